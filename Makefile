@@ -1,0 +1,50 @@
+# Set-up is part of every target: .venv (pinned) -> msg_defs built into it -> package installed.
+SHELL := /bin/bash
+.SHELLFLAGS := -eo pipefail -c
+# pip on this machine warns about absent local mirrors; hide that noise, keep real errors.
+PIP_QUIET := 2>&1 | { grep -v '^WARNING: Location' || true; }
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+PKG_SOURCES := $(shell find rcbht_introspection config resource -type f -not -name '*.pyc' 2>/dev/null) setup.py setup.cfg package.xml
+MSG_SOURCES := $(wildcard msg_defs/*.msg msg_defs/CMakeLists.txt msg_defs/package.xml)
+
+.PHONY: setup demo test bench lint clean
+
+setup: $(VENV)/.pkg-stamp
+
+$(VENV)/.deps-stamp: requirements.txt requirements-ros.txt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt $(PIP_QUIET)
+	touch $@
+
+$(VENV)/.msgs-stamp: $(VENV)/.deps-stamp $(MSG_SOURCES)
+	@if [ -f msg_defs/CMakeLists.txt ]; then \
+	  V=$$(cd $(VENV) && pwd); \
+	  cmake -S msg_defs -B build/msg_defs -DCMAKE_PREFIX_PATH=$$V -DCMAKE_INSTALL_PREFIX=$$V \
+	    -DPython3_EXECUTABLE=$$V/bin/python -DBUILD_TESTING=OFF > build/msg_defs.log 2>&1 || { mkdir -p build; cat build/msg_defs.log; exit 1; }; \
+	  cmake --build build/msg_defs -j2 >> build/msg_defs.log 2>&1 || { cat build/msg_defs.log; exit 1; }; \
+	  cmake --install build/msg_defs >> build/msg_defs.log 2>&1 || { cat build/msg_defs.log; exit 1; }; \
+	fi
+	touch $@
+
+$(VENV)/.pkg-stamp: $(VENV)/.msgs-stamp $(PKG_SOURCES)
+	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation --force-reinstall . $(PIP_QUIET)
+	touch $@
+
+demo: setup
+	$(VENV)/bin/rcbht demo --out demo_out
+
+test: setup
+	$(VENV)/bin/ruff check rcbht_introspection test
+	$(PY) -m pytest -q
+
+bench: setup
+	$(PY) -m rcbht_introspection.bench --out bench_out
+
+lint: setup
+	$(VENV)/bin/ruff check rcbht_introspection test
+	$(VENV)/bin/ruff format --check rcbht_introspection test
+
+clean:
+	rm -rf $(VENV) build *.egg-info

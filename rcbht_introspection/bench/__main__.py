@@ -1,0 +1,75 @@
+"""`make bench`: run every benchmark module, print medians, write bench_out/results.json.
+
+Each module in BENCHMARKS exposes `run(out_dir: Path) -> dict` returning its measured figures.
+Benchmarks are measurements, never pass/fail tests.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+BENCHMARKS: tuple[str, ...] = (
+    "rcbht_introspection.bench.taxonomy",
+    "rcbht_introspection.bench.stream",
+    "rcbht_introspection.bench.mondrian",
+    "rcbht_introspection.bench.sim",
+    "rcbht_introspection.bench.ros",
+)
+
+
+def machine() -> dict[str, object]:
+    """What the figures were measured on."""
+    cpu = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {
+        "cpu": cpu,
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "load_avg_at_start": os.getloadavg(),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m rcbht_introspection.bench")
+    parser.add_argument("--out", type=Path, default=Path("bench_out"))
+    parser.add_argument("--only", nargs="*", help="benchmark module short names to run")
+    args = parser.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    results: dict[str, object] = {
+        "machine": machine(),
+        "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+    }
+    for name in BENCHMARKS:
+        short = name.rsplit(".", 1)[1]
+        if args.only and short not in args.only:
+            continue
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name == name:
+                continue
+            raise
+        print(f"== {short}", flush=True)
+        results[short] = module.run(args.out)
+        print(json.dumps(results[short], indent=2), flush=True)
+    (args.out / "results.json").write_text(json.dumps(results, indent=2))
+    print(f"wrote {args.out / 'results.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""From words to sub-task samples: state split and encodings."""

@@ -1,0 +1,1 @@
+"""File formats: HIRO trial folders, the original RCBHT text records, rosbag2."""

@@ -1,0 +1,1 @@
+"""Sub-task classifiers (SVM, online Mondrian forest), safe model files and evaluation."""

@@ -1,0 +1,1 @@
+"""rclpy adapters only: parameters, topics, message conversions."""

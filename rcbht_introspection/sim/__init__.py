@@ -1,0 +1,1 @@
+"""MuJoCo snap-assembly simulator: the project's own wrench trials."""

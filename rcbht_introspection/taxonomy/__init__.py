@@ -1,0 +1,1 @@
+"""The RCBHT taxonomy, pure NumPy: primitives -> motion compositions -> low-level behaviours."""

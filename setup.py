@@ -1,0 +1,30 @@
+"""ament_python package set-up: works under colcon (ROS install) and plain pip (PyPI wheels)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "rcbht_introspection"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
+        (f"share/{package_name}", ["package.xml"]),
+        (f"share/{package_name}/config", glob("config/*.yaml")),
+    ],
+    install_requires=["setuptools"],
+    python_requires=">=3.10",
+    zip_safe=True,
+    maintainer="rcbht_introspection maintainers",
+    maintainer_email="rcbht@example.org",
+    description="RCBHT wrench action grammar and sub-task introspection for ROS 2 Jazzy",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "rcbht = rcbht_introspection.cli:main",
+        ],
+    },
+)
