@@ -1,0 +1,128 @@
+"""HIRO trial folders: `<arm>_Torques.dat` (t Fx Fy Fz Mx My Mz) and `<arm>_State.dat`.
+
+Malformed input raises InputError naming file, line and field (the CLI prints it, exit code 2).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.trial import AXES, Trial
+
+COLUMNS: tuple[str, ...] = ("t", *AXES)
+ARMS: tuple[str, ...] = ("L", "R")
+
+
+def read_table(path: Path, columns: tuple[str, ...] = COLUMNS) -> np.ndarray:
+    """Parse a whitespace table of len(columns) numeric columns; time (column 0) strictly increasing."""
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+    rows: list[list[float]] = []
+    last_t = -math.inf
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        parts = line.split()
+        if not parts:
+            continue
+        if len(parts) != len(columns):
+            raise InputError(f"expected {len(columns)} columns, found {len(parts)}", path, lineno)
+        row = []
+        for name, part in zip(columns, parts, strict=True):
+            try:
+                value = float(part)
+            except ValueError:
+                raise InputError(f"not a number: {part!r}", path, lineno, name) from None
+            if not math.isfinite(value):
+                raise InputError(f"not a finite number: {part!r}", path, lineno, name)
+            row.append(value)
+        if row[0] <= last_t:
+            raise InputError(
+                f"time does not increase ({row[0]} after {last_t})", path, lineno, columns[0]
+            )
+        last_t = row[0]
+        rows.append(row)
+    if not rows:
+        raise InputError("no samples", path)
+    return np.asarray(rows, dtype=np.float64)
+
+
+def read_state(path: Path) -> tuple[float, ...]:
+    """Sub-task start times, one per line (may be empty for failed trials)."""
+    if not path.is_file():
+        return ()
+    times: list[float] = []
+    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            value = float(line.split()[0])
+        except ValueError:
+            raise InputError(
+                f"not a number: {line.strip()!r}", path, lineno, "state time"
+            ) from None
+        if not math.isfinite(value) or (times and value < times[-1]):
+            raise InputError(f"state time out of order: {value}", path, lineno, "state time")
+        times.append(value)
+    return tuple(times)
+
+
+def read_trial(folder: Path | str) -> Trial:
+    """Load a HIRO trial folder (one arm R_*, or two arms L_* and R_*)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError("not a trial folder", folder)
+    wrench: dict[str, np.ndarray] = {}
+    time: np.ndarray | None = None
+    for arm in ARMS:
+        path = folder / f"{arm}_Torques.dat"
+        if not path.is_file():
+            continue
+        table = read_table(path)
+        if time is not None and (len(table) != len(time) or not np.allclose(table[:, 0], time)):
+            raise InputError("time column differs from the other arm's", path, field="t")
+        time = table[:, 0]
+        wrench[arm] = np.ascontiguousarray(table[:, 1:])
+    if time is None:
+        raise InputError("no R_Torques.dat or L_Torques.dat", folder)
+    state = read_state(folder / "R_State.dat")
+    if not state:
+        state = read_state(folder / "L_State.dat")
+    outcome_file = folder / "outcome.txt"
+    outcome = outcome_file.read_text().strip() if outcome_file.is_file() else "success"
+    return Trial(name=folder.name, time=time, wrench=wrench, state_times=state, outcome=outcome)
+
+
+def write_trial(trial: Trial, folder: Path | str) -> Path:
+    """Write `trial` in the HIRO layout (<arm>_Torques.dat, <arm>_State.dat, outcome.txt)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for arm, wrench in trial.wrench.items():
+        table = np.column_stack([trial.time, wrench])
+        np.savetxt(folder / f"{arm}_Torques.dat", table, fmt="%.9g", delimiter="\t")
+        (folder / f"{arm}_State.dat").write_text("".join(f"{t:.6g}\n" for t in trial.state_times))
+    (folder / "outcome.txt").write_text(trial.outcome + "\n")
+    return folder
+
+
+def find_trials(paths: list[Path] | list[str]) -> list[Path]:
+    """Trial folders among `paths`: each is a trial folder or a dataset folder of trials (sorted)."""
+    found: list[Path] = []
+    for p in map(Path, paths):
+        if (p / "R_Torques.dat").is_file() or (p / "L_Torques.dat").is_file():
+            found.append(p)
+        elif p.is_dir():
+            found.extend(
+                sorted(
+                    c
+                    for c in p.iterdir()
+                    if (c / "R_Torques.dat").is_file() or (c / "L_Torques.dat").is_file()
+                )
+            )
+        else:
+            raise InputError("no such trial or dataset folder", p)
+    return found
