@@ -75,7 +75,7 @@ def _coerce(value: Any, annotation: Any, where: str, path: Path | None) -> Any:
                 )
             items = [
                 _coerce(v, a, f"{where}[{i}]", path)
-                for i, (v, a) in enumerate(zip(args, value, strict=True))
+                for i, (a, v) in enumerate(zip(args, value, strict=True))
             ]
         else:
             item_type = args[0] if args else Any

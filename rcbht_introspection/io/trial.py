@@ -6,7 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-AXES: tuple[str, ...] = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
+from rcbht_introspection.taxonomy.words import AXES  # noqa: F401  (re-exported)
+
 SUBTASKS: tuple[str, ...] = ("approach", "rotation", "insertion", "mating")
 
 
@@ -34,6 +35,8 @@ class Trial:
 
     def subtask_bounds(self) -> list[tuple[str, float, float]]:
         """(sub-task, start, end) for every sub-task with a start time; the last ends at end_time."""
-        starts = list(self.state_times)
+        starts = list(self.state_times)[: len(SUBTASKS)]
+        if not starts:
+            return []
         ends = [*starts[1:], self.end_time]
         return [(SUBTASKS[i], s, e) for i, (s, e) in enumerate(zip(starts, ends, strict=True))]

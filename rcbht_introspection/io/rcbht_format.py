@@ -1,0 +1,157 @@
+"""The original RCBHT text format: Segments/Composites/llBehaviors files of "Key : value" records.
+
+Records are separated by blank lines; numbers are written with 5 decimals, as v2.0.2 does, so
+our output diffs against the golden files and feeds the original downstream tools.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.taxonomy.words import AXES, Level, TrialWords, Word
+
+
+@dataclass(frozen=True)
+class LevelFormat:
+    """File layout of one level: folder, file stem, record keys, label key, span keys, key width."""
+
+    folder: str
+    stem: str
+    keys: tuple[str, ...]
+    label_key: str
+    start_key: str
+    end_key: str
+    key_width: int
+
+
+FORMATS: dict[Level, LevelFormat] = {
+    Level.PRIMITIVE: LevelFormat(
+        "Segments", "Segement",
+        ("Iteration", "Average", "Max Val", "Min Val", "Start", "Finish", "Gradient", "Grad Label"),
+        "Grad Label", "Start", "Finish", 10,
+    ),
+    Level.COMPOSITION: LevelFormat(
+        "Composites", "Composites",
+        ("Iteration", "Label", "Average Val", "RMS Val", "Amplitude Val", "Label 1", "Label 2",
+         "t1Start", "t1End", "t2Start", "t2End", "tAvgIndex"),
+        "Label", "t1Start", "t2End", 14,
+    ),
+    Level.BEHAVIOR: LevelFormat(
+        "llBehaviors", "llBehaviors",
+        ("Iteration", "CompLabel", "averageVal1", "averageVal2", "AVG_MAG_VAL", "rmsVal1",
+         "rmsVal2", "AVG_RMS_Val", "amplitudeVal1", "amplitudeVal2", "AVG_AMP_VAL", "Label 1",
+         "Label 2", "t1Start", "t1End", "t2Start", "t2End", "tAvgIndex"),
+        "CompLabel", "t1Start", "t2End", 14,
+    ),
+}  # fmt: skip
+TEXT_KEYS = frozenset({"Grad Label", "Label", "CompLabel", "Label 1", "Label 2"})
+
+
+def level_path(root: Path, level: Level, axis: str) -> Path:
+    """Path of one level/axis file under a trial's output (or golden/) folder."""
+    fmt = FORMATS[level]
+    return Path(root) / fmt.folder / f"{fmt.stem}_{axis}.txt"
+
+
+def read_records(path: Path) -> list[dict[str, str]]:
+    """Parse a file into records of raw string values; malformed lines give a one-line error."""
+    records: list[dict[str, str]] = []
+    current: dict[str, str] = {}
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=path) from exc
+    for number, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line:
+            if current:
+                records.append(current)
+                current = {}
+            continue
+        key, sep, value = line.partition(":")
+        if not sep:
+            raise InputError("expected 'Key : value'", path=path, line=number)
+        key = key.strip()
+        if key == "Iteration" and current:
+            records.append(current)
+            current = {}
+        current[key] = value.strip()
+    if current:
+        records.append(current)
+    return records
+
+
+def read_words(path: Path, level: Level, axis: str, arm: str = "R") -> list[Word]:
+    """Read one level/axis file as words (numeric fields in `features`, labels as text)."""
+    fmt = FORMATS[level]
+    words = []
+    for index, record in enumerate(read_records(path)):
+        features: dict[str, float] = {}
+        for key, value in record.items():
+            if key in TEXT_KEYS or key == "Iteration":
+                continue
+            try:
+                features[key] = float(value)
+            except ValueError:
+                raise InputError(
+                    f"record {index + 1}: not a number: {value!r}", path=path, field=key
+                ) from None
+        for key in (fmt.label_key, fmt.start_key, fmt.end_key):
+            if key not in record:
+                raise InputError(f"record {index + 1}: missing key", path=path, field=key)
+        extra = {k: record[k] for k in ("Label 1", "Label 2") if k in record}
+        words.append(
+            Word(
+                axis=axis,
+                level=level,
+                label=record[fmt.label_key],
+                start=features[fmt.start_key],
+                end=features[fmt.end_key],
+                features=features,
+                arm=arm,
+                seq=index,
+                sublabels=tuple(extra.values()),
+            )
+        )
+    return words
+
+
+def read_trial_words(root: Path, name: str = "", arm: str = "R",
+                     levels: Iterable[Level] = (Level.COMPOSITION, Level.BEHAVIOR)) -> TrialWords:
+    """Read the words of all axes for the given levels from an output or golden/ folder."""
+    result = TrialWords(name=name or Path(root).parent.name)
+    for level in levels:
+        for axis in AXES:
+            for word in read_words(level_path(root, level, axis), level, axis, arm):
+                result.add(word)
+    return result
+
+
+def format_record(level: Level, iteration: int, word: Word) -> str:
+    """One record in the original layout ('Key : value', values with 5 decimals)."""
+    fmt = FORMATS[level]
+    lines = []
+    sub = dict(zip(("Label 1", "Label 2"), word.sublabels, strict=False))
+    for key in fmt.keys:
+        if key == "Iteration":
+            value = str(iteration)
+        elif key == fmt.label_key:
+            value = f"{word.label:<6}" if level is Level.PRIMITIVE else word.label
+        elif key in sub:
+            value = sub[key]
+        else:
+            value = f"{word.features.get(key, float('nan')):.5f}"
+        pad = key if level is Level.PRIMITIVE and key == "Grad Label" else f"{key:<{fmt.key_width}}"
+        lines.append(f"{pad}: {value}")
+    return "\n".join(lines) + "\n"
+
+
+def write_words(path: Path, level: Level, words: Iterable[Word]) -> None:
+    """Write one level/axis file; iterations are numbered from 1 in list order."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = "\n".join(format_record(level, i, w) for i, w in enumerate(words, start=1))
+    path.write_text(text + ("\n" if text else ""))
