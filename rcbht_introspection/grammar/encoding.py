@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -212,6 +213,36 @@ def compact_raw_features(sample: SubtaskSample, arms: Sequence[str]) -> dict[str
     return features
 
 
+def pairwise_selection(matrix: np.ndarray, labels: Sequence[str], k: int) -> np.ndarray:
+    """Indices of k columns taken in turn from each pair of classes' ANOVA F ranking.
+
+    A single multi-class F ranking is dominated by the easiest contrast (e.g. the 5 ms rotation
+    samples against everything); ranking per class pair keeps features for every contrast.
+    """
+    labels_arr = np.asarray(labels)
+    classes = sorted(set(labels))
+    rankings = []
+    for i, a in enumerate(classes):
+        for b in classes[i + 1 :]:
+            rows = (labels_arr == a) | (labels_arr == b)
+            with np.errstate(divide="ignore", invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                scores, _ = f_classif(matrix[rows], labels_arr[rows])
+            scores = np.nan_to_num(scores, nan=0.0, posinf=np.finfo(float).max)
+            rankings.append(np.argsort(-scores, kind="stable"))
+    chosen: list[int] = []
+    seen: set[int] = set()
+    depth = 0
+    while len(chosen) < min(k, matrix.shape[1]):
+        for ranking in rankings:
+            column = int(ranking[depth])
+            if column not in seen and len(chosen) < k:
+                seen.add(column)
+                chosen.append(column)
+        depth += 1
+    return np.asarray(sorted(chosen), dtype=int)
+
+
 @dataclass
 class CompactEncoding:
     """Label counts, duration fractions, bigrams and mean values per arm/level/axis + log duration."""
@@ -221,7 +252,7 @@ class CompactEncoding:
     """Include the duration-weighted mean wrench value of each level/axis."""
     bigrams: bool = True
     """Include label bigram counts."""
-    k: int | None = 50
+    k: int | None = 100
     """Keep the k features with the largest ANOVA F score on the training labels (None: all)."""
     arms: tuple[str, ...] = ()
     feature_names: list[str] = field(default_factory=list)
@@ -250,12 +281,10 @@ class CompactEncoding:
         keep = high > low
         labels = [s.subtask for s in samples]
         if self.k is not None and keep.sum() > self.k and len(set(labels)) > 1:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                scores, _ = f_classif(matrix[:, keep], labels)
-            scores = np.nan_to_num(scores, nan=0.0, posinf=np.finfo(float).max)
             columns = np.flatnonzero(keep)
+            chosen = pairwise_selection(matrix[:, keep], labels, self.k)
             keep = np.zeros_like(keep)
-            keep[columns[np.argsort(-scores, kind="stable")[: self.k]]] = True
+            keep[columns[chosen]] = True
         if "log_duration" in names:
             keep[names.index("log_duration")] = True
         self.feature_names = [k for k, kept in zip(names, keep, strict=True) if kept]
