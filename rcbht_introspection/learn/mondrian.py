@@ -326,50 +326,67 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             if n_classes > 1:
                 proba[:] = 1.0 / n_classes
             return proba
-        proba = np.zeros((n * n_trees, n_classes))
+        gamma = self.gamma_
+        # 1. walk every (sample, tree) path down to its leaf
         sample = np.repeat(np.arange(n), n_trees)
         node = np.tile(self._roots, n)
-        not_separated = np.ones(n * n_trees)
-        active = np.arange(n * n_trees)
-        gamma = self.gamma_
-        while len(active):
-            nd = node[active]
-            x = X[sample[active]]
-            eta = (np.maximum(self._lower[nd] - x, 0.0) + np.maximum(x - self._upper[nd], 0.0)).sum(axis=1)
-            delta = self._delta[nd]
-            outside = eta > 0
-            if outside.any():
-                o_active, o_nd, o_eta, o_delta = active[outside], nd[outside], eta[outside], delta[outside]
-                finite = np.isfinite(o_delta)
-                p_sep = np.ones(len(o_nd))
-                p_sep[finite] = -np.expm1(-o_delta[finite] * o_eta[finite])
-                d_bar = o_eta / (o_eta + gamma)
-                if finite.any():
-                    fe, fd = o_eta[finite], o_delta[finite]
-                    d_bar[finite] *= np.expm1(-(fe + gamma) * fd) / np.expm1(-fe * fd)
-                tables = self._tables[o_nd]
-                mean = (
-                    self._cnt[o_nd]
-                    - d_bar[:, None] * tables
-                    + (d_bar * self._n_tables[o_nd])[:, None] * self._parent_posterior[o_nd]
-                ) / self._n_customers[o_nd][:, None]
-                proba[o_active] += (not_separated[o_active] * p_sep)[:, None] * mean
-                not_separated[o_active] *= 1.0 - p_sep
-            leaf = self._left[nd] == NO_NODE
-            if leaf.any():
-                l_active = active[leaf]
-                proba[l_active] += not_separated[l_active][:, None] * self._posterior[nd[leaf]]
-            inner = ~leaf
-            active, nd, x = active[inner], nd[inner], x[inner]
-            go_left = x[np.arange(len(nd)), self._feature[nd]] <= self._threshold[nd]
-            node[active] = np.where(go_left, self._left[nd], self._right[nd])
+        rows = [node]
+        alive = np.flatnonzero(self._left[node] != NO_NODE)
+        while len(alive):
+            node = node.copy()
+            nd = node[alive]
+            go_left = X[sample[alive], self._feature[nd]] <= self._threshold[nd]
+            node[alive] = np.where(go_left, self._left[nd], self._right[nd])
+            step = np.full_like(node, NO_NODE)
+            step[alive] = node[alive]
+            rows.append(step)
+            alive = alive[self._left[node[alive]] != NO_NODE]
+        paths = np.stack(rows)  # (depth, n * n_trees), NO_NODE past the leaf
+        valid = paths != NO_NODE
+        nodes = paths[valid]
+        x = X[np.broadcast_to(sample, paths.shape)[valid]]
+        # 2. probability that the test point separates from the tree at each node of its path
+        eta = (np.maximum(self._lower[nodes] - x, 0.0) + np.maximum(x - self._upper[nodes], 0.0)).sum(axis=1)
+        delta = self._delta[nodes]
+        outside = eta > 0
+        p_sep = np.zeros(len(nodes))
+        finite = outside & np.isfinite(delta)
+        p_sep[outside] = 1.0
+        p_sep[finite] = -np.expm1(-delta[finite] * eta[finite])
+        sep = np.zeros(paths.shape)
+        sep[valid] = p_sep
+        not_before = np.ones(paths.shape)
+        not_before[1:] = np.cumprod(1.0 - sep[:-1], axis=0)
+        weight_sep = not_before[valid] * p_sep
+        # 3. posterior of a new node cut above the path node (separated) or the leaf's own
+        contrib = np.zeros((len(nodes), n_classes))
+        o = np.flatnonzero(outside)
+        if len(o):
+            on, oe = nodes[o], eta[o]
+            d_bar = oe / (oe + gamma)
+            fin = np.isfinite(delta[o])
+            if fin.any():
+                fe, fd = oe[fin], delta[o][fin]
+                d_bar[fin] *= np.expm1(-(fe + gamma) * fd) / np.expm1(-fe * fd)
+            mean = (
+                self._cnt[on]
+                - d_bar[:, None] * self._tables[on]
+                + (d_bar * self._n_tables[on])[:, None] * self._parent_posterior[on]
+            ) / self._n_customers[on][:, None]
+            contrib[o] = weight_sep[o][:, None] * mean
+        leaf = self._left[nodes] == NO_NODE
+        contrib[leaf] += ((not_before[valid] * (1.0 - p_sep))[leaf])[:, None] * self._posterior[nodes[leaf]]
+        full = np.zeros((*paths.shape, n_classes))
+        full[valid] = contrib
+        proba = full.sum(axis=0)
         proba = proba.reshape(n, n_trees, n_classes).mean(axis=1)
         proba /= proba.sum(axis=1, keepdims=True)
         return proba
 
     def predict(self, X) -> np.ndarray:
         """The class with the largest predictive probability."""
-        return self.classes_[np.argmax(self.predict_proba(X), axis=1)]
+        proba = self.predict_proba(X)
+        return self.classes_[np.argmax(proba, axis=1)]
 
     # ---------------------------------------------------------------- introspection
     @property
