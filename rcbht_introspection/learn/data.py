@@ -138,6 +138,8 @@ def find_trials_safe(path: Path) -> list[Path]:
 
 def load_trials(paths: Iterable[Path | str], words: str = "auto") -> list[TrialSamples]:
     """Per-trial samples of every trial under `paths`."""
+    if words not in WORD_SOURCES:
+        raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
     return [load_trial_samples(p, words) for p in find_inputs(paths)]
 
 
