@@ -67,15 +67,14 @@ def read_records(path: Path) -> list[dict[str, str]]:
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
         if not line:
-            if current:
-                records.append(current)
-                current = {}
             continue
         key, sep, value = line.partition(":")
         if not sep:
             raise InputError("expected 'Key : value'", path=path, line=number)
         key = key.strip()
-        if key == "Iteration" and current:
+        # A record starts at 'Iteration' or at a repeated key; blank lines are not trusted as
+        # separators (later code states write an empty 'Label 2' followed by a blank line).
+        if current and (key == "Iteration" or key in current):
             records.append(current)
             current = {}
         current[key] = value.strip()
@@ -119,8 +118,12 @@ def read_words(path: Path, level: Level, axis: str, arm: str = "R") -> list[Word
     return words
 
 
-def read_trial_words(root: Path, name: str = "", arm: str = "R",
-                     levels: Iterable[Level] = (Level.COMPOSITION, Level.BEHAVIOR)) -> TrialWords:
+def read_trial_words(
+    root: Path,
+    name: str = "",
+    arm: str = "R",
+    levels: Iterable[Level] = (Level.COMPOSITION, Level.BEHAVIOR),
+) -> TrialWords:
     """Read the words of all axes for the given levels from an output or golden/ folder."""
     result = TrialWords(name=name or Path(root).parent.name)
     for level in levels:
