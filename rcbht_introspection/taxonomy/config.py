@@ -40,7 +40,7 @@ class TaxonomyConfig:
     """Domain = |top_margin * rank-th largest| + |bottom_margin * rank-th smallest| sample."""
     domain_top_margin: float = 1.02
     domain_bottom_margin: float = 0.98
-    # 2.1 primitive clean-up
+    # 2.1 primitive clean-up (and two switches of later code states)
     primitive_cleanup: bool = True
     """Run primitivesCleanUp.m (False: the primitives go to the MC layer as segmented)."""
     final_segment: bool = True
