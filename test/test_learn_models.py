@@ -130,3 +130,18 @@ def test_unknown_word_source_and_missing_input(tmp_path: Path) -> None:
         load_samples([tmp_path], "magic")
     with pytest.raises(InputError):
         load_samples([tmp_path / "nowhere"])
+
+
+@pytest.mark.shared_data
+def test_engine_words_give_the_same_samples_as_golden(hiro_data: Path) -> None:
+    """words='engine' (batch RCBHT on the wrench) splits into the same sub-task words."""
+    trial = hiro_data / REAL / "20121127-HIROSA-S-30"
+    engine, golden = load_samples([trial], "engine"), load_samples([trial], "golden")
+    from rcbht_introspection.grammar.encoding import compact_raw_features
+
+    assert [(s.subtask, s.start, s.end) for s in engine] == [(s.subtask, s.start, s.end) for s in golden]
+    for ours, theirs in zip(engine, golden, strict=True):
+        a, b = compact_raw_features(ours, ["R"]), compact_raw_features(theirs, ["R"])
+        assert set(a) == set(b)
+        # golden files hold 5 decimals
+        assert max(abs(a[k] - b[k]) for k in a) < 1e-4
