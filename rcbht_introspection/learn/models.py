@@ -31,7 +31,12 @@ from rcbht_introspection.grammar.encoding import (
 )
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.io.trial import SUBTASKS
-from rcbht_introspection.learn.mondrian import NO_NODE, MondrianForestClassifier, _NodePool
+from rcbht_introspection.learn.mondrian import (
+    FEATURE_DTYPE,
+    NO_NODE,
+    MondrianForestClassifier,
+    _NodePool,
+)
 
 FORMAT = "rcbht-subtask-model"
 FORMAT_VERSION = 1
@@ -207,7 +212,7 @@ def _forest_from_arrays(params: dict[str, Any], arrays: dict[str, np.ndarray]) -
     forest._roots = arrays["mf_roots"].astype(np.int32)
     if len(forest._roots) != forest.n_estimators:
         raise ValueError("number of roots differs from n_estimators")
-    forest._X = arrays["mf_X"].astype(np.float64)
+    forest._X = arrays["mf_X"].astype(FEATURE_DTYPE)
     forest._y = arrays["mf_y"].astype(np.intp)
     forest.gamma_ = forest.discount_factor * n_features
     forest._update_posterior()

@@ -16,6 +16,9 @@ from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, check_random_state, validate_data
 
 NO_NODE = -1
+FEATURE_DTYPE = np.float32
+"""Training data and node boxes are stored in float32 (half the memory of the wide paper
+encoding); test points are cast the same way, so boxes and points compare exactly."""
 
 
 class _NodePool:
@@ -29,8 +32,8 @@ class _NodePool:
         self.feature = np.zeros(capacity, dtype=np.int32)
         self.threshold = np.zeros(capacity, dtype=np.float64)
         self.tau = np.full(capacity, np.inf)
-        self.lower = np.zeros((capacity, n_features))
-        self.upper = np.zeros((capacity, n_features))
+        self.lower = np.zeros((capacity, n_features), dtype=FEATURE_DTYPE)
+        self.upper = np.zeros((capacity, n_features), dtype=FEATURE_DTYPE)
         self.counts = np.zeros((capacity, n_classes))
         self.points: list[np.ndarray | None] = [None] * capacity
 
@@ -95,6 +98,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         """Grow n_estimators Mondrian trees on (X, y) from scratch."""
         self._check_params()
         X, y = validate_data(self, X, y, dtype=np.float64)
+        X = X.astype(FEATURE_DTYPE)
         check_classification_targets(y)
         self.classes_, y_index = np.unique(y, return_inverse=True)
         self._start(X.shape[1])
@@ -112,6 +116,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             if classes is None:
                 raise ValueError("classes must be passed on the first call to partial_fit")
         X, y = validate_data(self, X, y, dtype=np.float64, reset=first)
+        X = X.astype(FEATURE_DTYPE)
         check_classification_targets(y)
         if first:
             self.classes_ = np.unique(np.asarray(classes))
@@ -138,16 +143,16 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self._rng = np.random.default_rng(
             check_random_state(self.random_state).randint(np.iinfo(np.int32).max)
         )
-        self._pool = _NodePool(n_features, len(self.classes_))
+        self._pool = _NodePool(n_features, len(self.classes_), capacity=32 * self.n_estimators)
         self._roots = np.full(self.n_estimators, NO_NODE, dtype=np.int32)
-        self._X = np.empty((0, n_features))
+        self._X = np.empty((0, n_features), dtype=FEATURE_DTYPE)
         self._y = np.empty(0, dtype=np.intp)
         self.gamma_ = self.discount_factor * n_features
 
     def _add_data(self, X: np.ndarray, y_index: np.ndarray) -> np.ndarray:
         """Store a batch once at forest level (paused leaves index into it); return its indices."""
         start = len(self._y)
-        self._X = np.concatenate([self._X, X]) if start else np.array(X, dtype=np.float64)
+        self._X = np.concatenate([self._X, X]) if start else np.array(X, dtype=FEATURE_DTYPE)
         self._y = np.concatenate([self._y, y_index])
         return np.arange(start, len(self._y))
 
@@ -180,7 +185,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             dim = min(dim, len(extent) - 1)
             while extent[dim] <= 0:  # guard the float edge of the cumulative sum
                 dim -= 1
-            cut = self._rng.uniform(lower[dim], upper[dim])
+            cut = np.float64(self._rng.uniform(lower[dim], upper[dim]))  # float64: never rounded to the data dtype
             go_left = data[:, dim] <= cut
             left, right = pool.new(), pool.new()
             pool.feature[node], pool.threshold[node] = dim, cut
@@ -224,10 +229,10 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
                 while extent[dim] <= 0:
                     dim -= 1
                 if self._rng.random() * extent[dim] <= e_lower[dim]:
-                    cut = self._rng.uniform(low[dim], pool.lower[node, dim])
+                    cut = np.float64(self._rng.uniform(low[dim], pool.lower[node, dim]))  # float64: never rounded to the data dtype
                     old_is_left = False
                 else:
-                    cut = self._rng.uniform(pool.upper[node, dim], high[dim])
+                    cut = np.float64(self._rng.uniform(pool.upper[node, dim], high[dim]))  # float64: never rounded to the data dtype
                     old_is_left = True
                 new_parent = pool.new()
                 pool.parent[new_parent] = parent
@@ -318,7 +323,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
     def predict_proba(self, X) -> np.ndarray:
         """Mean over trees of the predictive class distribution (rows sum to 1)."""
         check_is_fitted(self, "classes_")
-        X = validate_data(self, X, dtype=np.float64, reset=False)
+        X = validate_data(self, X, dtype=np.float64, reset=False).astype(FEATURE_DTYPE)
         n, n_classes, n_trees = len(X), len(self.classes_), self.n_estimators
         if n_classes == 1 or (self._roots == NO_NODE).any():
             proba = np.zeros((n, n_classes))
