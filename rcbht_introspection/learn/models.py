@@ -29,7 +29,7 @@ from rcbht_introspection.grammar.encoding import (
     encoding_from_state,
     make_encoding,
 )
-from rcbht_introspection.grammar.split import SubtaskSample
+from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn.mondrian import (
     FEATURE_DTYPE,
@@ -121,12 +121,18 @@ def train_model(
     random_state: int = 0,
     taxonomy_profile: str = "reference",
     n_estimators: int = 100,
+    augment_prefixes: Sequence[float] = (),
 ) -> SubtaskModel:
-    """Fit the encoding and the classifier on `samples` (training data only)."""
+    """Fit the encoding and the classifier on `samples` (training data only).
+
+    `augment_prefixes` (e.g. (0.25, 0.5, 0.75)) also trains on those first fractions of every
+    sub-task, so a live classifier is not surprised by a sub-task that has only just begun.
+    """
     if classifier not in CLASSIFIERS:
         raise InputError(f"unknown classifier {classifier!r} (known: {', '.join(CLASSIFIERS)})")
     if not samples:
         raise InputError("no training samples")
+    samples = list(samples) + [prefix_sample(s, f) for f in augment_prefixes for s in samples]
     encoder = make_encoding(encoding).fit(samples)
     X = encoder.transform(samples)
     y = [s.subtask for s in samples]
