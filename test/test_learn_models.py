@@ -28,7 +28,7 @@ def samples(hiro_data: Path) -> tuple[list, list]:
 
 
 @pytest.mark.shared_data
-@pytest.mark.parametrize(("classifier", "encoding"), [("svm", "compact"), ("mondrian", "compact"), ("svm", "paper")])
+@pytest.mark.parametrize(("classifier", "encoding"), [("svm", "compact"), ("mondrian", "compact"), ("svm", "paper"), ("svm-tuned", "compact")])
 def test_model_round_trips_through_the_safe_file(samples, tmp_path: Path, classifier: str, encoding: str) -> None:
     train, valid = samples
     model = train_model(train, classifier, encoding, random_state=1)

@@ -27,7 +27,7 @@ from rcbht_introspection.learn.models import train_model
 
 VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
 """The paper's held-out trial counts by data-set size (REAL 36/10, SIM 30/8, two-arm 14/6)."""
-START_TRIALS: dict[str, int] = {"svm": 1, "mondrian": 3}
+START_TRIALS: dict[str, int] = {"svm": 1, "svm-tuned": 1, "mondrian": 3}
 PREFIX_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)
 NEAR_EMPTY_SECONDS = 0.05
 """Sub-tasks shorter than this (REAL S-22..S-46 rotation: 5 ms) are dropped in the variant."""
