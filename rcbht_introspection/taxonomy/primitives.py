@@ -99,20 +99,37 @@ def classify_gradient(g: float, thresholds: Sequence[float]) -> int:
 # --------------------------------------------------------------------------- segmentation
 
 
-def block_stats(t: np.ndarray, y: np.ndarray) -> tuple[list, ...]:
-    """Least-squares statistics of K blocks of samples: t (K, m), y (K, m, A) -> lists per block.
+def block_stats(t: np.ndarray, y: np.ndarray) -> tuple:
+    """Least-squares statistics of K blocks of m samples: t (K, m), y (K, m, A) -> nested lists.
 
-    Returns (n, mean_t, Stt, mean_y, Syy, Sty, max_y, min_y, last_t, last_y); per-axis entries are
-    (K, A) nested lists. Centred sums keep the precision of a direct polyfit.
+    Returns (m, mean_t, Stt, mean_y, Syy, Sty, max_y, min_y, last_t, last_y), per-axis entries as
+    (K, A) lists. Centred sums keep the precision of a direct polyfit. Every sum runs over the m
+    samples in order with element-wise operations, so one block gives bit-identical numbers
+    whether it is computed alone (streaming, `block_stats_one`) or among many (batch).
     """
     m = t.shape[1]
-    mt = t.mean(axis=1)
-    dt = t - mt[:, None]
-    my = y.mean(axis=1)
-    dy = y - my[:, None, :]
-    stt = np.einsum("km,km->k", dt, dt)
-    syy = np.einsum("kma,kma->ka", dy, dy)
-    sty = np.einsum("km,kma->ka", dt, dy)
+    st = t[:, 0]
+    sy = y[:, 0, :]
+    for j in range(1, m):
+        st = st + t[:, j]
+        sy = sy + y[:, j, :]
+    mt = st / m
+    my = sy / m
+    dt = t[:, 0] - mt
+    dy = y[:, 0, :] - my
+    stt = dt * dt
+    syy = dy * dy
+    sty = dt[:, None] * dy
+    ymax = y[:, 0, :]
+    ymin = y[:, 0, :]
+    for j in range(1, m):
+        dt = t[:, j] - mt
+        dy = y[:, j, :] - my
+        stt = stt + dt * dt
+        syy = syy + dy * dy
+        sty = sty + dt[:, None] * dy
+        ymax = np.maximum(ymax, y[:, j, :])
+        ymin = np.minimum(ymin, y[:, j, :])
     return (
         m,
         mt.tolist(),
@@ -120,11 +137,47 @@ def block_stats(t: np.ndarray, y: np.ndarray) -> tuple[list, ...]:
         my.tolist(),
         syy.tolist(),
         sty.tolist(),
-        y.max(axis=1).tolist(),
-        y.min(axis=1).tolist(),
+        ymax.tolist(),
+        ymin.tolist(),
         t[:, -1].tolist(),
         y[:, -1, :].tolist(),
     )
+
+
+def block_stats_one(ts: list[float], ys: list[list[float]]) -> tuple:
+    """`block_stats` of a single block in plain Python (same operations, same order, same bits).
+
+    ts: the block's m times; ys: its m samples of A axes. Used per window step by the stream.
+    """
+    m = len(ts)
+    st = ts[0]
+    for j in range(1, m):
+        st = st + ts[j]
+    mt = st / m
+    dts = [x - mt for x in ts]
+    stt = dts[0] * dts[0]
+    for j in range(1, m):
+        stt = stt + dts[j] * dts[j]
+    my_row, syy_row, sty_row, max_row, min_row = [], [], [], [], []
+    for col in zip(*ys, strict=True):
+        sy = col[0]
+        for j in range(1, m):
+            sy = sy + col[j]
+        my = sy / m
+        dy = col[0] - my
+        syy = dy * dy
+        sty = dts[0] * dy
+        for j in range(1, m):
+            dy = col[j] - my
+            syy = syy + dy * dy
+            sty = sty + dts[j] * dy
+        my_row.append(my)
+        syy_row.append(syy)
+        sty_row.append(sty)
+        max_row.append(max(col))
+        min_row.append(min(col))
+    return (m, [mt], [stt], [my_row], [syy_row], [sty_row], [max_row], [min_row], [ts[-1]],
+            [list(ys[-1])])  # fmt: skip
 
 
 class Segmenter:
