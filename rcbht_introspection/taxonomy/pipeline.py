@@ -18,7 +18,7 @@ step 3 (final once that pass stops).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from rcbht_introspection.taxonomy import behaviors as bh
@@ -922,3 +922,61 @@ class AxisPipeline:
 
     def retained(self) -> int:
         return self.compositions.retained() + self.behaviors.retained()
+
+
+# --------------------------------------------------------------------------- whole lists
+
+
+def run_ops(ops: list[Op], rows: list[Row]) -> list[Row]:
+    """Push a whole list through operators and finish: a pass applied to a complete sequence."""
+    chain = Chain(ops)
+    out: list[Row] = []
+    for r in rows:
+        out.extend(chain.push(r))
+    out.extend(chain.finish())
+    return out
+
+
+def whole_context(
+    config: TaxonomyConfig, state_times: Sequence[float], end_time: float
+) -> StreamContext:
+    """The context of a complete trial (every boundary and the end known)."""
+    return StreamContext(
+        config, boundaries=list(state_times), now=math.inf, ended=True, end_time=end_time
+    )
+
+
+def clean_primitives(prims: list[Row], config: TaxonomyConfig) -> list[Row]:
+    """primitivesCleanUp.m on a whole axis."""
+    return run_ops(
+        [RepeatedPrimitives(), PairPass(lambda a, b: pr.duration_pair(a, b, config))], prims
+    )
+
+
+def compose(prims: list[Row], config: TaxonomyConfig) -> list[Row]:
+    """CompoundMotionComposition's scan on a whole axis (before filtering)."""
+    return run_ops([Compose(config)], prims)
+
+
+def clean_compositions(
+    mcs: list[Row], state_times: Sequence[float], end_time: float, config: TaxonomyConfig
+) -> list[Row]:
+    """cleanUp.m run composition_cleanup_cycles times on a whole axis."""
+    ctx = whole_context(config, state_times, end_time)
+    ops: list[Op] = []
+    for _ in range(config.composition_cleanup_cycles):
+        ops.extend(composition_cycle(ctx))
+    return run_ops(ops, [list(m) for m in mcs])
+
+
+def compose_behaviors(mcs: list[Row], config: TaxonomyConfig) -> list[Row]:
+    """llbehComposition's scan on a whole axis (before refinement)."""
+    return run_ops([ComposeBehaviors(config)], mcs)
+
+
+def refine_behaviors(llbs: list[Row], config: TaxonomyConfig) -> list[Row]:
+    """Refinement.m run behavior_refinement_cycles times on a whole axis."""
+    ops: list[Op] = []
+    for _ in range(config.behavior_refinement_cycles):
+        ops.extend(refinement_cycle(config))
+    return run_ops(ops, [list(b) for b in llbs])

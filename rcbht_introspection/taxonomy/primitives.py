@@ -372,38 +372,6 @@ def label_segments(segments: list[list[float]], thresholds: Sequence[float]) -> 
 # --------------------------------------------------------------------------- clean-up
 
 
-def merge_repeated(prims: list[Primitive]) -> list[Primitive]:
-    """Clean-up step 1: merge runs of identical labels (pair: means; k >= 3 rows: sums / (k-1) [bug])."""
-    out: list[Primitive] = []
-    i, n = 0, len(prims)
-    while i < n:
-        j = i + 1
-        label = prims[i][LABEL]
-        while j < n and prims[j][LABEL] == label:
-            j += 1
-        out.append(merge_run(prims[i:j]))
-        i = j
-    return out
-
-
-def merge_run(run: list[Primitive]) -> Primitive:
-    """MergePrimitives for one run of equal labels (length 1 is returned unchanged)."""
-    if len(run) == 1:
-        return run[0]
-    first, last = run[0], run[-1]
-    if len(run) == 2:
-        return [
-            (first[AVG] + last[AVG]) / 2, max(first[MAX], last[MAX]), min(first[MIN], last[MIN]),
-            first[START], last[FINISH], (first[GRAD] + last[GRAD]) / 2, last[LABEL],
-        ]  # fmt: skip
-    k1 = len(run) - 1
-    return [
-        sum(p[AVG] for p in run) / k1,
-        max(p[MAX] for p in run), min(p[MIN] for p in run),
-        first[START], last[FINISH], sum(p[GRAD] for p in run) / k1, first[LABEL],
-    ]  # fmt: skip
-
-
 def merge_pair(p1: Primitive, p2: Primitive, keep_second: bool) -> Primitive:
     """MergePrimitives for a duration-context pair: label of the longer one, means, max/min."""
     return [
@@ -429,27 +397,6 @@ def duration_pair(p1: Primitive, p2: Primitive, config: TaxonomyConfig) -> Primi
     if ratio < 1 / length:
         return merge_pair(p1, p2, keep_second=True)
     return None
-
-
-def merge_durations(prims: list[Primitive], config: TaxonomyConfig) -> list[Primitive]:
-    """Clean-up step 2: one left-to-right pass; a merged pair's 2nd row is not compared again."""
-    out: list[Primitive] = []
-    i, n = 0, len(prims)
-    while i < n:
-        if i + 1 < n:
-            merged = duration_pair(prims[i], prims[i + 1], config)
-            if merged is not None:
-                out.append(merged)
-                i += 2
-                continue
-        out.append(prims[i])
-        i += 1
-    return out
-
-
-def clean_primitives(prims: list[Primitive], config: TaxonomyConfig) -> list[Primitive]:
-    """primitivesCleanUp.m: repeated labels, then duration/amplitude context."""
-    return merge_durations(merge_repeated(prims), config)
 
 
 # --------------------------------------------------------------------------- calibration
