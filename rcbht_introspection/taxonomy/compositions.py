@@ -29,6 +29,7 @@ from rcbht_introspection.taxonomy.primitives import (
     START,
     Primitive,
     ieee_div,
+    running_sum,
 )
 
 A, I, D, K, PC, NC, C, U, N, Z = range(1, 11)  # noqa: E741  (the original's letters)
@@ -185,7 +186,7 @@ def _merge(rows: list, index: int, label: int | None, amplitude: bool, what: int
         rows[index + 1 if what == 1 else index - 1] = None
         return
     run = rows[index : index + what + 1]
-    r[AVGV] = sum(x[AVGV] for x in run) / len(run)
+    r[AVGV] = running_sum(x[AVGV] for x in run) / len(run)
     r[RMS] = max(x[RMS] for x in run)
     if amplitude:
         r[AMP] = max(x[AMP] for x in run)

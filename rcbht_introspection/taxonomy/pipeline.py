@@ -299,8 +299,8 @@ class AdjustmentChains(Op):
         k = ctr + 1
         r = run[0]
         r[mc.LBL] = mc.A
-        r[mc.AVGV] = sum(x[mc.AVGV] for x in run) / k
-        r[mc.RMS] = sum(x[mc.RMS] for x in run) / k
+        r[mc.AVGV] = pr.running_sum(x[mc.AVGV] for x in run) / k
+        r[mc.RMS] = pr.running_sum(x[mc.RMS] for x in run) / k
         r[mc.AMP] = max(x[mc.AMP] for x in run)
         r[mc.T1E] = (run[-1][mc.T2E] + r[mc.T1S]) / 2 - cfg.adjustment_time_offset
         r[mc.T2S] = r[mc.T1E] + cfg.adjustment_time_step

@@ -38,6 +38,14 @@ def ieee_div(a: float, b: float) -> float:
     return math.inf if (a > 0) == (math.copysign(1.0, b) > 0) else -math.inf
 
 
+def running_sum(values) -> float:
+    """Left-to-right float sum (MATLAB's order); builtin sum() compensates on Python >= 3.12."""
+    total = 0.0
+    for v in values:
+        total += v
+    return total
+
+
 def fitted_average(vmax: float, vmin: float) -> float:
     """dAvg of statisticalData.m: (max+min)/2, written as the original does for mixed signs."""
     if (vmax >= 0 and vmin >= 0) or (vmax <= 0 and vmin <= 0):
@@ -416,7 +424,7 @@ def calibrate_limits(
             if p[START] > s2:
                 rot.append(p[GRAD])
         if rot:
-            pconst = 0.9 * abs(sum(rot) / len(rot))
+            pconst = 0.9 * abs(running_sum(rot) / len(rot))
     ins = [abs(p[GRAD]) for p in prims if p[START] > s3 and p[FINISH] < s4]
     pimp = 0.85 * max(ins) if ins else 0.0
     return pimp, pconst

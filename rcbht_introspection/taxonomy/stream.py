@@ -168,6 +168,8 @@ class ArmStream:
         self._seq = 0
         self._periods: list[float] = []
         self._period: float | None = None
+        self._dt_lo = math.nan  # in-rate interval bounds once the period is known
+        self._dt_hi = math.nan
         self._rate_run = 0
         # moment-axis labels: thresholds per axis once known, else the segments wait
         given = self.stream_config.moment_domains or {}
@@ -276,20 +278,21 @@ class ArmStream:
     def _track_rate(self, dt: float) -> None:
         """Nominal period from the first intervals; a sustained change is counted and adopted."""
         sc = self.stream_config
-        if self._period is None:
-            self._periods.append(dt)
-            if len(self._periods) >= sc.rate_window:
-                self._period = float(np.median(self._periods))
-                self._periods = []
-            return
-        if abs(dt - self._period) > sc.rate_tolerance * self._period:
-            self._periods.append(dt)
-            if len(self._periods) >= sc.rate_window:
-                self._period = float(np.median(self._periods))
-                self._periods = []
-                self.counters.rate_changes += 1
-        elif self._periods:
+        if self._period is not None and abs(dt - self._period) <= sc.rate_tolerance * self._period:
             self._periods = []
+            return
+        self._periods.append(dt)
+        if len(self._periods) >= sc.rate_window:
+            if self._period is not None:
+                self.counters.rate_changes += 1
+            self._set_period(float(np.median(self._periods)))
+            self._periods = []
+
+    def _set_period(self, period: float) -> None:
+        tol = self.stream_config.rate_tolerance
+        self._period = period
+        self._dt_lo = period * (1 - tol)
+        self._dt_hi = min(period * (1 + tol), self.stream_config.max_gap_periods * period)
 
     # ------------------------------------------------------------------ samples
 
@@ -333,12 +336,37 @@ class ArmStream:
     def push(self, t: float, wrench6: Sequence[float]) -> list[Word]:
         """One sample in; the words that became final out. Never raises for bad input."""
         out: list[Word] = []
-        if self._finished:
+        try:
+            t = float(t)
+            values = [float(v) for v in wrench6]
+        except (TypeError, ValueError):
             self.counters.malformed_samples += 1
             return out
         try:
-            values = [float(v) for v in wrench6]
-            for ts, ys in self._intake(float(t), values):
+            if len(values) == 6:
+                finite = values[0] + values[1] + values[2] + values[3] + values[4] + values[5]
+                dt = t - self._last_t
+                # the steady case: finite, increasing, at the nominal rate (no policy applies)
+                if (
+                    finite - finite == 0.0
+                    and self._dt_lo <= dt <= self._dt_hi
+                    and not self._finished
+                ):
+                    if self._periods:
+                        self._periods = []
+                    self._last_t = t
+                    self._last_y = values
+                    self.ctx.now = t
+                    self.segmenter.samples += 1
+                    self._ts.append(t)
+                    self._ys.append(values)
+                    if len(self._ts) == self.window:
+                        self._block(out)
+                    return out
+            if self._finished:
+                self.counters.malformed_samples += 1
+                return out
+            for ts, ys in self._intake(t, values):
                 self._feed(ts, ys, out)
         except Exception:  # a bug, never bad input: counted, the stream goes on
             self.counters.internal_errors += 1
