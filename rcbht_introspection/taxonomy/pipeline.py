@@ -131,34 +131,43 @@ class RepeatedPrimitives(Op):
 class PairPass(Op):
     """A greedy left-to-right pass over pairs (i, i+1); a merged pair is not compared again.
 
-    `decide(a, b)` returns the merged row or None. Rows before `start()` pass through.
+    `decide(a, b)` returns the merged row or None. Rows before `start(pos)` pass through, and so
+    does a row that `can_start` says can never be the first of a merging pair (it waits for no
+    one: the previous pair was already decided without it).
     """
 
-    def __init__(self, decide: Callable[[Row, Row], Row | None],
-                 start: Callable[[int], bool] | None = None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        decide: Callable[[Row, Row], Row | None],
+        start: Callable[[int], bool] | None = None,
+        can_start: Callable[[Row], bool] | None = None,
+    ) -> None:
         self.decide = decide
         self.before_start = start
+        self.can_start = can_start
         self.pending: Row | None = None
         self.pos = 0  # position of the next input row
+
+    def _hold(self, row: Row, pos: int) -> bool:
+        if self.before_start is not None and self.before_start(pos):
+            return False
+        return self.can_start is None or self.can_start(row)
 
     def push(self, row: Row) -> list[Row]:
         pos = self.pos
         self.pos += 1
-        if self.pending is None:
-            if self.before_start is not None and self.before_start(pos):
-                return [row]
-            self.pending = row
-            return []
-        merged = self.decide(self.pending, row)
-        if merged is not None:
+        out: list[Row] = []
+        if self.pending is not None:
+            first = self.pending
             self.pending = None
-            return [merged]
-        out = [self.pending]
-        self.pending = None
-        if self.before_start is not None and self.before_start(pos):
-            out.append(row)
-        else:
+            merged = self.decide(first, row)
+            if merged is not None:
+                return [merged]
+            out.append(first)
+        if self._hold(row, pos):
             self.pending = row
+        else:
+            out.append(row)
         return out
 
     def finish(self) -> list[Row]:
@@ -251,23 +260,33 @@ class AdjustmentChains(Op):
         return self._run()
 
     def _decidable(self, i: int) -> bool:
+        """Can the decision at position i be made with the rows (and time) known now?
+
+        It reads row i+1 (the guard and the labels); only for an 'a','a' pair that keeps a
+        chain going does it also read rows i+2 and i+3 (the chain-end check).
+        """
         n = self._available()
-        if not self.ended and i + 3 >= n:
+        if self.ended:
+            return i < n - 1
+        if i + 1 >= n:
             return False
-        if self.ended and i >= n - 1:
-            return False
-        if self._row(i) is None or not self.ctx.config.adjustment_mating_guard:
+        r, m = self._row(i), self._row(i + 1)
+        if r is None:
             return True
-        limit = self.ctx.limit()
-        if limit is not None or self.ctx.causal:
+        cfg = self.ctx.config
+        if cfg.adjustment_mating_guard:
+            limit = self.ctx.limit()
+            # an unknown limit is >= now - 0.002: the guard is true for MCs ending before that
+            if limit is None and not self.ctx.causal and not m[mc.T2E] < self.ctx.now - 0.002:
+                self.ctx.waiting.add(self)
+                return False
             self.ctx.waiting.discard(self)
+            if limit is not None and not m[mc.T2E] < limit:
+                return True
+        if r[mc.LBL] != mc.A or m[mc.LBL] != mc.A:
             return True
-        # unknown limit >= now - 0.002: the guard is true for MCs ending before that
-        if self._row(i + 1)[mc.T2E] < self.ctx.now - 0.002:
-            self.ctx.waiting.discard(self)
-            return True
-        self.ctx.waiting.add(self)
-        return False
+        keeps_chain = self.repeat or mc.similar(r[mc.AVGV], m[mc.AVGV], cfg.adjustment_similarity)
+        return not keeps_chain or i + 3 < n
 
     def _decide(self, i: int) -> None:
         cfg = self.ctx.config
@@ -446,8 +465,8 @@ class PrimitiveDurations(Op):
             self._decide(self.pending, row)
             out.append(self.pending)
             self.pending = None
-        if self.stopped or self.cycle.before_start(pos):
-            out.append(row)
+        if self.stopped or self.cycle.before_start(pos) or row[mc.LBL] in mc.CONTACTS:
+            out.append(row)  # contacts are skipped: nothing about them waits for the next MC
         else:
             self.pending = row
         return out
@@ -468,9 +487,16 @@ class CompositionDurations(Op):
     def __init__(self, ctx: StreamContext, cycle: CycleState) -> None:
         self.ctx, self.cycle = ctx, cycle
         self.pending: Row | None = None
-        self.skip_next = False  # the row after a '> 5' merge was emptied: its turn is a no-op
         self.pos = 0
         self.stopped = False
+
+    def _advance(self, row: Row, out: list[Row]) -> list[Row]:
+        """`row` is the next to be examined: contacts are skipped, so they need not wait."""
+        if row[mc.LBL] in mc.CONTACTS:
+            out.append(row)
+        else:
+            self.pending = row
+        return out
 
     def push(self, row: Row) -> list[Row]:
         pos = self.pos
@@ -480,45 +506,33 @@ class CompositionDurations(Op):
         if self.pending is None:
             if self.cycle.before_start(pos):
                 return [row]
-            self.pending = row
-            return []
+            return self._advance(row, [])
         r = self.pending
+        self.pending = None
         cfg = self.ctx.config
         lbl = r[mc.LBL]
-        if lbl in mc.CONTACTS:
-            self.pending = row
-            return [r]
         amp_ratio = pr.ieee_div(abs(row[mc.AMP]), abs(r[mc.AMP]))
         if amp_ratio == 0 or amp_ratio == math.inf:
-            self.pending = row
-            return [r]
+            return self._advance(row, [r])
         lim = cfg.duration_amplitude_ratio
         if amp_ratio > lim or amp_ratio < 1 / lim:
             if cfg.duration_gate_breaks:
                 self.stopped = True
-                self.pending = None
                 return [r, row]
-            self.pending = row
-            return [r]
+            return self._advance(row, [r])
         c1 = r[mc.T2E] - r[mc.T1S]
         c2 = row[mc.T2E] - row[mc.T1S]
         if c1 == 0 or c2 == 0:
-            self.pending = row
-            return [r]
+            return self._advance(row, [r])
         ratio = c1 / c2
         if ratio > cfg.duration_ratio:
-            rows = [r, row]
-            mc._merge(rows, 0, lbl if lbl in (mc.A, mc.I, mc.D, mc.K) else None, False, 1)
-            self.pending = None
+            mc._merge([r, row], 0, lbl if lbl in (mc.A, mc.I, mc.D, mc.K) else None, False, 1)
             # the emptied row's turn never changes anything; the next pair starts after it
             return [r]
         if ratio < 1 / cfg.duration_ratio:
-            rows = [r, row]
-            mc._merge(rows, 1, None, False, 0)
-            self.pending = row  # the merged row is compared with the next one
-            return []
-        self.pending = row
-        return [r]
+            mc._merge([r, row], 1, None, False, 0)
+            return self._advance(row, [])  # the merged row is compared with the next one
+        return self._advance(row, [r])
 
     def finish(self) -> list[Row]:
         out = [self.pending] if self.pending is not None else []
@@ -800,79 +814,101 @@ class Chain(Op):
         return sum(op.retained() for op in self.ops)
 
 
+def _labels(*labels: int, field: int) -> Callable[[Row], bool]:
+    """can_start predicate: the row's label is one that can open a merging pair."""
+    allowed = frozenset(labels)
+    return lambda row: row[field] in allowed
+
+
+def primitive_durations_pass(config: TaxonomyConfig) -> PairPass:
+    """Clean-up step 2 (impulses never open a pair)."""
+    return PairPass(
+        lambda a, b: pr.duration_pair(a, b, config),
+        can_start=lambda row: row[pr.LABEL] not in (pr.PIMP, pr.NIMP),
+    )
+
+
 def composition_cycle(ctx: StreamContext) -> list[Op]:
     """One cleanUp.m call as seven operators sharing its startIndex and largest amplitude."""
     cfg = ctx.config
     cycle = CycleState()
+    adjust = similar_pairs(mc._ADJUST_PAIRS, cfg.adjustment_merge_similarity, mc.A)
+    constant = similar_pairs(mc._CONSTANT_PAIRS, cfg.constant_merge_similarity, mc.K)
     return [
         AdjustmentChains(ctx, cycle),
         RepeatedCompositions(),
         PrimitiveDurations(ctx, cycle),
         CompositionDurations(ctx, cycle),
         ContactAmplitudes(ctx, cycle),
-        PairPass(
-            similar_pairs(mc._ADJUST_PAIRS, cfg.adjustment_merge_similarity, mc.A),
-            cycle.before_start,
-        ),
-        PairPass(
-            similar_pairs(mc._CONSTANT_PAIRS, cfg.constant_merge_similarity, mc.K),
-            cycle.before_start,
-        ),
+        PairPass(adjust, cycle.before_start, _labels(mc.A, mc.I, mc.D, field=mc.LBL)),
+        PairPass(constant, cycle.before_start, _labels(mc.I, mc.K, mc.D, field=mc.LBL)),
     ]
+
+
+def _push_pull(w1: float, w2: float) -> Callable[[Row, Row], bool]:
+    def test(r: Row, m: Row) -> bool:  # both similarity tests use the amplitude [bug]
+        return (
+            {r[bh.B_LBL], m[bh.B_LBL]} == {bh.PS, bh.PL}
+            and mc.similar(r[bh.B_AMP], m[bh.B_AMP], w1)
+            and mc.similar(r[bh.B_AMP], m[bh.B_AMP], w2)
+        )
+
+    return test
+
+
+def _align_shift(r: Row, m: Row) -> bool:
+    return (
+        r[bh.B_LBL] in (bh.SH, bh.AL)
+        and m[bh.B_LBL] in (bh.SH, bh.AL)
+        and m[bh.B_AMP] < r[bh.B_AMP]
+    )
+
+
+def _align_push(wa: float, wm: float) -> Callable[[Row, Row], bool]:
+    def test(r: Row, m: Row) -> bool:  # the reverse order can never be true in the original
+        return (
+            r[bh.B_LBL] in (bh.AL, bh.SH)
+            and m[bh.B_LBL] in (bh.PS, bh.PL)
+            and mc.similar(r[bh.B_AMP], m[bh.B_AMP], wa)
+            and mc.similar(r[bh.B_MAG], m[bh.B_MAG], wm)
+        )
+
+    return test
+
+
+_MOVES = (bh.PS, bh.PL, bh.AL, bh.SH)
+
+
+def _fixed(fa: float, fm: float) -> Callable[[Row, Row], bool]:
+    def test(r: Row, m: Row) -> bool:
+        return (
+            (r[bh.B_LBL] == bh.FX and m[bh.B_LBL] in _MOVES)
+            or (m[bh.B_LBL] == bh.FX and r[bh.B_LBL] in _MOVES)
+        ) and (
+            mc.similar(r[bh.B_AMP], m[bh.B_AMP], fa) and mc.similar(r[bh.B_MAG], m[bh.B_MAG], fm)
+        )
+
+    return test
 
 
 def refinement_cycle(config: TaxonomyConfig) -> list[Op]:
     """One Refinement.m call as six operators."""
-    w1, w2 = config.push_pull_similarity
-    wa, wm = config.align_push_similarity
-    fa, fm = config.fixed_similarity
-    L = bh
+    first = bh.B_LBL
     return [
         BehaviorDurations(config),
         PairPass(
-            behavior_pairs(
-                lambda r, m: (
-                    {r[L.B_LBL], m[L.B_LBL]} == {L.PS, L.PL}
-                    and mc.similar(r[L.B_AMP], m[L.B_AMP], w1)
-                    and mc.similar(r[L.B_AMP], m[L.B_AMP], w2)
-                ),  # both on the amplitude [bug]
-                L.AL,
-            )
+            behavior_pairs(_push_pull(*config.push_pull_similarity), bh.AL),
+            can_start=_labels(bh.PS, bh.PL, field=first),
         ),
-        PairPass(
-            behavior_pairs(
-                lambda r, m: (
-                    r[L.B_LBL] in (L.SH, L.AL)
-                    and m[L.B_LBL] in (L.SH, L.AL)
-                    and m[L.B_AMP] < r[L.B_AMP]
-                ),
-                L.AL,
-            )
-        ),
+        PairPass(behavior_pairs(_align_shift, bh.AL), can_start=_labels(bh.SH, bh.AL, field=first)),
         RepeatedBehaviors(),
         PairPass(
-            behavior_pairs(
-                lambda r, m: (
-                    r[L.B_LBL] in (L.AL, L.SH)
-                    and m[L.B_LBL] in (L.PS, L.PL)
-                    and mc.similar(r[L.B_AMP], m[L.B_AMP], wa)
-                    and mc.similar(r[L.B_MAG], m[L.B_MAG], wm)
-                ),
-                L.AL,
-            )
+            behavior_pairs(_align_push(*config.align_push_similarity), bh.AL),
+            can_start=_labels(bh.AL, bh.SH, field=first),
         ),
         PairPass(
-            behavior_pairs(
-                lambda r, m: (
-                    (
-                        (r[L.B_LBL] == L.FX and m[L.B_LBL] in (L.PS, L.PL, L.AL, L.SH))
-                        or (m[L.B_LBL] == L.FX and r[L.B_LBL] in (L.PS, L.PL, L.AL, L.SH))
-                    )
-                    and mc.similar(r[L.B_AMP], m[L.B_AMP], fa)
-                    and mc.similar(r[L.B_MAG], m[L.B_MAG], fm)
-                ),
-                L.FX,
-            )
+            behavior_pairs(_fixed(*config.fixed_similarity), bh.FX),
+            can_start=_labels(bh.FX, *_MOVES, field=first),
         ),
     ]
 
@@ -885,7 +921,7 @@ class AxisPipeline:
         self.ctx = ctx
         prim_ops: list[Op] = []
         if cfg.primitive_cleanup:
-            prim_ops = [RepeatedPrimitives(), PairPass(lambda a, b: pr.duration_pair(a, b, cfg))]
+            prim_ops = [RepeatedPrimitives(), primitive_durations_pass(cfg)]
         mc_ops: list[Op] = [Compose(cfg)]
         for _ in range(cfg.composition_cleanup_cycles):
             mc_ops.extend(composition_cycle(ctx))
@@ -948,9 +984,7 @@ def whole_context(
 
 def clean_primitives(prims: list[Row], config: TaxonomyConfig) -> list[Row]:
     """primitivesCleanUp.m on a whole axis."""
-    return run_ops(
-        [RepeatedPrimitives(), PairPass(lambda a, b: pr.duration_pair(a, b, config))], prims
-    )
+    return run_ops([RepeatedPrimitives(), primitive_durations_pass(config)], prims)
 
 
 def compose(prims: list[Row], config: TaxonomyConfig) -> list[Row]:
