@@ -20,15 +20,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--trials", type=int, default=12, help="number of trials (default 12)")
     p.add_argument("--scenario", choices=("one-arm", "two-arm"), default="one-arm")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--failures", action="store_true",
-                   help="make every second trial a failure (misalignment, jamming, missed_snap)")
-    p.add_argument("--rate", type=float, default=200.0, metavar="HZ",
-                   help="sensor output rate: 200 (HIRO) or 1000 Hz; must divide 1 kHz")
+    p.add_argument(
+        "--failures",
+        action="store_true",
+        help="make every second trial a failure (misalignment, jamming, missed_snap)",
+    )
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=200.0,
+        metavar="HZ",
+        help="sensor output rate: 200 (HIRO) or 1000 Hz; must divide 1 kHz",
+    )
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
     p.add_argument("--format", choices=("hiro", "bag"), default="hiro", dest="fmt")
-    p.add_argument("--config", type=Path, default=None, help="sim config YAML (default config/sim.yaml)")
-    p.add_argument("--progress", choices=("auto", "on", "off"), default="auto",
-                   help="progress bar (auto: on a terminal for more than 4 trials)")
+    p.add_argument(
+        "--config", type=Path, default=None, help="sim config YAML (default config/sim.yaml)"
+    )
+    p.add_argument(
+        "--progress",
+        choices=("auto", "on", "off"),
+        default="auto",
+        help="progress bar (auto: on a terminal for more than 4 trials)",
+    )
     p.set_defaults(func=run_sim)
 
     r = subparsers.add_parser(
@@ -38,8 +52,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "variability, of a simulated set with the real HIRO set; figures as PNG.",
     )
     r.add_argument("sim_dir", type=Path, metavar="SIM_DIR")
-    r.add_argument("--real", type=Path, default=None, metavar="REAL_DIR",
-                   help="real HIRO set with golden/ folders (default ../shared/data/hiro/REAL_HIRO_ONE_SA_SUCCESS)")
+    r.add_argument(
+        "--real",
+        type=Path,
+        default=None,
+        metavar="REAL_DIR",
+        help="real HIRO set with golden/ folders (default ../shared/data/hiro/REAL_HIRO_ONE_SA_SUCCESS)",
+    )
     r.add_argument("--out", type=Path, default=Path("sim_report"), metavar="DIR")
     r.set_defaults(func=run_report)
 
@@ -56,8 +75,15 @@ def run_sim(args: argparse.Namespace) -> int:
     )
     start = time.perf_counter()
     written = write_dataset(
-        args.out, args.trials, scenario=args.scenario, seed=args.seed, failures=args.failures,
-        rate_hz=args.rate, fmt=args.fmt, progress=progress, config=config,
+        args.out,
+        args.trials,
+        scenario=args.scenario,
+        seed=args.seed,
+        failures=args.failures,
+        rate_hz=args.rate,
+        fmt=args.fmt,
+        progress=progress,
+        config=config,
     )
     elapsed = time.perf_counter() - start
     print(f"wrote {len(written)} {args.scenario} trials to {args.out} in {elapsed:.1f} s")

@@ -39,7 +39,7 @@ class GeometryConfig:
     """Vertical length of the hook's lead-in ramp."""
     hook_play: float = 0.0005
     """Vertical gap between the seated male's shoulder and the hook's retention face."""
-    sensor_height: float = 0.045
+    sensor_height: float = 0.07
     """Height of the force/torque sensor site above the male part's bottom face."""
 
 

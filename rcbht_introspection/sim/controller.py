@@ -117,7 +117,8 @@ class SnapController:
             self._comply(dt, t - st.phase_start < cfg.centering_time)
             if st.seat_time is None:
                 self.force_set = min(
-                    cfg.insertion_force_max, plan.rotation_force + plan.insertion_force_rate * elapsed
+                    cfg.insertion_force_max,
+                    plan.rotation_force + plan.insertion_force_rate * elapsed,
                 )
             if st.snap_time is None:
                 st.peak_force = max(st.peak_force, f)

@@ -22,7 +22,9 @@ from rcbht_introspection.sim.simulate import simulate_trial
 FORMATS: tuple[str, ...] = ("hiro", "bag")
 
 
-def trial_plan(n_trials: int, seed: int, failures: bool, types: tuple[str, ...]) -> list[tuple[int, str | None]]:
+def trial_plan(
+    n_trials: int, seed: int, failures: bool, types: tuple[str, ...]
+) -> list[tuple[int, str | None]]:
     """(trial seed, failure type or None) for each trial of a set."""
     plan: list[tuple[int, str | None]] = []
     for i in range(n_trials):
@@ -92,10 +94,26 @@ def write_dataset(
             path = write_trial(trial, out / name)
             (path / "meta.json").write_text(json.dumps(trial.metadata, indent=1) + "\n")
         written.append(path)
-        index.append({"name": name, "outcome": trial.outcome, "state_times": list(trial.state_times),
-                      "end_time": trial.end_time, **trial.metadata})
+        index.append(
+            {
+                "name": name,
+                "outcome": trial.outcome,
+                "state_times": list(trial.state_times),
+                "end_time": trial.end_time,
+                **trial.metadata,
+            }
+        )
     (out / "sim_meta.json").write_text(
-        json.dumps({"scenario": scenario, "seed": seed, "rate_hz": rate_hz, "format": fmt,
-                    "trials": index}, indent=1) + "\n"
+        json.dumps(
+            {
+                "scenario": scenario,
+                "seed": seed,
+                "rate_hz": rate_hz,
+                "format": fmt,
+                "trials": index,
+            },
+            indent=1,
+        )
+        + "\n"
     )
     return written

@@ -91,8 +91,18 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
     wall_profile = [(a, 0.0), (a + tw, 0.0), (a + tw, h), (a + c, h), (a, h - c)]
     beam_c = min(c, 0.9 * bt)
     root = -g.beam_root_depth
-    beam_profile = [(-bt / 2, root), (bt / 2, root), (bt / 2, h), (-bt / 2 + beam_c, h), (-bt / 2, h - beam_c)]
-    hook_profile = [(-bt / 2, z_tip), (-bt / 2 - g.hook_depth, z_tip), (-bt / 2, z_tip + g.hook_ramp)]
+    beam_profile = [
+        (-bt / 2, root),
+        (bt / 2, root),
+        (bt / 2, h),
+        (-bt / 2 + beam_c, h),
+        (-bt / 2, h - beam_c),
+    ]
+    hook_profile = [
+        (-bt / 2, z_tip),
+        (-bt / 2 - g.hook_depth, z_tip),
+        (-bt / 2, z_tip + g.hook_ramp),
+    ]
     bw = g.beam_half_width
     meshes.append(f'<mesh name="wall_lo" vertex="{_prism(wall_profile, -y_out, -y_in)}"/>')
     meshes.append(f'<mesh name="wall_hi" vertex="{_prism(wall_profile, y_in, y_out)}"/>')

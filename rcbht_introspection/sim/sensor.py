@@ -46,12 +46,17 @@ def resample(raw: np.ndarray, k: int) -> np.ndarray:
 
 
 def measure(
-    wrench: np.ndarray, time: np.ndarray, config: SensorConfig, draw: SensorDraw,
+    wrench: np.ndarray,
+    time: np.ndarray,
+    config: SensorConfig,
+    draw: SensorDraw,
     rng: np.random.Generator,
 ) -> np.ndarray:
     """Add bias, slow drift, white noise and quantization to a true (tared) wrench (N, 6)."""
     std = np.array([config.noise_force] * 3 + [config.noise_torque] * 3) * draw.noise_scale
     q = np.array([config.quantization_force] * 3 + [config.quantization_torque] * 3)
-    drift = draw.drift[None, :] * np.sin(2 * np.pi * time[:, None] / draw.drift_period + draw.drift_phase)
+    drift = draw.drift[None, :] * np.sin(
+        2 * np.pi * time[:, None] / draw.drift_period + draw.drift_phase
+    )
     out = wrench + draw.bias[None, :] + drift + rng.normal(0.0, 1.0, wrench.shape) * std[None, :]
     return np.round(out / q) * q

@@ -85,7 +85,10 @@ def draw_trial(
 
 
 def run_physics(
-    config: SimConfig, physics: TrialPhysics, plan: ControlPlan, two_arm: bool,
+    config: SimConfig,
+    physics: TrialPhysics,
+    plan: ControlPlan,
+    two_arm: bool,
     trace: list[tuple[float, ...]] | None = None,
 ) -> dict[str, object]:
     """Run the controller on the model; return raw sensor data per step and controller events."""
@@ -119,8 +122,12 @@ def run_physics(
     while step < max_steps and not controller.done:
         t = step * dt
         u = controller.update(
-            t, dt, tare[0] - sensordata[0], tare[1] - sensordata[1],
-            tare[2] - sensordata[2], sz + qpos[qz],
+            t,
+            dt,
+            tare[0] - sensordata[0],
+            tare[1] - sensordata[1],
+            tare[2] - sensordata[2],
+            sz + qpos[qz],
         )
         ctrl[ra[0]] = u[0] - sx
         ctrl[ra[1]] = u[1] - sy
@@ -134,7 +141,11 @@ def run_physics(
         mujoco.mj_step(model, data)
         raw[step] = sensordata
         step += 1
-        if controller.state.phase != "insertion" and len(controller.state.switch_times) >= 3 and not phase_at_end_of_insertion:
+        if (
+            controller.state.phase != "insertion"
+            and len(controller.state.switch_times) >= 3
+            and not phase_at_end_of_insertion
+        ):
             phase_at_end_of_insertion["latched"] = float(_latched(config, model, data))
     raw = raw[:step]
     # tool-frame convention: the wrench the part exerts on the sensor (compression: +Fz), tared
