@@ -105,11 +105,13 @@ class ControllerConfig:
     seat_tolerance: float = 0.002
     """Seated only if the tool is within this height (m) of the believed seat."""
     hold_force: Range = (22.0, 34.0)
-    hold_time: Range = (3.0, 6.0)
-    retract_speed: Range = (0.0002, 0.0004)
+    hold_time: Range = (3.0, 9.0)
+    retract_speed: Range = (0.00012, 0.0003)
     """Move-away speed (m/s) after the hold; stops at release_force or retract_time."""
+    retract_lateral: Range = (-0.0003, 0.0003)
+    """Range of the move-away path's lateral speed (m/s) in x and y."""
     release_force: float = 3.0
-    retract_time: float = 6.0
+    retract_time: float = 9.0
     tail_time: float = 0.5
     abort_time: float = 1.5
     """After a failed insertion: time spent backing off before the trial ends."""
@@ -171,6 +173,11 @@ class SensorConfig:
     noise_torque: float = 0.0015
     drift_force: float = 0.05
     drift_torque: float = 0.002
+    vibration_force: float = 0.06
+    """Std (N) of the arm's structural vibration seen by the sensor (low-pass, see vibration_time)."""
+    vibration_torque: float = 0.002
+    vibration_time: float = 0.25
+    """Correlation time (s) of the vibration (an Ornstein-Uhlenbeck process)."""
     quantization_force: float = 0.001
     quantization_torque: float = 0.0001
 

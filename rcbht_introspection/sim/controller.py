@@ -31,6 +31,8 @@ class ControlPlan:
     hold_force: float
     hold_time: float
     retract_speed: float
+    retract_lateral: tuple[float, float] = (0.0, 0.0)
+    """Lateral velocity (m/s) of the move-away path; the latched part resists it."""
 
 
 @dataclass
@@ -152,14 +154,16 @@ class SnapController:
                 st.aborted = True
                 self._switch(t, "backoff")
         elif st.phase == "mating":
-            self._comply(dt, False)
             if st.hold_end is None:
+                self._comply(dt, False)
                 if tcp_z > self.seat_floor:
                     self._admit(dt, f)
                 if elapsed > plan.hold_time:
                     st.hold_end = t
             elif st.release_time is None:
                 u[2] += plan.retract_speed * dt
+                u[0] += plan.retract_lateral[0] * dt  # the move-away path is not purely vertical
+                u[1] += plan.retract_lateral[1] * dt
                 if f < cfg.release_force or t - st.hold_end > cfg.retract_time:
                     st.release_time = t
             elif t - st.release_time > cfg.tail_time:

@@ -59,4 +59,22 @@ def measure(
         2 * np.pi * time[:, None] / draw.drift_period + draw.drift_phase
     )
     out = wrench + draw.bias[None, :] + drift + rng.normal(0.0, 1.0, wrench.shape) * std[None, :]
+    out += vibration(time, config, draw.noise_scale, rng)
     return np.round(out / q) * q
+
+
+def vibration(
+    time: np.ndarray, config: SensorConfig, scale: float, rng: np.random.Generator
+) -> np.ndarray:
+    """Low-frequency structural vibration: an exact-discretised Ornstein-Uhlenbeck process."""
+    n = len(time)
+    out = np.zeros((n, 6))
+    if n < 2:
+        return out
+    dt = float(time[1] - time[0])
+    a = np.exp(-dt / config.vibration_time)
+    std = np.array([config.vibration_force] * 3 + [config.vibration_torque] * 3) * scale
+    kicks = rng.normal(0.0, 1.0, (n, 6)) * std[None, :] * np.sqrt(1.0 - a * a)
+    from scipy.signal import lfilter
+
+    return lfilter([1.0], [1.0, -a], kicks, axis=0)

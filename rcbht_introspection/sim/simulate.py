@@ -69,6 +69,7 @@ def draw_trial(
         hold_force=_uniform(rng, cc.hold_force),
         hold_time=_uniform(rng, cc.hold_time),
         retract_speed=_uniform(rng, cc.retract_speed),
+        retract_lateral=(_uniform(rng, cc.retract_lateral), _uniform(rng, cc.retract_lateral)),
     )
     s = config.sensor
     scale6 = np.array([1.0] * 3 + [0.0] * 3)
