@@ -92,7 +92,7 @@ def run_sim(args: argparse.Namespace) -> int:
 
 def run_report(args: argparse.Namespace) -> int:
     """Build the realism report (tables as Markdown + JSON, figures as PNG)."""
-    from rcbht_introspection.sim.report import write_report
+    from rcbht_introspection.commands.sim_report import write_report
 
     summary = write_report(args.sim_dir, args.real, args.out)
     print(summary)
