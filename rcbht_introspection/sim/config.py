@@ -57,7 +57,7 @@ class PhysicsConfig:
     beam_damping: float = 0.004
     beam_armature: float = 1.0e-5
     friction: float = 0.3
-    contact_solref: tuple[float, float] = (0.004, 1.0)
+    contact_solref: tuple[float, float] = (0.008, 1.0)
     contact_solimp: tuple[float, float, float] = (0.95, 0.99, 0.001)
     arm_kp_lin: float = 20000.0
     """Stiffness (N/m) of the arm's Cartesian position servo."""
@@ -87,12 +87,12 @@ class ControllerConfig:
     """Initial side-approach tilt (rad) about the y axis, removed during the rotation sub-task."""
     lateral_lead: float = 0.004
     """The male starts this far (m) towards -x, so its low edge lands on the +x chamfer."""
-    rotation_speed: Range = (0.03, 0.07)
+    rotation_speed: Range = (0.025, 0.05)
     """Angular speed (rad/s) of the alignment rotation."""
-    rotation_force: Range = (8.0, 13.0)
+    rotation_force: Range = (5.0, 9.0)
     """Force (N) kept on the contact while rotating."""
     rotation_settle: float = 0.6
-    insertion_force_rate: Range = (6.0, 14.0)
+    insertion_force_rate: Range = (10.0, 18.0)
     """Ramp (N/s) of the insertion force set-point."""
     insertion_force_max: float = 45.0
     insertion_timeout: float = 8.0
