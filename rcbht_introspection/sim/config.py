@@ -105,7 +105,7 @@ class ControllerConfig:
     seat_tolerance: float = 0.002
     """Seated only if the tool is within this height (m) of the believed seat."""
     hold_force: Range = (22.0, 34.0)
-    hold_time: Range = (3.0, 9.0)
+    hold_time: Range = (3.0, 14.0)
     retract_speed: Range = (0.00012, 0.0003)
     """Move-away speed (m/s) after the hold; stops at release_force or retract_time."""
     retract_lateral: Range = (-0.0003, 0.0003)
