@@ -149,3 +149,14 @@ def test_bag_format(tmp_path: Path) -> None:
     else:
         (path,) = write_dataset(tmp_path, 1, fmt="bag")
         assert path.exists()
+
+
+def test_rerun_replaces_the_previous_set_and_refuses_foreign_data(tmp_path: Path) -> None:
+    write_dataset(tmp_path, 2, seed=1)
+    write_dataset(tmp_path, 1, seed=1)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["SIM-ONE-S-01", "sim_meta.json"]
+    foreign = tmp_path / "other"
+    (foreign / "real").mkdir(parents=True)
+    (foreign / "real" / "R_Torques.dat").write_text("0 0 0 0 0 0 0\n")
+    with pytest.raises(InputError, match="did not write"):
+        write_dataset(foreign, 1)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -54,6 +55,44 @@ def _bag_writer() -> Callable[[Trial, Path], None]:
     return module.write_trial_bag
 
 
+def _clear_previous_set(out: Path) -> None:
+    """Re-running into a folder replaces the previous simulated set; foreign trials are an error.
+
+    A folder holding a sim_meta.json is our own earlier output: its listed trials are removed so no
+    stale trial of a larger earlier set survives. A folder with other trial data is refused.
+    """
+    if not out.is_dir():
+        return
+    meta = out / "sim_meta.json"
+    if meta.is_file():
+        try:
+            names = [t["name"] for t in json.loads(meta.read_text())["trials"]]
+        except (ValueError, KeyError, TypeError):
+            raise InputError(
+                "unreadable sim_meta.json; remove the folder first", path=meta
+            ) from None
+        for name in names:
+            shutil.rmtree(out / name, ignore_errors=True)
+            for suffix in (".mcap", ".db3"):
+                (out / f"{name}{suffix}").unlink(missing_ok=True)
+        meta.unlink()
+    if find_trials_in(out):
+        raise InputError(
+            "folder already holds trial data that this simulator did not write", path=out
+        )
+
+
+def find_trials_in(out: Path) -> list[Path]:
+    """Trial folders or bag files directly inside `out`."""
+    return sorted(
+        p
+        for p in out.iterdir()
+        if p.suffix in (".mcap", ".db3")
+        or (p / "R_Torques.dat").is_file()
+        or (p / "L_Torques.dat").is_file()
+    )
+
+
 def write_dataset(
     out_dir: Path | str,
     n_trials: int,
@@ -75,6 +114,7 @@ def write_dataset(
     config = config or load_sim_config()
     write_bag = _bag_writer() if fmt == "bag" else None
     out = Path(out_dir)
+    _clear_previous_set(out)
     out.mkdir(parents=True, exist_ok=True)
     plan = trial_plan(n_trials, seed, failures, config.failures.types)
     items = enumerate(plan)
