@@ -34,8 +34,8 @@ class TrialPhysics:
     female_yaw: float = 0.0
     friction_scale: float = 1.0
     stiffness_scale: float = 1.0
-    start_pose: tuple[float, float, float, float] = (0.0, 0.0, 0.05, 0.0)
-    """Initial tool centre point x, y, z (m) and pitch (rad)."""
+    start_pose: tuple[float, float, float] = (0.0, 0.0, 0.05)
+    """Initial tool centre point x, y, z (m); the initial pitch is set on the arm's joint."""
 
 
 def _prism(points_xz: list[tuple[float, float]], y0: float, y1: float) -> str:
@@ -150,7 +150,7 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
             f'euler="0 0 {physics.female_yaw:.6g}">{female_inner}</body>'
         )
 
-    sx, sy, sz, spitch = physics.start_pose
+    sx, sy, sz = physics.start_pose
     m = g.male_half
     hl = g.male_lower_height
     n = g.male_neck_half
@@ -175,7 +175,6 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
     sensors = '<force name="r_force" site="r_ft"/><torque name="r_torque" site="r_ft"/>'
     if two_arm:
         sensors += '<force name="l_force" site="l_ft"/><torque name="l_torque" site="l_ft"/>'
-    _ = spitch  # the initial pitch is set on the joint (qpos), not in the body frame
     return f"""<mujoco model="snap_assembly">
 <compiler angle="degree" autolimits="true"/>
 <option timestep="{p.timestep:.6g}" gravity="0 0 {-p.gravity:.6g}" integrator="implicitfast">

@@ -8,6 +8,7 @@ whose physical outcome contradicts the requested one is redrawn (counted in meta
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -15,7 +16,12 @@ import numpy as np
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim.config import SimConfig
-from rcbht_introspection.sim.controller import ControlPlan, HolderController, SnapController
+from rcbht_introspection.sim.controller import (
+    ControllerState,
+    ControlPlan,
+    HolderController,
+    SnapController,
+)
 from rcbht_introspection.sim.model import ARM_JOINTS, TrialPhysics, build_model
 from rcbht_introspection.sim.scenario import get_scenario
 from rcbht_introspection.sim.sensor import SensorDraw, decimation, measure, resample
@@ -24,6 +30,15 @@ SETTLE_TIME = 0.3
 """Time (s) the arm servos settle under gravity before taring and recording start."""
 MAX_DURATION = 80.0
 """Upper bound (s) on one trial; the controller's own time-outs end every trial well before."""
+
+
+@dataclass(frozen=True)
+class PhysicsRun:
+    """One physics run: tared tool-frame wrench per step (R columns 0-5, L 6-11), events, outcome."""
+
+    wrench: np.ndarray
+    state: ControllerState
+    latched: bool
 
 
 def _uniform(rng: np.random.Generator, r: tuple[float, float]) -> float:
@@ -57,7 +72,7 @@ def draw_trial(
         female_yaw=math.degrees(yaw),
         friction_scale=_uniform(rng, var.friction_scale),
         stiffness_scale=_uniform(rng, var.stiffness_scale),
-        start_pose=(start_x, 0.0, start_z, tilt),
+        start_pose=(start_x, 0.0, start_z),
     )
     plan = ControlPlan(
         start=(start_x, 0.0, start_z),
@@ -91,8 +106,8 @@ def run_physics(
     plan: ControlPlan,
     two_arm: bool,
     trace: list[tuple[float, ...]] | None = None,
-) -> dict[str, object]:
-    """Run the controller on the model; return raw sensor data per step and controller events."""
+) -> PhysicsRun:
+    """Run the controller on the model; return the tared wrench per physics step and the events."""
     model = build_model(config, physics, two_arm)
     data = mujoco.MjData(model)
     dt = model.opt.timestep
@@ -115,7 +130,6 @@ def run_physics(
     lz_sensor = 8
     qz = r_qadr[2]
     ra = r_act
-    phase_at_end_of_insertion: dict[str, float] = {}
     step = 0
     sensordata = data.sensordata
     qpos = data.qpos
@@ -142,22 +156,10 @@ def run_physics(
         mujoco.mj_step(model, data)
         raw[step] = sensordata
         step += 1
-        if (
-            controller.state.phase != "insertion"
-            and len(controller.state.switch_times) >= 3
-            and not phase_at_end_of_insertion
-        ):
-            phase_at_end_of_insertion["latched"] = float(_latched(config, model, data))
     raw = raw[:step]
     # tool-frame convention: the wrench the part exerts on the sensor (compression: +Fz), tared
     wrench = tare[None, :] - raw
-    return {
-        "wrench": wrench,
-        "dt": dt,
-        "state": controller.state,
-        "latched": _latched(config, model, data),
-        "latched_after_insertion": bool(phase_at_end_of_insertion.get("latched", 0.0)),
-    }
+    return PhysicsRun(wrench=wrench, state=controller.state, latched=_latched(config, model, data))
 
 
 def _latched(config: SimConfig, model: mujoco.MjModel, data: mujoco.MjData) -> bool:
@@ -188,12 +190,12 @@ def simulate_trial(
         physics, plan, sensor = draw_trial(config, rng, failure)
         result = run_physics(config, physics, plan, scen.two_arm)
         attempts += 1
-        latched = bool(result["latched"])
+        latched = result.latched
         consistent = latched if failure is None else not latched
         if consistent or attempts >= config.failures.max_attempts:
             break
-    state = result["state"]
-    raw = np.asarray(result["wrench"])
+    state = result.state
+    raw = result.wrench
     samples = resample(raw, k)
     period = 1.0 / rate_hz
     time = np.round(np.arange(len(samples)) * period, 9)
