@@ -96,6 +96,8 @@ class ControllerConfig:
     """Ramp (N/s) of the insertion force set-point."""
     insertion_force_max: float = 45.0
     insertion_timeout: float = 8.0
+    insertion_stroke: float = 0.002
+    """Planned stroke: the insertion never goes deeper than this below the believed seat height."""
     snap_drop: float = 0.25
     """Snap-through detected when force falls by this fraction below its insertion peak."""
     snap_min_peak: float = 13.0
@@ -114,6 +116,8 @@ class ControllerConfig:
     retract_time: float = 9.0
     tail_time: float = 0.5
     abort_time: float = 1.5
+    backoff_speed: float = 0.004
+    """Upward speed (m/s) of the back-off after an aborted insertion."""
     """After a failed insertion: time spent backing off before the trial ends."""
     force_gain: float = 0.00015
     """Admittance gain (m/s per N) of the force-controlled axis."""
@@ -160,8 +164,6 @@ class FailureConfig:
     """Yaw offset (rad) that wedges the male's corners on the housing walls."""
     missed_snap_z: Range = (0.004, 0.007)
     """Housing lower than believed (m): the insertion stroke ends before the hooks engage."""
-    insertion_stroke: float = 0.002
-    """Planned insertion stroke beyond the nominal seat height before the controller gives up."""
     max_attempts: int = 4
 
 

@@ -56,7 +56,6 @@ class SnapController:
 
     def __init__(self, config: SimConfig, plan: ControlPlan) -> None:
         self.cfg = config.controller
-        self.fail_cfg = config.failures
         self.plan = plan
         self.state = ControllerState()
         x, y, z = plan.start
@@ -72,7 +71,7 @@ class SnapController:
         self.pivot_z = 0.0
         self.admittance_z = 0.0
         self.trace: list[tuple[float, ...]] | None = None
-        self.seat_floor = -self.fail_cfg.insertion_stroke
+        self.seat_floor = -self.cfg.insertion_stroke
         """Lowest believed tool height the insertion may reach before it counts as done."""
 
     def _switch(self, t: float, phase: str) -> None:
@@ -169,7 +168,7 @@ class SnapController:
             elif t - st.release_time > cfg.tail_time:
                 self._switch(t, "done")
         elif st.phase == "backoff":
-            u[2] += 0.004 * dt
+            u[2] += cfg.backoff_speed * dt
             if elapsed > cfg.abort_time:
                 self._switch(t, "done")
         return u
