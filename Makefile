@@ -6,7 +6,7 @@ PIP_QUIET := 2>&1 | { grep -v '^WARNING: Location' || true; }
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-PKG_SOURCES := $(shell find rcbht_introspection config resource -type f -not -name '*.pyc' 2>/dev/null) setup.py setup.cfg package.xml
+PKG_SOURCES := $(shell find rcbht_introspection config resource scripts -type f -not -name '*.pyc' 2>/dev/null) setup.py setup.cfg package.xml
 MSG_SOURCES := $(wildcard msg_defs/msg/*.msg msg_defs/CMakeLists.txt msg_defs/package.xml)
 
 .PHONY: setup demo test bench lint clean
