@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import sys
 from collections.abc import Callable
@@ -70,3 +71,43 @@ def run(node_factory: Callable[[], Node], name: str, args: list[str] | None = No
 def config_fields(cls: type) -> list[str]:
     """Field names of a config class (for help texts)."""
     return [f.name for f in dataclasses.fields(cls)]
+
+
+class RosSession:
+    """An rclpy context + node spun by a background SingleThreadedExecutor (for CLI tools).
+
+    Signal handlers stay Python's, so Ctrl-C raises KeyboardInterrupt in the caller.
+    """
+
+    def __init__(self, name: str, domain_id: int | None = None) -> None:
+        from rclpy.context import Context
+        from rclpy.signals import SignalHandlerOptions
+
+        self.context = Context()
+        kwargs: dict[str, Any] = {"context": self.context}
+        if domain_id is not None:
+            kwargs["domain_id"] = domain_id
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO, **kwargs)
+        self.node = Node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        import threading
+
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        with contextlib.suppress(Exception):  # the context was shut down under it
+            self.executor.spin()
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=2.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+        self._thread.join(timeout=2.0)
+
+    def __enter__(self) -> RosSession:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
