@@ -210,12 +210,15 @@ def write_trial_bag(trial: Trial, path: Path | str, time_origin_ns: int = TIME_O
                     ),
                 )
                 bag.write(topics[arm], msg, int(t))
-            # A phase event at the time of this sample follows it (the sample ends the sub-task).
-            while ev < len(events) and time_origin_ns + round(events[ev][0] * _NS) <= t:
-                bag.write(PHASE_TOPIC, String(data=events[ev][1]), int(t))
+            # An event follows the last sample before it (a sample at its exact time ends the
+            # previous sub-task, spec 2.7); its log time is the event time.
+            next_t = int(t_ns[i + 1]) if i + 1 < len(t_ns) else None
+            while ev < len(events):
+                e_ns = time_origin_ns + round(events[ev][0] * _NS)
+                if next_t is not None and e_ns >= next_t:
+                    break
+                bag.write(PHASE_TOPIC, String(data=events[ev][1]), max(e_ns, int(t)))
                 ev += 1
-        for _, name in events[ev:]:
-            bag.write(PHASE_TOPIC, String(data=name), int(t_ns[-1]))
 
 
 @dataclass(frozen=True)

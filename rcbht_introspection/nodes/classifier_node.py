@@ -35,7 +35,7 @@ class ClassifierNode(Node):
         if model is None:
             self.get_logger().error(f"no usable model, /task_state stays {UNKNOWN!r}: {why}")
         self.tracker = BeliefTracker(model, cfg.mode, cfg.window_s, end_phases=cfg.end_phases)
-        self.origin_ns: int | None = None
+        self.stream: tuple[int, int] | None = None
         self.state = UNKNOWN
         self.reported_error: str | None = None
         qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
@@ -51,20 +51,21 @@ class ClassifierNode(Node):
             f"mode {cfg.mode}, model {cfg.model_file or '(none)'}, classes {list(self.tracker.classes)}"
         )
 
-    def _stream(self, origin_ns: int) -> None:
-        """A message of a new stream (new time origin): start a new session."""
-        if origin_ns != self.origin_ns:
-            if self.origin_ns is not None:
+    def _stream(self, origin_ns: int, stream_id: int) -> None:
+        """A message of a new stream (new time origin or stream id): start a new session."""
+        key = (origin_ns, stream_id)
+        if key != self.stream:
+            if self.stream is not None:
                 # the previous stream ended without all its end markers: issue what it has
                 for arm in tuple(self.tracker.arms):
                     self.tracker.end_of_stream(arm)
                 for final in self.tracker.take_finals():
                     self.publish_belief(final, 0)
                 self.tracker.reset()
-            self.origin_ns = origin_ns
+            self.stream = key
 
     def on_words(self, arm: str, msg: WordsMsg) -> None:
-        self._stream(to_ns(msg.time_origin))
+        self._stream(to_ns(msg.time_origin), msg.stream_id)
         words, now = words_from_msg(msg)
         self.tracker.add_words(arm, words, now)
         if msg.end_of_stream:
@@ -72,7 +73,7 @@ class ClassifierNode(Node):
         self.update(to_ns(msg.header.stamp))
 
     def on_phase(self, msg: PhaseMsg) -> None:
-        self._stream(to_ns(msg.time_origin))
+        self._stream(to_ns(msg.time_origin), msg.stream_id)
         if not self.tracker.phase(msg.name, msg.time):
             self.get_logger().warning(f"ignored unknown sub-task event {msg.name!r}")
             return

@@ -74,6 +74,7 @@ def words_msg(
     stamp_ns: int,
     origin_ns: int,
     *,
+    stream_id: int = 0,
     end_of_stream: bool = False,
     accepted: int = 0,
     rejected: int = 0,
@@ -84,6 +85,7 @@ def words_msg(
         arm=arm,
         level=LEVEL_CODES[level],
         time_origin=to_time(origin_ns),
+        stream_id=int(stream_id),
         words=[word_to_msg(w) for w in words],
         end_of_stream=end_of_stream,
         samples_accepted=int(accepted),
@@ -103,7 +105,10 @@ def words_from_msg(msg: WordsMsg) -> tuple[list[Word], float]:
 def phase_msg(event: PhaseEvent) -> PhaseMsg:
     """Applied sub-task event -> rcbht_interfaces/Phase."""
     msg = PhaseMsg(
-        name=event.name, time=float(event.time), time_origin=to_time(event.origin_ns or 0)
+        name=event.name,
+        time=float(event.time),
+        time_origin=to_time(event.origin_ns),
+        stream_id=int(event.stream_id),
     )
     msg.header.stamp = to_time(event.stamp_ns)
     return msg

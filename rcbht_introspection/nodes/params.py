@@ -48,6 +48,9 @@ class SegmenterConfig:
         "rcbht/phase", "rcbht_interfaces/Phase: each /task_phase event placed on the stream clock"
     )
     end_phases: tuple[str, ...] = _f(("done",), "event names that end the task (flush the streams)")
+    event_hold_s: float = _f(
+        0.05, "a /task_phase event waits up to this long for the wrench samples published before it"
+    )
     taxonomy_profile: str = _f("reference", "taxonomy threshold profile of config/rcbht.yaml")
     taxonomy_config_file: str = _f("", "optional YAML file overriding the taxonomy thresholds")
     stream_config_file: str = _f("", "optional YAML file overriding config/stream.yaml")
@@ -130,6 +133,12 @@ def validate(cfg: T, path: Path | None = None) -> T:
             path,
         )
         _check(bool(cfg.phase_topic), "phase_topic", "must not be empty", path)
+        _check(
+            0 < cfg.event_hold_s <= 10,
+            "event_hold_s",
+            f"must be in (0, 10], got {cfg.event_hold_s}",
+            path,
+        )
         for name in ("taxonomy_config_file", "stream_config_file"):
             value = getattr(cfg, name)
             _check(not value or Path(value).is_file(), name, f"no such file: {value}", path)

@@ -9,6 +9,7 @@ dropped and counted (Words.samples_rejected).
 from __future__ import annotations
 
 import sys
+import time
 from functools import partial
 
 from geometry_msgs.msg import WrenchStamped
@@ -34,7 +35,7 @@ class SegmenterNode(Node):
         factory = arm_stream_factory(
             cfg.taxonomy_profile, cfg.taxonomy_config_file, cfg.stream_config_file
         )
-        self.session = SegmenterSession(cfg.arms, factory, cfg.end_phases)
+        self.session = SegmenterSession(cfg.arms, factory, cfg.end_phases, hold_s=cfg.event_hold_s)
         qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         topics = word_topics(cfg.words_namespace, cfg.arms)
         self.word_pubs = {
@@ -45,59 +46,76 @@ class SegmenterNode(Node):
         self.phase_pub = self.create_publisher(PhaseMsg, cfg.applied_phase_topic, qos)
         for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True):
             self.create_subscription(WrenchStamped, topic, partial(self.on_wrench, arm), qos)
-        self.create_subscription(String, cfg.phase_topic, self.on_phase, qos)
+        self.phase_sub = self.create_subscription(String, cfg.phase_topic, self.on_phase, qos)
+        self.create_timer(cfg.event_hold_s / 2, self.on_flush)
         self.get_logger().info(
             f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
             f"profile {cfg.taxonomy_profile}"
         )
 
-    def on_wrench(self, arm: str, msg: WrenchStamped) -> None:
+    def take_phases(self) -> None:
+        """Handle /task_phase events already delivered, before the next wrench sample.
+
+        The executor serves ready subscriptions in a fixed order, so an event published just
+        before a sample could otherwise be handled after it (one sample late).
+        """
+        sub = self.phase_sub
+        while True:
+            with sub.handle:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+            if taken is None:
+                return
+            self.on_phase(*taken)
+
+    def on_wrench(self, arm: str, msg: WrenchStamped, info: dict) -> None:
+        self.take_phases()
         stamp, wrench = wrench_sample(msg)
-        out = self.session.push(arm, stamp, wrench)
+        out = self.session.push(arm, stamp, wrench, info.get("source_timestamp") or None)
         if out.rejected:
             self.get_logger().warning(
                 f"dropped a wrench sample of arm {arm}: {out.rejected} "
                 f"(rejected so far: {self.session.counts[arm].rejected})",
                 throttle_duration_sec=1.0,
             )
-            return
-        if out.words:
-            self.publish(out, stamp, self.session.origin_ns or 0)
+        self.publish(out)
 
-    def on_phase(self, msg: String) -> None:
-        out = self.session.phase(msg.data)
-        event = out.phase
-        assert event is not None
-        if not event.known:
+    def on_phase(self, msg: String, info: dict) -> None:
+        out = self.session.phase(msg.data, info.get("source_timestamp") or None)
+        if out.unknown_phase is not None:
             self.get_logger().warning(
-                f"ignored unknown /task_phase name {event.name!r} (known: sub-task names and "
-                f"{list(self.cfg.end_phases)})"
+                f"ignored unknown /task_phase name {out.unknown_phase!r} (known: sub-task names "
+                f"and {list(self.cfg.end_phases)})"
             )
-            return
-        self.publish(out, event.stamp_ns, event.origin_ns or 0)
-        self.phase_pub.publish(phase_msg(event))
+        self.publish(out)
 
-    def publish(self, out: Output, stamp_ns: int, origin_ns: int) -> None:
-        """One Words message per arm and level that has new words (every level at stream end)."""
-        for arm in self.cfg.arms:
-            words = out.words.get(arm, [])
-            counts = self.session.counts[arm]
+    def on_flush(self) -> None:
+        """Apply sub-task events that waited longer than the hold time for a later sample."""
+        if self.session.pending:
+            self.publish(self.session.flush(time.time_ns()))
+
+    def publish(self, out: Output) -> None:
+        """One Words message per batch and level with words (every level at stream end), then events."""
+        for batch in out.batches:
+            counts = self.session.counts[batch.arm]
             for level in LEVELS:
-                batch = [w for w in words if w.level == level]
-                if not batch and not out.ended:
+                words = [w for w in batch.words if w.level == level]
+                if not words and not batch.end_of_stream:
                     continue
-                self.word_pubs[(arm, level)].publish(
+                self.word_pubs[(batch.arm, level)].publish(
                     words_msg(
-                        arm,
+                        batch.arm,
                         level,
-                        batch,
-                        stamp_ns,
-                        origin_ns,
-                        end_of_stream=out.ended,
+                        words,
+                        batch.stamp_ns,
+                        batch.origin_ns,
+                        stream_id=batch.stream_id,
+                        end_of_stream=batch.end_of_stream,
                         accepted=counts.accepted,
                         rejected=counts.rejected_total,
                     )
                 )
+        for event in out.phases:
+            self.phase_pub.publish(phase_msg(event))
 
 
 def main(args: list[str] | None = None) -> int:
