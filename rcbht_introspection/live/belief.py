@@ -123,6 +123,16 @@ class BeliefTracker:
     # --- output ------------------------------------------------------------------------------
     def classify(self, start: float, end: float, phase: str = "", final: bool = False) -> Belief:
         """Belief over the words overlapping [start, end] (UNKNOWN without words or model)."""
+        if self.model is None:
+            n = sum(
+                1
+                for lv in self.words.words.values()
+                for ws in lv.values()
+                for seq in ws.values()
+                for w in seq
+                if w.end >= start and w.start <= end
+            )
+            return Belief(UNKNOWN, (), (), start, end, self.mode, phase, final, n)
         from rcbht_introspection.grammar.split import window_sample
 
         sample = window_sample(self.words, start, end, subtask=phase, trial=self.trial)
