@@ -67,15 +67,14 @@ def read_records(path: Path) -> list[dict[str, str]]:
     for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
         if not line:
-            if current:
-                records.append(current)
-                current = {}
             continue
         key, sep, value = line.partition(":")
         if not sep:
             raise InputError("expected 'Key : value'", path=path, line=number)
         key = key.strip()
-        if key == "Iteration" and current:
+        # A record starts at 'Iteration' or at a repeated key; blank lines are not trusted as
+        # separators (later code states write an empty 'Label 2' followed by a blank line).
+        if current and (key == "Iteration" or key in current):
             records.append(current)
             current = {}
         current[key] = value.strip()
@@ -119,8 +118,12 @@ def read_words(path: Path, level: Level, axis: str, arm: str = "R") -> list[Word
     return words
 
 
-def read_trial_words(root: Path, name: str = "", arm: str = "R",
-                     levels: Iterable[Level] = (Level.COMPOSITION, Level.BEHAVIOR)) -> TrialWords:
+def read_trial_words(
+    root: Path,
+    name: str = "",
+    arm: str = "R",
+    levels: Iterable[Level] = (Level.COMPOSITION, Level.BEHAVIOR),
+) -> TrialWords:
     """Read the words of all axes for the given levels from an output or golden/ folder."""
     result = TrialWords(name=name or Path(root).parent.name)
     for level in levels:
@@ -130,23 +133,49 @@ def read_trial_words(root: Path, name: str = "", arm: str = "R",
     return result
 
 
+_TEMPLATES: dict[Level, tuple[str, tuple[tuple[str, object], ...]]] = {}
+_NAN = float("nan")
+
+
+def _template(level: Level) -> tuple[str, tuple[tuple[str, object], ...]]:
+    """The record layout of a level as one str.format template and what fills each field."""
+    cached = _TEMPLATES.get(level)
+    if cached is not None:
+        return cached
+    fmt = FORMATS[level]
+    parts: list[str] = []
+    fills: list[tuple[str, object]] = []
+    for key in fmt.keys:
+        pad = key if level is Level.PRIMITIVE and key == "Grad Label" else f"{key:<{fmt.key_width}}"
+        if key == "Iteration":
+            spec, fill = "{}", ("iteration", None)
+        elif key == fmt.label_key:
+            spec, fill = ("{:<6}" if level is Level.PRIMITIVE else "{}"), ("label", None)
+        elif key in ("Label 1", "Label 2"):
+            spec, fill = "{}", ("sub", int(key[-1]) - 1)
+        else:
+            spec, fill = "{:.5f}", ("feature", key)
+        parts.append(f"{pad}: {spec}")
+        fills.append(fill)
+    _TEMPLATES[level] = ("\n".join(parts) + "\n", tuple(fills))
+    return _TEMPLATES[level]
+
+
 def format_record(level: Level, iteration: int, word: Word) -> str:
     """One record in the original layout ('Key : value', values with 5 decimals)."""
-    fmt = FORMATS[level]
-    lines = []
-    sub = dict(zip(("Label 1", "Label 2"), word.sublabels, strict=False))
-    for key in fmt.keys:
-        if key == "Iteration":
-            value = str(iteration)
-        elif key == fmt.label_key:
-            value = f"{word.label:<6}" if level is Level.PRIMITIVE else word.label
-        elif key in sub:
-            value = sub[key]
+    template, fills = _template(level)
+    features, sub = word.features, word.sublabels
+    values: list[object] = []
+    for kind, arg in fills:
+        if kind == "feature":
+            values.append(features.get(arg, _NAN))  # type: ignore[arg-type]
+        elif kind == "sub":
+            values.append(sub[arg] if arg < len(sub) else _NAN)  # type: ignore[operator]
+        elif kind == "label":
+            values.append(word.label)
         else:
-            value = f"{word.features.get(key, float('nan')):.5f}"
-        pad = key if level is Level.PRIMITIVE and key == "Grad Label" else f"{key:<{fmt.key_width}}"
-        lines.append(f"{pad}: {value}")
-    return "\n".join(lines) + "\n"
+            values.append(iteration)
+    return template.format(*values)
 
 
 def write_words(path: Path, level: Level, words: Iterable[Word]) -> None:

@@ -1,0 +1,197 @@
+"""`rcbht label`, `rcbht conformance`, `rcbht plot`: the taxonomy on trial folders.
+
+`label` writes the original RCBHT layout (diffable against golden/ files) or JSON lines;
+`conformance` checks a dataset against its golden/ outputs; `plot` draws the action grammar.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.taxonomy.words import AXES, Level, TrialWords, Word
+
+ENGINES = ("batch", "stream")
+FORMATS = ("rcbht", "jsonl")
+TIME_KEYS = ("t1Start", "t1End", "t2Start", "t2End")
+CONFORMANCE_LEVELS = (Level.COMPOSITION, Level.BEHAVIOR)
+TOLERANCE = 1e-4
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the label, conformance and plot subcommands."""
+    p = subparsers.add_parser("label", help="label trial folders with the RCBHT")
+    p.add_argument(
+        "trials", nargs="+", type=Path, metavar="TRIAL_DIR", help="trial or dataset folders"
+    )
+    p.add_argument("--out", type=Path, required=True, metavar="DIR")
+    p.add_argument("--format", choices=FORMATS, default="rcbht")
+    p.add_argument("--profile", default="reference", help="profile of config/rcbht.yaml")
+    p.add_argument("--engine", choices=ENGINES, default="batch")
+    p.set_defaults(func=run_label)
+
+    p = subparsers.add_parser(
+        "conformance", help="compare the engine with a dataset's golden/ files"
+    )
+    p.add_argument("dataset", type=Path, metavar="DATASET_DIR")
+    p.add_argument("--profile", default="reference")
+    p.add_argument("--engine", choices=ENGINES, default="batch")
+    p.set_defaults(func=run_conformance)
+
+    p = subparsers.add_parser("plot", help="draw a trial's primitives, MCs and LLBs per axis")
+    p.add_argument("trial", type=Path, metavar="TRIAL_DIR")
+    p.add_argument("--out", type=Path, required=True, metavar="FILE.png")
+    p.add_argument("--profile", default="reference")
+    p.set_defaults(func=run_plot)
+
+
+def labeller(engine: str, profile: str) -> Callable:
+    """trial -> TrialWords for the chosen engine and profile."""
+    from rcbht_introspection.taxonomy.config import load_taxonomy_config
+
+    config = load_taxonomy_config(profile)
+    if engine == "stream":
+        from rcbht_introspection.taxonomy.stream import label_trial_streamed
+
+        return lambda trial: label_trial_streamed(trial, config)
+    from rcbht_introspection.taxonomy.batch import label_trial
+
+    return lambda trial: label_trial(trial, config)
+
+
+# --------------------------------------------------------------------------- label
+
+
+def write_rcbht(words: TrialWords, folder: Path) -> None:
+    """The original layout: Segments/Composites/llBehaviors per axis (arm sub-folders if two arms)."""
+    from rcbht_introspection.io.rcbht_format import level_path, write_words
+
+    arms = words.arms
+    for arm in arms:
+        root = folder if len(arms) == 1 else folder / arm
+        for level in (Level.PRIMITIVE, Level.COMPOSITION, Level.BEHAVIOR):
+            for axis in AXES:
+                write_words(
+                    level_path(root, level, axis), level, words.axis_words(arm, level, axis)
+                )
+
+
+def word_record(trial: str, word: Word) -> dict[str, object]:
+    """One JSON-lines record."""
+    return {
+        "trial": trial,
+        "arm": word.arm,
+        "axis": word.axis,
+        "level": word.level.value,
+        "label": word.label,
+        "start": word.start,
+        "end": word.end,
+        "sublabels": list(word.sublabels),
+        "features": word.features,
+        "seq": word.seq,
+    }
+
+
+def write_jsonl(words: TrialWords, path: Path) -> None:
+    """All words, level by level and axis by axis, one JSON object per line."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w") as fh:
+        for arm in words.arms:
+            for level in (Level.PRIMITIVE, Level.COMPOSITION, Level.BEHAVIOR):
+                for axis in AXES:
+                    for word in words.axis_words(arm, level, axis):
+                        fh.write(json.dumps(word_record(words.name, word)) + "\n")
+
+
+def run_label(args: argparse.Namespace) -> int:
+    from rcbht_introspection.io.hiro import find_trials, read_trial
+
+    label = labeller(args.engine, args.profile)
+    trials = find_trials(args.trials)
+    if not trials:
+        raise InputError("no trial folders found", path=args.trials[0])
+    for folder in trials:
+        words = label(read_trial(folder))
+        if args.format == "rcbht":
+            write_rcbht(words, args.out / folder.name)
+        else:
+            write_jsonl(words, args.out / folder.name / "words.jsonl")
+    print(f"labelled {len(trials)} trial(s) into {args.out}")
+    return 0
+
+
+# --------------------------------------------------------------------------- conformance
+
+
+def first_difference(ours: list[Word], golden: list[Word]) -> str | None:
+    """Where two record lists first differ in label or any of the four MC/LLB times."""
+    for i, (a, b) in enumerate(zip(ours, golden, strict=False)):
+        if a.label != b.label:
+            return f"record {i + 1}: label {a.label!r} != golden {b.label!r}"
+        for key in TIME_KEYS:
+            x, y = a.features.get(key, float("nan")), b.features.get(key, float("nan"))
+            if not abs(x - y) <= TOLERANCE:
+                return f"record {i + 1} ({a.label}): {key} {x:.5f} != golden {y:.5f}"
+    if len(ours) != len(golden):
+        return f"{len(ours)} records != golden {len(golden)}"
+    return None
+
+
+def compare_trial(folder: Path, words: TrialWords) -> Iterable[tuple[Level, str, str | None]]:
+    """(level, axis, first difference or None) for each golden Composites/llBehaviors file."""
+    from rcbht_introspection.io.rcbht_format import level_path, read_words
+
+    arm = words.arms[0] if words.arms else "R"
+    for level in CONFORMANCE_LEVELS:
+        for axis in AXES:
+            path = level_path(folder / "golden", level, axis)
+            try:
+                golden = read_words(path, level, axis, arm)
+            except InputError as exc:
+                yield level, axis, f"golden file unreadable: {exc}"
+                continue
+            yield level, axis, first_difference(words.axis_words(arm, level, axis), golden)
+
+
+def run_conformance(args: argparse.Namespace) -> int:
+    from rcbht_introspection.io.hiro import find_trials, read_trial
+
+    label = labeller(args.engine, args.profile)
+    trials = [t for t in find_trials([args.dataset]) if (t / "golden").is_dir()]
+    if not trials:
+        raise InputError("no trial folders with golden/ outputs", path=args.dataset)
+    identical = {level: 0 for level in CONFORMANCE_LEVELS}
+    total = {level: 0 for level in CONFORMANCE_LEVELS}
+    failures: list[str] = []
+    for folder in trials:
+        words = label(read_trial(folder))
+        for level, axis, diff in compare_trial(folder, words):
+            total[level] += 1
+            if diff is None:
+                identical[level] += 1
+            else:
+                failures.append(f"{folder.name} {level.value} {axis}: {diff}")
+    for line in failures:
+        print(f"DIFF {line}")
+    names = {Level.COMPOSITION: "Composites", Level.BEHAVIOR: "llBehaviors"}
+    for level in CONFORMANCE_LEVELS:
+        print(f"{names[level]}: {identical[level]}/{total[level]} files identical")
+    print(f"{len(trials)} trials, engine {args.engine}, profile {args.profile}")
+    return 1 if failures else 0
+
+
+# --------------------------------------------------------------------------- plot
+
+
+def run_plot(args: argparse.Namespace) -> int:
+    from rcbht_introspection.io.hiro import read_trial
+    from rcbht_introspection.taxonomy_plot import plot_trial
+
+    trial = read_trial(args.trial)
+    words = labeller("batch", args.profile)(trial)
+    plot_trial(trial, words, args.out)
+    print(f"wrote {args.out}")
+    return 0

@@ -1,0 +1,268 @@
+"""Low-level-behaviour (LLB) layer (spec 2.4, llbehComposition.m) and refinement (spec 2.5).
+
+An LLB record is a list in the original `llbehStruc` layout: [label, avgVal1, avgVal2, AVG_MAG,
+rms1, rms2, AVG_RMS, amp1, amp2, AVG_AMP, mc1, mc2, t1Start, t1End, t2Start, t2End, tAvg], labels
+as integers (FX CT PS PL AL SH U N = 1..8; mc1/mc2 are MC integers a..z = 1..10, or after a merge
+the LLB integer [bug], which the files print through the MC table).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+from rcbht_introspection.taxonomy.compositions import (
+    AMP,
+    AVGV,
+    LBL,
+    RMS,
+    T1E,
+    T1S,
+    T2E,
+    T2S,
+    TAVG,
+    Composition,
+    similar,
+)
+from rcbht_introspection.taxonomy.compositions import NC as MC_NC
+from rcbht_introspection.taxonomy.compositions import PC as MC_PC
+from rcbht_introspection.taxonomy.compositions import A as MC_A
+from rcbht_introspection.taxonomy.compositions import C as MC_C
+from rcbht_introspection.taxonomy.compositions import D as MC_D
+from rcbht_introspection.taxonomy.compositions import I as MC_I
+from rcbht_introspection.taxonomy.compositions import K as MC_K
+from rcbht_introspection.taxonomy.compositions import N as MC_N
+from rcbht_introspection.taxonomy.compositions import U as MC_U
+from rcbht_introspection.taxonomy.compositions import Z as MC_Z
+from rcbht_introspection.taxonomy.config import TaxonomyConfig
+from rcbht_introspection.taxonomy.primitives import ieee_div
+
+FX, CT, PS, PL, AL, SH, U, N = range(1, 9)
+"""LLB label integers."""
+(B_LBL, B_AVG1, B_AVG2, B_MAG, B_RMS1, B_RMS2, B_RMS, B_AMP1, B_AMP2, B_AMP,
+ B_MC1, B_MC2, B_T1S, B_T1E, B_T2S, B_T2E, B_TAVG) = range(17)  # fmt: skip
+"""Field indices of an LLB record."""
+
+Behavior = list
+
+
+def _pair(label: int, m1: Composition, m2: Composition) -> Behavior:
+    """A two-MC LLB record (motCompsMatchEval, 'compositions with a match')."""
+    return [
+        label, m1[AVGV], m2[AVGV], (m1[AVGV] + m2[AVGV]) / 2,
+        m1[RMS], m2[RMS], max(m1[RMS], m2[RMS]),
+        m1[AMP], m2[AMP], max(m1[AMP], m2[AMP]),
+        m1[LBL], m2[LBL], m1[T1S], m1[T2E], m2[T1S], m2[T2E], (m1[TAVG] + m2[TAVG]) / 2,
+    ]  # fmt: skip
+
+
+def _single(label: int, m: Composition, mc2: int) -> Behavior:
+    """A single-MC LLB: its values three times, the MC's own four times, mc2 = 'z' or 'n'."""
+    avg, rms, amp = m[AVGV], m[RMS], m[AMP]
+    return [
+        label, avg, avg, avg, rms, rms, rms, amp, amp, amp, m[LBL], mc2,
+        m[T1S], m[T1E], m[T2S], m[T2E], (m[T1S] + m[T2E]) / 2,
+    ]  # fmt: skip
+
+
+def match_compositions(
+    mcs: Sequence[Composition], index: int, flag: bool, window: int
+) -> tuple[Behavior, int]:
+    """motCompsMatchEval for the MC at `index` (0-based): the LLB and the next index to examine."""
+    n = len(mcs)
+    cur = mcs[index]
+    lbl = cur[LBL]
+    last = index == n - 1
+    next_index = index if last else index + 1
+    rng = next_index if last else min(index + 1 + window, n - 1)
+    if lbl in (MC_K, MC_I, MC_D):
+        kind = {MC_K: FX, MC_I: PS, MC_D: PL}[lbl]
+        other = mcs[next_index]
+        if other[LBL] == lbl:
+            return _pair(kind, cur, other), next_index + 1
+        return _single(kind if flag else N, cur, MC_Z), index + 1
+    if lbl in (MC_C, MC_PC, MC_NC):
+        other = mcs[next_index]
+        o = other[LBL]
+        if o == MC_C or (lbl == MC_PC and o == MC_NC) or (lbl == MC_NC and o == MC_PC):
+            return _pair(CT, cur, other), next_index + 1
+        return _single(CT, cur, MC_Z), index + 1
+    if lbl == MC_A:
+        if cur[T2E] - cur[T1S] > 0.1:
+            rng = next_index
+        for match in range(next_index, rng + 1):
+            other = mcs[match]
+            if other[LBL] == MC_A:
+                kind = AL if other[AMP] < cur[AMP] else SH
+                return _pair(kind, cur, other), match + 1
+        return _single(AL if flag else N, cur, MC_Z), index + 1
+    return _single(N, cur, MC_N), index + 1
+
+
+def compose_behaviors(mcs: Sequence[Composition], config: TaxonomyConfig) -> list[Behavior]:
+    """llbehComposition: scan the MCs; timeCheckFlag is set once and never reset [quirk]."""
+    out: list[Behavior] = []
+    flag = False
+    thresh = config.behavior_time_threshold
+    index, n = 0, len(mcs)
+    while index < n:
+        m = mcs[index]
+        lbl = m[LBL]
+        window = 0
+        if lbl in (MC_K, MC_I, MC_D, MC_A):
+            if m[T2E] - m[T1S] >= thresh:
+                flag = True
+            if lbl == MC_A:
+                window = 1
+        record, index = match_compositions(mcs, index, flag, window)
+        out.append(record)
+    return out
+
+
+# --------------------------------------------------------------------------- refinement
+
+
+def merge_behaviors(rows: list, index: int, label: int | None) -> None:
+    """MergeLowLevelBehaviors(index): row index+1 into row index (only its first branch runs)."""
+    r, m = rows[index], rows[index + 1]
+    if label is not None:
+        r[B_LBL] = label
+    r[B_AVG2] = m[B_AVG2]
+    r[B_MAG] = (r[B_MAG] + m[B_MAG]) / 2
+    r[B_RMS1] = max(r[B_RMS1], r[B_RMS2])
+    r[B_RMS] = max(r[B_RMS], m[B_RMS])
+    r[B_AMP2] = m[B_AMP2]
+    r[B_AMP] = max(r[B_AMP], m[B_AMP])
+    r[B_MC1] = r[B_MC2] = r[B_LBL]
+    r[B_T1E] = r[B_T2E]
+    r[B_T2S] = m[B_T1S]
+    r[B_T2E] = m[B_T2E]
+    if m[B_T2E] == r[B_T1S]:
+        r[B_T1S] = m[B_T1S]
+    if r[B_T1E] > r[B_T2E]:
+        r[B_T2E] = r[B_T1E]
+    if r[B_T2S] < r[B_T1S]:
+        r[B_T1S] = r[B_T2S]
+    if r[B_T2E] < m[B_T1S]:
+        r[B_T1S] = r[B_T2S]
+    r[B_TAVG] = (r[B_T1S] + r[B_T2E]) / 2
+    rows[index + 1] = None
+
+
+def _compact(rows: list) -> list:
+    return [r for r in rows if r is not None]
+
+
+def refine_durations(rows: list, config: TaxonomyConfig) -> list:
+    """Step 1: duration context over a prefix; the pass stops at the first pair that does not merge.
+
+    A 0 or Inf amplitude ratio would hang the original (continue without increment); here it
+    stops the pass, like the other non-qualifying pairs.
+    """
+    n = len(rows)
+    idx = 0
+    amp_lim, dur_lim = config.behavior_amplitude_ratio, config.behavior_duration_ratio
+    while idx < n - 2:
+        r, m = rows[idx], rows[idx + 1]
+        if (
+            r[B_LBL] != CT
+            and m[B_LBL] != CT
+            and r[B_MC2] not in (MC_U, MC_Z)
+            and m[B_MC2] not in (MC_U, MC_Z)
+        ):
+            ratio = ieee_div(abs(m[B_AMP]), abs(r[B_AMP]))
+            if ratio == 0 or ratio == math.inf or ratio > amp_lim:
+                break
+            # actionLbl2actionInt('n') returns 6 [bug]: the 'noisy' duration variant keys on 6
+            if r[B_MC2] != 6 and m[B_MC2] != 6:
+                p1, p2 = r[B_T2E] - r[B_T1S], m[B_T2E] - m[B_T1S]
+            elif r[B_MC2] == 6:
+                p1, p2 = r[B_T1E] - r[B_T1S], m[B_T2E] - m[B_T1S]
+            else:
+                p1, p2 = r[B_T2E] - r[B_T1S], m[B_T1E] - m[B_T1S]
+            d = ieee_div(p1, p2)
+            if d > dur_lim:
+                merge_behaviors(rows, idx, None)
+                idx += 2
+            elif d < 1 / dur_lim:
+                rows[idx], rows[idx + 1] = m, r
+                merge_behaviors(rows, idx, None)
+                idx += 2
+            else:
+                break
+        idx += 1
+    return _compact(rows)
+
+
+def _merge_pairs(rows: list, test, label: int | None) -> list:
+    """One left-to-right pass merging every pair (i, i+1) that `test` accepts; then compaction."""
+    for i in range(len(rows) - 1):
+        r, m = rows[i], rows[i + 1]
+        if r is None or m is None:
+            continue
+        if test(r, m):
+            merge_behaviors(rows, i, label)
+    return _compact(rows)
+
+
+def refine_once(rows: list, config: TaxonomyConfig) -> list:
+    """Refinement.m: duration context, then the amplitude-context merges and repeats."""
+    if not rows:
+        return rows
+    rows = refine_durations(rows, config)
+    w1, w2 = config.push_pull_similarity
+    rows = _merge_pairs(
+        rows,
+        lambda r, m: (
+            {r[B_LBL], m[B_LBL]} == {PS, PL}
+            and similar(r[B_AMP], m[B_AMP], w1)
+            and similar(r[B_AMP], m[B_AMP], w2)
+        ),  # both tests use the amplitude [bug]
+        AL,
+    )
+    rows = _merge_pairs(
+        rows,
+        lambda r, m: r[B_LBL] in (SH, AL) and m[B_LBL] in (SH, AL) and m[B_AMP] < r[B_AMP],
+        AL,
+    )
+    while True:
+        before = len(rows)
+        rows = _merge_pairs(rows, lambda r, m: r[B_LBL] == m[B_LBL], None)
+        if len(rows) == before:
+            break
+    wa, wm = config.align_push_similarity
+    rows = _merge_pairs(
+        rows,
+        lambda r, m: (
+            r[B_LBL] in (AL, SH)
+            and m[B_LBL] in (PS, PL)
+            and similar(r[B_AMP], m[B_AMP], wa)
+            and similar(r[B_MAG], m[B_MAG], wm)
+        ),
+        AL,
+    )
+    fa, fm = config.fixed_similarity
+    rows = _merge_pairs(
+        rows,
+        lambda r, m: (
+            (
+                (r[B_LBL] == FX and m[B_LBL] in (PS, PL, AL, SH))
+                or (m[B_LBL] == FX and r[B_LBL] in (PS, PL, AL, SH))
+            )
+            and similar(r[B_AMP], m[B_AMP], fa)
+            and similar(r[B_MAG], m[B_MAG], fm)
+        ),
+        FX,
+    )
+    return rows
+
+
+def refine_behaviors(rows: list[Behavior], config: TaxonomyConfig) -> list[Behavior]:
+    """Refinement run behavior_refinement_cycles times."""
+    rows = [list(r) for r in rows]
+    for _ in range(config.behavior_refinement_cycles):
+        rows = refine_once(rows, config)
+    return rows
+
+
+MC_NOISE = MC_N

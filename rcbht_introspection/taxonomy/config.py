@@ -1,0 +1,116 @@
+"""Every threshold and filter constant of the RCBHT in one typed object, loaded from config/rcbht.yaml.
+
+The `reference` profile reproduces the v2.0.2 (a1ca1d1) code that produced the published label
+files, including its [bug]-tagged behaviours (spec 2.1-2.5); other profiles may override fields.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rcbht_introspection.errors import InputError
+
+CONFIG_FILE = "rcbht.yaml"
+
+
+@dataclass(frozen=True)
+class TaxonomyConfig:
+    """RCBHT constants; names follow the spec (sections 2.1-2.5)."""
+
+    profile: str = "reference"
+    # 2.1 segmentation
+    window: int = 5
+    """W: the growing window advances W samples per fit."""
+    fit_threshold: float = 0.90
+    """A window still "fits" while R^2 > fit_threshold."""
+    fit_zero_sum: float = 1e-4
+    """SSres or SStot below this count as 0 (then R^2 is 1)."""
+    # 2.1 gradient classification: [pimp bpos mpos spos sneg mneg bneg nimp]
+    gradient_thresholds: tuple[float, ...] = (70.0, 46.0, 23.0, 1.0, -1.0, -23.0, -46.0, -70.0)
+    calibrated_thresholds: dict[str, tuple[float, ...]] | None = None
+    """Per-axis 8-value spectra from the calibration routine; None = the defaults above."""
+    domain_axes: tuple[str, ...] = ("Mx", "My", "Mz")
+    """Axes whose thresholds shrink when the signal's domain is small."""
+    domain_threshold: float = 1.9
+    domain_divisor: float = 10.0
+    domain_rank: int = 4
+    """Domain = |top_margin * rank-th largest| + |bottom_margin * rank-th smallest| sample."""
+    domain_top_margin: float = 1.02
+    domain_bottom_margin: float = 0.98
+    # 2.1 primitive clean-up (and two switches of later code states)
+    primitive_cleanup: bool = True
+    """Run primitivesCleanUp.m (False: the primitives go to the MC layer as segmented)."""
+    final_segment: bool = True
+    """Keep the wrap-up segment wStart..N (False: the later code state that drops it)."""
+    """Run primitivesCleanUp.m (False: the primitives go to the MC layer as segmented)."""
+    primitive_amplitude_ratio: float = 2.0
+    primitive_length_ratio: float = 5.0
+    # 2.2 MC layer
+    composition_amplitude_ratio: float = 2.0
+    composition_length_ratio: float = 5.0
+    # 2.3 MC filtering
+    composition_cleanup_cycles: int = 4
+    adjustment_similarity: float = 0.5
+    adjustment_mating_guard: bool = True
+    """a1ca1d1: repeated 'a' chains merge only while the next MC ends before mating - 0.002 s."""
+    adjustment_time_offset: float = 0.002
+    adjustment_time_step: float = 0.001
+    duration_amplitude_ratio: float = 5.0
+    duration_ratio: float = 5.0
+    duration_gate_breaks: bool = True
+    """a1ca1d1: a failed amplitude gate stops the duration pass (HEAD skips the pair instead)."""
+    contact_amplitude_fraction: float = 0.1
+    adjustment_merge_similarity: tuple[float, float] = (0.5, 0.5)
+    """(amplitude, avgVal) similarity widths for merging a/i/d pairs into 'a'."""
+    constant_merge_similarity: tuple[float, float] = (1.5, 1.0)
+    """(amplitude, avgVal) similarity widths for merging i/d/k pairs into 'k'."""
+    # 2.4 LLB layer
+    behavior_time_threshold: float = 0.10
+    # 2.5 LLB refinement
+    behavior_refinement_cycles: int = 5
+    behavior_amplitude_ratio: float = 5.0
+    behavior_duration_ratio: float = 5.0
+    push_pull_similarity: tuple[float, float] = (1.5, 1.0)
+    align_push_similarity: tuple[float, float] = (0.5, 1.0)
+    fixed_similarity: tuple[float, float] = (0.75, 0.75)
+
+    def thresholds(self, axis: str) -> tuple[float, ...]:
+        """The 8-value gradient spectrum of one axis before the domain rule."""
+        if self.calibrated_thresholds and axis in self.calibrated_thresholds:
+            return self.calibrated_thresholds[axis]
+        return self.gradient_thresholds
+
+
+def load_taxonomy_config(
+    profile: str = "reference", path: Path | str | None = None
+) -> TaxonomyConfig:
+    """Load one profile of config/rcbht.yaml (`profiles: {name: {field: value}}`) over the defaults."""
+    import yaml
+
+    from rcbht_introspection.config import config_path, from_mapping
+
+    file = Path(path) if path is not None else config_path(CONFIG_FILE)
+    try:
+        data: Any = yaml.safe_load(file.read_text()) or {}
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=file) from None
+    except yaml.YAMLError:
+        raise InputError("not valid YAML", path=file) from None
+    profiles = data.get("profiles") if isinstance(data, dict) else None
+    if not isinstance(profiles, dict) or profile not in profiles:
+        known = ", ".join(sorted(profiles)) if isinstance(profiles, dict) else "none"
+        raise InputError(f"unknown taxonomy profile {profile!r} (known: {known})", path=file)
+    values = dict(profiles[profile] or {})
+    values["profile"] = profile
+    config = from_mapping(TaxonomyConfig, values, path=file, prefix=f"profiles.{profile}.")
+    if len(config.gradient_thresholds) != 8:
+        raise InputError("expected 8 values", path=file, field="gradient_thresholds")
+    return config
+
+
+def config_fields() -> tuple[str, ...]:
+    """Names of every TaxonomyConfig field (for docs and tests)."""
+    return tuple(f.name for f in dataclasses.fields(TaxonomyConfig))

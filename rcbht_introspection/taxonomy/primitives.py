@@ -1,0 +1,445 @@
+"""Primitive layer (spec 2.1): growing-window regression segmentation, gradient labels, clean-up.
+
+The segmenter is incremental: it is fed blocks of W samples and keeps, per axis, only the running
+least-squares statistics of the open segment (merged block by block with Chan's pairwise update,
+O(1) per window step and numerically stable). The batch engine feeds a whole trial as one array of
+blocks, the streaming engine feeds one block whenever W samples have arrived: one implementation.
+
+Records are plain lists in the original `statData` layout, [avg, max, min, start, finish, gradient,
+label] with the label as its 1-based integer, so each rule reads like the spec.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from rcbht_introspection.taxonomy.config import TaxonomyConfig
+from rcbht_introspection.taxonomy.words import AXES, PRIMITIVE_LABELS
+
+AVG, MAX, MIN, START, FINISH, GRAD, LABEL = range(7)
+"""Field indices of a primitive record (statData columns)."""
+BPOS, MPOS, SPOS, BNEG, MNEG, SNEG, CONS, PIMP, NIMP, NONE = range(1, 11)
+"""Primitive label integers (spec 2: bpos..none = 1..10)."""
+POSITIVE = frozenset({BPOS, MPOS, SPOS})
+NEGATIVE = frozenset({BNEG, MNEG, SNEG})
+
+Primitive = list  # [avg, max, min, start, finish, gradient, label]
+
+
+def ieee_div(a: float, b: float) -> float:
+    """a / b with IEEE semantics (x/0 = +-inf, 0/0 = nan), as MATLAB divides."""
+    if b != 0.0:
+        return a / b
+    if a == 0.0 or math.isnan(a):
+        return math.nan
+    return math.inf if (a > 0) == (math.copysign(1.0, b) > 0) else -math.inf
+
+
+def fitted_average(vmax: float, vmin: float) -> float:
+    """dAvg of statisticalData.m: (max+min)/2, written as the original does for mixed signs."""
+    if (vmax >= 0 and vmin >= 0) or (vmax <= 0 and vmin <= 0):
+        return (vmax + vmin) / 2
+    return vmax - (abs(vmax) + abs(vmin)) / 2
+
+
+# --------------------------------------------------------------------------- gradient labels
+
+
+def axis_domain(values: np.ndarray, config: TaxonomyConfig) -> float:
+    """|1.02 * 4th-largest| + |0.98 * 4th-smallest| sample of an axis (adjustAxes.m)."""
+    n = len(values)
+    if n == 0:
+        return 0.0
+    rank = min(config.domain_rank, n)
+    part = np.partition(values, (rank - 1, n - rank))
+    return abs(config.domain_top_margin * float(part[n - rank])) + abs(
+        config.domain_bottom_margin * float(part[rank - 1])
+    )
+
+
+def axis_thresholds(axis: str, domain: float | None, config: TaxonomyConfig) -> tuple[float, ...]:
+    """The 8-value spectrum [pimp bpos mpos spos sneg mneg bneg nimp] after the moment-axis rule."""
+    values = config.thresholds(axis)
+    if axis in config.domain_axes and domain is not None and domain < config.domain_threshold:
+        values = tuple(v / config.domain_divisor for v in values)
+    return values
+
+
+def classify_gradient(g: float, thresholds: Sequence[float]) -> int:
+    """Label integer of one gradient (GradientClassification.m); g == nimp exactly is 'none'."""
+    pimp, bpos, mpos, spos, sneg, mneg, bneg, nimp = thresholds
+    if g >= 0:
+        if g >= pimp:
+            return PIMP
+        if g >= bpos:
+            return BPOS
+        if g >= mpos:
+            return MPOS
+        if g >= spos:
+            return SPOS
+        return CONS
+    if g < nimp:
+        return NIMP
+    if g == nimp:
+        return NONE
+    if g <= bneg:
+        return BNEG
+    if g <= mneg:
+        return MNEG
+    if g <= sneg:
+        return SNEG
+    if g < 0:
+        return CONS
+    return NONE  # nan
+
+
+# --------------------------------------------------------------------------- segmentation
+
+
+def block_stats(t: np.ndarray, y: np.ndarray) -> tuple[list, ...]:
+    """Least-squares statistics of K blocks of samples: t (K, m), y (K, m, A) -> lists per block.
+
+    Returns (n, mean_t, Stt, mean_y, Syy, Sty, max_y, min_y, last_t, last_y); per-axis entries are
+    (K, A) nested lists. Centred sums keep the precision of a direct polyfit.
+    """
+    m = t.shape[1]
+    mt = t.mean(axis=1)
+    dt = t - mt[:, None]
+    my = y.mean(axis=1)
+    dy = y - my[:, None, :]
+    stt = np.einsum("km,km->k", dt, dt)
+    syy = np.einsum("kma,kma->ka", dy, dy)
+    sty = np.einsum("km,kma->ka", dt, dy)
+    return (
+        m,
+        mt.tolist(),
+        stt.tolist(),
+        my.tolist(),
+        syy.tolist(),
+        sty.tolist(),
+        y.max(axis=1).tolist(),
+        y.min(axis=1).tolist(),
+        t[:, -1].tolist(),
+        y[:, -1, :].tolist(),
+    )
+
+
+class Segmenter:
+    """Growing-window regression segmentation of A axes (fitRegressionCurves.m), fed block by block.
+
+    State per axis: the open segment's running statistics (n, mean_t, mean_y, Stt, Syy, Sty, raw
+    max/min) and its start time. Closed segments are appended to `segments[axis]` as
+    [avg, max, min, start, finish, gradient] (labels are attached by the caller, because the
+    moment-axis rule may need the whole trial).
+    """
+
+    def __init__(self, config: TaxonomyConfig, n_axes: int = len(AXES)) -> None:
+        self.window = config.window
+        self.threshold = config.fit_threshold
+        self.zero = config.fit_zero_sum
+        self.n_axes = n_axes
+        self.samples = 0
+        self.blocks = 0
+        """Number of full W-sample blocks fed so far (the window-step index k)."""
+        self.first_t = 0.0
+        self.first_y: list[float] = [0.0] * n_axes
+        self.last_t = 0.0
+        self.last_y: list[float] = [0.0] * n_axes
+        # open segment per axis: [n, mt, my, Stt, Syy, Sty, ymax, ymin, start_t]
+        self.state: list[list[float]] = []
+        self.segments: list[list[list[float]]] = [[] for _ in range(n_axes)]
+        self.finished = False
+
+    # The segment statistics start from the first sample; each later block (samples i+1..i+W of
+    # the window step at i = 1 + W*k) is merged into them.
+    def start(self, t0: float, y0: Sequence[float]) -> None:
+        """Feed the very first sample."""
+        self.samples = 1
+        self.first_t = self.last_t = float(t0)
+        self.first_y = [float(v) for v in y0]
+        self.last_y = list(self.first_y)
+        self.state = [
+            [1.0, self.first_t, v, 0.0, 0.0, 0.0, v, v, self.first_t] for v in self.first_y
+        ]
+
+    def feed_blocks(self, stats: tuple[list, ...], count: int, final: bool = False) -> list[int]:
+        """Advance every axis over `count` blocks (block_stats output); returns axes that closed.
+
+        With `final`, the last of the blocks is the partial last pass (possibly empty: count may
+        include one block of n = 0 given as None stats) and the final segments are emitted.
+        """
+        m, bmt, bstt, bmy, bsyy, bsty, bmax, bmin, blt, bly = stats
+        threshold, zero = self.threshold, self.zero
+        closed: list[int] = []
+        k0 = self.blocks
+        n_full = count - 1 if final else count
+        for a in range(self.n_axes):
+            n, mt, my, stt, syy, sty, smax, smin, ts = self.state[a]
+            pt, py = self.last_t, self.last_y[a]
+            segs = self.segments[a]
+            before = len(segs)
+            for j in range(n_full):
+                # W = S (+) block j  (Chan et al. pairwise update)
+                bt = bmt[j]
+                by = bmy[j][a]
+                nn = n + m
+                dt = bt - mt
+                dy = by - my
+                f = n * m / nn
+                wtt = stt + bstt[j] + dt * dt * f
+                wyy = syy + bsyy[j][a] + dy * dy * f
+                wty = sty + bsty[j][a] + dt * dy * f
+                # R^2 = 1 - SSres/SStot with the original's zero clamps and nan/inf -> 1
+                if wyy < zero:
+                    good = True
+                else:
+                    ssres = wyy - wty * wty / wtt if wtt > 0 else wyy
+                    good = ssres < zero or 1.0 - ssres / wyy > threshold
+                if good:
+                    n, stt, syy, sty = nn, wtt, wyy, wty
+                    mt = mt + dt * m / nn
+                    my = my + dy * m / nn
+                    v = bmax[j][a]
+                    if v > smax:
+                        smax = v
+                    v = bmin[j][a]
+                    if v < smin:
+                        smin = v
+                else:
+                    slope = wty / wtt if wtt > 0 else 0.0
+                    wmt = mt + dt * m / nn
+                    wmy = my + dy * m / nn
+                    lt, ly = blt[j], bly[j][a]
+                    # the first window of the signal keeps all of it; later ones end at i
+                    finish = lt if k0 + j == 0 else pt
+                    f0 = wmy + slope * (ts - wmt)
+                    f1 = wmy + slope * (finish - wmt)
+                    if finish == ts:  # a one-sample segment (after the first window closed)
+                        finish = finish + finish / 20
+                    hi, lo = (f0, f1) if f0 >= f1 else (f1, f0)
+                    segs.append([fitted_average(hi, lo), hi, lo, ts, finish, slope])
+                    if k0 + j == 0:
+                        n, mt, my, stt, syy, sty, smax, smin, ts = (
+                            1.0,
+                            lt,
+                            ly,
+                            0.0,
+                            0.0,
+                            0.0,
+                            ly,
+                            ly,
+                            lt,
+                        )
+                    else:
+                        # S = point(i) (+) block j
+                        nn = 1.0 + m
+                        dt = bt - pt
+                        dy = by - py
+                        f = m / nn
+                        n = nn
+                        stt = bstt[j] + dt * dt * f
+                        syy = bsyy[j][a] + dy * dy * f
+                        sty = bsty[j][a] + dt * dy * f
+                        mt = pt + dt * m / nn
+                        my = py + dy * m / nn
+                        smax = bmax[j][a] if bmax[j][a] > py else py
+                        smin = bmin[j][a] if bmin[j][a] < py else py
+                        ts = pt
+                pt, py = blt[j], bly[j][a]
+            self.state[a] = [n, mt, my, stt, syy, sty, smax, smin, ts]
+            if len(segs) != before:
+                closed.append(a)
+        if n_full:
+            self.blocks += n_full
+            self.last_t = blt[n_full - 1]
+            self.last_y = list(bly[n_full - 1])
+        if final:
+            self._finish(stats if count > n_full and m else None, count - 1)
+        return closed
+
+    def _finish(self, stats: tuple[list, ...] | None, j: int) -> None:
+        """The last pass: wStart..N fitted once; raw max/min; never split (spec 2.1 step 2)."""
+        self.finished = True
+        if self.samples < 2:
+            return
+        for a in range(self.n_axes):
+            n, mt, my, stt, _syy, sty, smax, smin, ts = self.state[a]
+            end = self.last_t
+            if stats is not None:
+                m, bmt, bstt, bmy, _bsyy, bsty, bmax, bmin, blt, _bly = stats
+                nn = n + m
+                dt = bmt[j] - mt
+                dy = bmy[j][a] - my
+                f = n * m / nn
+                stt = stt + bstt[j] + dt * dt * f
+                sty = sty + bsty[j][a] + dt * dy * f
+                smax = max(smax, bmax[j][a])
+                smin = min(smin, bmin[j][a])
+                end = blt[j]
+            slope = sty / stt if stt > 0 else 0.0
+            finish = end if end != ts else end + end / 20
+            self.segments[a].append([fitted_average(smax, smin), smax, smin, ts, finish, slope])
+
+
+def segment_arrays(time: np.ndarray, wrench: np.ndarray, config: TaxonomyConfig) -> Segmenter:
+    """Segment a whole (N,) time / (N, A) signal: the batch use of the incremental Segmenter."""
+    n = len(time)
+    seg = Segmenter(config, wrench.shape[1] if wrench.ndim == 2 else len(AXES))
+    if n == 0:
+        seg.finished = True
+        return seg
+    w = config.window
+    seg.start(time[0], wrench[0])
+    seg.samples = n
+    full = (n - 1) // w
+    rest = (n - 1) - full * w
+    if full:
+        stats = block_stats(
+            time[1 : 1 + full * w].reshape(full, w), wrench[1 : 1 + full * w].reshape(full, w, -1)
+        )
+        seg.feed_blocks(stats, full)
+    if rest:
+        stats = block_stats(
+            time[1 + full * w :].reshape(1, rest), wrench[1 + full * w :].reshape(1, rest, -1)
+        )
+        seg.feed_blocks(stats, 1, final=True)
+    else:
+        seg._finish(None, 0)
+    return seg
+
+
+def label_segments(segments: list[list[float]], thresholds: Sequence[float]) -> list[Primitive]:
+    """Attach gradient labels: [avg, max, min, start, finish, gradient] -> 7-field primitives."""
+    return [[*s, classify_gradient(s[GRAD], thresholds)] for s in segments]
+
+
+# --------------------------------------------------------------------------- clean-up
+
+
+def merge_repeated(prims: list[Primitive]) -> list[Primitive]:
+    """Clean-up step 1: merge runs of identical labels (pair: means; k >= 3 rows: sums / (k-1) [bug])."""
+    out: list[Primitive] = []
+    i, n = 0, len(prims)
+    while i < n:
+        j = i + 1
+        label = prims[i][LABEL]
+        while j < n and prims[j][LABEL] == label:
+            j += 1
+        out.append(merge_run(prims[i:j]))
+        i = j
+    return out
+
+
+def merge_run(run: list[Primitive]) -> Primitive:
+    """MergePrimitives for one run of equal labels (length 1 is returned unchanged)."""
+    if len(run) == 1:
+        return run[0]
+    first, last = run[0], run[-1]
+    if len(run) == 2:
+        return [
+            (first[AVG] + last[AVG]) / 2, max(first[MAX], last[MAX]), min(first[MIN], last[MIN]),
+            first[START], last[FINISH], (first[GRAD] + last[GRAD]) / 2, last[LABEL],
+        ]  # fmt: skip
+    k1 = len(run) - 1
+    return [
+        sum(p[AVG] for p in run) / k1,
+        max(p[MAX] for p in run), min(p[MIN] for p in run),
+        first[START], last[FINISH], sum(p[GRAD] for p in run) / k1, first[LABEL],
+    ]  # fmt: skip
+
+
+def merge_pair(p1: Primitive, p2: Primitive, keep_second: bool) -> Primitive:
+    """MergePrimitives for a duration-context pair: label of the longer one, means, max/min."""
+    return [
+        (p1[AVG] + p2[AVG]) / 2, max(p1[MAX], p2[MAX]), min(p1[MIN], p2[MIN]),
+        p1[START], p2[FINISH], (p1[GRAD] + p2[GRAD]) / 2, p2[LABEL] if keep_second else p1[LABEL],
+    ]  # fmt: skip
+
+
+def duration_pair(p1: Primitive, p2: Primitive, config: TaxonomyConfig) -> Primitive | None:
+    """Clean-up step 2 for one pair: the merged primitive, or None when the pair is kept."""
+    if p1[LABEL] in (PIMP, NIMP):
+        return None
+    amp_ratio = ieee_div(abs(p2[MAX] - p2[MIN]), abs(p1[MAX] - p1[MIN]))
+    limit = config.primitive_amplitude_ratio
+    if amp_ratio == 0 or amp_ratio == math.inf or amp_ratio > limit or amp_ratio < 1 / limit:
+        return None
+    ratio = ieee_div(p1[FINISH] - p1[START], p2[FINISH] - p2[START])
+    if ratio == 0 or ratio == math.inf:
+        return None
+    length = config.primitive_length_ratio
+    if ratio > length:
+        return merge_pair(p1, p2, keep_second=False)
+    if ratio < 1 / length:
+        return merge_pair(p1, p2, keep_second=True)
+    return None
+
+
+def merge_durations(prims: list[Primitive], config: TaxonomyConfig) -> list[Primitive]:
+    """Clean-up step 2: one left-to-right pass; a merged pair's 2nd row is not compared again."""
+    out: list[Primitive] = []
+    i, n = 0, len(prims)
+    while i < n:
+        if i + 1 < n:
+            merged = duration_pair(prims[i], prims[i + 1], config)
+            if merged is not None:
+                out.append(merged)
+                i += 2
+                continue
+        out.append(prims[i])
+        i += 1
+    return out
+
+
+def clean_primitives(prims: list[Primitive], config: TaxonomyConfig) -> list[Primitive]:
+    """primitivesCleanUp.m: repeated labels, then duration/amplitude context."""
+    return merge_durations(merge_repeated(prims), config)
+
+
+# --------------------------------------------------------------------------- calibration
+
+
+def calibrate_limits(
+    prims: list[Primitive], state_times: Sequence[float], axis: str
+) -> tuple[float, float]:
+    """(pimp, pConst) of one axis from a successful trial's primitives (ROBIO'12 optimisation)."""
+    s2, s3, s4 = state_times[1], state_times[2], state_times[3]
+    pconst = 0.0
+    if axis in ("Fx", "My"):
+        rot = []
+        for p in prims:
+            if p[FINISH] > s3:
+                break
+            if p[START] > s2:
+                rot.append(p[GRAD])
+        if rot:
+            pconst = 0.9 * abs(sum(rot) / len(rot))
+    ins = [abs(p[GRAD]) for p in prims if p[START] > s3 and p[FINISH] < s4]
+    pimp = 0.85 * max(ins) if ins else 0.0
+    return pimp, pconst
+
+
+def gradient_spectrum(pimp: float, pconst: float) -> tuple[float, ...]:
+    """computeGradientSpectrum: [pimp bpos mpos spos sneg mneg bneg nimp] from (pimp, pConst)."""
+    delta = (pimp - pconst) / 3
+    pos = (pimp, pimp - delta, pimp - 2 * delta, pconst)
+    return (*pos, -pos[3], -pos[2], -pos[1], -pos[0])
+
+
+def calibrate(limits: dict[str, tuple[float, float]]) -> dict[str, tuple[float, ...]]:
+    """Per-axis spectra from per-axis (pimp, pConst): Fx own; Fy, Fz (Fz pimp, Fx pConst); M* from My."""
+    fx, fz, my = limits["Fx"], limits["Fz"], limits["My"]
+    return {
+        "Fx": gradient_spectrum(fx[0], fx[1]),
+        "Fy": gradient_spectrum(fz[0], fx[1]),
+        "Fz": gradient_spectrum(fz[0], fx[1]),
+        "Mx": gradient_spectrum(my[0], my[1]),
+        "My": gradient_spectrum(my[0], my[1]),
+        "Mz": gradient_spectrum(my[0], my[1]),
+    }
+
+
+PRIMITIVE_NAMES = PRIMITIVE_LABELS
