@@ -76,6 +76,7 @@ class BeliefTracker:
         self.words = TrialWords(name=self.trial)
         self.watermark: dict[tuple[str, Level, str], float] = {}
         self.ended_arms: set[str] = set()
+        self.ended_levels: set[tuple[str, Level]] = set()
         self.arms: set[str] = set()
         self.segments: list[_Segment] = []
         self.task_ended = False
@@ -99,10 +100,13 @@ class BeliefTracker:
         if self.mode == "window" and self._added > 2000:
             self._prune(self.now - self.window_s)
 
-    def end_of_stream(self, arm: str) -> None:
-        """`arm`'s stream finished: every word of it is final."""
+    def end_of_stream(self, arm: str, level: Level | None = None) -> None:
+        """`arm`'s stream finished on `level` (None: on every level): its words there are final."""
         self.arms.add(arm)
-        self.ended_arms.add(arm)
+        for lv in LEVELS if level is None else (level,):
+            self.ended_levels.add((arm, lv))
+        if all((arm, lv) in self.ended_levels for lv in LEVELS):
+            self.ended_arms.add(arm)
 
     def phase(self, name: str, t: float) -> bool:
         """A sub-task event at stream time `t`; returns False for names it does not know."""
@@ -146,12 +150,14 @@ class BeliefTracker:
         if self.model is None or n == 0:
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
         try:
+            # the verdict is the model's own prediction (as offline evaluation uses it), which
+            # for a probabilistic SVM need not be the arg-max of its calibrated probabilities
+            verdict = str(self.model.predict_samples([sample])[0])  # type: ignore[attr-defined]
             proba = np.asarray(self.model.predict_proba_samples([sample]))[0]  # type: ignore[attr-defined]
         except Exception as exc:  # a bad model must not stop the node
             self.last_error = f"{type(exc).__name__}: {exc}"
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
-        best = int(np.argmax(proba))
-        return Belief(self.classes[best], self.classes, tuple(float(p) for p in proba), **base)
+        return Belief(verdict, self.classes, tuple(float(p) for p in proba), **base)
 
     def window(self) -> tuple[float, float, str]:
         """(start, end, phase) of the current window."""
@@ -178,6 +184,8 @@ class BeliefTracker:
             if arm in self.ended_arms:
                 continue
             for level in LEVELS:
+                if (arm, level) in self.ended_levels:
+                    continue
                 for axis in AXES:
                     if self.watermark.get((arm, level, axis), -np.inf) < end:
                         return False

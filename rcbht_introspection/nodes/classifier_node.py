@@ -22,6 +22,7 @@ from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker, load
 from rcbht_introspection.nodes.common import declare_config, qos_profile, run
 from rcbht_introspection.nodes.conversions import belief_msg, to_ns, words_from_msg
 from rcbht_introspection.nodes.params import ClassifierConfig, word_topics
+from rcbht_introspection.taxonomy.words import LEVELS
 
 
 class ClassifierNode(Node):
@@ -38,6 +39,7 @@ class ClassifierNode(Node):
         self.stream: tuple[int, int] | None = None
         self.state = UNKNOWN
         self.reported_error: str | None = None
+        self.batches: dict[tuple[str, int], int] = {}
         qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         self.state_pub = self.create_publisher(String, cfg.state_topic, qos)
         self.belief_pub = self.create_publisher(BeliefMsg, cfg.belief_topic, qos)
@@ -69,8 +71,15 @@ class ClassifierNode(Node):
         words, now = words_from_msg(msg)
         self.tracker.add_words(arm, words, now)
         if msg.end_of_stream:
-            self.tracker.end_of_stream(arm)
-        self.update(to_ns(msg.header.stamp))
+            self.tracker.end_of_stream(arm, LEVELS[msg.level])
+        # act once per wrench sample: when the last level message of its batch arrived
+        stamp = to_ns(msg.header.stamp)
+        key = (arm, stamp)
+        self.batches[key] = self.batches.get(key, 0) + 1
+        if self.batches[key] < msg.batch_size:
+            return
+        self.batches = {k: n for k, n in self.batches.items() if k[1] > stamp}
+        self.update(stamp)
 
     def on_phase(self, msg: PhaseMsg) -> None:
         self._stream(to_ns(msg.time_origin), msg.stream_id)

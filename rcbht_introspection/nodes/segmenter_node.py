@@ -97,18 +97,18 @@ class SegmenterNode(Node):
         """One Words message per batch and level with words (every level at stream end), then events."""
         for batch in out.batches:
             counts = self.session.counts[batch.arm]
-            for level in LEVELS:
-                words = [w for w in batch.words if w.level == level]
-                if not words and not batch.end_of_stream:
-                    continue
+            per_level = {level: [w for w in batch.words if w.level == level] for level in LEVELS}
+            levels = [lv for lv in LEVELS if per_level[lv] or batch.end_of_stream]
+            for level in levels:
                 self.word_pubs[(batch.arm, level)].publish(
                     words_msg(
                         batch.arm,
                         level,
-                        words,
+                        per_level[level],
                         batch.stamp_ns,
                         batch.origin_ns,
                         stream_id=batch.stream_id,
+                        batch_size=len(levels),
                         end_of_stream=batch.end_of_stream,
                         accepted=counts.accepted,
                         rejected=counts.rejected_total,
