@@ -83,6 +83,7 @@ class BeliefTracker:
         self.now = 0.0
         self._issued = 0
         self._added = 0
+        self.last_final: Belief | None = None
 
     # --- input -------------------------------------------------------------------------------
     def add_words(self, arm: str, words: Iterable[Word], now: float | None = None) -> None:
@@ -172,7 +173,14 @@ class BeliefTracker:
         return 0.0, self.now, ""
 
     def current(self) -> Belief:
-        """The belief about the running window."""
+        """The belief about the running window (after the task ended: the last verdict)."""
+        if (
+            self.mode == "boundary"
+            and self.task_ended
+            and self.last_final is not None
+            and self._issued >= len(self.segments)
+        ):
+            return self.last_final
         start, end, phase = self.window()
         return self.classify(start, end, phase)
 
@@ -199,6 +207,7 @@ class BeliefTracker:
             if seg.end is None or not self._complete(seg.end):
                 break
             out.append(self.classify(seg.start, seg.end, seg.phase, final=True))
+            self.last_final = out[-1]
             self._issued += 1
         if out:
             keep_from = out[-1].end

@@ -504,6 +504,10 @@ def _score(
         bag_out: dict[str, Any] = {
             "name": trial.name,
             "truth": truth,
+            "truth_starts": [
+                round(s - float(trial.time[0]), 6) for _, s, _ in trial.subtask_bounds()
+            ],
+            "duration": round(float(trial.time[-1] - trial.time[0]), 6),
             "verdicts": verdicts,
             "final_probabilities": [
                 dict(zip(b.classes, b.probabilities, strict=True)) for b in finals
