@@ -102,3 +102,44 @@ def test_bad_inputs(tmp_path: Path) -> None:
     with pytest.raises(InputError, match=r"exists already"):
         write_trial_bag(trial, tmp_path / "x.db3")
     assert main(["bag", "info", str(junk)]) == 2
+
+
+def test_record_a_replay_between_processes(tmp_path: Path) -> None:
+    """`rcbht bag replay` and `rcbht bag record` as separate processes over real DDS."""
+    import subprocess
+    import sys
+    import time
+
+    from ros_support import require_ros, ros_env, stop
+
+    from rcbht_introspection.io.bags import read_trial_bag, write_trial_bag
+
+    require_ros()
+    env = ros_env(tmp_path)
+    t = np.round(np.arange(0, 2.0, 0.005), 6)
+    rng = np.random.default_rng(5)
+    trial = Trial("rec", t, {"R": rng.normal(size=(len(t), 6))}, state_times=(0.0, 0.5, 0.9, 1.2))
+    write_trial_bag(trial, tmp_path / "src.db3")
+    cli = [sys.executable, "-m", "rcbht_introspection.cli", "bag"]
+    rec_log = (tmp_path / "record.log").open("w")
+    recorder = subprocess.Popen(
+        [*cli, "record", "/wrench", "/task_phase", "--out", str(tmp_path / "rec.mcap")],
+        env=env, stdout=rec_log, stderr=subprocess.STDOUT,
+    )  # fmt: skip
+    try:
+        time.sleep(1.0)
+        play = subprocess.run(
+            [*cli, "replay", str(tmp_path / "src.db3"), "--rate", "4", "--wait", "20"],
+            env=env, capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+        assert play.returncode == 0, play.stderr
+        assert "published 406 messages" in play.stdout  # 400 samples, 5 events, 1 info record
+        time.sleep(1.0)
+    finally:
+        code = stop(recorder)
+    rec_log.close()
+    assert code == 0, (tmp_path / "record.log").read_text()
+    back = read_trial_bag(tmp_path / "rec.mcap")
+    np.testing.assert_array_equal(back.wrench["R"], trial.wrench["R"])
+    np.testing.assert_array_equal(back.time, trial.time)
+    assert back.state_times == trial.state_times

@@ -108,7 +108,7 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
-    from rcbht_introspection.io.bags import bag_messages
+    from rcbht_introspection.io.bags import TRIAL_INFO_TOPIC, bag_messages
     from rcbht_introspection.nodes.common import RosSession
     from rcbht_introspection.nodes.player import BagPlayer
 
@@ -116,7 +116,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     with RosSession("rcbht_bag_player") as ros:
         player = BagPlayer(ros.node)
         player.prepare(messages)
-        if args.wait > 0 and not player.wait_for_subscribers(list(player.publishers), args.wait):
+        live = [t for t in player.publishers if t != TRIAL_INFO_TOPIC]  # metadata: no one waits
+        if args.wait > 0 and not player.wait_for_subscribers(live, args.wait):
             print("note: not every topic has a subscriber; playing anyway")
         t0 = time.perf_counter()
         n = player.play(messages, rate=args.rate)

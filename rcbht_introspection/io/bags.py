@@ -279,7 +279,8 @@ def read_trial_bag(path: Path | str) -> Trial:
     info: dict = {}
     stamps: dict[str, list[int]] = {}
     values: dict[str, list[tuple[float, ...]]] = {}
-    phases: list[tuple[int, str]] = []
+    phases: list[tuple[int, int, str]] = []
+    last_stamp = 0
     for m in bag_messages(path):
         try:
             if m.msgtype == WRENCH_TYPE:
@@ -287,8 +288,10 @@ def read_trial_bag(path: Path | str) -> Trial:
                 arm = arm_of_topic(m.topic, frame)
                 stamps.setdefault(arm, []).append(t)
                 values.setdefault(arm, []).append(w)
+                last_stamp = max(last_stamp, t)
             elif m.topic == PHASE_TOPIC and m.msgtype == STRING_TYPE:
-                phases.append((m.t_ns, decode_string(m.raw)))
+                # (log time, stamp of the last sample before it, name)
+                phases.append((m.t_ns, last_stamp, decode_string(m.raw)))
             elif m.topic == TRIAL_INFO_TOPIC and m.msgtype == STRING_TYPE:
                 info = json.loads(decode_string(m.raw))
         except (ValueError, struct.error, UnicodeDecodeError, json.JSONDecodeError) as exc:
@@ -308,8 +311,11 @@ def read_trial_bag(path: Path | str) -> Trial:
         raise InputError(f"wrench stamps do not increase at message {k}", path, field="stamp")
     wrench = {arm: np.asarray(values[arm], dtype=np.float64).reshape(-1, len(AXES)) for arm in arms}
     state: list[float] = []
-    for t, name in phases:
+    for log_ns, sample_ns, name in phases:
         if len(state) < len(SUBTASKS) and name == SUBTASKS[len(state)]:
+            # written bags log events at their trial time; recorded ones at receive time, so
+            # there the event belongs to the last sample received before it
+            t = log_ns if info else (sample_ns or int(ref[0]))
             state.append((t - origin) / _NS)
     name = str(info.get("name", path.name.split(".")[0]))
     return Trial(

@@ -90,7 +90,7 @@ class BagPlayer:
 
 
 class RawRecorder:
-    """Records topics to a bag as they arrive (raw CDR bytes, receive time as log time)."""
+    """Records topics to a bag as they arrive (raw CDR bytes, publisher send time as log time)."""
 
     def __init__(self, node: Node, out: Path, qos: QoSProfile | int = 1000) -> None:
         self.node = node
@@ -103,9 +103,12 @@ class RawRecorder:
         cls = message_class(msgtype)
         self.counts[topic] = 0
 
-        def on_message(raw: bytes) -> None:
+        def on_message(raw: bytes, info: dict) -> None:
+            # log time = the publisher's send time: keeps the publication order across topics
+            # (receive order across subscriptions depends on the executor)
+            t_ns = info.get("source_timestamp") or time.time_ns()
             with self._lock:
-                self.bag.write_raw(topic, msgtype, time.time_ns(), raw)
+                self.bag.write_raw(topic, msgtype, t_ns, raw)
                 self.counts[topic] += 1
 
         self.node.create_subscription(cls, topic, on_message, self.qos, raw=True)
