@@ -268,9 +268,14 @@ def _wait(condition: Any, timeout: float, procs: list[NodeProcess], what: str) -
         time.sleep(0.05)
 
 
-def replay_eval(bags: list[Path], model_path: Path, options: ReplayEvalOptions) -> dict[str, Any]:
-    """Run the live pipeline on `bags` and return the scores (see module doc)."""
-    if not Path(model_path).is_file():
+def replay_eval(
+    bags: list[Path], model_path: Path | None, options: ReplayEvalOptions
+) -> dict[str, Any]:
+    """Run the live pipeline on `bags` and return the scores (see module doc).
+
+    Without a model (None) the classifier publishes "unknown"; latencies and drops still count.
+    """
+    if model_path is not None and not Path(model_path).is_file():
         raise InputError("no such model file", model_path)
     if options.rate <= 0:
         raise InputError(f"rate must be > 0, got {options.rate}", field="rate")
@@ -290,7 +295,9 @@ def replay_eval(bags: list[Path], model_path: Path, options: ReplayEvalOptions) 
         taxonomy_profile=options.profile,
     )
     cls_cfg = ClassifierConfig(
-        model_file=str(Path(model_path).resolve()), mode=options.mode, arms=arms
+        model_file=str(Path(model_path).resolve()) if model_path else "",
+        mode=options.mode,
+        arms=arms,
     )
     seg_params = write_params(
         work / "segmenter.yaml",
@@ -449,14 +456,14 @@ def _play_one(
 def _score(
     per_bag: list[dict[str, Any]],
     trials: list[Any],
-    model_path: Path,
+    model_path: Path | None,
     options: ReplayEvalOptions,
     arms: tuple[str, ...],
 ) -> dict[str, Any]:
     """Scores over all bags plus a per-bag record."""
     model = None
     factory = None
-    if options.offline:
+    if options.offline and model_path is not None:
         from rcbht_introspection.learn.models import load_model
         from rcbht_introspection.live.segmenter import arm_stream_factory
 
@@ -554,11 +561,11 @@ def _score(
         "subtask_accuracy": round(correct / total, 4) if total else None,
         "subtasks": total,
         "subtasks_correct": correct,
-        "verdicts_match_offline": verdicts_match if options.offline else None,
+        "verdicts_match_offline": verdicts_match if model is not None else None,
         "time_accuracy": round(sum(a * d for a, d in time_acc) / weight, 4),
         "dropped_wrench": dropped,
         "rejected_wrench": rejected,
-        "words_match_offline": words_match if options.offline else None,
+        "words_match_offline": words_match if model is not None else None,
         "latency_ms": offline.percentiles_ms(latencies),
         "latency_received_ms": offline.percentiles_ms(received_latencies),
         "word_latency_ms": offline.percentiles_ms(word_latencies),
