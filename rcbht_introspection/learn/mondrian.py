@@ -16,6 +16,9 @@ from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, check_random_state, validate_data
 
 NO_NODE = -1
+POINTWISE_BATCH = 16
+"""Mini-batches up to this size are added point by point across all trees (vectorised);
+larger ones block by block per tree (fewer passes)."""
 FEATURE_DTYPE = np.float32
 """Training data and node boxes are stored in float32 (half the memory of the wide paper
 encoding); test points are cast the same way, so boxes and points compare exactly."""
@@ -132,11 +135,14 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         if (self._roots == NO_NODE).all():
             for tree in range(self.n_estimators):
                 self._roots[tree] = self._grow(new, NO_NODE, 0.0)
-        else:
+        elif len(new) <= POINTWISE_BATCH:
             # one point at a time through all trees at once (Mondrian trees are projective:
             # extending point by point has the same distribution as extending by the batch)
             for point in new:
                 self._extend_point(int(point))
+        else:
+            for tree in range(self.n_estimators):
+                self._extend(tree, int(self._roots[tree]), new)
         self._update_posterior()
         return self
 
