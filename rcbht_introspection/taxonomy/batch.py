@@ -124,15 +124,7 @@ def upper_layers(
     """Clean-up, MCs + filtering, LLBs + refinement of one axis: the operator chain, fed whole."""
     ctx = StreamContext(config, boundaries=list(state_times), now=math.inf, ended=True,
                         end_time=end_time)  # fmt: skip
-    pipe = AxisPipeline(ctx)
-    mcs: list[Composition] = []
-    llbs: list[Behavior] = []
-    for p in prims:
-        m, b = pipe.push(p)
-        mcs += m
-        llbs += b
-    m, b = pipe.finish()
-    return mcs + m, llbs + b
+    return AxisPipeline(ctx).run_whole(prims)
 
 
 def label_arm(

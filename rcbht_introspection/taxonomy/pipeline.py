@@ -117,8 +117,10 @@ class RepeatedPrimitives(Op):
         self.count += 1
         self.sum_avg += row[pr.AVG]
         self.sum_grad += row[pr.GRAD]
-        self.vmax = max(self.vmax, row[pr.MAX])
-        self.vmin = min(self.vmin, row[pr.MIN])
+        if row[pr.MAX] > self.vmax:
+            self.vmax = row[pr.MAX]
+        if row[pr.MIN] < self.vmin:
+            self.vmin = row[pr.MIN]
         return out
 
     def finish(self) -> list[Row]:
@@ -148,11 +150,6 @@ class PairPass(Op):
         self.pending: Row | None = None
         self.pos = 0  # position of the next input row
 
-    def _hold(self, row: Row, pos: int) -> bool:
-        if self.before_start is not None and self.before_start(pos):
-            return False
-        return self.can_start is None or self.can_start(row)
-
     def push(self, row: Row) -> list[Row]:
         pos = self.pos
         self.pos += 1
@@ -164,7 +161,9 @@ class PairPass(Op):
             if merged is not None:
                 return [merged]
             out.append(first)
-        if self._hold(row, pos):
+        if (self.before_start is None or not self.before_start(pos)) and (
+            self.can_start is None or self.can_start(row)
+        ):
             self.pending = row
         else:
             out.append(row)
@@ -813,6 +812,17 @@ class Chain(Op):
     def retained(self) -> int:
         return sum(op.retained() for op in self.ops)
 
+    def run_all(self, rows: list[Row]) -> list[Row]:
+        """A complete sequence, operator after operator (same rows as push + finish)."""
+        for op in self.ops:
+            push = op.push
+            out: list[Row] = []
+            for r in rows:
+                out.extend(push(r))
+            out.extend(op.finish())
+            rows = out
+        return rows
+
 
 def _labels(*labels: int, field: int) -> Callable[[Row], bool]:
     """can_start predicate: the row's label is one that can open a merging pair."""
@@ -959,18 +969,20 @@ class AxisPipeline:
     def retained(self) -> int:
         return self.compositions.retained() + self.behaviors.retained()
 
+    def run_whole(self, prims: list[Row]) -> tuple[list[Row], list[Row]]:
+        """A whole axis at once (the batch engine): the same operators, one after the other."""
+        if not self.ctx.config.final_segment:
+            prims = prims[:-1]
+        mcs = self.compositions.run_all(prims)
+        return mcs, self.behaviors.run_all([list(m) for m in mcs])
+
 
 # --------------------------------------------------------------------------- whole lists
 
 
 def run_ops(ops: list[Op], rows: list[Row]) -> list[Row]:
     """Push a whole list through operators and finish: a pass applied to a complete sequence."""
-    chain = Chain(ops)
-    out: list[Row] = []
-    for r in rows:
-        out.extend(chain.push(r))
-    out.extend(chain.finish())
-    return out
+    return Chain(ops).run_all(rows)
 
 
 def whole_context(

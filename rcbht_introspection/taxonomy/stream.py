@@ -315,10 +315,10 @@ class ArmStream:
     def _block(self, out: list[Word], final: bool = False) -> None:
         stats = block_stats_one(self._ts, self._ys)
         if self._trackers:
-            bmax, bmin = stats[6][0], stats[7][0]
+            bmax, bmin = stats[6], stats[7]
             for a in list(self._trackers):
                 tr = self._trackers[a]
-                tr.add([y[a] for y in self._ys], bmax[a], bmin[a])
+                tr.add([y[a] for y in self._ys], bmax[a][0], bmin[a][0])
                 if not self.causal and tr.settled(self.config):
                     self._release_waiting(a, tr.domain(self.config), out)
         self._ts = []
