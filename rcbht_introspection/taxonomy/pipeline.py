@@ -42,6 +42,8 @@ class StreamContext:
     """Time of the latest sample; unmarked boundaries are not earlier than this."""
     ended: bool = False
     end_time: float = 0.0
+    _limit_key: tuple = ()
+    _limit: float | None = None
     waiting: set = field(default_factory=set)
     """Operators waiting for time to pass (the 'a'-chain limit); poll them as samples arrive."""
 
@@ -51,9 +53,12 @@ class StreamContext:
 
     def limit(self) -> float | None:
         """The 'a'-chain time limit (cleanUp stateVec(2,2)) if it is already determined."""
-        if len(self.boundaries) >= 4 or self.ended:
-            return mc.state_limits(self.boundaries, self.end_time)[1]
-        return None
+        key = (len(self.boundaries), self.ended, self.end_time)
+        if key != self._limit_key:
+            known = len(self.boundaries) >= 4 or self.ended
+            self._limit = mc.state_limits(self.boundaries, self.end_time)[1] if known else None
+            self._limit_key = key
+        return self._limit
 
 
 class Op:
@@ -812,6 +817,18 @@ class Chain(Op):
     def retained(self) -> int:
         return sum(op.retained() for op in self.ops)
 
+    def push_rows(self, rows: list[Row]) -> list[Row]:
+        """Several final rows at once, operator after operator (same rows as pushing each)."""
+        for op in self.ops:
+            if not rows:
+                break
+            push = op.push
+            out: list[Row] = []
+            for r in rows:
+                out.extend(push(r))
+            rows = out
+        return rows
+
     def run_all(self, rows: list[Row]) -> list[Row]:
         """A complete sequence, operator after operator (same rows as push + finish)."""
         for op in self.ops:
@@ -955,6 +972,16 @@ class AxisPipeline:
             if prim is None:
                 return [], []
         return self._flow(self.compositions.push(prim))
+
+    def push_rows(self, prims: list[Row]) -> tuple[list[Row], list[Row]]:
+        """Several final labelled primitives in (e.g. from push_many); final MCs and LLBs out."""
+        if len(prims) == 1:
+            return self.push(prims[0])
+        if not self.ctx.config.final_segment:
+            prims = [self.held_last, *prims] if self.held_last is not None else list(prims)
+            self.held_last = prims.pop()
+        mcs = self.compositions.push_rows(prims)
+        return mcs, self.behaviors.push_rows([list(m) for m in mcs])
 
     def poll(self) -> tuple[list[Row], list[Row]]:
         """Rows released because time advanced or a boundary was marked."""

@@ -200,33 +200,34 @@ class ArmStream:
         for b in llbs:
             out.append(self._word("b", b, axis))
 
-    def _primitive(self, a: int, seg: list[float], out: list[Word]) -> None:
-        """A closed segment: label it (or let it wait for the domain) and run the pipeline."""
+    def _primitives(self, a: int, segs: list[list[float]], out: list[Word]) -> None:
+        """Closed segments: label them (or let them wait for the domain) and run the pipeline."""
         thresholds = self._thresholds[a]
         if thresholds is None:
             if not self.causal:
-                self._waiting[a].append(seg)
+                self._waiting[a].extend(segs)
                 return
             thresholds = axis_thresholds(
                 AXES[a], self._trackers[a].domain(self.config), self.config
             )
-        prim = [*seg, classify_gradient(seg[5], thresholds)]
-        out.append(self._word("p", prim, AXES[a]))
-        mcs, llbs = self.pipes[a].push(prim)
+        axis = AXES[a]
+        prims = [[*seg, classify_gradient(seg[5], thresholds)] for seg in segs]
+        for prim in prims:
+            out.append(self._word("p", prim, axis))
+        mcs, llbs = self.pipes[a].push_rows(prims)
         self._emit(a, mcs, llbs, out)
 
     def _release_waiting(self, a: int, domain: float, out: list[Word]) -> None:
         self._thresholds[a] = axis_thresholds(AXES[a], domain, self.config)
         waiting = self._waiting.pop(a, [])
         self._trackers.pop(a, None)
-        for seg in waiting:
-            self._primitive(a, seg, out)
+        if waiting:
+            self._primitives(a, waiting, out)
 
     def _closed(self, out: list[Word]) -> None:
         for a, segs in enumerate(self.segmenter.segments):
             if segs:
-                for seg in segs:
-                    self._primitive(a, seg, out)
+                self._primitives(a, list(segs), out)
                 segs.clear()
 
     # ------------------------------------------------------------------ intake
