@@ -166,30 +166,28 @@ def block_stats_one(ts: list[float], ys: list[list[float]]) -> tuple:
     stt = dts[0] * dts[0]
     for j in range(1, m):
         stt = stt + dts[j] * dts[j]
-    my_row, syy_row, sty_row, max_row, min_row = [], [], [], [], []
+    d0 = dts[0]
+    rest = dts[1:]
+    my_col, syy_col, sty_col, max_col, min_col = [], [], [], [], []
     for col in zip(*ys, strict=True):
         sy = col[0]
-        for j in range(1, m):
-            sy = sy + col[j]
+        for v in col[1:]:
+            sy = sy + v
         my = sy / m
         dy = col[0] - my
         syy = dy * dy
-        sty = dts[0] * dy
-        for j in range(1, m):
-            dy = col[j] - my
+        sty = d0 * dy
+        for dt, v in zip(rest, col[1:], strict=True):
+            dy = v - my
             syy = syy + dy * dy
-            sty = sty + dts[j] * dy
-        my_row.append(my)
-        syy_row.append(syy)
-        sty_row.append(sty)
-        max_row.append(max(col))
-        min_row.append(min(col))
-
-    def column(row: list[float]) -> list[list[float]]:
-        return [[v] for v in row]
-
-    return (m, [mt], [stt], column(my_row), column(syy_row), column(sty_row), column(max_row),
-            column(min_row), [ts[-1]], column(list(ys[-1])))  # fmt: skip
+            sty = sty + dt * dy
+        my_col.append([my])
+        syy_col.append([syy])
+        sty_col.append([sty])
+        max_col.append([max(col)])
+        min_col.append([min(col)])
+    return (m, [mt], [stt], my_col, syy_col, sty_col, max_col, min_col, [ts[-1]],
+            [[v] for v in ys[-1]])  # fmt: skip
 
 
 class Segmenter:

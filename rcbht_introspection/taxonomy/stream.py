@@ -110,20 +110,25 @@ class DomainTracker:
         self.top: list[float] = []  # descending
         self.bottom: list[float] = []  # ascending
 
-    def add(self, values: Sequence[float], vmax: float, vmin: float) -> None:
+    def add(self, values: Sequence[float], vmax: float, vmin: float) -> bool:
+        """Take in samples (with their max and min); True if the 4th largest/smallest changed."""
         rank = self.rank
+        changed = False
         if len(self.top) < rank or vmax > self.top[-1]:
             for v in values:
                 if len(self.top) < rank or v > self.top[-1]:
                     self.top.append(v)
                     self.top.sort(reverse=True)
                     del self.top[rank:]
+                    changed = True
         if len(self.bottom) < rank or vmin < self.bottom[-1]:
             for v in values:
                 if len(self.bottom) < rank or v < self.bottom[-1]:
                     self.bottom.append(v)
                     self.bottom.sort()
                     del self.bottom[rank:]
+                    changed = True
+        return changed
 
     def domain(self, config: TaxonomyConfig) -> float:
         if not self.top:
@@ -319,8 +324,8 @@ class ArmStream:
             bmax, bmin = stats[6], stats[7]
             for a in list(self._trackers):
                 tr = self._trackers[a]
-                tr.add([y[a] for y in self._ys], bmax[a][0], bmin[a][0])
-                if not self.causal and tr.settled(self.config):
+                changed = tr.add([y[a] for y in self._ys], bmax[a][0], bmin[a][0])
+                if changed and not self.causal and tr.settled(self.config):
                     self._release_waiting(a, tr.domain(self.config), out)
         self._ts = []
         self._ys = []
