@@ -312,13 +312,14 @@ class ArmStream:
             for a, tr in self._trackers.items():
                 tr.add((values[a],), values[a], values[a])
             return
-        self.segmenter.samples += 1
         self._ts.append(t)
         self._ys.append(values)
         if len(self._ts) == self.window:
             self._block(out)
 
     def _block(self, out: list[Word], final: bool = False) -> None:
+        self.ctx.now = self._ts[-1]
+        self.segmenter.samples += len(self._ts)
         stats = block_stats_one(self._ts, self._ys)
         if self._trackers:
             bmax, bmin = stats[6], stats[7]
@@ -344,7 +345,7 @@ class ArmStream:
         out: list[Word] = []
         try:
             t = float(t)
-            values = [float(v) for v in wrench6]
+            values = list(map(float, wrench6))
         except (TypeError, ValueError):
             self.counters.malformed_samples += 1
             return out
@@ -362,11 +363,10 @@ class ArmStream:
                         self._periods = []
                     self._last_t = t
                     self._last_y = values
-                    self.ctx.now = t
-                    self.segmenter.samples += 1
-                    self._ts.append(t)
+                    ts = self._ts
+                    ts.append(t)
                     self._ys.append(values)
-                    if len(self._ts) == self.window:
+                    if len(ts) == self.window:
                         self._block(out)
                     return out
             if self._finished:
