@@ -113,6 +113,8 @@ class DomainTracker:
     def add(self, values: Sequence[float], vmax: float, vmin: float) -> bool:
         """Take in samples (with their max and min); True if the 4th largest/smallest changed."""
         rank = self.rank
+        if len(self.top) == rank and vmax <= self.top[-1] and vmin >= self.bottom[-1]:
+            return False  # the usual case: nothing new at either end
         changed = False
         if len(self.top) < rank or vmax > self.top[-1]:
             for v in values:
@@ -325,7 +327,10 @@ class ArmStream:
             bmax, bmin = stats[6], stats[7]
             for a in list(self._trackers):
                 tr = self._trackers[a]
-                changed = tr.add([y[a] for y in self._ys], bmax[a][0], bmin[a][0])
+                lo, hi = bmin[a][0], bmax[a][0]
+                if len(tr.top) == tr.rank and hi <= tr.top[-1] and lo >= tr.bottom[-1]:
+                    continue  # nothing new at either end (checked before building the column)
+                changed = tr.add([y[a] for y in self._ys], hi, lo)
                 if changed and not self.causal and tr.settled(self.config):
                     self._release_waiting(a, tr.domain(self.config), out)
         self._ts = []
