@@ -1,4 +1,4 @@
-"""Primitive layer (spec 2.1): growing-window regression segmentation, gradient labels, clean-up.
+"""Primitive layer (spec 2.1): regression segmentation, gradient labels, clean-up rules, calibration.
 
 The segmenter is incremental: it is fed blocks of W samples and keeps, per axis, only the running
 least-squares statistics of the open segment (merged block by block with Chan's pairwise update,
