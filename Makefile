@@ -6,8 +6,8 @@ PIP_QUIET := 2>&1 | { grep -v '^WARNING: Location' || true; }
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-PKG_SOURCES := $(shell find rcbht_introspection config resource -type f -not -name '*.pyc' 2>/dev/null) setup.py setup.cfg package.xml
-MSG_SOURCES := $(wildcard msg_defs/*.msg msg_defs/CMakeLists.txt msg_defs/package.xml)
+PKG_SOURCES := $(shell find rcbht_introspection config resource scripts -type f -not -name '*.pyc' 2>/dev/null) setup.py setup.cfg package.xml
+MSG_SOURCES := $(wildcard msg_defs/msg/*.msg msg_defs/CMakeLists.txt msg_defs/package.xml)
 
 .PHONY: setup demo test bench lint clean
 
@@ -21,8 +21,10 @@ $(VENV)/.deps-stamp: requirements.txt requirements-ros.txt
 $(VENV)/.msgs-stamp: $(VENV)/.deps-stamp $(MSG_SOURCES)
 	@if [ -f msg_defs/CMakeLists.txt ]; then \
 	  V=$$(cd $(VENV) && pwd); \
+	  mkdir -p build; \
+	  echo "building msg_defs (rcbht_interfaces) into $(VENV); log: build/msg_defs.log"; \
 	  cmake -S msg_defs -B build/msg_defs -DCMAKE_PREFIX_PATH=$$V -DCMAKE_INSTALL_PREFIX=$$V \
-	    -DPython3_EXECUTABLE=$$V/bin/python -DBUILD_TESTING=OFF > build/msg_defs.log 2>&1 || { mkdir -p build; cat build/msg_defs.log; exit 1; }; \
+	    -DPython3_EXECUTABLE=$$V/bin/python -DBUILD_TESTING=OFF > build/msg_defs.log 2>&1 || { cat build/msg_defs.log; exit 1; }; \
 	  cmake --build build/msg_defs -j2 >> build/msg_defs.log 2>&1 || { cat build/msg_defs.log; exit 1; }; \
 	  cmake --install build/msg_defs >> build/msg_defs.log 2>&1 || { cat build/msg_defs.log; exit 1; }; \
 	fi

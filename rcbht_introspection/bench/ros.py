@@ -1,0 +1,134 @@
+"""ROS benchmark: sustained wrench rate with zero drops and word-to-belief latency, real DDS.
+
+Two scenarios through segmenter_node + classifier_node as separate processes (the replay-eval
+machinery): one arm at 1 kHz and two arms at 2 x 1 kHz, each for RCBHT_BENCH_ROS_SECONDS of
+playback (default 60). The wrench comes from REAL HIRO trials (200 Hz recordings played at 5x =
+1 kHz) when ../shared data is present, else from a synthetic contact signal. The classifier uses
+a model trained on HIRO trials 1-40 when the learn work and the data are present, else none.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rcbht_introspection.io.trial import Trial
+
+SOURCE_RATE_HZ = 200.0
+TARGET_RATE_HZ = 1000.0
+
+
+def synthetic_trial(name: str, seconds: float, seed: int) -> Trial:
+    """A 200 Hz contact-like wrench (ramps, holds, noise) with four sub-tasks."""
+    rng = np.random.default_rng(seed)
+    t = np.round(np.arange(0.0, seconds, 1.0 / SOURCE_RATE_HZ), 6)
+    knots = np.sort(rng.uniform(0, seconds, 40))
+    wrench = np.column_stack(
+        [np.interp(t, knots, rng.normal(0, s, len(knots))) for s in (5, 5, 20, 0.5, 0.5, 0.2)]
+    )
+    wrench += rng.normal(0, 0.05, wrench.shape)
+    marks = (0.0, 0.3 * seconds, 0.3 * seconds + 0.5, 0.55 * seconds)
+    return Trial(name, t, {"R": wrench}, state_times=marks)
+
+
+def _hiro() -> Path | None:
+    from rcbht_introspection.commands.demo import shared_hiro
+
+    return shared_hiro()
+
+
+def _sources(seconds_of_data: float) -> list[Trial]:
+    """Trials (200 Hz) totalling at least `seconds_of_data`."""
+    from rcbht_introspection.io.hiro import find_trials, read_trial
+
+    hiro = _hiro()
+    trials: list[Trial] = []
+    total = 0.0
+    folders = find_trials([hiro]) if hiro is not None else []
+    i = 0
+    while total < seconds_of_data:
+        if folders:
+            trial = read_trial(folders[(40 + i) % len(folders)])  # held-out trials first
+        else:
+            trial = synthetic_trial(f"synthetic-{i}", 30.0, i)
+        trials.append(trial)
+        total += trial.end_time
+        i += 1
+    return trials
+
+
+def _two_arm(a: Trial, b: Trial) -> Trial:
+    """Arm R from `a`, arm L from `b` (cut or tiled to a's length)."""
+    n = len(a.time)
+    idx = np.arange(n) % len(b.time)
+    return Trial(a.name, a.time, {"R": a.wrench["R"], "L": b.wrench["R"][idx]}, a.state_times)
+
+
+def _model(out_dir: Path) -> Path | None:
+    hiro = _hiro()
+    try:
+        from rcbht_introspection.learn.data import load_samples
+        from rcbht_introspection.learn.models import save_model, train_model
+    except ImportError:
+        return None
+    if hiro is None:
+        return None
+    from rcbht_introspection.io.hiro import find_trials
+
+    train = [f for f in find_trials([hiro]) if int(f.name.rsplit("-", 1)[1]) <= 40]
+    return save_model(train_model(load_samples(train, words="auto")), out_dir / "bench_model.rcbht")
+
+
+def run(out_dir: Path) -> dict[str, Any]:
+    """Both scenarios; figures per scenario plus the load average around them."""
+    from rcbht_introspection.io.bags import write_trial_bag
+    from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval
+
+    seconds = float(os.environ.get("RCBHT_BENCH_ROS_SECONDS", "60"))
+    rate = TARGET_RATE_HZ / SOURCE_RATE_HZ
+    work = Path(out_dir) / "ros"
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    model = _model(work)
+    sources = _sources(seconds * rate)
+    results: dict[str, Any] = {
+        "playback_seconds_target": seconds,
+        "source": "REAL HIRO trials at 5x" if _hiro() else "synthetic 200 Hz at 5x",
+        "model": str(model) if model else None,
+    }
+    for name, arms in (("one_arm_1kHz", 1), ("two_arm_2x1kHz", 2)):
+        bags = []
+        for i, trial in enumerate(sources):
+            if arms == 2:
+                trial = _two_arm(trial, sources[(i + 1) % len(sources)])
+            bag = work / name / f"{i:02d}-{trial.name}.mcap"
+            write_trial_bag(trial, bag)
+            bags.append(bag)
+        load_before = os.getloadavg()
+        t0 = time.monotonic()
+        options = ReplayEvalOptions(rate=rate, offline=False, log_dir=work / f"{name}_logs")
+        r = replay_eval(bags, model, options)
+        play_s = sum(b["play_s"] for b in r["per_bag"])
+        published = sum(b["published_wrench"] for b in r["per_bag"])
+        results[name] = {
+            "arms": arms,
+            "wrench_published": published,
+            "wrench_dropped": r["dropped_wrench"],
+            "wrench_rejected": r["rejected_wrench"],
+            "playback_s": round(play_s, 2),
+            "achieved_rate_hz_per_arm": round(published / arms / play_s, 1) if play_s else None,
+            "latency_ms": r["latency_ms"],
+            "latency_received_ms": r["latency_received_ms"],
+            "word_latency_ms": r["word_latency_ms"],
+            "clean_shutdown": r["clean_shutdown"],
+            "domain_id": r["domain_id"],
+            "wall_s": round(time.monotonic() - t0, 1),
+            "load_avg_before": [round(x, 2) for x in load_before],
+            "load_avg_after": [round(x, 2) for x in os.getloadavg()],
+        }
+    return results

@@ -1,0 +1,259 @@
+"""Sub-task belief from live words: the classifier node's state, pure Python.
+
+Two modes. "boundary" (the paper's setting): the window is the words since the last sub-task
+event; when the next event closes a sub-task, its final verdict is issued once every word
+overlapping it is final (each arm's words reach its end on every level and axis, or the arm's
+stream ended). "window": the words of the last `window_s` seconds, no state machine needed.
+Times are stream seconds; a new stream (new time origin) starts a new session.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from rcbht_introspection.io.trial import AXES, SUBTASKS
+from rcbht_introspection.taxonomy.words import LEVELS, Level, TrialWords, Word
+
+UNKNOWN = "unknown"
+MODES: tuple[str, ...] = ("boundary", "window")
+
+
+@dataclass(frozen=True)
+class Belief:
+    """The believed sub-task of one window and the per-class probabilities behind it."""
+
+    subtask: str
+    classes: tuple[str, ...]
+    probabilities: tuple[float, ...]
+    start: float
+    end: float
+    mode: str
+    phase: str = ""
+    final: bool = False
+    n_words: int = 0
+
+
+@dataclass
+class _Segment:
+    """A sub-task announced by the state machine: [start, end], end None while it runs."""
+
+    phase: str
+    start: float
+    end: float | None = None
+
+
+class BeliefTracker:
+    """Collects words, tracks sub-task events and classifies windows with a SubtaskModel."""
+
+    def __init__(
+        self,
+        model: object | None,
+        mode: str = "boundary",
+        window_s: float = 2.0,
+        subtasks: Sequence[str] = SUBTASKS,
+        end_phases: Sequence[str] = ("done",),
+        trial: str = "live",
+    ) -> None:
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+        self.model = model
+        self.mode = mode
+        self.window_s = float(window_s)
+        self.subtasks = tuple(subtasks)
+        self.end_phases = tuple(end_phases)
+        self.trial = trial
+        self.classes: tuple[str, ...] = (
+            tuple(str(c) for c in model.classes_) if model is not None else ()  # type: ignore[attr-defined]
+        )
+        self.last_error: str | None = None
+        self.reset()
+
+    def reset(self) -> None:
+        """Start a new stream: no words, no sub-task events."""
+        self.words = TrialWords(name=self.trial)
+        self.watermark: dict[tuple[str, Level, str], float] = {}
+        self.ended_arms: set[str] = set()
+        self.ended_levels: set[tuple[str, Level]] = set()
+        self.arms: set[str] = set()
+        self.segments: list[_Segment] = []
+        self.task_ended = False
+        self.now = 0.0
+        self._issued = 0
+        self._added = 0
+        self.last_final: Belief | None = None
+
+    # --- input -------------------------------------------------------------------------------
+    def add_words(self, arm: str, words: Iterable[Word], now: float | None = None) -> None:
+        """Add final words of `arm`; `now` is the stream time of the sample that finalised them."""
+        self.arms.add(arm)
+        for w in words:
+            self.words.add(w)
+            key = (w.arm, w.level, w.axis)
+            if w.end > self.watermark.get(key, -np.inf):
+                self.watermark[key] = w.end
+            self.now = max(self.now, w.end)
+            self._added += 1
+        if now is not None:
+            self.now = max(self.now, now)
+        if self.mode == "window" and self._added > 2000:
+            self._prune(self.now - self.window_s)
+
+    def end_of_stream(self, arm: str, level: Level | None = None) -> None:
+        """`arm`'s stream finished on `level` (None: on every level): its words there are final."""
+        self.arms.add(arm)
+        for lv in LEVELS if level is None else (level,):
+            self.ended_levels.add((arm, lv))
+        if all((arm, lv) in self.ended_levels for lv in LEVELS):
+            self.ended_arms.add(arm)
+
+    def phase(self, name: str, t: float) -> bool:
+        """A sub-task event at stream time `t`; returns False for names it does not know."""
+        if name in self.end_phases:
+            if self.segments and self.segments[-1].end is None:
+                self.segments[-1].end = t
+            self.task_ended = True
+            self.now = max(self.now, t)
+            return True
+        if name not in self.subtasks:
+            return False
+        if self.segments and self.segments[-1].end is None:
+            self.segments[-1].end = t
+        self.segments.append(_Segment(name, t))
+        self.now = max(self.now, t)
+        return True
+
+    # --- output ------------------------------------------------------------------------------
+    def classify(self, start: float, end: float, phase: str = "", final: bool = False) -> Belief:
+        """Belief over the words overlapping [start, end] (UNKNOWN without words or model)."""
+        if self.model is None:
+            n = sum(
+                1
+                for lv in self.words.words.values()
+                for ws in lv.values()
+                for seq in ws.values()
+                for w in seq
+                if w.end >= start and w.start <= end
+            )
+            return Belief(UNKNOWN, (), (), start, end, self.mode, phase, final, n)
+        from rcbht_introspection.grammar.split import window_sample
+
+        sample = window_sample(self.words, start, end, subtask=phase, trial=self.trial)
+        n = sum(
+            len(ws)
+            for lv in sample.words.words.values()
+            for ws in lv.values()
+            for ws in ws.values()
+        )
+        base = dict(start=start, end=end, mode=self.mode, phase=phase, final=final, n_words=n)
+        if self.model is None or n == 0:
+            return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
+        try:
+            # the verdict is the model's own prediction (as offline evaluation uses it), which
+            # for a probabilistic SVM need not be the arg-max of its calibrated probabilities
+            verdict = str(self.model.predict_samples([sample])[0])  # type: ignore[attr-defined]
+            proba = np.asarray(self.model.predict_proba_samples([sample]))[0]  # type: ignore[attr-defined]
+        except Exception as exc:  # a bad model must not stop the node
+            self.last_error = f"{type(exc).__name__}: {exc}"
+            return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
+        return Belief(verdict, self.classes, tuple(float(p) for p in proba), **base)
+
+    def window(self) -> tuple[float, float, str]:
+        """(start, end, phase) of the current window."""
+        if self.mode == "window":
+            return max(0.0, self.now - self.window_s), self.now, ""
+        if self.segments and self.segments[-1].end is None:
+            seg = self.segments[-1]
+            return seg.start, max(self.now, seg.start), seg.phase
+        if self.segments:
+            seg = self.segments[-1]
+            return seg.start, seg.end if seg.end is not None else self.now, seg.phase
+        return 0.0, self.now, ""
+
+    def current(self) -> Belief:
+        """The belief about the running window (after the task ended: the last verdict)."""
+        if (
+            self.mode == "boundary"
+            and self.task_ended
+            and self.last_final is not None
+            and self._issued >= len(self.segments)
+        ):
+            return self.last_final
+        start, end, phase = self.window()
+        return self.classify(start, end, phase)
+
+    def _complete(self, end: float) -> bool:
+        """Every word overlapping times up to `end` is final (each arm reached it or ended)."""
+        if not self.arms:
+            return self.task_ended
+        for arm in self.arms:
+            if arm in self.ended_arms:
+                continue
+            for level in LEVELS:
+                if (arm, level) in self.ended_levels:
+                    continue
+                for axis in AXES:
+                    if self.watermark.get((arm, level, axis), -np.inf) < end:
+                        return False
+        return True
+
+    def take_finals(self) -> list[Belief]:
+        """Final verdicts of closed sub-tasks whose words are all final (each issued once)."""
+        out = []
+        while self._issued < len(self.segments):
+            seg = self.segments[self._issued]
+            if seg.end is None or not self._complete(seg.end):
+                break
+            out.append(self.classify(seg.start, seg.end, seg.phase, final=True))
+            self.last_final = out[-1]
+            self._issued += 1
+        if out:
+            keep_from = out[-1].end
+            if self._issued < len(self.segments):
+                keep_from = min(keep_from, self.segments[self._issued].start)
+            self._prune(keep_from)
+        return out
+
+    @property
+    def finished(self) -> bool:
+        """The task ended and every sub-task verdict was issued."""
+        return self.task_ended and self._issued >= len(self.segments) and self._complete(self.now)
+
+    def _prune(self, before: float) -> None:
+        """Drop words that end before `before` (no later window can overlap them)."""
+        for per_level in self.words.words.values():
+            for per_axis in per_level.values():
+                for axis, seq in per_axis.items():
+                    if seq and seq[0].end < before:
+                        per_axis[axis] = [w for w in seq if w.end >= before]
+        self._added = 0
+
+
+def load_subtask_model(path: str, expected_profile: str = "") -> tuple[object | None, str]:
+    """(model, '') for a usable sub-task model file, else (None, why it cannot be used)."""
+    if not path:
+        return None, "no model file given (parameter model_file)"
+    try:
+        from rcbht_introspection.learn.models import load_model
+    except ImportError as exc:
+        return None, f"the learning module is missing ({exc.name}); it comes with the learn work"
+    from rcbht_introspection.errors import InputError
+
+    try:
+        model = load_model(path)
+    except InputError as exc:
+        return None, str(exc)
+    except OSError as exc:
+        return None, f"{path}: cannot read: {exc.strerror}"
+    classes = [str(c) for c in getattr(model, "classes_", [])]
+    if not classes or not set(classes) <= set(SUBTASKS):
+        return None, f"{path}: model classes {classes} are not sub-tasks {list(SUBTASKS)}"
+    profile = str(getattr(model, "taxonomy_profile", ""))
+    if expected_profile and profile != expected_profile:
+        return None, (
+            f"{path}: model was trained with taxonomy profile {profile!r}, "
+            f"the segmenter uses {expected_profile!r}"
+        )
+    return model, ""

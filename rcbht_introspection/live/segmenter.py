@@ -1,0 +1,279 @@
+"""Segmenter session: validates wrench samples, keeps one ArmStream per arm, applies sub-task events.
+
+Stream time is seconds since the stream's first accepted sample (any arm), so absolute ROS stamps
+never enter the regression fits. A sample is rejected (and counted) when its values are not all
+finite or its stamp is zero or not after the arm's previous stamp.
+
+A sub-task event (/task_phase) applies at each arm's last sample published before it. Wrench and
+events travel on different topics, so their arrival order is not their publication order; when
+both carry the publisher's source timestamp, an event waits until a later-published sample of the
+arm arrives (or `flush` finds it older than the hold time), which makes replays deterministic.
+An end event finishes every arm's stream; the next sample starts a new stream (new id and origin).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.taxonomy.words import Word
+
+REJECT_REASONS: tuple[str, ...] = ("non_finite", "zero_stamp", "non_increasing_stamp")
+
+
+@dataclass
+class ArmCounts:
+    """Samples of one arm accepted into the stream and rejected, by reason (whole session)."""
+
+    accepted: int = 0
+    rejected: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REJECT_REASONS, 0))
+
+    @property
+    def rejected_total(self) -> int:
+        return sum(self.rejected.values())
+
+
+@dataclass(frozen=True)
+class WordBatch:
+    """Words of one arm that became final at the sample `stamp_ns` of stream `stream_id`."""
+
+    arm: str
+    words: list[Word]
+    stamp_ns: int
+    origin_ns: int
+    stream_id: int
+    end_of_stream: bool = False
+
+
+@dataclass(frozen=True)
+class PhaseEvent:
+    """A sub-task event placed on the stream clock: `time` is the last sample before it."""
+
+    name: str
+    time: float
+    stamp_ns: int
+    origin_ns: int
+    stream_id: int
+    end: bool
+
+
+@dataclass
+class Output:
+    """What one call produced, in order: word batches, applied events, a rejection reason."""
+
+    batches: list[WordBatch] = field(default_factory=list)
+    phases: list[PhaseEvent] = field(default_factory=list)
+    rejected: str | None = None
+    unknown_phase: str | None = None
+
+
+@dataclass
+class _Pending:
+    """An event not yet applied to every arm."""
+
+    name: str
+    source_ns: int | None
+    end: bool
+    waiting: set[str]
+    time: float | None = None
+    stamp_ns: int = 0
+
+
+class _Arm:
+    """Per-arm stream state."""
+
+    def __init__(self, stream: object) -> None:
+        self.stream = stream
+        self.last_ns = 0
+        self.last_t: float | None = None
+        self.first_t: float | None = None
+        self.last_source: int | None = None
+        self.finished = False
+
+
+class SegmenterSession:
+    """One live segmentation session over `arms`; `stream_factory(arm)` builds an ArmStream."""
+
+    def __init__(
+        self,
+        arms: Sequence[str],
+        stream_factory: Callable[[str], object],
+        end_phases: Sequence[str] = ("done",),
+        subtasks: Sequence[str] = SUBTASKS,
+        hold_s: float = 0.05,
+    ) -> None:
+        self.arms = tuple(arms)
+        self.stream_factory = stream_factory
+        self.end_phases = tuple(end_phases)
+        self.subtasks = tuple(subtasks)
+        self.hold_ns = int(hold_s * 1e9)
+        self.counts = {arm: ArmCounts() for arm in self.arms}
+        self.unknown_phases = 0
+        self.late_phases = 0
+        self.pending: list[_Pending] = []
+        self.stream_id = -1
+        self._new_stream()
+
+    def _new_stream(self) -> None:
+        self.state = {arm: _Arm(self.stream_factory(arm)) for arm in self.arms}
+        self.origin_ns: int | None = None
+        self.stream_id += 1
+
+    def stream_time(self, stamp_ns: int) -> float:
+        """Seconds since the stream's time origin."""
+        assert self.origin_ns is not None
+        return (stamp_ns - self.origin_ns) / 1e9
+
+    # --- samples ---------------------------------------------------------------------------
+    def push(
+        self, arm: str, stamp_ns: int, wrench: Sequence[float], source_ns: int | None = None
+    ) -> Output:
+        """Feed one sample (after applying events published before it); returns what it finalised."""
+        out = Output()
+        if source_ns is not None and self.origin_ns is not None:
+            self._apply_due(out, lambda p: p.source_ns is not None and p.source_ns < source_ns, arm)
+        counts = self.counts[arm]
+        st = self.state[arm]
+        reason = None
+        if not all(math.isfinite(v) for v in wrench):
+            reason = "non_finite"
+        elif stamp_ns <= 0:
+            reason = "zero_stamp"
+        elif stamp_ns <= st.last_ns:
+            reason = "non_increasing_stamp"
+        if reason is not None:
+            counts.rejected[reason] += 1
+            out.rejected = reason
+            return out
+        first_of_stream = self.origin_ns is None
+        if first_of_stream:
+            self.origin_ns = stamp_ns
+        t = self.stream_time(stamp_ns)
+        st.last_ns, st.last_t = stamp_ns, t
+        st.last_source = source_ns
+        if st.first_t is None:
+            st.first_t = t
+        counts.accepted += 1
+        words = st.stream.push(t, wrench)  # type: ignore[attr-defined]
+        if words:
+            out.batches.append(
+                WordBatch(arm, list(words), stamp_ns, self.origin_ns, self.stream_id)
+            )
+        if first_of_stream:
+            # events that came before any sample of the stream apply at its first sample
+            self._apply_due(
+                out, lambda p: p.source_ns is None or source_ns is None or p.source_ns < source_ns
+            )
+        return out
+
+    # --- events ----------------------------------------------------------------------------
+    def phase(self, name: str, source_ns: int | None = None) -> Output:
+        """A /task_phase event; applied now unless samples published before it may be in flight."""
+        out = Output()
+        name = name.strip()
+        end = name in self.end_phases
+        if not end and name not in self.subtasks:
+            self.unknown_phases += 1
+            out.unknown_phase = name
+            return out
+        if end and self.origin_ns is None and not self.pending:
+            return out  # nothing to finish
+        self.pending.append(_Pending(name, source_ns, end, set(self.arms)))
+        if self.origin_ns is None:
+            return out  # applies at the stream's first sample
+        if source_ns is None:
+            self._apply_due(out, lambda p: True)
+        else:
+            # arms whose last sample was published after the event cannot wait for an earlier one
+            late = [
+                a
+                for a, st in self.state.items()
+                if st.last_source is not None and st.last_source > source_ns
+            ]
+            if late:
+                self.late_phases += 1
+            for arm in late:
+                self._apply_due(out, lambda p: p.source_ns is None or p.source_ns <= source_ns, arm)
+        return out
+
+    def flush(self, now_ns: int) -> Output:
+        """Apply events published more than the hold time before `now_ns` (same clock as sources)."""
+        out = Output()
+        if self.origin_ns is not None:
+            self._apply_due(
+                out, lambda p: p.source_ns is None or p.source_ns + self.hold_ns <= now_ns
+            )
+        return out
+
+    def _apply_due(
+        self, out: Output, due: Callable[[_Pending], bool], only: str | None = None
+    ) -> None:
+        """Apply, in order, the pending events that are due (for one arm or all)."""
+        for p in list(self.pending):
+            if not due(p):
+                break
+            for arm in sorted(p.waiting):
+                if only is None or arm == only:
+                    self._apply(p, arm, out)
+            if p.waiting:
+                continue  # still due on another arm; this arm may go on with later events
+            self.pending.remove(p)
+            out.phases.append(
+                PhaseEvent(
+                    p.name, p.time or 0.0, p.stamp_ns, self.origin_ns or 0, self.stream_id, p.end
+                )
+            )
+            if p.end:
+                self._new_stream()
+                break  # later events belong to the next stream: they wait for its first sample
+
+    def _apply(self, p: _Pending, arm: str, out: Output) -> None:
+        st = self.state[arm]
+        p.waiting.discard(arm)
+        assert self.origin_ns is not None
+        if p.time is None or arm == self.arms[0]:
+            p.time = st.last_t if st.last_t is not None else 0.0
+            p.stamp_ns = st.last_ns or self.origin_ns
+        if p.end:
+            words = st.stream.finish()  # type: ignore[attr-defined]
+            st.finished = True
+            out.batches.append(
+                WordBatch(
+                    arm, list(words), st.last_ns, self.origin_ns, self.stream_id, end_of_stream=True
+                )
+            )
+        elif st.last_t is not None and st.first_t is not None and st.last_t > st.first_t:
+            # a boundary at or before an arm's first sample cuts nothing
+            words = st.stream.mark_boundary(st.last_t, p.name)  # type: ignore[attr-defined]
+            if words:
+                out.batches.append(
+                    WordBatch(arm, list(words), st.last_ns, self.origin_ns, self.stream_id)
+                )
+
+
+def arm_stream_factory(
+    profile: str = "reference", taxonomy_file: str = "", stream_file: str = ""
+) -> Callable[[str], object]:
+    """`arm -> ArmStream` with the taxonomy profile (or file) and stream config (or file)."""
+    try:
+        from rcbht_introspection.taxonomy.config import load_taxonomy_config
+        from rcbht_introspection.taxonomy.stream import ArmStream
+    except ImportError as exc:
+        raise InputError(
+            f"the streaming taxonomy engine is missing ({exc.name}); it comes with the taxonomy work"
+        ) from None
+    config = load_taxonomy_config(profile, taxonomy_file or None)
+    stream_config = None
+    if stream_file:
+        from rcbht_introspection.config import load_yaml
+        from rcbht_introspection.taxonomy.stream import StreamConfig
+
+        stream_config = load_yaml(StreamConfig, stream_file)
+
+    def make(arm: str) -> object:
+        return ArmStream(config=config, stream_config=stream_config, arm=arm)
+
+    return make

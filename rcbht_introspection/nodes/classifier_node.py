@@ -1,0 +1,118 @@
+"""classifier_node: RCBHT words -> the believed sub-task on /task_state and rcbht/belief.
+
+Parameters: see config/classifier.yaml. Without a usable model (missing, unreadable, wrong
+classes or taxonomy profile) it logs why once and publishes "unknown". /task_state is published
+when the belief changes and at `publish_rate_hz`; each verdict on a finished sub-task is a
+Belief with final=true.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from functools import partial
+
+from rcbht_interfaces.msg import Belief as BeliefMsg
+from rcbht_interfaces.msg import Phase as PhaseMsg
+from rcbht_interfaces.msg import Words as WordsMsg
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker, load_subtask_model
+from rcbht_introspection.nodes.common import declare_config, qos_profile, run
+from rcbht_introspection.nodes.conversions import belief_msg, to_ns, words_from_msg
+from rcbht_introspection.nodes.params import ClassifierConfig, word_topics
+from rcbht_introspection.taxonomy.words import LEVELS
+
+
+class ClassifierNode(Node):
+    """Thin adapter: Words / Phase messages -> BeliefTracker -> Belief and /task_state."""
+
+    def __init__(self) -> None:
+        super().__init__("classifier_node")
+        self.cfg = declare_config(self, ClassifierConfig)
+        cfg = self.cfg
+        model, why = load_subtask_model(cfg.model_file, cfg.expected_profile)
+        if model is None:
+            self.get_logger().error(f"no usable model, /task_state stays {UNKNOWN!r}: {why}")
+        self.tracker = BeliefTracker(model, cfg.mode, cfg.window_s, end_phases=cfg.end_phases)
+        self.stream: tuple[int, int] | None = None
+        self.state = UNKNOWN
+        self.reported_error: str | None = None
+        self.batches: dict[tuple[str, int], int] = {}
+        qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
+        self.state_pub = self.create_publisher(String, cfg.state_topic, qos)
+        self.belief_pub = self.create_publisher(BeliefMsg, cfg.belief_topic, qos)
+        for (arm, _), topic in word_topics(cfg.words_namespace, cfg.arms).items():
+            self.create_subscription(WordsMsg, topic, partial(self.on_words, arm), qos)
+        self.create_subscription(PhaseMsg, cfg.phase_topic, self.on_phase, qos)
+        if cfg.publish_rate_hz > 0:
+            self.create_timer(1.0 / cfg.publish_rate_hz, self.publish_state)
+        self.publish_state()
+        self.get_logger().info(
+            f"mode {cfg.mode}, model {cfg.model_file or '(none)'}, classes {list(self.tracker.classes)}"
+        )
+
+    def _stream(self, origin_ns: int, stream_id: int) -> None:
+        """A message of a new stream (new time origin or stream id): start a new session."""
+        key = (origin_ns, stream_id)
+        if key != self.stream:
+            if self.stream is not None:
+                # the previous stream ended without all its end markers: issue what it has
+                for arm in tuple(self.tracker.arms):
+                    self.tracker.end_of_stream(arm)
+                for final in self.tracker.take_finals():
+                    self.publish_belief(final, 0)
+                self.tracker.reset()
+            self.stream = key
+
+    def on_words(self, arm: str, msg: WordsMsg) -> None:
+        self._stream(to_ns(msg.time_origin), msg.stream_id)
+        words, now = words_from_msg(msg)
+        self.tracker.add_words(arm, words, now)
+        if msg.end_of_stream:
+            self.tracker.end_of_stream(arm, LEVELS[msg.level])
+        # act once per wrench sample: when the last level message of its batch arrived
+        stamp = to_ns(msg.header.stamp)
+        key = (arm, stamp)
+        self.batches[key] = self.batches.get(key, 0) + 1
+        if self.batches[key] < msg.batch_size:
+            return
+        self.batches = {k: n for k, n in self.batches.items() if k[1] > stamp}
+        self.update(stamp)
+
+    def on_phase(self, msg: PhaseMsg) -> None:
+        self._stream(to_ns(msg.time_origin), msg.stream_id)
+        if not self.tracker.phase(msg.name, msg.time):
+            self.get_logger().warning(f"ignored unknown sub-task event {msg.name!r}")
+            return
+        self.update(to_ns(msg.header.stamp))
+
+    def update(self, trigger_ns: int) -> None:
+        """Publish finished sub-task verdicts, then the current belief and a changed state."""
+        for final in self.tracker.take_finals():
+            self.publish_belief(final, trigger_ns)
+        belief = self.tracker.current()
+        self.publish_belief(belief, trigger_ns)
+        if belief.subtask != self.state:
+            self.state = belief.subtask
+            self.publish_state()
+        error = self.tracker.last_error
+        if error and error != self.reported_error:
+            self.reported_error = error
+            self.get_logger().error(f"model prediction failed, publishing {UNKNOWN!r}: {error}")
+
+    def publish_belief(self, belief: Belief, trigger_ns: int) -> None:
+        self.belief_pub.publish(belief_msg(belief, time.time_ns(), trigger_ns))
+
+    def publish_state(self) -> None:
+        self.state_pub.publish(String(data=self.state))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point (`ros2 run rcbht_introspection classifier_node`)."""
+    return run(ClassifierNode, "classifier_node", args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

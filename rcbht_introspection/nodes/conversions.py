@@ -1,0 +1,149 @@
+"""Conversions between rcbht_interfaces / ROS messages and the core records (Word, Belief)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import WrenchStamped
+from rcbht_interfaces.msg import Belief as BeliefMsg
+from rcbht_interfaces.msg import Phase as PhaseMsg
+from rcbht_interfaces.msg import Word as WordMsg
+from rcbht_interfaces.msg import Words as WordsMsg
+
+from rcbht_introspection.live.belief import Belief
+from rcbht_introspection.live.segmenter import PhaseEvent
+from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
+
+LEVEL_CODES: dict[Level, int] = {level: i for i, level in enumerate(LEVELS)}
+_NS = 1_000_000_000
+
+
+def to_time(ns: int) -> Time:
+    """Integer nanoseconds -> builtin_interfaces/Time."""
+    ns = int(ns)
+    return Time(sec=ns // _NS, nanosec=ns % _NS)
+
+
+def to_ns(t: Time) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds."""
+    return int(t.sec) * _NS + int(t.nanosec)
+
+
+def wrench_sample(msg: WrenchStamped) -> tuple[int, tuple[float, ...]]:
+    """(stamp ns, (Fx, Fy, Fz, Mx, My, Mz)) of a WrenchStamped."""
+    f, m = msg.wrench.force, msg.wrench.torque
+    return to_ns(msg.header.stamp), (f.x, f.y, f.z, m.x, m.y, m.z)
+
+
+def word_to_msg(word: Word) -> WordMsg:
+    """Word -> rcbht_interfaces/Word."""
+    return WordMsg(
+        arm=word.arm,
+        axis=word.axis,
+        level=LEVEL_CODES[word.level],
+        label=word.label,
+        start=float(word.start),
+        end=float(word.end),
+        seq=int(word.seq),
+        sublabels=list(word.sublabels),
+        feature_keys=list(word.features),
+        feature_values=[float(v) for v in word.features.values()],
+    )
+
+
+def msg_to_word(msg: WordMsg) -> Word:
+    """rcbht_interfaces/Word -> Word."""
+    return Word(
+        axis=msg.axis,
+        level=LEVELS[msg.level],
+        label=msg.label,
+        start=msg.start,
+        end=msg.end,
+        features=dict(zip(msg.feature_keys, (float(v) for v in msg.feature_values), strict=True)),
+        arm=msg.arm,
+        seq=int(msg.seq),
+        sublabels=tuple(msg.sublabels),
+    )
+
+
+def words_msg(
+    arm: str,
+    level: Level,
+    words: Sequence[Word],
+    stamp_ns: int,
+    origin_ns: int,
+    *,
+    stream_id: int = 0,
+    batch_size: int = 1,
+    end_of_stream: bool = False,
+    accepted: int = 0,
+    rejected: int = 0,
+    frame_id: str = "",
+) -> WordsMsg:
+    """A batch of words of one arm and level that became final at the sample `stamp_ns`."""
+    msg = WordsMsg(
+        arm=arm,
+        level=LEVEL_CODES[level],
+        time_origin=to_time(origin_ns),
+        stream_id=int(stream_id),
+        words=[word_to_msg(w) for w in words],
+        batch_size=int(batch_size),
+        end_of_stream=end_of_stream,
+        samples_accepted=int(accepted),
+        samples_rejected=int(rejected),
+    )
+    msg.header.stamp = to_time(stamp_ns)
+    msg.header.frame_id = frame_id
+    return msg
+
+
+def words_from_msg(msg: WordsMsg) -> tuple[list[Word], float]:
+    """(words, stream time of the sample that finalised them)."""
+    now = (to_ns(msg.header.stamp) - to_ns(msg.time_origin)) / 1e9
+    return [msg_to_word(w) for w in msg.words], now
+
+
+def phase_msg(event: PhaseEvent) -> PhaseMsg:
+    """Applied sub-task event -> rcbht_interfaces/Phase."""
+    msg = PhaseMsg(
+        name=event.name,
+        time=float(event.time),
+        time_origin=to_time(event.origin_ns),
+        stream_id=int(event.stream_id),
+    )
+    msg.header.stamp = to_time(event.stamp_ns)
+    return msg
+
+
+def belief_msg(belief: Belief, stamp_ns: int, trigger_ns: int = 0) -> BeliefMsg:
+    """Belief -> rcbht_interfaces/Belief (stamp: when computed; trigger: the wrench sample behind it)."""
+    msg = BeliefMsg(
+        subtask=belief.subtask,
+        classes=list(belief.classes),
+        probabilities=[float(p) for p in belief.probabilities],
+        window_start=float(belief.start),
+        window_end=float(belief.end),
+        mode=belief.mode,
+        phase=belief.phase,
+        final=belief.final,
+        n_words=int(belief.n_words),
+        trigger_stamp=to_time(trigger_ns),
+    )
+    msg.header.stamp = to_time(stamp_ns)
+    return msg
+
+
+def belief_from_msg(msg: BeliefMsg) -> Belief:
+    """rcbht_interfaces/Belief -> Belief."""
+    return Belief(
+        subtask=msg.subtask,
+        classes=tuple(msg.classes),
+        probabilities=tuple(float(p) for p in msg.probabilities),
+        start=msg.window_start,
+        end=msg.window_end,
+        mode=msg.mode,
+        phase=msg.phase,
+        final=msg.final,
+        n_words=int(msg.n_words),
+    )

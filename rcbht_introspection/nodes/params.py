@@ -1,0 +1,188 @@
+"""Typed, validated parameters of the segmenter and classifier nodes (no rclpy import).
+
+Each node declares one ROS parameter per field (read-only, with the field's description) and
+turns the values back into its config object here, so a bad value is a one-line error naming the
+parameter. config/segmenter.yaml and config/classifier.yaml are ROS parameter files
+(`--ros-args --params-file ...`) holding the defaults; `load_node_config` reads them without ROS.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+
+from rcbht_introspection.config import config_path, from_mapping
+from rcbht_introspection.errors import InputError
+
+T = TypeVar("T")
+RELIABILITIES: tuple[str, ...] = ("reliable", "best_effort")
+LEVEL_TOPICS: tuple[str, ...] = ("primitives", "compositions", "behaviors")
+
+
+def _f(default: Any, description: str) -> Any:
+    """A dataclass field with a parameter description."""
+    if isinstance(default, (list, tuple)):
+        return field(default_factory=lambda: tuple(default), metadata={"description": description})
+    return field(default=default, metadata={"description": description})
+
+
+@dataclass(frozen=True)
+class SegmenterConfig:
+    """segmenter_node: wrench topics per arm -> RCBHT words per level (and arm)."""
+
+    arms: tuple[str, ...] = _f(("R",), "arm names, one or two (e.g. [R] or [L, R])")
+    wrench_topics: tuple[str, ...] = _f(
+        ("/wrench",), "geometry_msgs/WrenchStamped topic of each arm, in `arms` order"
+    )
+    phase_topic: str = _f(
+        "/task_phase", "std_msgs/String sub-task events of the task's state machine"
+    )
+    words_namespace: str = _f(
+        "rcbht", "words go to <ns>/{primitives,compositions,behaviors}; two arms: <arm>/<ns>/..."
+    )
+    applied_phase_topic: str = _f(
+        "rcbht/phase", "rcbht_interfaces/Phase: each /task_phase event placed on the stream clock"
+    )
+    end_phases: tuple[str, ...] = _f(("done",), "event names that end the task (flush the streams)")
+    event_hold_s: float = _f(
+        0.05, "a /task_phase event waits up to this long for the wrench samples published before it"
+    )
+    taxonomy_profile: str = _f("reference", "taxonomy threshold profile of config/rcbht.yaml")
+    taxonomy_config_file: str = _f("", "optional YAML file overriding the taxonomy thresholds")
+    stream_config_file: str = _f("", "optional YAML file overriding config/stream.yaml")
+    qos_depth: int = _f(1000, "history depth of every subscription and publisher")
+    qos_reliability: str = _f("reliable", "reliable or best_effort")
+
+
+@dataclass(frozen=True)
+class ClassifierConfig:
+    """classifier_node: words (+ applied sub-task events) -> belief and /task_state."""
+
+    model_file: str = _f("", "model file written by `rcbht train` (empty: publish 'unknown')")
+    mode: str = _f("boundary", "boundary (words since the last sub-task event) or window")
+    window_s: float = _f(2.0, "window mode: seconds of words the belief covers")
+    publish_rate_hz: float = _f(
+        10.0, "/task_state is also republished at this rate (0: only on change)"
+    )
+    arms: tuple[str, ...] = _f(("R",), "arm names whose words are classified, as in the segmenter")
+    words_namespace: str = _f("rcbht", "namespace of the word topics, as in the segmenter")
+    phase_topic: str = _f("rcbht/phase", "rcbht_interfaces/Phase events from the segmenter")
+    state_topic: str = _f("/task_state", "std_msgs/String: the believed sub-task name")
+    belief_topic: str = _f("rcbht/belief", "rcbht_interfaces/Belief: probabilities and window")
+    end_phases: tuple[str, ...] = _f(("done",), "event names that end the task")
+    expected_profile: str = _f("", "taxonomy profile the model must be trained with ('' = any)")
+    qos_depth: int = _f(1000, "history depth of every subscription and publisher")
+    qos_reliability: str = _f("reliable", "reliable or best_effort")
+
+
+def descriptions(cls: type) -> dict[str, str]:
+    """Parameter name -> description."""
+    return {f.name: f.metadata.get("description", "") for f in dataclasses.fields(cls)}
+
+
+def defaults(cls: type) -> dict[str, Any]:
+    """Parameter name -> default value (lists for tuples, as ROS parameters want)."""
+    out = {}
+    for k, v in dataclasses.asdict(cls()).items():
+        out[k] = list(v) if isinstance(v, tuple) else v
+    return out
+
+
+def word_topics(namespace: str, arms: tuple[str, ...]) -> dict[tuple[str, str], str]:
+    """(arm, level topic) -> topic name: <ns>/<level> for one arm, <arm>/<ns>/<level> for two."""
+    ns = namespace.strip("/")
+    out = {}
+    for arm in arms:
+        prefix = ns if len(arms) == 1 else f"{arm}/{ns}"
+        for level in LEVEL_TOPICS:
+            out[(arm, level)] = f"{prefix}/{level}"
+    return out
+
+
+def _check(cond: bool, field_name: str, message: str, path: Path | None) -> None:
+    if not cond:
+        raise InputError(message, path=path, field=field_name)
+
+
+def validate(cfg: T, path: Path | None = None) -> T:
+    """Cross-field checks beyond types; InputError names the parameter."""
+    arms = cfg.arms  # type: ignore[attr-defined]
+    _check(1 <= len(arms) <= 2, "arms", f"expected one or two arms, got {list(arms)}", path)
+    _check(
+        len(set(arms)) == len(arms) and all(arms),
+        "arms",
+        "arm names must be unique and non-empty",
+        path,
+    )
+    _check(cfg.qos_depth >= 1, "qos_depth", f"must be >= 1, got {cfg.qos_depth}", path)  # type: ignore[attr-defined]
+    _check(
+        cfg.qos_reliability in RELIABILITIES,  # type: ignore[attr-defined]
+        "qos_reliability",
+        f"expected one of {RELIABILITIES}, got {cfg.qos_reliability!r}",  # type: ignore[attr-defined]
+        path,
+    )
+    if isinstance(cfg, SegmenterConfig):
+        _check(
+            len(cfg.wrench_topics) == len(arms),
+            "wrench_topics",
+            f"expected one topic per arm ({len(arms)}), got {len(cfg.wrench_topics)}",
+            path,
+        )
+        _check(bool(cfg.phase_topic), "phase_topic", "must not be empty", path)
+        _check(
+            0 < cfg.event_hold_s <= 10,
+            "event_hold_s",
+            f"must be in (0, 10], got {cfg.event_hold_s}",
+            path,
+        )
+        for name in ("taxonomy_config_file", "stream_config_file"):
+            value = getattr(cfg, name)
+            _check(not value or Path(value).is_file(), name, f"no such file: {value}", path)
+    if isinstance(cfg, ClassifierConfig):
+        _check(
+            cfg.mode in ("boundary", "window"),
+            "mode",
+            f"expected boundary or window, got {cfg.mode!r}",
+            path,
+        )
+        _check(cfg.window_s > 0, "window_s", f"must be > 0, got {cfg.window_s}", path)
+        _check(
+            cfg.publish_rate_hz >= 0,
+            "publish_rate_hz",
+            f"must be >= 0, got {cfg.publish_rate_hz}",
+            path,
+        )
+        _check(bool(cfg.state_topic), "state_topic", "must not be empty", path)
+    return cfg
+
+
+def config_from_parameters(cls: type[T], values: dict[str, Any], path: Path | None = None) -> T:
+    """Typed, validated config from parameter values (unknown names and bad types are errors)."""
+    return validate(from_mapping(cls, values, path=path), path)
+
+
+NODE_NAMES = {SegmenterConfig: "segmenter_node", ClassifierConfig: "classifier_node"}
+CONFIG_FILES = {SegmenterConfig: "segmenter.yaml", ClassifierConfig: "classifier.yaml"}
+
+
+def load_node_config(cls: type[T], path: Path | str | None = None) -> T:
+    """Config of a node from a ROS parameter file (default: config/<node>.yaml)."""
+    path = Path(path) if path is not None else config_path(CONFIG_FILES[cls])
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise InputError(
+            "not valid YAML", path=path, line=None if mark is None else mark.line + 1
+        ) from None
+    node = NODE_NAMES[cls]
+    section = data.get(node, data.get("/**")) if isinstance(data, dict) else None
+    if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
+        raise InputError(f"expected {node}: ros__parameters: {{...}}", path=path)
+    return config_from_parameters(cls, section["ros__parameters"], path)

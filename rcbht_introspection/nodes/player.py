@@ -1,0 +1,132 @@
+"""Bag playback and raw recording over rclpy (stand-ins for `ros2 bag play` / `ros2 bag record`)."""
+
+from __future__ import annotations
+
+import importlib
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.bags import BagMessage, BagWriter
+
+
+def message_class(msgtype: str) -> type:
+    """Python class of 'pkg/msg/Type' (the package must be installed)."""
+    pkg, kind, name = msgtype.split("/")
+    try:
+        return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+    except (ImportError, AttributeError):
+        raise InputError(f"message type {msgtype} is not installed") from None
+
+
+def wait_until(condition: Callable[[], bool], timeout: float, poll: float = 0.02) -> bool:
+    """Poll `condition` until true or `timeout` seconds passed."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(poll)
+    return True
+
+
+class BagPlayer:
+    """Publishes bag messages (raw CDR, no deserialisation) with their recorded timing / rate."""
+
+    def __init__(self, node: Node, qos: QoSProfile | int = 1000) -> None:
+        self.node = node
+        self.qos = qos
+        self.publishers: dict[str, object] = {}
+
+    def publisher(self, topic: str, msgtype: str) -> object:
+        pub = self.publishers.get(topic)
+        if pub is None:
+            pub = self.node.create_publisher(message_class(msgtype), topic, self.qos)
+            self.publishers[topic] = pub
+        return pub
+
+    def prepare(self, messages: Sequence[BagMessage]) -> None:
+        """Create every publisher the messages need (do it early: discovery takes time)."""
+        for m in messages:
+            self.publisher(m.topic, m.msgtype)
+
+    def wait_for_subscribers(self, topics: Sequence[str], timeout: float = 20.0) -> bool:
+        """True once each of `topics` has a matched subscriber."""
+        pubs = [self.publishers[t] for t in topics if t in self.publishers]
+        return wait_until(lambda: all(p.get_subscription_count() > 0 for p in pubs), timeout)  # type: ignore[attr-defined]
+
+    def play(
+        self,
+        messages: Sequence[BagMessage],
+        rate: float = 1.0,
+        on_publish: Callable[[BagMessage, int], None] | None = None,
+        stop: threading.Event | None = None,
+    ) -> int:
+        """Publish at the recorded spacing divided by `rate`; `on_publish(msg, wall_ns)` after each."""
+        if rate <= 0:
+            raise InputError(f"rate must be > 0, got {rate}", field="rate")
+        if not messages:
+            return 0
+        self.prepare(messages)
+        t0_bag = messages[0].t_ns
+        t0 = time.perf_counter()
+        count = 0
+        for m in messages:
+            if stop is not None and stop.is_set():
+                break
+            due = t0 + (m.t_ns - t0_bag) / 1e9 / rate
+            delay = due - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            self.publishers[m.topic].publish(m.raw)  # type: ignore[attr-defined]
+            count += 1
+            if on_publish is not None:
+                on_publish(m, time.time_ns())
+        return count
+
+
+class RawRecorder:
+    """Records topics to a bag as they arrive (raw CDR bytes, publisher send time as log time)."""
+
+    def __init__(self, node: Node, out: Path, qos: QoSProfile | int = 1000) -> None:
+        self.node = node
+        self.bag = BagWriter(out)
+        self.qos = qos
+        self.counts: dict[str, int] = {}
+        self._lock = threading.Lock()
+
+    def subscribe(self, topic: str, msgtype: str) -> None:
+        cls = message_class(msgtype)
+        self.counts[topic] = 0
+
+        def on_message(raw: bytes, info: dict) -> None:
+            # log time = the publisher's send time: keeps the publication order across topics
+            # (receive order across subscriptions depends on the executor)
+            t_ns = info.get("source_timestamp") or time.time_ns()
+            with self._lock:
+                self.bag.write_raw(topic, msgtype, t_ns, raw)
+                self.counts[topic] += 1
+
+        self.node.create_subscription(cls, topic, on_message, self.qos, raw=True)
+
+    def resolve(self, topics: Sequence[str], timeout: float) -> dict[str, str]:
+        """Type of each topic, from the ROS graph (waits up to `timeout` for them to appear)."""
+        wanted = {t if t.startswith("/") else "/" + t for t in topics}
+        found: dict[str, str] = {}
+
+        def seen() -> bool:
+            for name, types in self.node.get_topic_names_and_types():
+                if name in wanted and types:
+                    found[name] = types[0]
+            return wanted <= set(found)
+
+        wait_until(seen, timeout, poll=0.1)
+        return found
+
+    def close(self) -> None:
+        with self._lock:
+            self.bag.close()

@@ -1,0 +1,127 @@
+"""segmenter_node: WrenchStamped per arm -> RCBHT words on rcbht/{primitives,compositions,behaviors}.
+
+Parameters: see config/segmenter.yaml (`ros2 param describe` shows each description). /task_phase
+events are placed on the stream clock, applied as sub-task boundaries and republished as
+rcbht_interfaces/Phase; an end event ("done") finishes the streams. Malformed samples are
+dropped and counted (Words.samples_rejected).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from functools import partial
+
+from geometry_msgs.msg import WrenchStamped
+from rcbht_interfaces.msg import Phase as PhaseMsg
+from rcbht_interfaces.msg import Words as WordsMsg
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
+from rcbht_introspection.nodes.common import declare_config, qos_profile, run
+from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
+from rcbht_introspection.nodes.params import SegmenterConfig, word_topics
+from rcbht_introspection.taxonomy.words import LEVELS
+
+
+class SegmenterNode(Node):
+    """Thin adapter: messages in -> SegmenterSession -> Words / Phase messages out."""
+
+    def __init__(self) -> None:
+        super().__init__("segmenter_node")
+        self.cfg = declare_config(self, SegmenterConfig)
+        cfg = self.cfg
+        factory = arm_stream_factory(
+            cfg.taxonomy_profile, cfg.taxonomy_config_file, cfg.stream_config_file
+        )
+        self.session = SegmenterSession(cfg.arms, factory, cfg.end_phases, hold_s=cfg.event_hold_s)
+        qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
+        topics = word_topics(cfg.words_namespace, cfg.arms)
+        self.word_pubs = {
+            (arm, level): self.create_publisher(WordsMsg, topics[(arm, level.value + "s")], qos)
+            for arm in cfg.arms
+            for level in LEVELS
+        }
+        self.phase_pub = self.create_publisher(PhaseMsg, cfg.applied_phase_topic, qos)
+        for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True):
+            self.create_subscription(WrenchStamped, topic, partial(self.on_wrench, arm), qos)
+        self.phase_sub = self.create_subscription(String, cfg.phase_topic, self.on_phase, qos)
+        self.create_timer(cfg.event_hold_s / 2, self.on_flush)
+        self.get_logger().info(
+            f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
+            f"profile {cfg.taxonomy_profile}"
+        )
+
+    def take_phases(self) -> None:
+        """Handle /task_phase events already delivered, before the next wrench sample.
+
+        The executor serves ready subscriptions in a fixed order, so an event published just
+        before a sample could otherwise be handled after it (one sample late).
+        """
+        sub = self.phase_sub
+        while True:
+            with sub.handle:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+            if taken is None:
+                return
+            self.on_phase(*taken)
+
+    def on_wrench(self, arm: str, msg: WrenchStamped, info: dict) -> None:
+        self.take_phases()
+        stamp, wrench = wrench_sample(msg)
+        out = self.session.push(arm, stamp, wrench, info.get("source_timestamp") or None)
+        if out.rejected:
+            self.get_logger().warning(
+                f"dropped a wrench sample of arm {arm}: {out.rejected} "
+                f"(rejected so far: {self.session.counts[arm].rejected})",
+                throttle_duration_sec=1.0,
+            )
+        self.publish(out)
+
+    def on_phase(self, msg: String, info: dict) -> None:
+        out = self.session.phase(msg.data, info.get("source_timestamp") or None)
+        if out.unknown_phase is not None:
+            self.get_logger().warning(
+                f"ignored unknown /task_phase name {out.unknown_phase!r} (known: sub-task names "
+                f"and {list(self.cfg.end_phases)})"
+            )
+        self.publish(out)
+
+    def on_flush(self) -> None:
+        """Apply sub-task events that waited longer than the hold time for a later sample."""
+        if self.session.pending:
+            self.publish(self.session.flush(time.time_ns()))
+
+    def publish(self, out: Output) -> None:
+        """One Words message per batch and level with words (every level at stream end), then events."""
+        for batch in out.batches:
+            counts = self.session.counts[batch.arm]
+            per_level = {level: [w for w in batch.words if w.level == level] for level in LEVELS}
+            levels = [lv for lv in LEVELS if per_level[lv] or batch.end_of_stream]
+            for level in levels:
+                self.word_pubs[(batch.arm, level)].publish(
+                    words_msg(
+                        batch.arm,
+                        level,
+                        per_level[level],
+                        batch.stamp_ns,
+                        batch.origin_ns,
+                        stream_id=batch.stream_id,
+                        batch_size=len(levels),
+                        end_of_stream=batch.end_of_stream,
+                        accepted=counts.accepted,
+                        rejected=counts.rejected_total,
+                    )
+                )
+        for event in out.phases:
+            self.phase_pub.publish(phase_msg(event))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point (`ros2 run rcbht_introspection segmenter_node`)."""
+    return run(SegmenterNode, "segmenter_node", args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,80 @@
+"""Test support for the ROS parts: availability checks and an isolated DDS environment."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import random
+from pathlib import Path
+
+from conftest import require
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def have(module: str) -> bool:
+    """True when `module` can be imported (without importing it)."""
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
+
+
+def require_ros() -> None:
+    """rclpy and the built rcbht_interfaces must be present (CI: fail, locally: skip)."""
+    require(have("rclpy"), "rclpy (ROS 2 Jazzy wheels) not installed")
+    require(have("rcbht_interfaces"), "rcbht_interfaces not built (make setup builds msg_defs)")
+
+
+def require_stream() -> None:
+    """The streaming taxonomy engine (taxonomy work) must be present."""
+    require(have("rcbht_introspection.taxonomy.stream"), "taxonomy.stream (ArmStream) missing")
+
+
+def require_learn() -> None:
+    """Models and the sub-task split (learn work) must be present."""
+    require(have("rcbht_introspection.learn.models"), "learn.models missing")
+    require(have("rcbht_introspection.grammar.split"), "grammar.split missing")
+
+
+def ros_env(tmp_path: Path) -> dict[str, str]:
+    """Environment of an isolated ROS graph: random domain 1..101, loopback only, logs in tmp."""
+    from rcbht_introspection.nodes.replay_eval import ros_env as env
+
+    values = env(random.randint(1, 101), tmp_path / "ros_log")
+    full = {**os.environ, **values}
+    full.pop("ROS_LOCALHOST_ONLY", None)
+    full["PYTHONPATH"] = os.pathsep.join(
+        p for p in (str(REPO), os.environ.get("PYTHONPATH", "")) if p
+    )
+    return full
+
+
+def node_command(module: str, params: dict[str, object]) -> list[str]:
+    """Command line of a node process with `-p name:=value` parameters."""
+    import sys
+
+    import yaml
+
+    args = [sys.executable, "-m", f"rcbht_introspection.nodes.{module}", "--ros-args"]
+    for name, value in params.items():
+        text = yaml.safe_dump(value, default_flow_style=True).strip()
+        text = text.removesuffix("\n...").removesuffix("...").strip()
+        args += ["-p", f"{name}:={text}"]
+    return args
+
+
+def stop(proc: object, timeout: float = 15.0) -> int | None:
+    """SIGINT a process and wait; None (after killing it) if it did not exit in time."""
+    import signal
+    import subprocess
+
+    if proc.poll() is None:  # type: ignore[attr-defined]
+        proc.send_signal(signal.SIGINT)  # type: ignore[attr-defined]
+        try:
+            return proc.wait(timeout)  # type: ignore[attr-defined]
+        except subprocess.TimeoutExpired:
+            proc.kill()  # type: ignore[attr-defined]
+            proc.wait(5)  # type: ignore[attr-defined]
+            return None
+    return proc.returncode  # type: ignore[attr-defined]

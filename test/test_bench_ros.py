@@ -1,0 +1,27 @@
+"""The ROS benchmark runs end to end with a short duration (figures are measured, not asserted)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from ros_support import require_ros, require_stream
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def test_ros_benchmark_short(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    require_ros()
+    require_stream()
+    from rcbht_introspection.bench import ros
+
+    monkeypatch.setenv("RCBHT_BENCH_ROS_SECONDS", "2")
+    result = ros.run(tmp_path)
+    for name, arms in (("one_arm_1kHz", 1), ("two_arm_2x1kHz", 2)):
+        r = result[name]
+        assert r["arms"] == arms
+        assert r["wrench_published"] >= 2 * 1000 * arms * 0.9
+        assert 0 <= r["wrench_dropped"] <= r["wrench_published"]
+        assert r["achieved_rate_hz_per_arm"] > 500
+        assert r["latency_ms"]["n"] > 0 and r["word_latency_ms"]["n"] > 0
+        assert r["clean_shutdown"]

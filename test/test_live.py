@@ -1,0 +1,160 @@
+"""The live pipeline's pure state: sub-task verdicts from words, and the segmenter session."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from ros_support import require_learn, require_stream
+
+from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.live.belief import UNKNOWN, BeliefTracker
+from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
+
+REAL = "REAL_HIRO_ONE_SA_SUCCESS"
+
+
+def words_of(trial: Trial) -> list[Word]:
+    """Batch-engine words of a trial in end-time order (as a stream would deliver them)."""
+    from rcbht_introspection.taxonomy.batch import label_trial
+
+    tw = label_trial(trial)
+    out = [w for per_level in tw.words.values() for per_axis in per_level.values()
+           for seq in per_axis.values() for w in seq]  # fmt: skip
+    return sorted(out, key=lambda w: (w.end, LEVELS.index(w.level)))
+
+
+@pytest.fixture(scope="module")
+def trained(hiro_data: Path, tmp_path_factory: pytest.TempPathFactory) -> object:
+    require_learn()
+    from rcbht_introspection.learn.data import load_samples
+    from rcbht_introspection.learn.models import train_model
+
+    folders = [hiro_data / REAL / f"20121127-HIROSA-S-{i:02d}" for i in range(1, 16)]
+    return train_model(load_samples(folders, words="auto"))
+
+
+@pytest.mark.shared_data
+def test_final_verdicts_equal_offline_classification(hiro_data: Path, trained: object) -> None:
+    """Fed words in time order, the tracker's verdicts equal predict() on the spec 2.7 split."""
+    from rcbht_introspection.grammar.split import split_words
+    from rcbht_introspection.io.hiro import read_trial
+    from rcbht_introspection.live.offline import trial_words
+
+    trial = read_trial(hiro_data / REAL / "20121127-HIROSA-S-43")
+    words = words_of(trial)
+    tracker = BeliefTracker(trained)
+    assert tracker.current().subtask == UNKNOWN  # before any evidence
+    events = [(t, s) for s, t, _ in trial.subtask_bounds()] + [(trial.end_time, "done")]
+    finals = []
+    i = 0
+    for w in words:
+        while i < len(events) and events[i][0] <= w.start:
+            tracker.phase(events[i][1], events[i][0])
+            i += 1
+        tracker.add_words(w.arm, [w], w.end)
+        for f in tracker.take_finals():
+            # issued only once every word overlapping the sub-task is final
+            assert all(x.start >= f.end or x.end >= f.end for x in words if x.end > w.end)
+            finals.append(f)
+    for t, name in events[i:]:
+        tracker.phase(name, t)
+    tracker.end_of_stream("R")
+    finals += tracker.take_finals()
+    assert [f.phase for f in finals] == [s for s, _, _ in trial.subtask_bounds()]
+    assert all(f.final for f in finals)
+    samples = split_words(trial_words(trial.name, {"R": words}), trial.state_times, trial.end_time)
+    assert [f.subtask for f in finals] == trained.predict_samples(samples)
+    assert tracker.finished
+    assert tracker.current() == finals[-1]  # the last verdict holds after the task ended
+
+
+def test_window_mode_and_no_model() -> None:
+    tracker = BeliefTracker(None, mode="window", window_s=1.0)
+    w = Word("Fz", Level.PRIMITIVE, "bpos", 0.0, 0.4, arm="R")
+    tracker.add_words("R", [w], 0.4)
+    b = tracker.current()
+    assert (b.subtask, b.n_words, b.start, b.end) == (UNKNOWN, 1, 0.0, 0.4)
+    tracker.add_words("R", [Word("Fz", Level.PRIMITIVE, "cons", 0.4, 2.0, arm="R")], 2.0)
+    b = tracker.current()
+    assert (b.start, b.end, b.n_words) == (1.0, 2.0, 1)
+    assert tracker.take_finals() == []  # no sub-tasks in window mode
+    with pytest.raises(ValueError, match="mode"):
+        BeliefTracker(None, mode="psychic")
+
+
+def _stream_trial() -> Trial:
+    rng = np.random.default_rng(11)
+    t = np.round(np.arange(0.0, 4.0, 0.005), 6)
+    knots = np.linspace(0, 4, 12)
+    wrench = np.column_stack([np.interp(t, knots, rng.normal(0, 5, 12)) for _ in range(6)])
+    return Trial("stream", t, {"R": wrench + rng.normal(0, 0.02, wrench.shape)},
+                 state_times=(0.0, 1.2, 1.6, 2.5))  # fmt: skip
+
+
+def test_session_orders_events_by_source_time() -> None:
+    """An event that arrives before samples published ahead of it still applies after them."""
+    require_stream()
+    from rcbht_introspection.io.bags import END_PHASE
+    from rcbht_introspection.live.offline import offline_stream_words, trial_events
+    from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
+
+    trial = _stream_trial()
+    factory = arm_stream_factory()
+    session = SegmenterSession(("R",), factory)
+    origin = 1_700_000_000 * 10**9
+    ns = origin + np.rint(trial.time * 1e9).astype(np.int64)
+    events = trial_events(trial, END_PHASE)
+    # the publisher sends sample i at source time 10*i and an event right after the last sample
+    # before it (source 10*i + 5); the session receives each event two samples early
+    follows = [
+        int(np.searchsorted(ns - origin, round(t * 1e9), side="right")) - 1 for t, _ in events
+    ]
+    got: list[Word] = []
+    applied = []
+
+    def take(out: object) -> None:
+        got.extend(w for b in out.batches for w in b.words)  # type: ignore[attr-defined]
+        applied.extend(out.phases)  # type: ignore[attr-defined]
+
+    for i in range(len(ns)):
+        for (_, name), j in zip(events, follows, strict=True):
+            if max(j - 2, 0) == i:
+                take(session.phase(name, source_ns=10 * j + 5))
+        take(session.push("R", int(ns[i]), trial.wrench["R"][i], source_ns=10 * i))
+    take(session.flush(10 * len(ns) + 10**9))  # the end event has no later sample
+    assert [p.name for p in applied] == [name for _, name in events]
+    np.testing.assert_allclose([p.time for p in applied], [t for t, _ in events], atol=1e-9)
+    assert got == offline_stream_words(trial, factory, END_PHASE)["R"]
+    assert session.stream_id == 1 and session.late_phases == 0  # the end event closed stream 0
+
+
+def test_late_event_applies_at_the_latest_sample() -> None:
+    require_stream()
+    from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
+
+    session = SegmenterSession(("R",), arm_stream_factory())
+    base = 1_700_000_000 * 10**9
+    for i in range(10):
+        session.push("R", base + i * 5_000_000, [float(i)] * 6, source_ns=100 * i)
+    out = session.phase("rotation", source_ns=450)  # published after sample 4, arrives after 9
+    assert [p.time for p in out.phases] == [0.045]
+    assert session.late_phases == 1
+
+
+def test_session_rejects_malformed_samples() -> None:
+    require_stream()
+    from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
+
+    session = SegmenterSession(("R",), arm_stream_factory())
+    base = 1_700_000_000 * 10**9
+    assert session.push("R", base, [0.0] * 6).rejected is None
+    assert session.push("R", base + 5_000_000, [float("nan")] + [0.0] * 5).rejected == "non_finite"
+    assert session.push("R", 0, [0.0] * 6).rejected == "zero_stamp"
+    assert session.push("R", base - 1, [0.0] * 6).rejected == "non_increasing_stamp"
+    assert session.push("R", base, [0.0] * 6).rejected == "non_increasing_stamp"
+    assert session.push("R", base + 10_000_000, [1.0] * 6).rejected is None
+    counts = session.counts["R"]
+    assert counts.accepted == 2 and counts.rejected_total == 4
+    assert session.phase("pirouette").unknown_phase == "pirouette"

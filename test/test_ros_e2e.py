@@ -1,0 +1,57 @@
+"""End to end over real DDS: converted HIRO trials replayed through both node processes, scored
+against the truth and the offline run of the same stream and model (trained on other trials)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from ros_support import require_learn, require_ros, require_stream
+
+from rcbht_introspection.cli import main
+
+pytestmark = [pytest.mark.ros, pytest.mark.shared_data, pytest.mark.slow]
+
+TRAIN = range(1, 21)
+HELD_OUT = (41, 44)
+
+
+@pytest.fixture(scope="module")
+def model(hiro_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    require_learn()
+    from rcbht_introspection.learn.data import load_samples
+    from rcbht_introspection.learn.models import save_model, train_model
+
+    real = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS"
+    folders = [real / f"20121127-HIROSA-S-{i:02d}" for i in TRAIN]
+    path = tmp_path_factory.mktemp("model") / "model.rcbht"
+    return save_model(train_model(load_samples(folders, words="auto")), path)
+
+
+def test_replay_eval_of_held_out_trials(hiro_data: Path, model: Path, tmp_path: Path) -> None:
+    require_ros()
+    require_stream()
+    real = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS"
+    bags = []
+    for i in HELD_OUT:
+        bag = tmp_path / f"s{i}.mcap"
+        assert main(["bag", "from-hiro", str(real / f"20121127-HIROSA-S-{i:02d}"), str(bag)]) == 0
+        bags.append(str(bag))
+    out = tmp_path / "eval.json"
+    assert (
+        main(["replay-eval", *bags, "--model", str(model), "--rate", "5", "--json", str(out)]) == 0
+    )
+    result = json.loads(out.read_text())
+    assert result["clean_shutdown"], result["exit_codes"]
+    assert result["dropped_wrench"] == 0
+    assert result["words_match_offline"], [b["words_mismatch"] for b in result["per_bag"]]
+    assert result["verdicts_match_offline"], [
+        (b["verdicts"], b["offline_verdicts"]) for b in result["per_bag"]
+    ]
+    assert result["subtasks"] == 4 * len(HELD_OUT)
+    assert result["subtask_accuracy"] >= 0.75
+    assert 0.5 <= result["time_accuracy"] <= 1.0
+    assert result["latency_ms"]["n"] > 100 and result["latency_ms"]["p50"] > 0
+    for b in result["per_bag"]:
+        assert b["published_wrench"] > 5000 and b["node_words"] == b["offline_words"] > 0

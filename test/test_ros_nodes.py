@@ -1,0 +1,185 @@
+"""The nodes as separate processes over real DDS: ament index layout, parameters, robustness, SIGINT."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from ros_support import node_command, require_learn, require_ros, require_stream, ros_env, stop
+
+pytestmark = pytest.mark.ros
+
+
+@pytest.fixture
+def env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
+    """Isolated ROS environment for the node processes and for this test process."""
+    require_ros()
+    values = ros_env(tmp_path)
+    for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR", "FASTRTPS_DEFAULT_PROFILES_FILE"):
+        monkeypatch.setenv(key, values[key])
+    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
+    return values
+
+
+def wait_for(condition, timeout: float = 20.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+def test_ament_index_finds_the_executables(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`ros2 run` resolves <prefix>/lib/<package>/<executable> through the ament index."""
+    require_ros()
+    from ament_index_python.packages import get_package_prefix, get_package_share_directory
+
+    monkeypatch.setenv("AMENT_PREFIX_PATH", sys.prefix)
+    prefix = Path(get_package_prefix("rcbht_introspection"))
+    for exe in ("segmenter_node", "classifier_node"):
+        path = prefix / "lib" / "rcbht_introspection" / exe
+        assert path.is_file() and os.access(path, os.X_OK), path
+        assert path.read_text().startswith("#!")
+    share = Path(get_package_share_directory("rcbht_introspection"))
+    assert (share / "config" / "segmenter.yaml").is_file()
+    assert (share / "config" / "classifier.yaml").is_file()
+    assert (Path(get_package_share_directory("rcbht_interfaces")) / "msg" / "Words.msg").is_file()
+
+
+def test_installed_executable_rejects_a_bad_parameter(tmp_path: Path) -> None:
+    """Runs the installed lib/rcbht_introspection/classifier_node as `ros2 run` would."""
+    require_ros()
+    exe = Path(sys.prefix) / "lib" / "rcbht_introspection" / "classifier_node"
+    env = ros_env(tmp_path)
+    env["PATH"] = os.path.dirname(sys.executable) + os.pathsep + env.get("PATH", "")
+    env.pop("PYTHONPATH", None)  # the installed copy
+    proc = subprocess.run(
+        [str(exe), "--ros-args", "-p", "mode:=psychic"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2, proc.stderr
+    errors = [line for line in proc.stderr.splitlines() if "error" in line]
+    assert errors == [
+        "[classifier_node] error: field mode: expected boundary or window, got 'psychic'"
+    ]
+
+
+def test_bad_segmenter_parameter_from_file(tmp_path: Path, env: dict[str, str]) -> None:
+    params = tmp_path / "seg.yaml"
+    params.write_text("segmenter_node:\n  ros__parameters:\n    arms: [L, R]\n")
+    proc = subprocess.run(
+        [sys.executable, "-m", "rcbht_introspection.nodes.segmenter_node", "--ros-args",
+         "--params-file", str(params)],
+        env=env, capture_output=True, text=True, timeout=60,
+    )  # fmt: skip
+    assert proc.returncode == 2
+    assert "field wrench_topics: expected one topic per arm (2), got 1" in proc.stderr
+
+
+@pytest.mark.parametrize("model", ["missing", "garbage"])
+def test_classifier_without_usable_model_says_unknown(
+    tmp_path: Path, env: dict[str, str], model: str
+) -> None:
+    if model == "garbage":
+        require_learn()
+    from std_msgs.msg import String
+
+    from rcbht_introspection.nodes.common import RosSession
+
+    path = tmp_path / "model.rcbht"
+    if model == "garbage":
+        path.write_text("this is not a model\n")
+    log = tmp_path / "classifier.log"
+    with log.open("w") as out:
+        proc = subprocess.Popen(
+            node_command("classifier_node", {"model_file": str(path), "publish_rate_hz": 20.0}),
+            env=env, stdout=out, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+    states: list[str] = []
+    try:
+        with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+            ros.node.create_subscription(String, "/task_state", lambda m: states.append(m.data), 10)
+            assert wait_for(lambda: len(states) >= 3), log.read_text()
+        assert set(states) == {"unknown"}
+        assert proc.poll() is None
+    finally:
+        code = stop(proc)
+    text = log.read_text()
+    assert "no usable model" in text and str(path) in text
+    assert code == 0, text
+
+
+def test_segmenter_survives_malformed_input_and_sigint(tmp_path: Path, env: dict[str, str]) -> None:
+    require_stream()
+    from geometry_msgs.msg import WrenchStamped
+    from rcbht_interfaces.msg import Words
+    from std_msgs.msg import String
+
+    from rcbht_introspection.nodes.common import RosSession, qos_profile
+    from rcbht_introspection.nodes.conversions import to_time
+
+    log = tmp_path / "segmenter.log"
+    with log.open("w") as out:
+        proc = subprocess.Popen(
+            node_command("segmenter_node", {}), env=env, stdout=out, stderr=subprocess.STDOUT
+        )
+    ends: list[Words] = []
+    words = 0
+    try:
+        with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+            qos = qos_profile(1000, "reliable")
+
+            def on_words(msg: Words) -> None:
+                nonlocal words
+                words += len(msg.words)
+                if msg.end_of_stream:
+                    ends.append(msg)
+
+            ros.node.create_subscription(Words, "/rcbht/primitives", on_words, qos)
+            wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
+            phase = ros.node.create_publisher(String, "/task_phase", qos)
+            assert wait_for(
+                lambda: wrench.get_subscription_count() > 0 and phase.get_subscription_count() > 0
+            ), log.read_text()
+
+            def send(stamp_ns: int, value: float) -> None:
+                msg = WrenchStamped()
+                msg.header.stamp = to_time(stamp_ns)
+                msg.wrench.force.z = value
+                msg.wrench.torque.x = 0.1 * value
+                wrench.publish(msg)
+                time.sleep(0.0005)
+
+            base = 1_700_000_000 * 10**9
+            n = 800
+            phase.publish(String(data="approach"))
+            for i in range(n):
+                send(base + i * 5_000_000, 10 * math.sin(i / 40) + (i > 400) * 5)
+                if i == 300:
+                    send(base + i * 5_000_000, float("nan"))  # NaN
+                    send(0, 1.0)  # zero stamp
+                    send(base + (i - 10) * 5_000_000, 1.0)  # decreasing stamp
+                    phase.publish(String(data="pirouette"))  # unknown sub-task name
+                if i == 400:
+                    phase.publish(String(data="rotation"))
+            phase.publish(String(data="done"))
+            assert wait_for(lambda: bool(ends), 30), log.read_text()
+        assert ends[0].samples_accepted == n
+        assert ends[0].samples_rejected == 3
+        assert words > 0
+        assert proc.poll() is None  # still running after the bad input
+    finally:
+        code = stop(proc)
+    text = log.read_text()
+    assert "ignored unknown /task_phase name 'pirouette'" in text
+    assert "dropped a wrench sample" in text
+    assert code == 0, text
