@@ -149,8 +149,13 @@ def test_bag_format(tmp_path: Path) -> None:
         with pytest.raises(InputError, match="--format hiro"):
             write_dataset(tmp_path, 1, fmt="bag")
     else:
-        (path,) = write_dataset(tmp_path, 1, fmt="bag")
-        assert path.exists()
+        from rcbht_introspection.io.bags import read_trial_bag
+
+        (path,) = write_dataset(tmp_path, 1, seed=4, fmt="bag")
+        back = read_trial_bag(path)
+        assert path.suffix == ".mcap" and back.arms == ("R",)
+        assert len(back.state_times) == 4 and back.outcome == "success"
+        assert back.end_time > 15.0
 
 
 def test_rerun_replaces_the_previous_set_and_refuses_foreign_data(tmp_path: Path) -> None:
