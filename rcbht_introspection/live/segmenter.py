@@ -245,8 +245,8 @@ class SegmenterSession:
                     arm, list(words), st.last_ns, self.origin_ns, self.stream_id, end_of_stream=True
                 )
             )
-        elif st.last_t is not None and st.first_t is not None and st.last_t > st.first_t:
-            # a boundary at or before an arm's first sample cuts nothing
+        elif st.last_t is not None:
+            # every sub-task start is marked (the stream reads rotation/mating starts by order)
             words = st.stream.mark_boundary(st.last_t, p.name)  # type: ignore[attr-defined]
             if words:
                 out.batches.append(
@@ -255,9 +255,12 @@ class SegmenterSession:
 
 
 def arm_stream_factory(
-    profile: str = "reference", taxonomy_file: str = "", stream_file: str = ""
+    profile: str = "reference",
+    taxonomy_file: str = "",
+    stream_file: str = "",
+    stream_profile: str = "reference",
 ) -> Callable[[str], object]:
-    """`arm -> ArmStream` with the taxonomy profile (or file) and stream config (or file)."""
+    """`arm -> ArmStream`: taxonomy thresholds (profile or file) and stream profile (or file)."""
     try:
         from rcbht_introspection.taxonomy.config import load_taxonomy_config
         from rcbht_introspection.taxonomy.stream import ArmStream
@@ -267,11 +270,15 @@ def arm_stream_factory(
         ) from None
     config = load_taxonomy_config(profile, taxonomy_file or None)
     stream_config = None
-    if stream_file:
-        from rcbht_introspection.config import load_yaml
-        from rcbht_introspection.taxonomy.stream import StreamConfig
+    try:
+        from rcbht_introspection.taxonomy.stream import load_stream_config
 
-        stream_config = load_yaml(StreamConfig, stream_file)
+        stream_config = load_stream_config(stream_profile, stream_file or None)
+    except ImportError:
+        if stream_file:
+            raise InputError(
+                "this taxonomy engine has no stream configuration", stream_file
+            ) from None
 
     def make(arm: str) -> object:
         return ArmStream(config=config, stream_config=stream_config, arm=arm)

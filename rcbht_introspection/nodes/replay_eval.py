@@ -55,6 +55,7 @@ class ReplayEvalOptions:
     rate: float = 1.0
     mode: str = "boundary"
     profile: str = "reference"
+    stream_profile: str = "reference"
     startup_timeout: float = 30.0
     drain_timeout: float = 20.0
     domain_id: int | None = None
@@ -306,6 +307,7 @@ def replay_eval(
             "arms": list(arms),
             "wrench_topics": list(seg.wrench_topics),
             "taxonomy_profile": options.profile,
+            "stream_profile": options.stream_profile,
         },
     )
     cls_params = write_params(
@@ -326,7 +328,7 @@ def replay_eval(
         codes: dict[str, int | None] = {}
         try:
             with RosSession("rcbht_replay_eval", domain_id=domain_id) as ros:
-                qos = qos_profile(1000, "reliable")
+                qos = qos_profile(seg.qos_depth, "reliable")
                 observer = Observer(ros.node, seg, cls_cfg, qos)
                 player = BagPlayer(ros.node, qos)
                 all_messages = [list(bag_messages(b)) for b in bags]
@@ -365,6 +367,7 @@ def replay_eval(
             "rate": options.rate,
             "mode": options.mode,
             "profile": options.profile,
+            "stream_profile": options.stream_profile,
             "model": str(model_path),
             "domain_id": domain_id,
             "exit_codes": codes,
@@ -468,7 +471,7 @@ def _score(
         from rcbht_introspection.live.segmenter import arm_stream_factory
 
         model = load_model(model_path)
-        factory = arm_stream_factory(options.profile)
+        factory = arm_stream_factory(options.profile, stream_profile=options.stream_profile)
     correct = total = 0
     verdicts_match = words_match = True
     dropped = rejected = 0

@@ -33,8 +33,12 @@ class SegmenterNode(Node):
         self.cfg = declare_config(self, SegmenterConfig)
         cfg = self.cfg
         factory = arm_stream_factory(
-            cfg.taxonomy_profile, cfg.taxonomy_config_file, cfg.stream_config_file
+            cfg.taxonomy_profile,
+            cfg.taxonomy_config_file,
+            cfg.stream_config_file,
+            cfg.stream_profile,
         )
+        self.last_sample = time.monotonic()
         self.session = SegmenterSession(cfg.arms, factory, cfg.end_phases, hold_s=cfg.event_hold_s)
         qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         topics = word_topics(cfg.words_namespace, cfg.arms)
@@ -50,7 +54,7 @@ class SegmenterNode(Node):
         self.create_timer(cfg.event_hold_s / 2, self.on_flush)
         self.get_logger().info(
             f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
-            f"profile {cfg.taxonomy_profile}"
+            f"profile {cfg.taxonomy_profile}, stream {cfg.stream_profile}"
         )
 
     def take_phases(self) -> None:
@@ -68,6 +72,7 @@ class SegmenterNode(Node):
             self.on_phase(*taken)
 
     def on_wrench(self, arm: str, msg: WrenchStamped, info: dict) -> None:
+        self.last_sample = time.monotonic()
         self.take_phases()
         stamp, wrench = wrench_sample(msg)
         out = self.session.push(arm, stamp, wrench, info.get("source_timestamp") or None)
@@ -89,8 +94,13 @@ class SegmenterNode(Node):
         self.publish(out)
 
     def on_flush(self) -> None:
-        """Apply sub-task events that waited longer than the hold time for a later sample."""
-        if self.session.pending:
+        """Apply sub-task events that waited longer than the hold time for a later sample.
+
+        Only while no samples arrive: a backlog of samples published before the event must be
+        consumed first (each later-published sample applies due events itself).
+        """
+        idle = time.monotonic() - self.last_sample > self.cfg.event_hold_s
+        if self.session.pending and idle:
             self.publish(self.session.flush(time.time_ns()))
 
     def publish(self, out: Output) -> None:
