@@ -21,7 +21,12 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.taxonomy.words import Word
 
-REJECT_REASONS: tuple[str, ...] = ("non_finite", "zero_stamp", "non_increasing_stamp")
+REJECT_REASONS: tuple[str, ...] = (
+    "non_finite",
+    "zero_stamp",
+    "non_increasing_stamp",
+    "published_before_end",
+)
 
 
 @dataclass
@@ -103,7 +108,7 @@ class SegmenterSession:
         stream_factory: Callable[[str], object],
         end_phases: Sequence[str] = ("done",),
         subtasks: Sequence[str] = SUBTASKS,
-        hold_s: float = 0.05,
+        hold_s: float = 1.0,
     ) -> None:
         self.arms = tuple(arms)
         self.stream_factory = stream_factory
@@ -114,6 +119,7 @@ class SegmenterSession:
         self.unknown_phases = 0
         self.late_phases = 0
         self.pending: list[_Pending] = []
+        self.end_source: int | None = None
         self.stream_id = -1
         self._new_stream()
 
@@ -138,7 +144,10 @@ class SegmenterSession:
         counts = self.counts[arm]
         st = self.state[arm]
         reason = None
-        if not all(math.isfinite(v) for v in wrench):
+        if source_ns is not None and self.end_source is not None and source_ns < self.end_source:
+            # a straggler of a stream that an end event already closed: it must not open a new one
+            reason = "published_before_end"
+        elif not all(math.isfinite(v) for v in wrench):
             reason = "non_finite"
         elif stamp_ns <= 0:
             reason = "zero_stamp"
@@ -227,6 +236,8 @@ class SegmenterSession:
                 )
             )
             if p.end:
+                if p.source_ns is not None:
+                    self.end_source = p.source_ns
                 self._new_stream()
                 break  # later events belong to the next stream: they wait for its first sample
 

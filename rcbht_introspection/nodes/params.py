@@ -49,7 +49,9 @@ class SegmenterConfig:
     )
     end_phases: tuple[str, ...] = _f(("done",), "event names that end the task (flush the streams)")
     event_hold_s: float = _f(
-        0.05, "a /task_phase event waits up to this long for the wrench samples published before it"
+        1.0,
+        "a /task_phase event waits up to this long (after samples stop) for the wrench samples "
+        "published before it; only the end event ever waits this long",
     )
     taxonomy_profile: str = _f("reference", "taxonomy threshold profile of config/rcbht.yaml")
     taxonomy_config_file: str = _f("", "optional YAML file overriding the taxonomy thresholds")

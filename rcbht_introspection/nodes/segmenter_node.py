@@ -51,7 +51,7 @@ class SegmenterNode(Node):
         for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True):
             self.create_subscription(WrenchStamped, topic, partial(self.on_wrench, arm), qos)
         self.phase_sub = self.create_subscription(String, cfg.phase_topic, self.on_phase, qos)
-        self.create_timer(cfg.event_hold_s / 2, self.on_flush)
+        self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
         self.get_logger().info(
             f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
             f"profile {cfg.taxonomy_profile}, stream {cfg.stream_profile}"
