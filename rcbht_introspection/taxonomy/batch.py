@@ -7,6 +7,7 @@ layer + refinement for every arm and axis.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -30,8 +31,6 @@ from rcbht_introspection.taxonomy.behaviors import (
     B_T2S,
     B_TAVG,
     Behavior,
-    compose_behaviors,
-    refine_behaviors,
 )
 from rcbht_introspection.taxonomy.compositions import (
     AMP,
@@ -46,15 +45,13 @@ from rcbht_introspection.taxonomy.compositions import (
     T2S,
     TAVG,
     Composition,
-    clean_compositions,
-    compose,
 )
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
+from rcbht_introspection.taxonomy.pipeline import AxisPipeline, StreamContext
 from rcbht_introspection.taxonomy.primitives import (
     Primitive,
     axis_domain,
     axis_thresholds,
-    clean_primitives,
     label_segments,
     segment_arrays,
 )
@@ -124,13 +121,18 @@ def behavior_word(b: Behavior, axis: str, arm: str, seq: int = 0) -> Word:
 def upper_layers(
     prims: list[Primitive], state_times: Sequence[float], end_time: float, config: TaxonomyConfig
 ) -> tuple[list[Composition], list[Behavior]]:
-    """Clean-up, MCs + filtering, LLBs + refinement for one axis's labelled primitives."""
-    if not config.final_segment:
-        prims = prims[:-1]
-    cleaned = clean_primitives(prims, config) if config.primitive_cleanup else prims
-    mcs = clean_compositions(compose(cleaned, config), state_times, end_time, config)
-    llbs = refine_behaviors(compose_behaviors(mcs, config), config)
-    return mcs, llbs
+    """Clean-up, MCs + filtering, LLBs + refinement of one axis: the operator chain, fed whole."""
+    ctx = StreamContext(config, boundaries=list(state_times), now=math.inf, ended=True,
+                        end_time=end_time)  # fmt: skip
+    pipe = AxisPipeline(ctx)
+    mcs: list[Composition] = []
+    llbs: list[Behavior] = []
+    for p in prims:
+        m, b = pipe.push(p)
+        mcs += m
+        llbs += b
+    m, b = pipe.finish()
+    return mcs + m, llbs + b
 
 
 def label_arm(

@@ -8,7 +8,6 @@ the LLB integer [bug], which the files print through the MC table).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 from rcbht_introspection.taxonomy.compositions import (
@@ -22,7 +21,6 @@ from rcbht_introspection.taxonomy.compositions import (
     T2S,
     TAVG,
     Composition,
-    similar,
 )
 from rcbht_introspection.taxonomy.compositions import NC as MC_NC
 from rcbht_introspection.taxonomy.compositions import PC as MC_PC
@@ -32,10 +30,7 @@ from rcbht_introspection.taxonomy.compositions import D as MC_D
 from rcbht_introspection.taxonomy.compositions import I as MC_I
 from rcbht_introspection.taxonomy.compositions import K as MC_K
 from rcbht_introspection.taxonomy.compositions import N as MC_N
-from rcbht_introspection.taxonomy.compositions import U as MC_U
 from rcbht_introspection.taxonomy.compositions import Z as MC_Z
-from rcbht_introspection.taxonomy.config import TaxonomyConfig
-from rcbht_introspection.taxonomy.primitives import ieee_div
 
 FX, CT, PS, PL, AL, SH, U, N = range(1, 9)
 """LLB label integers."""
@@ -99,26 +94,6 @@ def match_compositions(
     return _single(N, cur, MC_N), index + 1
 
 
-def compose_behaviors(mcs: Sequence[Composition], config: TaxonomyConfig) -> list[Behavior]:
-    """llbehComposition: scan the MCs; timeCheckFlag is set once and never reset [quirk]."""
-    out: list[Behavior] = []
-    flag = False
-    thresh = config.behavior_time_threshold
-    index, n = 0, len(mcs)
-    while index < n:
-        m = mcs[index]
-        lbl = m[LBL]
-        window = 0
-        if lbl in (MC_K, MC_I, MC_D, MC_A):
-            if m[T2E] - m[T1S] >= thresh:
-                flag = True
-            if lbl == MC_A:
-                window = 1
-        record, index = match_compositions(mcs, index, flag, window)
-        out.append(record)
-    return out
-
-
 # --------------------------------------------------------------------------- refinement
 
 
@@ -147,122 +122,3 @@ def merge_behaviors(rows: list, index: int, label: int | None) -> None:
         r[B_T1S] = r[B_T2S]
     r[B_TAVG] = (r[B_T1S] + r[B_T2E]) / 2
     rows[index + 1] = None
-
-
-def _compact(rows: list) -> list:
-    return [r for r in rows if r is not None]
-
-
-def refine_durations(rows: list, config: TaxonomyConfig) -> list:
-    """Step 1: duration context over a prefix; the pass stops at the first pair that does not merge.
-
-    A 0 or Inf amplitude ratio would hang the original (continue without increment); here it
-    stops the pass, like the other non-qualifying pairs.
-    """
-    n = len(rows)
-    idx = 0
-    amp_lim, dur_lim = config.behavior_amplitude_ratio, config.behavior_duration_ratio
-    while idx < n - 2:
-        r, m = rows[idx], rows[idx + 1]
-        if (
-            r[B_LBL] != CT
-            and m[B_LBL] != CT
-            and r[B_MC2] not in (MC_U, MC_Z)
-            and m[B_MC2] not in (MC_U, MC_Z)
-        ):
-            ratio = ieee_div(abs(m[B_AMP]), abs(r[B_AMP]))
-            if ratio == 0 or ratio == math.inf or ratio > amp_lim:
-                break
-            # actionLbl2actionInt('n') returns 6 [bug]: the 'noisy' duration variant keys on 6
-            if r[B_MC2] != 6 and m[B_MC2] != 6:
-                p1, p2 = r[B_T2E] - r[B_T1S], m[B_T2E] - m[B_T1S]
-            elif r[B_MC2] == 6:
-                p1, p2 = r[B_T1E] - r[B_T1S], m[B_T2E] - m[B_T1S]
-            else:
-                p1, p2 = r[B_T2E] - r[B_T1S], m[B_T1E] - m[B_T1S]
-            d = ieee_div(p1, p2)
-            if d > dur_lim:
-                merge_behaviors(rows, idx, None)
-                idx += 2
-            elif d < 1 / dur_lim:
-                rows[idx], rows[idx + 1] = m, r
-                merge_behaviors(rows, idx, None)
-                idx += 2
-            else:
-                break
-        idx += 1
-    return _compact(rows)
-
-
-def _merge_pairs(rows: list, test, label: int | None) -> list:
-    """One left-to-right pass merging every pair (i, i+1) that `test` accepts; then compaction."""
-    for i in range(len(rows) - 1):
-        r, m = rows[i], rows[i + 1]
-        if r is None or m is None:
-            continue
-        if test(r, m):
-            merge_behaviors(rows, i, label)
-    return _compact(rows)
-
-
-def refine_once(rows: list, config: TaxonomyConfig) -> list:
-    """Refinement.m: duration context, then the amplitude-context merges and repeats."""
-    if not rows:
-        return rows
-    rows = refine_durations(rows, config)
-    w1, w2 = config.push_pull_similarity
-    rows = _merge_pairs(
-        rows,
-        lambda r, m: (
-            {r[B_LBL], m[B_LBL]} == {PS, PL}
-            and similar(r[B_AMP], m[B_AMP], w1)
-            and similar(r[B_AMP], m[B_AMP], w2)
-        ),  # both tests use the amplitude [bug]
-        AL,
-    )
-    rows = _merge_pairs(
-        rows,
-        lambda r, m: r[B_LBL] in (SH, AL) and m[B_LBL] in (SH, AL) and m[B_AMP] < r[B_AMP],
-        AL,
-    )
-    while True:
-        before = len(rows)
-        rows = _merge_pairs(rows, lambda r, m: r[B_LBL] == m[B_LBL], None)
-        if len(rows) == before:
-            break
-    wa, wm = config.align_push_similarity
-    rows = _merge_pairs(
-        rows,
-        lambda r, m: (
-            r[B_LBL] in (AL, SH)
-            and m[B_LBL] in (PS, PL)
-            and similar(r[B_AMP], m[B_AMP], wa)
-            and similar(r[B_MAG], m[B_MAG], wm)
-        ),
-        AL,
-    )
-    fa, fm = config.fixed_similarity
-    rows = _merge_pairs(
-        rows,
-        lambda r, m: (
-            (
-                (r[B_LBL] == FX and m[B_LBL] in (PS, PL, AL, SH))
-                or (m[B_LBL] == FX and r[B_LBL] in (PS, PL, AL, SH))
-            )
-            and similar(r[B_AMP], m[B_AMP], fa)
-            and similar(r[B_MAG], m[B_MAG], fm)
-        ),
-        FX,
-    )
-    return rows
-
-
-def refine_behaviors(rows: list[Behavior], config: TaxonomyConfig) -> list[Behavior]:
-    """Refinement run behavior_refinement_cycles times."""
-    rows = [list(r) for r in rows]
-    for _ in range(config.behavior_refinement_cycles):
-        rows = refine_once(rows, config)
-    return rows
-
-
-MC_NOISE = MC_N

@@ -1,4 +1,4 @@
-"""Motion-composition (MC) layer (spec 2.2) and MC filtering (spec 2.3, cleanUp.m).
+"""Motion-composition (MC) layer (spec 2.2) and MC filtering (spec 2.3, cleanUp.m): the rules.
 
 An MC record is a list in the original `motComps` layout: [label, avgVal, rmsVal, amplitude,
 glabel1, glabel2, t1Start, t1End, t2Start, t2End, tAvg], labels as 1-based integers
@@ -29,6 +29,7 @@ from rcbht_introspection.taxonomy.primitives import (
     START,
     Primitive,
     ieee_div,
+    running_sum,
 )
 
 A, I, D, K, PC, NC, C, U, N, Z = range(1, 11)  # noqa: E741  (the original's letters)
@@ -131,18 +132,6 @@ def _single(p1: Primitive, label: int, amplitude: float) -> Composition:
     return [label, p1[AVG], p1[MAX], amplitude, p1[LABEL], p1[LABEL], s, s, f, f, (s + f) / 2]
 
 
-def compose(prims: Sequence[Primitive], config: TaxonomyConfig) -> list[Composition]:
-    """CompoundMotionComposition: scan left to right; the last primitive pairs with itself."""
-    out: list[Composition] = []
-    i, n = 0, len(prims)
-    while i < n:
-        p2 = prims[i + 1] if i + 1 < n else prims[i]
-        mc, paired = match_primitives(prims[i], p2, config)
-        out.append(mc)
-        i += 2 if paired else 1
-    return out
-
-
 # --------------------------------------------------------------------------- filtering
 
 
@@ -197,7 +186,7 @@ def _merge(rows: list, index: int, label: int | None, amplitude: bool, what: int
         rows[index + 1 if what == 1 else index - 1] = None
         return
     run = rows[index : index + what + 1]
-    r[AVGV] = sum(x[AVGV] for x in run) / len(run)
+    r[AVGV] = running_sum(x[AVGV] for x in run) / len(run)
     r[RMS] = max(x[RMS] for x in run)
     if amplitude:
         r[AMP] = max(x[AMP] for x in run)
@@ -208,91 +197,6 @@ def _merge(rows: list, index: int, label: int | None, amplitude: bool, what: int
     r[TAVG] = (r[T1S] + last[T2E]) / 2
     for j in range(index + 1, index + what + 1):
         rows[j] = None
-
-
-def _compact(rows: list) -> list:
-    """DeleteEmptyRows."""
-    return [r for r in rows if r is not None]
-
-
-def _start_index(rows: list, s2: float | None) -> int | None:
-    """0-based index of the first MC whose t2End > rotation start (None: skip those steps)."""
-    if s2 is None:
-        return None
-    for i, r in enumerate(rows):
-        if r[T2E] > s2:
-            return i
-    return None
-
-
-def merge_adjustment_chains(
-    rows: list, start: int | None, limit: float, config: TaxonomyConfig
-) -> list:
-    """Step 1: chains of similar consecutive 'a' (only while the next MC ends before `limit`)."""
-    if start is None:
-        return rows
-    n = len(rows)
-    w = config.adjustment_similarity
-    repeat = False
-    ctr = 0
-    for i in range(start, n - 1):
-        j = i + 1
-        if rows[i] is None:
-            continue
-        if config.adjustment_mating_guard and not rows[j][T2E] < limit:
-            continue
-        if rows[i][LBL] == A and rows[j][LBL] == A:
-            if similar(rows[i][AVGV], rows[j][AVGV], w):
-                repeat = True
-                ctr += 1
-            if (
-                repeat
-                and ctr > 0
-                and j + 1 < n - 1
-                and (rows[j + 1][LBL] != A or not similar(rows[j + 1][AVGV], rows[j + 2][AVGV], w))
-            ):
-                fi = i - (ctr - 1)
-                li = fi + ctr
-                run = rows[fi : li + 1]
-                k = ctr + 1
-                r = rows[fi]
-                r[LBL] = A
-                r[AVGV] = sum(x[AVGV] for x in run) / k
-                r[RMS] = sum(x[RMS] for x in run) / k
-                r[AMP] = max(x[AMP] for x in run)
-                r[T1E] = (rows[li][T2E] + r[T1S]) / 2 - config.adjustment_time_offset
-                r[T2S] = r[T1E] + config.adjustment_time_step
-                r[T2E] = rows[li][T2E]
-                r[TAVG] = (r[T1S] + r[T2E]) / 2
-                for x in range(fi + 1, li + 1):
-                    rows[x] = None
-                repeat = False
-                ctr = 0
-    return _compact(rows)
-
-
-def merge_repeated(rows: list) -> list:
-    """Step 2: runs of identical non-'a' labels merge into their first MC, until none remain."""
-    while True:
-        changed = False
-        i, n = 0, len(rows)
-        while i <= n - 2:
-            if rows[i][LBL] != A:
-                j = i + 1
-                while j < n and rows[j][LBL] == rows[i][LBL]:
-                    j += 1
-                count = j - i - 1
-                if count:
-                    _merge(rows, i, None, False, count)
-                    i += 1 + count
-                    changed = True
-                else:
-                    i += 1
-            else:
-                i += 1
-        rows = _compact(rows)
-        if not changed:
-            return rows
 
 
 def _relabel_from(glabel: int) -> int | None:
@@ -309,130 +213,5 @@ def _relabel_from(glabel: int) -> int | None:
     return None
 
 
-def primitive_durations(
-    rows: list, start: int | None, config: TaxonomyConfig
-) -> tuple[list, float]:
-    """Step 3: relabel an MC after its much longer primitive; returns (rows, maxAmplitude)."""
-    max_amp = 0.0
-    if start is None:
-        return rows, max_amp
-    lim = config.duration_amplitude_ratio
-    ratio_lim = config.duration_ratio
-    for i in range(start, len(rows) - 1):
-        r = rows[i]
-        if r[LBL] in CONTACTS:
-            continue
-        amp_ratio = ieee_div(abs(rows[i + 1][AMP]), abs(r[AMP]))
-        if amp_ratio == 0 or amp_ratio == math.inf:
-            continue
-        if amp_ratio > lim or amp_ratio < 1 / lim:
-            if config.duration_gate_breaks:
-                break
-            continue
-        p1 = r[T1E] - r[T1S]
-        p2 = r[T2E] - r[T2S]
-        if p1 == 0 or p2 == 0:
-            continue
-        ratio = p1 / p2
-        glabel = None
-        if ratio > ratio_lim:
-            glabel = r[GL1]
-        elif ratio < 1 / ratio_lim:
-            glabel = r[GL2]
-        if glabel is not None:
-            new = _relabel_from(glabel)
-            if new is not None:
-                r[LBL] = new
-        if r[AMP] > max_amp:
-            max_amp = r[AMP]
-    return rows, max_amp
-
-
-def composition_durations(rows: list, start: int | None, config: TaxonomyConfig) -> list:
-    """Step 4: absorb an MC into a neighbour five times longer (keeping the longer one's label)."""
-    if start is None:
-        return rows
-    lim = config.duration_amplitude_ratio
-    ratio_lim = config.duration_ratio
-    for i in range(start, len(rows) - 1):
-        r = rows[i]
-        lbl = r[LBL] if r is not None else 0
-        if lbl in CONTACTS:
-            continue
-        nxt = rows[i + 1]
-        amp1 = abs(r[AMP]) if r is not None else 0.0
-        amp2 = abs(nxt[AMP]) if nxt is not None else 0.0
-        amp_ratio = ieee_div(amp2, amp1)
-        if amp_ratio == 0 or amp_ratio == math.inf:
-            continue
-        if amp_ratio > lim or amp_ratio < 1 / lim:
-            if config.duration_gate_breaks:
-                break
-            continue
-        c1 = (r[T2E] - r[T1S]) if r is not None else 0.0
-        c2 = (nxt[T2E] - nxt[T1S]) if nxt is not None else 0.0
-        if c1 == 0 or c2 == 0:
-            continue
-        ratio = c1 / c2
-        if ratio > ratio_lim:
-            _merge(rows, i, lbl if lbl in (A, I, D, K) else None, False, 1)
-        elif ratio < 1 / ratio_lim:
-            _merge(rows, i + 1, None, False, 0)
-    return _compact(rows)
-
-
-def contact_amplitudes(rows: list, max_amp: float, config: TaxonomyConfig) -> list:
-    """Step 5: pc/nc whose amplitude is below 10 % of the largest become i/d."""
-    limit = config.contact_amplitude_fraction * abs(max_amp)
-    for r in rows:
-        if r[LBL] == PC and abs(r[AMP]) < limit:
-            r[LBL] = I
-        elif r[LBL] == NC and abs(r[AMP]) < limit:
-            r[LBL] = D
-    return rows
-
-
 _ADJUST_PAIRS = frozenset({(A, I), (A, D), (I, A), (D, A)})
 _CONSTANT_PAIRS = frozenset({(I, K), (K, I), (D, K), (K, D), (D, I), (I, D)})
-
-
-def merge_similar_pairs(
-    rows: list, start: int | None, pairs: frozenset, widths: tuple[float, float], label: int
-) -> list:
-    """Steps 6/7: listed label pairs with similar amplitude and avgVal merge as `label`."""
-    if start is None:
-        return rows
-    wa, wm = widths
-    for i in range(start, len(rows) - 1):
-        r, m = rows[i], rows[i + 1]
-        if r is None or m is None or (r[LBL], m[LBL]) not in pairs:
-            continue
-        if similar(r[AMP], m[AMP], wa) and similar(r[AVGV], m[AVGV], wm):
-            _merge(rows, i, label, True, 1)
-    return _compact(rows)
-
-
-def clean_compositions(
-    rows: list[Composition], state_times: Sequence[float], end_time: float, config: TaxonomyConfig
-) -> list[Composition]:
-    """cleanUp.m, run composition_cleanup_cycles times."""
-    rows = [list(r) for r in rows]
-    s2, limit = state_limits(state_times, end_time)
-    for _ in range(config.composition_cleanup_cycles):
-        rows = clean_once(rows, s2, limit, config)
-    return rows
-
-
-def clean_once(rows: list, s2: float | None, limit: float, config: TaxonomyConfig) -> list:
-    """One cleanUp.m call (steps 1-7); startIndex is found once, before step 1, as the original does."""
-    if not rows:
-        return rows
-    start = _start_index(rows, s2)
-    rows = merge_adjustment_chains(rows, start, limit, config)
-    rows = merge_repeated(rows)
-    rows, max_amp = primitive_durations(rows, start, config)
-    rows = composition_durations(rows, start, config)
-    rows = contact_amplitudes(rows, max_amp, config)
-    rows = merge_similar_pairs(rows, start, _ADJUST_PAIRS, config.adjustment_merge_similarity, A)
-    rows = merge_similar_pairs(rows, start, _CONSTANT_PAIRS, config.constant_merge_similarity, K)
-    return rows

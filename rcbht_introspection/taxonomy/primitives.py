@@ -38,6 +38,14 @@ def ieee_div(a: float, b: float) -> float:
     return math.inf if (a > 0) == (math.copysign(1.0, b) > 0) else -math.inf
 
 
+def running_sum(values) -> float:
+    """Left-to-right float sum (MATLAB's order); builtin sum() compensates on Python >= 3.12."""
+    total = 0.0
+    for v in values:
+        total += v
+    return total
+
+
 def fitted_average(vmax: float, vmin: float) -> float:
     """dAvg of statisticalData.m: (max+min)/2, written as the original does for mixed signs."""
     if (vmax >= 0 and vmin >= 0) or (vmax <= 0 and vmin <= 0):
@@ -99,20 +107,37 @@ def classify_gradient(g: float, thresholds: Sequence[float]) -> int:
 # --------------------------------------------------------------------------- segmentation
 
 
-def block_stats(t: np.ndarray, y: np.ndarray) -> tuple[list, ...]:
-    """Least-squares statistics of K blocks of samples: t (K, m), y (K, m, A) -> lists per block.
+def block_stats(t: np.ndarray, y: np.ndarray) -> tuple:
+    """Least-squares statistics of K blocks of m samples: t (K, m), y (K, m, A) -> nested lists.
 
-    Returns (n, mean_t, Stt, mean_y, Syy, Sty, max_y, min_y, last_t, last_y); per-axis entries are
-    (K, A) nested lists. Centred sums keep the precision of a direct polyfit.
+    Returns (m, mean_t, Stt, mean_y, Syy, Sty, max_y, min_y, last_t, last_y), per-axis entries as
+    (K, A) lists. Centred sums keep the precision of a direct polyfit. Every sum runs over the m
+    samples in order with element-wise operations, so one block gives bit-identical numbers
+    whether it is computed alone (streaming, `block_stats_one`) or among many (batch).
     """
     m = t.shape[1]
-    mt = t.mean(axis=1)
-    dt = t - mt[:, None]
-    my = y.mean(axis=1)
-    dy = y - my[:, None, :]
-    stt = np.einsum("km,km->k", dt, dt)
-    syy = np.einsum("kma,kma->ka", dy, dy)
-    sty = np.einsum("km,kma->ka", dt, dy)
+    st = t[:, 0]
+    sy = y[:, 0, :]
+    for j in range(1, m):
+        st = st + t[:, j]
+        sy = sy + y[:, j, :]
+    mt = st / m
+    my = sy / m
+    dt = t[:, 0] - mt
+    dy = y[:, 0, :] - my
+    stt = dt * dt
+    syy = dy * dy
+    sty = dt[:, None] * dy
+    ymax = y[:, 0, :]
+    ymin = y[:, 0, :]
+    for j in range(1, m):
+        dt = t[:, j] - mt
+        dy = y[:, j, :] - my
+        stt = stt + dt * dt
+        syy = syy + dy * dy
+        sty = sty + dt[:, None] * dy
+        ymax = np.maximum(ymax, y[:, j, :])
+        ymin = np.minimum(ymin, y[:, j, :])
     return (
         m,
         mt.tolist(),
@@ -120,11 +145,47 @@ def block_stats(t: np.ndarray, y: np.ndarray) -> tuple[list, ...]:
         my.tolist(),
         syy.tolist(),
         sty.tolist(),
-        y.max(axis=1).tolist(),
-        y.min(axis=1).tolist(),
+        ymax.tolist(),
+        ymin.tolist(),
         t[:, -1].tolist(),
         y[:, -1, :].tolist(),
     )
+
+
+def block_stats_one(ts: list[float], ys: list[list[float]]) -> tuple:
+    """`block_stats` of a single block in plain Python (same operations, same order, same bits).
+
+    ts: the block's m times; ys: its m samples of A axes. Used per window step by the stream.
+    """
+    m = len(ts)
+    st = ts[0]
+    for j in range(1, m):
+        st = st + ts[j]
+    mt = st / m
+    dts = [x - mt for x in ts]
+    stt = dts[0] * dts[0]
+    for j in range(1, m):
+        stt = stt + dts[j] * dts[j]
+    my_row, syy_row, sty_row, max_row, min_row = [], [], [], [], []
+    for col in zip(*ys, strict=True):
+        sy = col[0]
+        for j in range(1, m):
+            sy = sy + col[j]
+        my = sy / m
+        dy = col[0] - my
+        syy = dy * dy
+        sty = dts[0] * dy
+        for j in range(1, m):
+            dy = col[j] - my
+            syy = syy + dy * dy
+            sty = sty + dts[j] * dy
+        my_row.append(my)
+        syy_row.append(syy)
+        sty_row.append(sty)
+        max_row.append(max(col))
+        min_row.append(min(col))
+    return (m, [mt], [stt], [my_row], [syy_row], [sty_row], [max_row], [min_row], [ts[-1]],
+            [list(ys[-1])])  # fmt: skip
 
 
 class Segmenter:
@@ -319,38 +380,6 @@ def label_segments(segments: list[list[float]], thresholds: Sequence[float]) -> 
 # --------------------------------------------------------------------------- clean-up
 
 
-def merge_repeated(prims: list[Primitive]) -> list[Primitive]:
-    """Clean-up step 1: merge runs of identical labels (pair: means; k >= 3 rows: sums / (k-1) [bug])."""
-    out: list[Primitive] = []
-    i, n = 0, len(prims)
-    while i < n:
-        j = i + 1
-        label = prims[i][LABEL]
-        while j < n and prims[j][LABEL] == label:
-            j += 1
-        out.append(merge_run(prims[i:j]))
-        i = j
-    return out
-
-
-def merge_run(run: list[Primitive]) -> Primitive:
-    """MergePrimitives for one run of equal labels (length 1 is returned unchanged)."""
-    if len(run) == 1:
-        return run[0]
-    first, last = run[0], run[-1]
-    if len(run) == 2:
-        return [
-            (first[AVG] + last[AVG]) / 2, max(first[MAX], last[MAX]), min(first[MIN], last[MIN]),
-            first[START], last[FINISH], (first[GRAD] + last[GRAD]) / 2, last[LABEL],
-        ]  # fmt: skip
-    k1 = len(run) - 1
-    return [
-        sum(p[AVG] for p in run) / k1,
-        max(p[MAX] for p in run), min(p[MIN] for p in run),
-        first[START], last[FINISH], sum(p[GRAD] for p in run) / k1, first[LABEL],
-    ]  # fmt: skip
-
-
 def merge_pair(p1: Primitive, p2: Primitive, keep_second: bool) -> Primitive:
     """MergePrimitives for a duration-context pair: label of the longer one, means, max/min."""
     return [
@@ -378,27 +407,6 @@ def duration_pair(p1: Primitive, p2: Primitive, config: TaxonomyConfig) -> Primi
     return None
 
 
-def merge_durations(prims: list[Primitive], config: TaxonomyConfig) -> list[Primitive]:
-    """Clean-up step 2: one left-to-right pass; a merged pair's 2nd row is not compared again."""
-    out: list[Primitive] = []
-    i, n = 0, len(prims)
-    while i < n:
-        if i + 1 < n:
-            merged = duration_pair(prims[i], prims[i + 1], config)
-            if merged is not None:
-                out.append(merged)
-                i += 2
-                continue
-        out.append(prims[i])
-        i += 1
-    return out
-
-
-def clean_primitives(prims: list[Primitive], config: TaxonomyConfig) -> list[Primitive]:
-    """primitivesCleanUp.m: repeated labels, then duration/amplitude context."""
-    return merge_durations(merge_repeated(prims), config)
-
-
 # --------------------------------------------------------------------------- calibration
 
 
@@ -416,7 +424,7 @@ def calibrate_limits(
             if p[START] > s2:
                 rot.append(p[GRAD])
         if rot:
-            pconst = 0.9 * abs(sum(rot) / len(rot))
+            pconst = 0.9 * abs(running_sum(rot) / len(rot))
     ins = [abs(p[GRAD]) for p in prims if p[START] > s3 and p[FINISH] < s4]
     pimp = 0.85 * max(ins) if ins else 0.0
     return pimp, pconst

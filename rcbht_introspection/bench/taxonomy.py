@@ -1,0 +1,101 @@
+"""Benchmark of the batch taxonomy: label one real trial / all 46 in-process, and `rcbht label`.
+
+Targets (issue 2): <= 20 ms per real trial in-process, <= 50 ms per trial end-to-end (parse,
+taxonomy, write). Times are medians; CPU time (process_time) is reported next to wall time
+because the machine is shared.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPEATS = 3
+
+
+def hiro_root() -> Path:
+    """../shared/data/hiro next to the repository, or $RCBHT_HIRO_DATA."""
+    env = os.environ.get("RCBHT_HIRO_DATA")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parents[3] / "shared" / "data" / "hiro"
+
+
+def _ms(seconds: float) -> float:
+    return round(seconds * 1000, 3)
+
+
+def run(out_dir: Path) -> dict:
+    from rcbht_introspection.commands.taxonomy import write_rcbht
+    from rcbht_introspection.io.hiro import find_trials, read_trial
+    from rcbht_introspection.taxonomy.batch import default_config, label_trial
+
+    dataset = hiro_root() / "REAL_HIRO_ONE_SA_SUCCESS"
+    if not dataset.is_dir():
+        return {"skipped": f"no data at {dataset}"}
+    folders = find_trials([dataset])
+    trials = [read_trial(f) for f in folders]
+    config = default_config()
+    label_trial(trials[0], config)  # warm-up
+    load_start = os.getloadavg()[0]
+
+    cpu: list[list[float]] = [[] for _ in trials]
+    wall: list[list[float]] = [[] for _ in trials]
+    all_cpu, all_wall = [], []
+    for _ in range(REPEATS):
+        c0, w0 = time.process_time(), time.perf_counter()
+        for i, trial in enumerate(trials):
+            c, w = time.process_time(), time.perf_counter()
+            label_trial(trial, config)
+            cpu[i].append(time.process_time() - c)
+            wall[i].append(time.perf_counter() - w)
+        all_cpu.append(time.process_time() - c0)
+        all_wall.append(time.perf_counter() - w0)
+
+    # in-process pipeline per trial: parse + taxonomy + write the original layout
+    pipe: list[float] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for folder in folders:
+            w = time.perf_counter()
+            write_rcbht(label_trial(read_trial(folder), config), Path(tmp) / folder.name)
+            pipe.append(time.perf_counter() - w)
+
+    # end-to-end through the CLI: one process labels the whole dataset, and one single trial
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "rcbht_introspection.cli", "label"]
+        w = time.perf_counter()
+        subprocess.run([*cmd, str(dataset), "--out", tmp], check=True, capture_output=True)
+        dataset_wall = time.perf_counter() - w
+        singles = []
+        for folder in folders[:5]:
+            w = time.perf_counter()
+            subprocess.run([*cmd, str(folder), "--out", tmp], check=True, capture_output=True)
+            singles.append(time.perf_counter() - w)
+        startup = []
+        for _ in range(3):
+            w = time.perf_counter()
+            subprocess.run([*cmd, "--help"], check=True, capture_output=True)
+            startup.append(time.perf_counter() - w)
+
+    samples = statistics.median(len(t.time) for t in trials)
+    return {
+        "trials": len(trials),
+        "median_samples_per_axis": samples,
+        "label_one_trial_ms_median_cpu": _ms(statistics.median(min(c) for c in cpu)),
+        "label_one_trial_ms_median_wall": _ms(statistics.median(min(w) for w in wall)),
+        "label_all_trials_ms_cpu": _ms(min(all_cpu)),
+        "label_all_trials_ms_wall": _ms(min(all_wall)),
+        "pipeline_parse_label_write_ms_median_wall": _ms(statistics.median(pipe)),
+        "cli_label_dataset_ms_per_trial_wall": _ms(dataset_wall / len(folders)),
+        "cli_label_dataset_s_wall": round(dataset_wall, 3),
+        "cli_label_single_trial_ms_wall_median": _ms(statistics.median(singles)),
+        "cli_startup_ms_wall_median": _ms(statistics.median(startup)),
+        "load_avg_1min_start": round(load_start, 2),
+        "load_avg_1min_end": round(os.getloadavg()[0], 2),
+        "targets": {"in_process_ms": 20, "end_to_end_ms": 50},
+    }

@@ -1,0 +1,121 @@
+"""`rcbht train` (write a sub-task model) and `rcbht evaluate` (learning-curve protocol)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar.encoding import ENCODINGS
+from rcbht_introspection.learn.data import WORD_SOURCES, load_trials
+from rcbht_introspection.learn.models import CLASSIFIERS
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the train and evaluate subcommands."""
+    train = subparsers.add_parser("train", help="train a sub-task classifier and save the model")
+    train.add_argument("inputs", nargs="+", type=Path, metavar="TRIAL_OR_DATASET_DIR")
+    train.add_argument("--out", type=Path, required=True, metavar="MODEL")
+    _common(train)
+    train.add_argument("--seed", type=int, default=0)
+    train.set_defaults(func=run_train)
+
+    ev = subparsers.add_parser("evaluate", help="learning-curve evaluation of a classifier")
+    ev.add_argument("inputs", nargs="+", type=Path, metavar="DATASET_DIR")
+    _common(ev)
+    ev.add_argument("--permutations", type=int, default=20)
+    ev.add_argument("--validation-trials", type=int, default=None,
+                    help="held-out trials (default: 10 of 46, 8 of 38, 6 of 20, else ~22%%)")
+    ev.add_argument("--trials", type=int, default=None, help="use only the first N trials")
+    ev.add_argument("--seed", type=int, default=0)
+    ev.add_argument("--n-estimators", type=int, default=100, help="Mondrian trees")
+    ev.add_argument("--no-variant", action="store_true",
+                    help="skip the variant without near-empty sub-tasks")
+    ev.add_argument("--json", type=Path, default=None, metavar="OUT")
+    ev.add_argument("--plot", type=Path, default=None, metavar="OUT.png")
+    ev.add_argument("--no-progress", action="store_true")
+    ev.set_defaults(func=run_evaluate)
+
+
+def _common(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--classifier", choices=CLASSIFIERS, default="svm")
+    parser.add_argument("--encoding", choices=ENCODINGS, default="compact")
+    parser.add_argument("--words", choices=WORD_SOURCES, default="auto",
+                        help="golden label files, the batch engine, or golden when present")
+
+
+def run_train(args: argparse.Namespace) -> int:
+    from rcbht_introspection.learn.models import save_model, train_model
+
+    trials = load_trials(args.inputs, args.words)
+    samples = [s for t in trials for s in t.samples]
+    model = train_model(samples, args.classifier, args.encoding, random_state=args.seed)
+    save_model(model, args.out)
+    print(
+        f"wrote {args.out}: {args.classifier}/{args.encoding}, {len(samples)} samples from "
+        f"{len(trials)} trials, {model.encoder.n_features} features, classes {model.classes_}"
+    )
+    return 0
+
+
+def _clean(value: Any) -> Any:
+    """JSON-safe copy (NaN becomes null)."""
+    if isinstance(value, float) and math.isnan(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_clean(v) for v in value]
+    return value
+
+
+def run_evaluate(args: argparse.Namespace) -> int:
+    from rcbht_introspection.learn.evaluate import Protocol, evaluate, total_steps
+
+    if args.permutations < 1:
+        raise InputError("--permutations must be at least 1", field="--permutations")
+    trials = load_trials(args.inputs, args.words)
+    if args.trials is not None:
+        trials = trials[: args.trials]
+    protocol = Protocol(
+        classifier=args.classifier,
+        encoding=args.encoding,
+        permutations=args.permutations,
+        n_validation=args.validation_trials,
+        seed=args.seed,
+        n_estimators=args.n_estimators,
+        variant=not args.no_variant,
+    )
+    bar = None
+    if not args.no_progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=total_steps(trials, protocol), desc=f"{args.classifier}/{args.encoding}",
+                   unit="step", file=sys.stderr)
+    try:
+        result = evaluate(trials, protocol, progress=bar.update if bar else None)
+    finally:
+        if bar:
+            bar.close()
+    result["datasets"] = [str(p) for p in args.inputs]
+    result["words"] = args.words
+    result = _clean(result)
+    ss, base = result["steady_state_accuracy"], result["duration_baseline"]
+    print(
+        f"{args.classifier}/{args.encoding}: steady state {ss['mean']:.4f} +- {ss['std']:.4f}, "
+        f"duration only {base['mean']:.4f} +- {base['std']:.4f}, "
+        f"best of splits {result['best_of_splits']:.4f} ({result['n_trials']} trials, "
+        f"{result['n_validation_trials']} held out, {args.permutations} permutations)"
+    )
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2))
+    if args.plot:
+        from rcbht_introspection.learn.plot import plot_learning_curve
+
+        plot_learning_curve([result], args.plot, title=", ".join(p.name for p in args.inputs))
+    return 0

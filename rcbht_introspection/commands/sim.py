@@ -1,0 +1,99 @@
+"""`rcbht sim` (simulate a data set) and `rcbht sim-report` (realism report against real HIRO)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from rcbht_introspection.errors import InputError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the `sim` and `sim-report` subcommands."""
+    p = subparsers.add_parser(
+        "sim",
+        help="simulate snap-assembly trials with MuJoCo",
+        description="Simulate snap-assembly trials (MuJoCo) into HIRO trial folders or rosbag2 files.",
+    )
+    p.add_argument("--trials", type=int, default=12, help="number of trials (default 12)")
+    p.add_argument("--scenario", choices=("one-arm", "two-arm"), default="one-arm")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--failures",
+        action="store_true",
+        help="make every second trial a failure (misalignment, jamming, missed_snap)",
+    )
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=200.0,
+        metavar="HZ",
+        help="sensor output rate: 200 (HIRO) or 1000 Hz; must divide 1 kHz",
+    )
+    p.add_argument("--out", type=Path, required=True, metavar="DIR")
+    p.add_argument("--format", choices=("hiro", "bag"), default="hiro", dest="fmt")
+    p.add_argument(
+        "--config", type=Path, default=None, help="sim config YAML (default config/sim.yaml)"
+    )
+    p.add_argument(
+        "--progress",
+        choices=("auto", "on", "off"),
+        default="auto",
+        help="progress bar (auto: on a terminal for more than 4 trials)",
+    )
+    p.set_defaults(func=run_sim)
+
+    r = subparsers.add_parser(
+        "sim-report",
+        help="realism report: simulated vs real LLB label statistics",
+        description="Compare LLB label frequencies per sub-task and axis, and trial-to-trial "
+        "variability, of a simulated set with the real HIRO set; figures as PNG.",
+    )
+    r.add_argument("sim_dir", type=Path, metavar="SIM_DIR")
+    r.add_argument(
+        "--real",
+        type=Path,
+        default=None,
+        metavar="REAL_DIR",
+        help="real HIRO set with golden/ folders (default ../shared/data/hiro/REAL_HIRO_ONE_SA_SUCCESS)",
+    )
+    r.add_argument("--out", type=Path, default=Path("sim_report"), metavar="DIR")
+    r.set_defaults(func=run_report)
+
+
+def run_sim(args: argparse.Namespace) -> int:
+    """Simulate and write the data set; print a one-line summary."""
+    from rcbht_introspection.sim import load_sim_config, write_dataset
+
+    if args.trials < 1:
+        raise InputError(f"--trials must be at least 1, got {args.trials}", field="trials")
+    config = load_sim_config(args.config)
+    progress = args.progress == "on" or (
+        args.progress == "auto" and args.trials > 4 and sys.stderr.isatty()
+    )
+    start = time.perf_counter()
+    written = write_dataset(
+        args.out,
+        args.trials,
+        scenario=args.scenario,
+        seed=args.seed,
+        failures=args.failures,
+        rate_hz=args.rate,
+        fmt=args.fmt,
+        progress=progress,
+        config=config,
+    )
+    elapsed = time.perf_counter() - start
+    print(f"wrote {len(written)} {args.scenario} trials to {args.out} in {elapsed:.1f} s")
+    return 0
+
+
+def run_report(args: argparse.Namespace) -> int:
+    """Build the realism report (tables as Markdown + JSON, figures as PNG)."""
+    from rcbht_introspection.commands.sim_report import write_report
+
+    summary = write_report(args.sim_dir, args.real, args.out)
+    print(summary)
+    return 0

@@ -1,0 +1,356 @@
+"""Feature encodings of sub-task samples, fitted on training data only and stored in the model.
+
+`paper`: the resampled label-index vectors of spec 3 (one n per level = the longest label
+sequence in the training data; REAL golden labels give 6204 features, SIM 1428).
+`compact`: per arm, level and axis the label counts, duration fractions, label bigrams and the
+duration-weighted mean value of the words, plus the log sub-task duration; features constant on
+the training data are dropped, the rest are min-max scaled with bounds fixed at fit time.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+from sklearn.feature_selection import f_classif
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar.split import SubtaskSample
+from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, Word
+
+LABEL_ALIASES: dict[str, str] = {"const": "cons"}
+"""Spellings of the same label in the original files ('const' = 'cons', spec 3)."""
+VALUE_KEYS: dict[Level, str] = {
+    Level.PRIMITIVE: "Average",
+    Level.COMPOSITION: "Average Val",
+    Level.BEHAVIOR: "AVG_MAG_VAL",
+}
+"""The record field holding a word's mean wrench value, per level."""
+MIN_DURATION = 1e-3
+"""Floor (s) for the log sub-task duration, so a zero-length window stays finite."""
+
+
+def label_index(level: Level, label: str) -> int:
+    """0-based index of `label` in its level's vocabulary (spec 3); -1 if unknown."""
+    label = LABEL_ALIASES.get(label.strip(), label.strip())
+    try:
+        return level.labels.index(label)
+    except ValueError:
+        return -1
+
+
+def sample_arms(samples: Sequence[SubtaskSample]) -> tuple[str, ...]:
+    """Arms present in the samples (sorted), e.g. ('R',) or ('L', 'R')."""
+    arms: set[str] = set()
+    for sample in samples:
+        arms.update(sample.words.arms)
+    return tuple(sorted(arms)) or ("R",)
+
+
+def resample_labels(words: Sequence[Word], level: Level, n: int) -> np.ndarray:
+    """Spec 3 'slice_and_find_mode': n equal-duration bins, each the label covering it longest.
+
+    Times run from the first word's start to the last word's end (words sorted by start);
+    ties go to the label that appears first. An empty sequence gives -1 everywhere.
+    """
+    out = np.full(n, -1.0)
+    if not words or n <= 0:
+        return out
+    ordered = sorted(words, key=lambda w: w.start)
+    starts = np.array([w.start for w in ordered])
+    ends = np.maximum(np.array([w.end for w in ordered]), starts)
+    codes = np.array([label_index(level, w.label) for w in ordered])
+    t0, t1 = starts[0], max(ends[-1], starts[0])
+    edges = t0 + (t1 - t0) * np.arange(n + 1) / n
+    kinds = list(dict.fromkeys(codes.tolist()))  # first-appearance order breaks ties
+    mass = np.empty((len(kinds), n))
+    for row, kind in enumerate(kinds):
+        mask = codes == kind
+        mass[row] = np.diff(_coverage(edges, starts[mask], ends[mask]))
+    out[:] = np.asarray(kinds, dtype=float)[np.argmax(mass, axis=0)]
+    return out
+
+
+def _coverage(edges: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """Total length of the intervals [starts, ends] lying left of each edge (piecewise linear)."""
+    times = np.concatenate([starts, ends])
+    slopes = np.concatenate([np.ones(len(starts)), -np.ones(len(ends))])
+    order = np.argsort(times, kind="stable")
+    times, slopes = times[order], np.cumsum(slopes[order])
+    values = np.concatenate([[0.0], np.cumsum(slopes[:-1] * np.diff(times))])
+    return np.interp(edges, times, values)
+
+
+class Encoding(Protocol):
+    """A fitted map from samples to a fixed-length feature matrix."""
+
+    name: str
+
+    def fit(self, samples: Sequence[SubtaskSample]) -> Encoding: ...
+
+    def transform(self, samples: Sequence[SubtaskSample]) -> np.ndarray: ...
+
+    def to_state(self) -> dict[str, Any]: ...
+
+
+class _SampleCache:
+    """Per-sample memo of expensive intermediate results, keyed by object identity.
+
+    Holds a reference to each sample so an id is never reused while cached; bounded size.
+    """
+
+    def __init__(self, limit: int = 20000) -> None:
+        self.limit = limit
+        self.entries: dict[tuple[int, Any], tuple[SubtaskSample, Any]] = {}
+
+    def get(self, sample: SubtaskSample, key: Any, compute: Any) -> Any:
+        full = (id(sample), key)
+        hit = self.entries.get(full)
+        if hit is not None and hit[0] is sample:
+            return hit[1]
+        value = compute()
+        if len(self.entries) >= self.limit:
+            self.entries.clear()
+        self.entries[full] = (sample, value)
+        return value
+
+
+_CACHE = _SampleCache()
+
+
+@dataclass
+class PaperEncoding:
+    """Spec 3 vectors: per arm, level (primitive, composition, behavior) and axis, n_level bins."""
+
+    name: str = "paper"
+    arms: tuple[str, ...] = ()
+    n: dict[str, int] = field(default_factory=dict)
+
+    def fit(self, samples: Sequence[SubtaskSample]) -> PaperEncoding:
+        """n per level = the longest label sequence over the training samples, arms and axes."""
+        if not samples:
+            raise InputError("cannot fit the paper encoding on zero samples")
+        self.arms = sample_arms(samples)
+        self.n = {
+            level.value: max(
+                1,
+                max(
+                    len(s.words.axis_words(arm, level, axis))
+                    for s in samples
+                    for arm in self.arms
+                    for axis in AXES
+                ),
+            )
+            for level in LEVELS
+        }
+        return self
+
+    @property
+    def n_features(self) -> int:
+        return len(self.arms) * len(AXES) * sum(self.n.values())
+
+    def transform(self, samples: Sequence[SubtaskSample]) -> np.ndarray:
+        out = np.empty((len(samples), self.n_features))
+        for row, sample in enumerate(samples):
+            parts = []
+            for arm in self.arms:
+                for level in LEVELS:
+                    n = self.n[level.value]
+                    for axis in AXES:
+                        parts.append(
+                            _CACHE.get(
+                                sample,
+                                ("paper", arm, level, axis, n),
+                                lambda a=arm, lv=level, ax=axis, k=n, s=sample: resample_labels(
+                                    s.words.axis_words(a, lv, ax), lv, k
+                                ),
+                            )
+                        )
+            out[row] = np.concatenate(parts)
+        return out
+
+    def to_state(self) -> dict[str, Any]:
+        return {"name": self.name, "arms": list(self.arms), "n": dict(self.n)}
+
+
+def compact_raw_features(sample: SubtaskSample, arms: Sequence[str]) -> dict[str, float]:
+    """Unscaled compact features of one sample (names are 'arm/level/axis/kind:label')."""
+    features: dict[str, float] = {}
+    duration = max(sample.duration, 0.0)
+    features["log_duration"] = math.log(max(duration, MIN_DURATION))
+    for arm in arms:
+        for level in LEVELS:
+            value_key = VALUE_KEYS[level]
+            for axis in AXES:
+                words = sorted(sample.words.axis_words(arm, level, axis), key=lambda w: w.start)
+                prefix = f"{arm}/{level.value}/{axis}/"
+                if not words:
+                    continue
+                labels = [LABEL_ALIASES.get(w.label.strip(), w.label.strip()) for w in words]
+                spans = [max(w.end - w.start, 0.0) for w in words]
+                total = sum(spans)
+                weights = spans if total > 0 else [1.0] * len(words)
+                wsum = sum(weights)
+                features[prefix + "n_words"] = math.log1p(len(words))
+                for label, weight in zip(labels, weights, strict=True):
+                    key = prefix + "count:" + label
+                    features[key] = features.get(key, 0.0) + 1.0
+                    key = prefix + "frac:" + label
+                    features[key] = features.get(key, 0.0) + weight / wsum
+                for a, b in itertools.pairwise(labels):
+                    key = prefix + f"bigram:{a}>{b}"
+                    features[key] = features.get(key, 0.0) + 1.0
+                mean = sum(w.features.get(value_key, 0.0) * wt for w, wt in zip(words, weights, strict=True))
+                features[prefix + "mean_value"] = mean / wsum
+    for key in list(features):
+        if "/count:" in key or "/bigram:" in key:
+            features[key] = math.log1p(features[key])
+    return features
+
+
+def pairwise_selection(matrix: np.ndarray, labels: Sequence[str], k: int) -> np.ndarray:
+    """Indices of k columns taken in turn from each pair of classes' ANOVA F ranking.
+
+    A single multi-class F ranking is dominated by the easiest contrast (e.g. the 5 ms rotation
+    samples against everything); ranking per class pair keeps features for every contrast.
+    """
+    labels_arr = np.asarray(labels)
+    classes = sorted(set(labels))
+    rankings = []
+    for i, a in enumerate(classes):
+        for b in classes[i + 1 :]:
+            rows = (labels_arr == a) | (labels_arr == b)
+            with np.errstate(divide="ignore", invalid="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                scores, _ = f_classif(matrix[rows], labels_arr[rows])
+            scores = np.nan_to_num(scores, nan=0.0, posinf=np.finfo(float).max)
+            rankings.append(np.argsort(-scores, kind="stable"))
+    chosen: list[int] = []
+    seen: set[int] = set()
+    depth = 0
+    while len(chosen) < min(k, matrix.shape[1]):
+        for ranking in rankings:
+            column = int(ranking[depth])
+            if column not in seen and len(chosen) < k:
+                seen.add(column)
+                chosen.append(column)
+        depth += 1
+    return np.asarray(sorted(chosen), dtype=int)
+
+
+@dataclass
+class CompactEncoding:
+    """Label counts, duration fractions, bigrams and mean values per arm/level/axis + log duration."""
+
+    name: str = "compact"
+    values: bool = True
+    """Include the duration-weighted mean wrench value of each level/axis."""
+    bigrams: bool = True
+    """Include label bigram counts."""
+    k: int | None = 100
+    """Keep the k features with the largest ANOVA F score on the training labels (None: all)."""
+    arms: tuple[str, ...] = ()
+    feature_names: list[str] = field(default_factory=list)
+    lower: list[float] = field(default_factory=list)
+    scale: list[float] = field(default_factory=list)
+
+    def _raw(self, sample: SubtaskSample) -> dict[str, float]:
+        return _CACHE.get(
+            sample, ("compact", self.arms), lambda: compact_raw_features(sample, self.arms)
+        )
+
+    def _keep(self, name: str) -> bool:
+        if not self.values and name.endswith("/mean_value"):
+            return False
+        return self.bigrams or "/bigram:" not in name
+
+    def fit(self, samples: Sequence[SubtaskSample]) -> CompactEncoding:
+        """Keep features that vary over the training samples; fix their min-max bounds."""
+        if not samples:
+            raise InputError("cannot fit the compact encoding on zero samples")
+        self.arms = sample_arms(samples)
+        raws = [self._raw(s) for s in samples]
+        names = sorted({k for raw in raws for k in raw if self._keep(k)})
+        matrix = np.array([[raw.get(k, 0.0) for k in names] for raw in raws])
+        low, high = matrix.min(axis=0), matrix.max(axis=0)
+        keep = high > low
+        labels = [s.subtask for s in samples]
+        if self.k is not None and keep.sum() > self.k and len(set(labels)) > 1:
+            columns = np.flatnonzero(keep)
+            chosen = pairwise_selection(matrix[:, keep], labels, self.k)
+            keep = np.zeros_like(keep)
+            keep[columns[chosen]] = True
+        if "log_duration" in names:
+            keep[names.index("log_duration")] = True
+        self.feature_names = [k for k, kept in zip(names, keep, strict=True) if kept]
+        self.lower = low[keep].tolist()
+        self.scale = np.where(high > low, high - low, 1.0)[keep].tolist()
+        return self
+
+    @property
+    def n_features(self) -> int:
+        return len(self.feature_names)
+
+    def transform(self, samples: Sequence[SubtaskSample]) -> np.ndarray:
+        lower, scale = np.asarray(self.lower), np.asarray(self.scale)
+        out = np.empty((len(samples), self.n_features))
+        for row, sample in enumerate(samples):
+            raw = self._raw(sample)
+            out[row] = [raw.get(k, 0.0) for k in self.feature_names]
+        return (out - lower) / scale
+
+    def to_state(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "values": self.values,
+            "bigrams": self.bigrams,
+            "k": self.k,
+            "arms": list(self.arms),
+            "feature_names": list(self.feature_names),
+            "lower": list(self.lower),
+            "scale": list(self.scale),
+        }
+
+
+ENCODINGS = ("compact", "paper")
+
+
+def make_encoding(name: str) -> PaperEncoding | CompactEncoding:
+    """A fresh (unfitted) encoding by name."""
+    if name == "paper":
+        return PaperEncoding()
+    if name == "compact":
+        return CompactEncoding()
+    raise InputError(f"unknown encoding {name!r} (known: {', '.join(ENCODINGS)})")
+
+
+def encoding_from_state(state: dict[str, Any]) -> PaperEncoding | CompactEncoding:
+    """Rebuild a fitted encoding from its stored parameters; bad fields are one-line errors."""
+    try:
+        name = state["name"]
+        if name == "paper":
+            n = {str(k): int(v) for k, v in state["n"].items()}
+            if set(n) != {lv.value for lv in LEVELS}:
+                raise ValueError("n must name every level")
+            return PaperEncoding(arms=tuple(map(str, state["arms"])), n=n)
+        if name == "compact":
+            enc = CompactEncoding(
+                values=bool(state["values"]),
+                bigrams=bool(state["bigrams"]),
+                k=None if state["k"] is None else int(state["k"]),
+                arms=tuple(map(str, state["arms"])),
+                feature_names=[str(x) for x in state["feature_names"]],
+                lower=[float(x) for x in state["lower"]],
+                scale=[float(x) for x in state["scale"]],
+            )
+            if not (len(enc.feature_names) == len(enc.lower) == len(enc.scale)):
+                raise ValueError("feature_names, lower and scale differ in length")
+            return enc
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError(f"bad encoding parameters: {exc}", field="encoding") from None
+    raise InputError(f"unknown encoding {state.get('name')!r}", field="encoding.name")

@@ -1,0 +1,105 @@
+"""Sub-task split of a trial's words by its state times (spec 2.7), and live time windows.
+
+A word that spans a sub-task boundary is cut there: the part before the mark stays in the
+earlier sub-task and the rest is re-examined for the next one, as data_folder_parser.py does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.taxonomy.words import TrialWords, Word
+
+
+@dataclass
+class SubtaskSample:
+    """The words of one sub-task of one trial (every arm, level and axis), clipped to [start, end]."""
+
+    trial: str
+    subtask: str
+    start: float
+    end: float
+    words: TrialWords
+
+    @property
+    def duration(self) -> float:
+        return self.end - self.start
+
+
+def _clip(word: Word, start: float | None = None, end: float | None = None) -> Word:
+    """A copy of `word` with its span limited to [start, end] (None keeps that side)."""
+    new_start = word.start if start is None else max(word.start, start)
+    new_end = word.end if end is None else min(word.end, end)
+    if new_start == word.start and new_end == word.end:
+        return word
+    return replace(word, start=new_start, end=new_end)
+
+
+def split_words(
+    words: TrialWords, state_times: Sequence[float], end_time: float
+) -> list[SubtaskSample]:
+    """One SubtaskSample per sub-task that has a start time; the last ends at `end_time`.
+
+    For each arm/level/axis the words are walked in order against the marks (the state times
+    after the first, then `end_time`): a word ending before a mark stays in the current
+    sub-task, one ending at it closes the sub-task, one crossing it is cut in two. Words past
+    `end_time` are clipped to it; sub-tasks beyond SUBTASKS are ignored.
+    """
+    starts = [float(t) for t in list(state_times)[: len(SUBTASKS)]]
+    if not starts:
+        return []
+    marks = [*starts[1:], float(end_time)]
+    parts = [TrialWords(name=words.name) for _ in starts]
+    for arm, per_level in words.words.items():
+        for level, per_axis in per_level.items():
+            for axis, sequence in per_axis.items():
+                # keep every (arm, level, axis) key present in every part, even if empty
+                for part in parts:
+                    part.words.setdefault(arm, {}).setdefault(level, {}).setdefault(axis, [])
+                state = 0
+                for word in sequence:
+                    current = word
+                    while True:
+                        mark = marks[state]
+                        if current.end < mark:
+                            parts[state].add(current)
+                            break
+                        if current.end == mark:
+                            parts[state].add(current)
+                            state += 1
+                            break
+                        parts[state].add(_clip(current, end=mark))
+                        state += 1
+                        if state >= len(marks):
+                            break
+                        current = _clip(current, start=mark)
+                    if state >= len(marks):
+                        break
+    return [
+        SubtaskSample(words.name, SUBTASKS[i], starts[i], marks[i], parts[i])
+        for i in range(len(starts))
+    ]
+
+
+def window_sample(
+    words: TrialWords, start: float, end: float, subtask: str = "", trial: str | None = None
+) -> SubtaskSample:
+    """The words overlapping [start, end], clipped to it (a live or prefix view of a sub-task).
+
+    A word overlaps when it ends after `start` and starts before `end`; a zero-length window
+    keeps the words that contain its instant, so a 5 ms sub-task is never empty.
+    """
+    out = TrialWords(name=words.name)
+    for arm, per_level in words.words.items():
+        for level, per_axis in per_level.items():
+            for axis, sequence in per_axis.items():
+                target = out.words.setdefault(arm, {}).setdefault(level, {}).setdefault(axis, [])
+                for word in sequence:
+                    if word.end < start or word.start > end:
+                        continue
+                    if word.end == start and word.start < start:
+                        continue
+                    target.append(_clip(word, start, end))
+    return SubtaskSample(words.name if trial is None else trial, subtask, start, end, out)

@@ -1,0 +1,334 @@
+"""Sub-task classifiers (SVM as in the paper, our Mondrian forest) and their safe model files.
+
+A model file is a NumPy .npz read with allow_pickle=False: a JSON header (format version,
+classifier, encoding with its fitted parameters, class names, taxonomy profile, SHA-256 of all
+content) and plain arrays. The SVM pipeline is stored with skops and loaded with an explicit
+trusted-type list, the Mondrian forest as its node arrays. Loading never executes code.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import warnings
+import zipfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from sklearn.pipeline import Pipeline
+from sklearn.preprocessing import StandardScaler
+from sklearn.svm import SVC
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar.encoding import (
+    CompactEncoding,
+    PaperEncoding,
+    encoding_from_state,
+    make_encoding,
+)
+from rcbht_introspection.grammar.split import SubtaskSample
+from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.learn.mondrian import NO_NODE, MondrianForestClassifier, _NodePool
+
+FORMAT = "rcbht-subtask-model"
+FORMAT_VERSION = 1
+CLASSIFIERS = ("svm", "mondrian")
+SVM_TRUSTED_TYPES: tuple[str, ...] = (
+    "sklearn.pipeline.Pipeline",
+    "sklearn.preprocessing._data.StandardScaler",
+    "sklearn.svm._classes.SVC",
+)
+"""The only types a stored SVM pipeline may contain (checked before skops builds anything)."""
+
+
+def make_svm(random_state: int = 0) -> Pipeline:
+    """The paper's classifier: standardised features, RBF SVC, C=1, one-vs-one, Platt probabilities."""
+    return Pipeline(
+        [
+            ("scale", StandardScaler()),
+            (
+                "svc",
+                SVC(
+                    kernel="rbf",
+                    C=1.0,
+                    decision_function_shape="ovo",
+                    probability=True,
+                    random_state=random_state,
+                ),
+            ),
+        ]
+    )
+
+
+def _fit_svm(estimator: Pipeline, X: np.ndarray, y: Sequence[str]) -> Pipeline:
+    """Fit, silencing only sklearn 1.9's deprecation of SVC(probability=True) (the paper's setting)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*probability.*", category=FutureWarning)
+        return estimator.fit(X, list(y))
+
+
+@dataclass
+class SubtaskModel:
+    """A fitted encoding + classifier mapping sub-task samples to sub-task probabilities."""
+
+    classifier: str
+    encoder: PaperEncoding | CompactEncoding
+    estimator: Any
+    taxonomy_profile: str = "reference"
+    random_state: int = 0
+
+    @property
+    def encoding(self) -> str:
+        """Name of the encoding ('paper' or 'compact')."""
+        return self.encoder.name
+
+    @property
+    def classes_(self) -> list[str]:
+        """Sub-task names in the column order of predict_proba_samples."""
+        return [str(c) for c in self.estimator.classes_]
+
+    def features(self, samples: Sequence[SubtaskSample]) -> np.ndarray:
+        return self.encoder.transform(samples)
+
+    def predict_proba_samples(self, samples: Sequence[SubtaskSample]) -> np.ndarray:
+        """(n, k) class probabilities, columns in classes_ order."""
+        return self.estimator.predict_proba(self.features(samples))
+
+    def predict_samples(self, samples: Sequence[SubtaskSample]) -> list[str]:
+        """The predicted sub-task of each sample."""
+        return [str(c) for c in self.estimator.predict(self.features(samples))]
+
+    def partial_fit_samples(self, samples: Sequence[SubtaskSample]) -> SubtaskModel:
+        """Online update with a mini-batch (Mondrian only; the encoding stays as fitted)."""
+        if self.classifier != "mondrian":
+            raise InputError(f"partial_fit needs the mondrian classifier, not {self.classifier}")
+        self.estimator.partial_fit(self.features(samples), [s.subtask for s in samples])
+        return self
+
+
+def train_model(
+    samples: Sequence[SubtaskSample],
+    classifier: str = "svm",
+    encoding: str = "compact",
+    random_state: int = 0,
+    taxonomy_profile: str = "reference",
+    n_estimators: int = 100,
+) -> SubtaskModel:
+    """Fit the encoding and the classifier on `samples` (training data only)."""
+    if classifier not in CLASSIFIERS:
+        raise InputError(f"unknown classifier {classifier!r} (known: {', '.join(CLASSIFIERS)})")
+    if not samples:
+        raise InputError("no training samples")
+    encoder = make_encoding(encoding).fit(samples)
+    X = encoder.transform(samples)
+    y = [s.subtask for s in samples]
+    if classifier == "svm":
+        if len(set(y)) < 2:
+            raise InputError("the SVM needs samples of at least two sub-tasks")
+        estimator: Any = _fit_svm(make_svm(random_state), X, y)
+    else:
+        classes = sorted(set(SUBTASKS) | set(y))
+        estimator = MondrianForestClassifier(n_estimators=n_estimators, random_state=random_state)
+        estimator.partial_fit(X, y, classes=classes)
+    return SubtaskModel(classifier, encoder, estimator, taxonomy_profile, random_state)
+
+
+# ------------------------------------------------------------------------------ model files
+def _forest_arrays(forest: MondrianForestClassifier) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Parameters and arrays that fully describe a fitted forest (including online state)."""
+    pool, size = forest._pool, forest._pool.size
+    leaves = [i for i in range(size) if pool.points[i] is not None]
+    offsets = np.zeros(len(leaves) + 1, dtype=np.int64)
+    offsets[1:] = np.cumsum([len(pool.points[i]) for i in leaves])
+    flat = np.concatenate([pool.points[i] for i in leaves]) if leaves else np.empty(0, np.int64)
+    params = {
+        "n_estimators": int(forest.n_estimators),
+        "discount_factor": float(forest.discount_factor),
+        "random_state": forest.random_state if isinstance(forest.random_state, int) else None,
+        "n_features_in": int(forest.n_features_in_),
+        "rng_state": forest._rng.bit_generator.state,
+    }
+    arrays = {
+        "mf_classes": np.asarray(forest.classes_).astype(str),
+        "mf_roots": forest._roots,
+        "mf_left": pool.left[:size],
+        "mf_right": pool.right[:size],
+        "mf_parent": pool.parent[:size],
+        "mf_feature": pool.feature[:size],
+        "mf_threshold": pool.threshold[:size],
+        "mf_tau": pool.tau[:size],
+        "mf_lower": pool.lower[:size],
+        "mf_upper": pool.upper[:size],
+        "mf_counts": pool.counts[:size],
+        "mf_X": forest._X,
+        "mf_y": forest._y.astype(np.int64),
+        "mf_leaf_nodes": np.asarray(leaves, dtype=np.int64),
+        "mf_leaf_offsets": offsets,
+        "mf_leaf_points": flat.astype(np.int64),
+    }
+    return params, arrays
+
+
+def _forest_from_arrays(params: dict[str, Any], arrays: dict[str, np.ndarray]) -> MondrianForestClassifier:
+    """Rebuild a forest from _forest_arrays output; inconsistent arrays raise ValueError."""
+    forest = MondrianForestClassifier(
+        n_estimators=int(params["n_estimators"]),
+        discount_factor=float(params["discount_factor"]),
+        random_state=params["random_state"],
+    )
+    classes = arrays["mf_classes"]
+    size = len(arrays["mf_left"])
+    n_features = int(params["n_features_in"])
+    forest.classes_ = classes
+    forest.n_features_in_ = n_features
+    forest._rng = np.random.default_rng()
+    forest._rng.bit_generator.state = params["rng_state"]
+    pool = _NodePool(n_features, len(classes), capacity=max(size, 1))
+    pool.size = size
+    for name in ("left", "right", "parent", "feature", "threshold", "tau", "lower", "upper", "counts"):
+        value = arrays[f"mf_{name}"]
+        target = getattr(pool, name)
+        if value.shape != target[:size].shape:
+            raise ValueError(f"array mf_{name} has shape {value.shape}")
+        target[:size] = value
+    links = np.concatenate([pool.left[:size], pool.right[:size], pool.parent[:size], arrays["mf_roots"]])
+    if size == 0 or links.max() >= size or links.min() < NO_NODE:
+        raise ValueError("node links point outside the node arrays")
+    offsets, flat = arrays["mf_leaf_offsets"], arrays["mf_leaf_points"]
+    n_points = len(arrays["mf_y"])
+    if len(flat) and (flat.max() >= n_points or flat.min() < 0):
+        raise ValueError("leaf points point outside the stored data")
+    for k, node in enumerate(arrays["mf_leaf_nodes"]):
+        pool.points[int(node)] = flat[offsets[k] : offsets[k + 1]].astype(np.intp)
+    forest._pool = pool
+    forest._roots = arrays["mf_roots"].astype(np.int32)
+    if len(forest._roots) != forest.n_estimators:
+        raise ValueError("number of roots differs from n_estimators")
+    forest._X = arrays["mf_X"].astype(np.float64)
+    forest._y = arrays["mf_y"].astype(np.intp)
+    forest.gamma_ = forest.discount_factor * n_features
+    forest._update_posterior()
+    return forest
+
+
+def _checksum(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
+    """SHA-256 over the header (without its checksum) and every array's name, dtype, shape, bytes."""
+    digest = hashlib.sha256()
+    digest.update(json.dumps({k: v for k, v in header.items() if k != "checksum"}, sort_keys=True).encode())
+    for name in sorted(arrays):
+        value = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}|{value.dtype.str}|{value.shape}".encode())
+        digest.update(value.tobytes())
+    return digest.hexdigest()
+
+
+def save_model(model: SubtaskModel, path: Path | str) -> Path:
+    """Write `model` as a safe .npz model file (no pickled objects)."""
+    path = Path(path)
+    header: dict[str, Any] = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "classifier": model.classifier,
+        "encoding": model.encoder.to_state(),
+        "classes": model.classes_,
+        "taxonomy_profile": model.taxonomy_profile,
+        "random_state": model.random_state,
+    }
+    if model.classifier == "svm":
+        import skops.io as sio
+
+        arrays = {"svm_skops": np.frombuffer(sio.dumps(model.estimator), dtype=np.uint8)}
+    else:
+        header["mondrian"], arrays = _forest_arrays(model.estimator)
+    header["checksum"] = _checksum(header, arrays)
+    payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("wb") as handle:
+        np.savez_compressed(handle, **payload)
+    return path
+
+
+def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskModel:
+    """Read a model file; a corrupt, tampered, foreign or wrong-version file is a one-line InputError."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {name: npz[name] for name in npz.files}
+    except FileNotFoundError:
+        raise InputError("model file not found", path) from None
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise InputError(f"not a readable model file ({type(exc).__name__})", path) from None
+    if "header" not in arrays:
+        raise InputError("not an rcbht model file (no header)", path)
+    try:
+        header = json.loads(arrays.pop("header").tobytes().decode())
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise InputError("model header is not valid JSON", path, field="header") from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        raise InputError("not an rcbht sub-task model file", path, field="format")
+    if header.get("format_version") != FORMAT_VERSION:
+        raise InputError(
+            f"model format version {header.get('format_version')!r} is not supported "
+            f"(this version reads {FORMAT_VERSION}); retrain with `rcbht train`",
+            path,
+            field="format_version",
+        )
+    if header.get("checksum") != _checksum(header, arrays):
+        raise InputError("checksum mismatch: the model file is corrupt or was modified", path, field="checksum")
+    encoder = encoding_from_state(header.get("encoding") or {})
+    if expect_encoding is not None and encoder.name != expect_encoding:
+        raise InputError(
+            f"model uses the {encoder.name!r} encoding, expected {expect_encoding!r}", path, field="encoding"
+        )
+    classifier = header.get("classifier")
+    try:
+        if classifier == "svm":
+            import skops.io as sio
+
+            data = arrays["svm_skops"].tobytes()
+            untrusted = [t for t in sio.get_untrusted_types(data=data) if t not in SVM_TRUSTED_TYPES]
+            if untrusted:
+                raise InputError(f"SVM holds untrusted types {untrusted}", path, field="svm_skops")
+            estimator: Any = sio.loads(data, trusted=list(SVM_TRUSTED_TYPES))
+        elif classifier == "mondrian":
+            estimator = _forest_from_arrays(header["mondrian"], arrays)
+        else:
+            raise InputError(f"unknown classifier {classifier!r}", path, field="classifier")
+    except InputError:
+        raise
+    except (KeyError, ValueError, TypeError, IndexError) as exc:
+        raise InputError(f"inconsistent model content: {exc}", path, field=str(classifier)) from None
+    if [str(c) for c in estimator.classes_] != header.get("classes"):
+        raise InputError("class names differ from the header", path, field="classes")
+    return SubtaskModel(
+        classifier,
+        encoder,
+        estimator,
+        str(header.get("taxonomy_profile", "reference")),
+        int(header.get("random_state", 0)),
+    )
+
+
+def model_summary(path: Path | str) -> dict[str, Any]:
+    """Header of a model file (for `rcbht train` output and diagnostics)."""
+    model = load_model(path)
+    return {
+        "classifier": model.classifier,
+        "encoding": model.encoding,
+        "classes": model.classes_,
+        "taxonomy_profile": model.taxonomy_profile,
+        "n_features": model.encoder.n_features,
+    }
+
+
+__all__ = [
+    "FORMAT_VERSION",
+    "SubtaskModel",
+    "load_model",
+    "make_svm",
+    "save_model",
+    "train_model",
+]

@@ -1,0 +1,409 @@
+"""Mondrian forest classifier (Lakshminarayanan, Roy, Teh, NIPS 2014), batch and online.
+
+Our own NumPy implementation of the reference algorithm: lifetime = infinity, discount
+gamma = 10 * D, uniform base measure, leaves pause when pure, no bagging; the forest averages
+the trees' hierarchically smoothed predictive distributions. All trees share one flat node pool
+(structure-of-arrays), so prediction walks every tree of the forest at once with NumPy.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.utils.multiclass import check_classification_targets
+from sklearn.utils.validation import check_is_fitted, check_random_state, validate_data
+
+NO_NODE = -1
+
+
+class _NodePool:
+    """Flat arrays of every node of every tree; grows by doubling."""
+
+    def __init__(self, n_features: int, n_classes: int, capacity: int = 256) -> None:
+        self.size = 0
+        self.left = np.full(capacity, NO_NODE, dtype=np.int32)
+        self.right = np.full(capacity, NO_NODE, dtype=np.int32)
+        self.parent = np.full(capacity, NO_NODE, dtype=np.int32)
+        self.feature = np.zeros(capacity, dtype=np.int32)
+        self.threshold = np.zeros(capacity, dtype=np.float64)
+        self.tau = np.full(capacity, np.inf)
+        self.lower = np.zeros((capacity, n_features))
+        self.upper = np.zeros((capacity, n_features))
+        self.counts = np.zeros((capacity, n_classes))
+        self.points: list[np.ndarray | None] = [None] * capacity
+
+    def new(self) -> int:
+        if self.size == len(self.left):
+            self._grow()
+        index = self.size
+        self.size += 1
+        self.left[index] = self.right[index] = self.parent[index] = NO_NODE
+        self.tau[index] = np.inf
+        self.counts[index] = 0.0
+        self.points[index] = None
+        return index
+
+    def _grow(self) -> None:
+        capacity = 2 * len(self.left)
+        for name in ("left", "right", "parent"):
+            old = getattr(self, name)
+            new = np.full(capacity, NO_NODE, dtype=old.dtype)
+            new[: len(old)] = old
+            setattr(self, name, new)
+        for name in ("feature", "threshold", "tau", "lower", "upper", "counts"):
+            old = getattr(self, name)
+            new = np.empty((capacity, *old.shape[1:]), dtype=old.dtype)
+            new[: len(old)] = old
+            setattr(self, name, new)
+        self.points.extend([None] * (capacity - len(self.points)))
+
+
+class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
+    """Online random forest whose trees are Mondrian processes (NIPS 2014).
+
+    Parameters: n_estimators (trees, 100 as in the seed paper), discount_factor (gamma = this
+    times the number of features), random_state. `partial_fit` extends every tree with a
+    mini-batch so that batch and online training give the same distribution of forests.
+    """
+
+    def __init__(
+        self,
+        n_estimators: int = 100,
+        discount_factor: float = 10.0,
+        random_state: int | np.random.RandomState | None = None,
+    ) -> None:
+        self.n_estimators = n_estimators
+        self.discount_factor = discount_factor
+        self.random_state = random_state
+
+    # ---------------------------------------------------------------- sklearn plumbing
+    def __sklearn_tags__(self):
+        tags = super().__sklearn_tags__()
+        tags.classifier_tags.multi_class = True
+        tags.non_deterministic = False
+        return tags
+
+    def _check_params(self) -> None:
+        if not isinstance(self.n_estimators, numbers.Integral) or self.n_estimators < 1:
+            raise ValueError(f"n_estimators must be a positive integer, got {self.n_estimators!r}")
+        if not isinstance(self.discount_factor, numbers.Real) or self.discount_factor <= 0:
+            raise ValueError(f"discount_factor must be > 0, got {self.discount_factor!r}")
+
+    def fit(self, X, y) -> MondrianForestClassifier:
+        """Grow n_estimators Mondrian trees on (X, y) from scratch."""
+        self._check_params()
+        X, y = validate_data(self, X, y, dtype=np.float64)
+        check_classification_targets(y)
+        self.classes_, y_index = np.unique(y, return_inverse=True)
+        self._start(X.shape[1])
+        self._add_data(X, y_index)
+        for tree in range(self.n_estimators):
+            self._roots[tree] = self._grow(np.arange(len(y_index)), NO_NODE, 0.0)
+        self._update_posterior()
+        return self
+
+    def partial_fit(self, X, y, classes=None) -> MondrianForestClassifier:
+        """Extend every tree with a mini-batch; `classes` (all labels) is required on the first call."""
+        first = not hasattr(self, "classes_")
+        if first:
+            self._check_params()
+            if classes is None:
+                raise ValueError("classes must be passed on the first call to partial_fit")
+        X, y = validate_data(self, X, y, dtype=np.float64, reset=first)
+        check_classification_targets(y)
+        if first:
+            self.classes_ = np.unique(np.asarray(classes))
+            self._start(X.shape[1])
+        elif classes is not None and not np.array_equal(np.unique(classes), self.classes_):
+            raise ValueError("classes differ from those of the first call to partial_fit")
+        lookup = {c: i for i, c in enumerate(self.classes_.tolist())}
+        try:
+            y_index = np.array([lookup[c] for c in y.tolist()], dtype=np.intp)
+        except KeyError as exc:
+            raise ValueError(f"label {exc.args[0]!r} is not in classes {self.classes_}") from None
+        new = self._add_data(X, y_index)
+        for tree in range(self.n_estimators):
+            if self._roots[tree] == NO_NODE:
+                self._roots[tree] = self._grow(new, NO_NODE, 0.0)
+            else:
+                self._extend(tree, self._roots[tree], new)
+        self._update_posterior()
+        return self
+
+    # ---------------------------------------------------------------- training
+    def _start(self, n_features: int) -> None:
+        """Reset the forest: empty node pool, no data, a fresh random stream."""
+        self._rng = np.random.default_rng(
+            check_random_state(self.random_state).randint(np.iinfo(np.int32).max)
+        )
+        self._pool = _NodePool(n_features, len(self.classes_))
+        self._roots = np.full(self.n_estimators, NO_NODE, dtype=np.int32)
+        self._X = np.empty((0, n_features))
+        self._y = np.empty(0, dtype=np.intp)
+        self.gamma_ = self.discount_factor * n_features
+
+    def _add_data(self, X: np.ndarray, y_index: np.ndarray) -> np.ndarray:
+        """Store a batch once at forest level (paused leaves index into it); return its indices."""
+        start = len(self._y)
+        self._X = np.concatenate([self._X, X]) if start else np.array(X, dtype=np.float64)
+        self._y = np.concatenate([self._y, y_index])
+        return np.arange(start, len(self._y))
+
+    def _paused(self, counts: np.ndarray, n_points: int, lower: np.ndarray, upper: np.ndarray) -> bool:
+        """A block pauses when its labels are all equal, it has < 2 points or zero volume."""
+        return np.count_nonzero(counts) <= 1 or n_points < 2 or not np.any(upper > lower)
+
+    def _grow(self, points: np.ndarray, parent: int, tau_parent: float) -> int:
+        """Sample a Mondrian block on `points` below `parent` (batch growth); return its node."""
+        pool, X, y = self._pool, self._X, self._y
+        n_classes = pool.counts.shape[1]
+        root = pool.new()
+        stack = [(root, points, parent, tau_parent)]
+        while stack:
+            node, idx, par, tau_par = stack.pop()
+            data = X[idx]
+            lower, upper = data.min(axis=0), data.max(axis=0)
+            counts = np.bincount(y[idx], minlength=n_classes).astype(np.float64)
+            pool.parent[node] = par
+            pool.lower[node], pool.upper[node] = lower, upper
+            pool.counts[node] = counts
+            extent = upper - lower
+            if self._paused(counts, len(idx), lower, upper):
+                pool.tau[node] = np.inf
+                pool.points[node] = idx
+                continue
+            rate = extent.sum()
+            pool.tau[node] = tau_par + self._rng.exponential(1.0 / rate)
+            dim = int(np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right"))
+            dim = min(dim, len(extent) - 1)
+            while extent[dim] <= 0:  # guard the float edge of the cumulative sum
+                dim -= 1
+            cut = self._rng.uniform(lower[dim], upper[dim])
+            go_left = data[:, dim] <= cut
+            left, right = pool.new(), pool.new()
+            pool.feature[node], pool.threshold[node] = dim, cut
+            pool.left[node], pool.right[node] = left, right
+            stack.append((left, idx[go_left], node, pool.tau[node]))
+            stack.append((right, idx[~go_left], node, pool.tau[node]))
+        return root
+
+    def _extend(self, tree: int, node: int, idx: np.ndarray) -> None:
+        """ExtendMondrianBlock: add points `idx` to the block at `node` (may insert a parent)."""
+        pool, X, y = self._pool, self._X, self._y
+        n_classes = pool.counts.shape[1]
+        stack = [(node, idx)]
+        while stack:
+            node, idx = stack.pop()
+            if len(idx) == 0:
+                continue
+            data = X[idx]
+            low, high = data.min(axis=0), data.max(axis=0)
+            e_lower = np.maximum(pool.lower[node] - low, 0.0)
+            e_upper = np.maximum(high - pool.upper[node], 0.0)
+            new_counts = np.bincount(y[idx], minlength=n_classes).astype(np.float64)
+            parent = int(pool.parent[node])
+            tau_parent = 0.0 if parent == NO_NODE else float(pool.tau[parent])
+            if pool.left[node] == NO_NODE:  # paused leaf: absorb, regrow if no longer pure
+                pool.lower[node] = np.minimum(pool.lower[node], low)
+                pool.upper[node] = np.maximum(pool.upper[node], high)
+                pool.counts[node] += new_counts
+                points = np.concatenate([pool.points[node], idx])
+                if self._paused(pool.counts[node], len(points), pool.lower[node], pool.upper[node]):
+                    pool.points[node] = points
+                else:
+                    self._regrow(tree, node, points, parent, tau_parent)
+                continue
+            rate = float(e_lower.sum() + e_upper.sum())
+            split_time = tau_parent + self._rng.exponential(1.0 / rate) if rate > 0 else np.inf
+            if split_time < pool.tau[node]:
+                extent = e_lower + e_upper
+                dim = int(np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right"))
+                dim = min(dim, len(extent) - 1)
+                while extent[dim] <= 0:
+                    dim -= 1
+                if self._rng.random() * extent[dim] <= e_lower[dim]:
+                    cut = self._rng.uniform(low[dim], pool.lower[node, dim])
+                    old_is_left = False
+                else:
+                    cut = self._rng.uniform(pool.upper[node, dim], high[dim])
+                    old_is_left = True
+                new_parent = pool.new()
+                pool.parent[new_parent] = parent
+                pool.lower[new_parent] = np.minimum(pool.lower[node], low)
+                pool.upper[new_parent] = np.maximum(pool.upper[node], high)
+                pool.counts[new_parent] = pool.counts[node] + new_counts
+                pool.tau[new_parent] = split_time
+                pool.feature[new_parent], pool.threshold[new_parent] = dim, cut
+                self._replace_child(tree, parent, node, new_parent)
+                pool.parent[node] = new_parent
+                left_side = data[:, dim] <= cut
+                near, far = (idx[left_side], idx[~left_side]) if old_is_left else (idx[~left_side], idx[left_side])
+                sibling = self._grow(far, new_parent, split_time)
+                if old_is_left:
+                    pool.left[new_parent], pool.right[new_parent] = node, sibling
+                else:
+                    pool.left[new_parent], pool.right[new_parent] = sibling, node
+                stack.append((node, near))
+            else:
+                pool.lower[node] = np.minimum(pool.lower[node], low)
+                pool.upper[node] = np.maximum(pool.upper[node], high)
+                pool.counts[node] += new_counts
+                go_left = data[:, pool.feature[node]] <= pool.threshold[node]
+                stack.append((int(pool.left[node]), idx[go_left]))
+                stack.append((int(pool.right[node]), idx[~go_left]))
+
+    def _replace_child(self, tree: int, parent: int, old: int, new: int) -> None:
+        """Point `parent` (or the tree's root slot) at `new` instead of `old`."""
+        pool = self._pool
+        if parent == NO_NODE:
+            self._roots[tree] = new
+        elif pool.left[parent] == old:
+            pool.left[parent] = new
+        else:
+            pool.right[parent] = new
+
+    def _regrow(self, tree: int, node: int, points: np.ndarray, parent: int, tau_parent: float) -> None:
+        """Replace the leaf `node` by a freshly grown block on `points` (an unpaused leaf)."""
+        fresh = self._grow(points, parent, tau_parent)
+        self._replace_child(tree, parent, node, fresh)
+        self._pool.points[node] = None
+
+    # ---------------------------------------------------------------- posterior
+    def _update_posterior(self) -> None:
+        """Hierarchical (interpolated Kneser-Ney) smoothing of class counts, top-down."""
+        pool = self._pool
+        size = pool.size
+        n_classes = pool.counts.shape[1]
+        is_leaf = pool.left[:size] == NO_NODE
+        cnt = pool.counts[:size].copy()
+        internal = np.flatnonzero(~is_leaf)
+        cnt[internal] = np.minimum(pool.counts[pool.left[internal]], 1.0) + np.minimum(
+            pool.counts[pool.right[internal]], 1.0
+        )
+        parent = pool.parent[:size]
+        tau_parent = np.where(parent == NO_NODE, 0.0, pool.tau[np.maximum(parent, 0)])
+        delta = pool.tau[:size] - tau_parent
+        self._cnt = cnt
+        self._delta = delta
+        self._posterior = np.zeros((size, n_classes))
+        frontier = self._roots.copy()
+        base = np.full((len(frontier), n_classes), 1.0 / n_classes)
+        while len(frontier):
+            c = cnt[frontier]
+            tables = np.minimum(c, 1.0)
+            discount = np.exp(-self.gamma_ * delta[frontier])[:, None]
+            g = (c - discount * tables + discount * tables.sum(axis=1, keepdims=True) * base)
+            g /= c.sum(axis=1, keepdims=True)
+            self._posterior[frontier] = g
+            inner = frontier[~is_leaf[frontier]]
+            frontier = np.concatenate([pool.left[inner], pool.right[inner]])
+            base = np.concatenate([self._posterior[inner], self._posterior[inner]])
+        # compact views for fast prediction
+        self._left = pool.left[:size].copy()
+        self._right = pool.right[:size].copy()
+        self._feature = pool.feature[:size].copy()
+        self._threshold = pool.threshold[:size].copy()
+        self._lower = pool.lower[:size]
+        self._upper = pool.upper[:size]
+        self._parent_posterior = np.where(
+            (parent == NO_NODE)[:, None], 1.0 / n_classes, self._posterior[np.maximum(parent, 0)]
+        )
+        self._tables = np.minimum(cnt, 1.0)
+        self._n_tables = self._tables.sum(axis=1)
+        self._n_customers = cnt.sum(axis=1)
+
+    # ---------------------------------------------------------------- prediction
+    def predict_proba(self, X) -> np.ndarray:
+        """Mean over trees of the predictive class distribution (rows sum to 1)."""
+        check_is_fitted(self, "classes_")
+        X = validate_data(self, X, dtype=np.float64, reset=False)
+        n, n_classes, n_trees = len(X), len(self.classes_), self.n_estimators
+        if n_classes == 1 or (self._roots == NO_NODE).any():
+            proba = np.zeros((n, n_classes))
+            proba[:, 0] = 1.0
+            if n_classes > 1:
+                proba[:] = 1.0 / n_classes
+            return proba
+        gamma = self.gamma_
+        # 1. walk every (sample, tree) path down to its leaf
+        sample = np.repeat(np.arange(n), n_trees)
+        node = np.tile(self._roots, n)
+        rows = [node]
+        alive = np.flatnonzero(self._left[node] != NO_NODE)
+        while len(alive):
+            node = node.copy()
+            nd = node[alive]
+            go_left = X[sample[alive], self._feature[nd]] <= self._threshold[nd]
+            node[alive] = np.where(go_left, self._left[nd], self._right[nd])
+            step = np.full_like(node, NO_NODE)
+            step[alive] = node[alive]
+            rows.append(step)
+            alive = alive[self._left[node[alive]] != NO_NODE]
+        paths = np.stack(rows)  # (depth, n * n_trees), NO_NODE past the leaf
+        valid = paths != NO_NODE
+        nodes = paths[valid]
+        x = X[np.broadcast_to(sample, paths.shape)[valid]]
+        # 2. probability that the test point separates from the tree at each node of its path
+        eta = (np.maximum(self._lower[nodes] - x, 0.0) + np.maximum(x - self._upper[nodes], 0.0)).sum(axis=1)
+        delta = self._delta[nodes]
+        outside = eta > 0
+        p_sep = np.zeros(len(nodes))
+        finite = outside & np.isfinite(delta)
+        p_sep[outside] = 1.0
+        p_sep[finite] = -np.expm1(-delta[finite] * eta[finite])
+        sep = np.zeros(paths.shape)
+        sep[valid] = p_sep
+        not_before = np.ones(paths.shape)
+        not_before[1:] = np.cumprod(1.0 - sep[:-1], axis=0)
+        weight_sep = not_before[valid] * p_sep
+        # 3. posterior of a new node cut above the path node (separated) or the leaf's own
+        contrib = np.zeros((len(nodes), n_classes))
+        o = np.flatnonzero(outside)
+        if len(o):
+            on, oe = nodes[o], eta[o]
+            d_bar = oe / (oe + gamma)
+            fin = np.isfinite(delta[o])
+            if fin.any():
+                fe, fd = oe[fin], delta[o][fin]
+                d_bar[fin] *= np.expm1(-(fe + gamma) * fd) / np.expm1(-fe * fd)
+            mean = (
+                self._cnt[on]
+                - d_bar[:, None] * self._tables[on]
+                + (d_bar * self._n_tables[on])[:, None] * self._parent_posterior[on]
+            ) / self._n_customers[on][:, None]
+            contrib[o] = weight_sep[o][:, None] * mean
+        leaf = self._left[nodes] == NO_NODE
+        contrib[leaf] += ((not_before[valid] * (1.0 - p_sep))[leaf])[:, None] * self._posterior[nodes[leaf]]
+        full = np.zeros((*paths.shape, n_classes))
+        full[valid] = contrib
+        proba = full.sum(axis=0)
+        proba = proba.reshape(n, n_trees, n_classes).mean(axis=1)
+        proba /= proba.sum(axis=1, keepdims=True)
+        return proba
+
+    def predict(self, X) -> np.ndarray:
+        """The class with the largest predictive probability."""
+        proba = self.predict_proba(X)
+        return self.classes_[np.argmax(proba, axis=1)]
+
+    # ---------------------------------------------------------------- introspection
+    @property
+    def n_nodes_(self) -> int:
+        check_is_fitted(self, "classes_")
+        return int(self._pool.size)
+
+    def tree_depths(self) -> np.ndarray:
+        """Depth of every tree (root = 0), for diagnostics."""
+        check_is_fitted(self, "classes_")
+        depth = np.zeros(self.n_estimators, dtype=int)
+        for tree, root in enumerate(self._roots):
+            stack, best = [(int(root), 0)], 0
+            while stack:
+                node, d = stack.pop()
+                best = max(best, d)
+                if self._pool.left[node] != NO_NODE:
+                    stack += [(int(self._pool.left[node]), d + 1), (int(self._pool.right[node]), d + 1)]
+            depth[tree] = best
+        return depth

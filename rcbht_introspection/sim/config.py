@@ -1,0 +1,201 @@
+"""Typed configuration of the snap-assembly simulator (config/sim.yaml): every physical constant,
+controller gain, variation range and failure offset lives here, none in the code."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rcbht_introspection.config import config_path, load_yaml
+
+Range = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class GeometryConfig:
+    """Dimensions (m) of the male camera part and the female snap housing."""
+
+    male_half: float = 0.02
+    """Half width of the male part's lower block (square footprint)."""
+    male_lower_height: float = 0.005
+    """Height of the lower block; its top edge is the shoulder the snap hooks catch."""
+    male_neck_half: float = 0.014
+    male_neck_height: float = 0.02
+    clearance: float = 0.0004
+    """Gap between the male block and the housing's inner faces."""
+    base_half: float = 0.04
+    base_thickness: float = 0.01
+    wall_height: float = 0.011
+    wall_thickness: float = 0.004
+    chamfer: float = 0.0025
+    """Size of the 45 degree lead-in chamfer on the top inner edge of walls and beams."""
+    beam_half_width: float = 0.011
+    beam_thickness: float = 0.002
+    beam_root_depth: float = 0.008
+    """The beams are rooted this far below the housing floor (their lever arm grows with it)."""
+    hook_depth: float = 0.0014
+    """How far each snap hook protrudes into the opening (the beam deflection needed)."""
+    hook_ramp: float = 0.003
+    """Vertical length of the hook's lead-in ramp."""
+    hook_play: float = 0.0005
+    """Vertical gap between the seated male's shoulder and the hook's retention face."""
+    sensor_height: float = 0.07
+    """Height of the force/torque sensor site above the male part's bottom face."""
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    """MuJoCo constants: time step, masses, stiffnesses, friction, contact softness, gravity."""
+
+    timestep: float = 0.001
+    gravity: float = 9.81
+    male_mass: float = 0.12
+    hand_mass: float = 0.35
+    female_mass: float = 0.25
+    beam_stiffness: float = 0.65
+    """Rotational stiffness (N m/rad) of each cantilever beam about its root."""
+    beam_damping: float = 0.004
+    beam_armature: float = 1.0e-5
+    friction: float = 0.3
+    contact_solref: tuple[float, float] = (0.008, 1.0)
+    contact_solimp: tuple[float, float, float] = (0.95, 0.99, 0.001)
+    arm_kp_lin: float = 20000.0
+    """Stiffness (N/m) of the arm's Cartesian position servo."""
+    arm_kd_lin: float = 250.0
+    arm_kp_rot: float = 60.0
+    arm_kd_rot: float = 0.6
+    arm_link_mass: float = 0.5
+    arm_link_inertia: float = 0.001
+    holder_kp_lin: float = 15000.0
+    """Stiffness of the second arm holding the female part (two-arm scenario)."""
+    holder_kd_lin: float = 220.0
+    holder_kp_rot: float = 80.0
+    holder_kd_rot: float = 0.8
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Scripted hybrid force/position controller: speeds, force set-points, gains, time-outs."""
+
+    start_height: Range = (0.028, 0.04)
+    """Initial clearance (m) of the male bottom above the housing top, drawn per trial."""
+    approach_speed: Range = (0.005, 0.008)
+    contact_force: float = 2.0
+    """Guarded move: force (N) that ends the approach."""
+    approach_timeout: float = 15.0
+    tilt: Range = (0.12, 0.22)
+    """Initial side-approach tilt (rad) about the y axis, removed during the rotation sub-task."""
+    lateral_lead: float = 0.004
+    """The male starts this far (m) towards -x, so its low edge lands on the +x chamfer."""
+    rotation_speed: Range = (0.025, 0.05)
+    """Angular speed (rad/s) of the alignment rotation."""
+    rotation_force: Range = (5.0, 9.0)
+    """Force (N) kept on the contact while rotating."""
+    rotation_settle: float = 0.6
+    insertion_force_rate: Range = (10.0, 18.0)
+    """Ramp (N/s) of the insertion force set-point."""
+    insertion_force_max: float = 45.0
+    insertion_timeout: float = 8.0
+    insertion_stroke: float = 0.002
+    """Planned stroke: the insertion never goes deeper than this below the believed seat height."""
+    snap_drop: float = 0.25
+    """Snap-through detected when force falls by this fraction below its insertion peak."""
+    snap_min_peak: float = 13.0
+    seat_fraction: float = 0.7
+    """After the snap, the part counts as seated once the force is back to this fraction of the hold force."""
+    seat_settle: float = 0.3
+    seat_tolerance: float = 0.002
+    """Seated only if the tool is within this height (m) of the believed seat."""
+    hold_force: Range = (22.0, 34.0)
+    hold_time: Range = (3.0, 14.0)
+    retract_speed: Range = (0.00012, 0.0003)
+    """Move-away speed (m/s) after the hold; stops at release_force or retract_time."""
+    retract_lateral: Range = (-0.0003, 0.0003)
+    """Range of the move-away path's lateral speed (m/s) in x and y."""
+    release_force: float = 3.0
+    retract_time: float = 9.0
+    tail_time: float = 0.5
+    abort_time: float = 1.5
+    backoff_speed: float = 0.004
+    """Upward speed (m/s) of the back-off after an aborted insertion."""
+    """After a failed insertion: time spent backing off before the trial ends."""
+    force_gain: float = 0.00015
+    """Admittance gain (m/s per N) of the force-controlled axis."""
+    max_admittance_speed: float = 0.004
+    """Speed limit (m/s) of the admittance loop."""
+    lateral_gain: float = 1.5
+    """Proportional gain (1/s) pulling the lateral position towards the believed hole centre."""
+    centering_time: float = 1.0
+    """Insertion: the lateral servo centres the part this long (s), then only complies."""
+    lateral_compliance: float = 0.0002
+    """Lateral admittance (m/s per N) during insertion and mating: yield to the housing's push."""
+    force_filter: float = 0.02
+    """Time constant (s) of the controller's force low-pass filter."""
+    holder_force: float = 2.0
+    """Two-arm: upward preload (N) of the holding arm; its admittance yields to the insertion force."""
+    holder_compliance: float = 0.00015
+    """Two-arm: holder's admittance (m per N) around its home pose."""
+
+
+@dataclass(frozen=True)
+class VariationConfig:
+    """Per-trial random variation (uniform ranges or std) of a successful trial."""
+
+    offset_xy: float = 0.0006
+    """Std (m) of the unknown female pose offset in x and y."""
+    offset_z: float = 0.0005
+    offset_yaw: float = 0.01
+    """Std (rad) of the female yaw offset."""
+    friction_scale: Range = (0.75, 1.3)
+    stiffness_scale: Range = (0.8, 1.25)
+    noise_scale: Range = (0.7, 1.4)
+    bias_force: float = 0.25
+    bias_torque: float = 0.01
+
+
+@dataclass(frozen=True)
+class FailureConfig:
+    """Offsets that produce each failure type (sampled uniformly in the ranges)."""
+
+    types: tuple[str, ...] = ("misalignment", "jamming", "missed_snap")
+    misalignment_xy: Range = (0.004, 0.007)
+    """Lateral offset (m) beyond the chamfer's capture range: the male lands on the housing top."""
+    jamming_yaw: Range = (0.12, 0.2)
+    """Yaw offset (rad) that wedges the male's corners on the housing walls."""
+    missed_snap_z: Range = (0.004, 0.007)
+    """Housing lower than believed (m): the insertion stroke ends before the hooks engage."""
+    max_attempts: int = 4
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """Force/torque sensor model: white noise std, low-frequency drift, output filtering."""
+
+    noise_force: float = 0.04
+    noise_torque: float = 0.0015
+    drift_force: float = 0.05
+    drift_torque: float = 0.002
+    vibration_force: float = 0.06
+    """Std (N) of the arm's structural vibration seen by the sensor (low-pass, see vibration_time)."""
+    vibration_torque: float = 0.002
+    vibration_time: float = 0.25
+    """Correlation time (s) of the vibration (an Ornstein-Uhlenbeck process)."""
+    quantization_force: float = 0.001
+    quantization_torque: float = 0.0001
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Every number the simulator uses, one object per trial set."""
+
+    geometry: GeometryConfig = field(default_factory=GeometryConfig)
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    controller: ControllerConfig = field(default_factory=ControllerConfig)
+    variation: VariationConfig = field(default_factory=VariationConfig)
+    failures: FailureConfig = field(default_factory=FailureConfig)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+
+
+def load_sim_config(path: Path | str | None = None) -> SimConfig:
+    """Load config/sim.yaml (or `path`); unknown keys and wrong types give one-line errors."""
+    return load_yaml(SimConfig, path if path is not None else config_path("sim.yaml"))

@@ -1,0 +1,159 @@
+"""Write a simulated data set: one folder per trial in the HIRO layout, or one rosbag2 per trial.
+
+Trial i of a set uses seed `seed * 1000 + i`; with failures on, every second trial is a failure,
+cycling through the configured failure types. A dataset-level sim_meta.json lists every trial's
+outcome and variation; each HIRO trial folder also gets outcome.txt and meta.json.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.hiro import write_trial
+from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.sim.config import SimConfig, load_sim_config
+from rcbht_introspection.sim.scenario import get_scenario
+from rcbht_introspection.sim.simulate import simulate_trial
+
+FORMATS: tuple[str, ...] = ("hiro", "bag")
+
+
+def trial_plan(
+    n_trials: int, seed: int, failures: bool, types: tuple[str, ...]
+) -> list[tuple[int, str | None]]:
+    """(trial seed, failure type or None) for each trial of a set."""
+    plan: list[tuple[int, str | None]] = []
+    for i in range(n_trials):
+        failure = types[(i // 2) % len(types)] if failures and i % 2 == 1 else None
+        plan.append((seed * 1000 + i, failure))
+    return plan
+
+
+def trial_name(scenario: str, index: int, failure: str | None) -> str:
+    """Folder name in the HIRO style: SIM-<ONE|TWO>-S-<nn> or SIM-<..>-F-<nn>-<type>."""
+    arms = "ONE" if scenario == "one-arm" else "TWO"
+    if failure is None:
+        return f"SIM-{arms}-S-{index + 1:02d}"
+    return f"SIM-{arms}-F-{index + 1:02d}-{failure}"
+
+
+def _bag_writer() -> Callable[[Trial, Path], None]:
+    """The rosbag2 writer of io.bags, imported only when a bag is asked for."""
+    try:
+        module = importlib.import_module("rcbht_introspection.io.bags")
+    except ModuleNotFoundError as exc:
+        raise InputError(
+            "--format bag needs rcbht_introspection.io.bags (the rosbag2 writer of the ROS "
+            f"branch), which is not installed here ({exc.name} missing); use --format hiro",
+            field="format",
+        ) from None
+    return module.write_trial_bag
+
+
+def _clear_previous_set(out: Path) -> None:
+    """Re-running into a folder replaces the previous simulated set; foreign trials are an error.
+
+    A folder holding a sim_meta.json is our own earlier output: its listed trials are removed so no
+    stale trial of a larger earlier set survives. A folder with other trial data is refused.
+    """
+    if not out.is_dir():
+        return
+    meta = out / "sim_meta.json"
+    if meta.is_file():
+        try:
+            names = [t["name"] for t in json.loads(meta.read_text())["trials"]]
+        except (ValueError, KeyError, TypeError):
+            raise InputError(
+                "unreadable sim_meta.json; remove the folder first", path=meta
+            ) from None
+        for name in names:
+            shutil.rmtree(out / name, ignore_errors=True)
+            for suffix in (".mcap", ".db3"):
+                (out / f"{name}{suffix}").unlink(missing_ok=True)
+        meta.unlink()
+    if find_trials_in(out):
+        raise InputError(
+            "folder already holds trial data that this simulator did not write", path=out
+        )
+
+
+def find_trials_in(out: Path) -> list[Path]:
+    """Trial folders or bag files directly inside `out`."""
+    return sorted(
+        p
+        for p in out.iterdir()
+        if p.suffix in (".mcap", ".db3")
+        or (p / "R_Torques.dat").is_file()
+        or (p / "L_Torques.dat").is_file()
+    )
+
+
+def write_dataset(
+    out_dir: Path | str,
+    n_trials: int,
+    *,
+    scenario: str = "one-arm",
+    seed: int = 0,
+    failures: bool = False,
+    rate_hz: float = 200.0,
+    fmt: str = "hiro",
+    progress: bool = False,
+    config: SimConfig | None = None,
+) -> list[Path]:
+    """Simulate `n_trials` trials into `out_dir`; returns the written trial folders (or bag files)."""
+    if fmt not in FORMATS:
+        raise InputError(f"unknown format {fmt!r} (known: {', '.join(FORMATS)})", field="format")
+    if n_trials < 1:
+        raise InputError(f"need at least one trial, got {n_trials}", field="trials")
+    get_scenario(scenario)
+    config = config or load_sim_config()
+    write_bag = _bag_writer() if fmt == "bag" else None
+    out = Path(out_dir)
+    _clear_previous_set(out)
+    out.mkdir(parents=True, exist_ok=True)
+    plan = trial_plan(n_trials, seed, failures, config.failures.types)
+    items = enumerate(plan)
+    if progress:
+        from tqdm import tqdm
+
+        items = tqdm(items, total=len(plan), desc="simulating", unit="trial")
+    written: list[Path] = []
+    index: list[dict[str, object]] = []
+    for i, (trial_seed, failure) in items:
+        name = trial_name(scenario, i, failure)
+        trial = simulate_trial(config, trial_seed, scenario, failure, rate_hz, name=name)
+        if write_bag is not None:
+            path = out / f"{name}.mcap"
+            write_bag(trial, path)
+        else:
+            path = write_trial(trial, out / name)
+            (path / "meta.json").write_text(json.dumps(trial.metadata, indent=1) + "\n")
+        written.append(path)
+        index.append(
+            {
+                "name": name,
+                "outcome": trial.outcome,
+                "state_times": list(trial.state_times),
+                "end_time": trial.end_time,
+                **trial.metadata,
+            }
+        )
+    (out / "sim_meta.json").write_text(
+        json.dumps(
+            {
+                "scenario": scenario,
+                "seed": seed,
+                "rate_hz": rate_hz,
+                "format": fmt,
+                "trials": index,
+            },
+            indent=1,
+        )
+        + "\n"
+    )
+    return written

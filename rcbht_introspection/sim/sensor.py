@@ -1,0 +1,80 @@
+"""Force/torque sensor model: tare, bias, drift, white noise, quantization, output rate.
+
+The physics runs at 1/timestep; the sensor averages the physics samples of each output period
+(a box anti-alias filter, as a strain-gauge amplifier does) and then adds its own errors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.sim.config import SensorConfig
+
+
+@dataclass(frozen=True)
+class SensorDraw:
+    """Per-trial sensor errors: constant bias (6,), drift amplitude and period, noise scale."""
+
+    bias: np.ndarray
+    drift: np.ndarray
+    drift_period: float
+    drift_phase: float
+    noise_scale: float
+
+
+def decimation(rate_hz: float, timestep: float) -> int:
+    """Physics steps per output sample; the rate must divide the physics rate."""
+    if rate_hz <= 0:
+        raise InputError(f"rate must be positive, got {rate_hz}", field="rate")
+    ratio = 1.0 / (timestep * rate_hz)
+    k = round(ratio)
+    if k < 1 or abs(ratio - k) > 1e-6:
+        raise InputError(
+            f"rate {rate_hz:g} Hz does not divide the physics rate {1.0 / timestep:g} Hz",
+            field="rate",
+        )
+    return k
+
+
+def resample(raw: np.ndarray, k: int) -> np.ndarray:
+    """Box-average consecutive blocks of `k` physics samples (drops an incomplete last block)."""
+    n = len(raw) // k
+    return raw[: n * k].reshape(n, k, raw.shape[1]).mean(axis=1)
+
+
+def measure(
+    wrench: np.ndarray,
+    time: np.ndarray,
+    config: SensorConfig,
+    draw: SensorDraw,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Add bias, slow drift, white noise and quantization to a true (tared) wrench (N, 6)."""
+    std = np.array([config.noise_force] * 3 + [config.noise_torque] * 3) * draw.noise_scale
+    q = np.array([config.quantization_force] * 3 + [config.quantization_torque] * 3)
+    drift = draw.drift[None, :] * np.sin(
+        2 * np.pi * time[:, None] / draw.drift_period + draw.drift_phase
+    )
+    out = wrench + draw.bias[None, :] + drift + rng.normal(0.0, 1.0, wrench.shape) * std[None, :]
+    out += vibration(time, config, draw.noise_scale, rng)
+    return np.round(out / q) * q
+
+
+def vibration(
+    time: np.ndarray, config: SensorConfig, scale: float, rng: np.random.Generator
+) -> np.ndarray:
+    """Low-frequency structural vibration: an exact-discretised Ornstein-Uhlenbeck process."""
+    n = len(time)
+    out = np.zeros((n, 6))
+    if n < 2:
+        return out
+    dt = float(time[1] - time[0])
+    a = np.exp(-dt / config.vibration_time)
+    std = np.array([config.vibration_force] * 3 + [config.vibration_torque] * 3) * scale
+    kicks = rng.normal(0.0, 1.0, (n, 6)) * std[None, :] * np.sqrt(1.0 - a * a)
+    from scipy.signal import lfilter
+
+    return lfilter([1.0], [1.0, -a], kicks, axis=0)

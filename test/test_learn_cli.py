@@ -1,0 +1,69 @@
+"""`rcbht evaluate` and `rcbht train` in-process on a few REAL trials (tiny protocol)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from rcbht_introspection.cli import main
+from rcbht_introspection.learn.data import load_trials
+from rcbht_introspection.learn.evaluate import Protocol, evaluate
+from rcbht_introspection.learn.models import load_model
+
+KEYS = {"steady_state_accuracy", "curve", "per_class_accuracy", "confusion_matrix", "best_of_splits",
+        "fit_seconds", "predict_ms", "duration_baseline", "prefix_accuracy", "without_near_empty"}  # fmt: skip
+
+
+@pytest.mark.shared_data
+def test_evaluate_writes_the_documented_json_and_plot(hiro_data: Path, tmp_path: Path) -> None:
+    # trials 19..28 mix long and 5 ms rotations
+    subset = sorted((hiro_data / "REAL_HIRO_ONE_SA_SUCCESS").iterdir())[18:28]
+    data = tmp_path / "subset"
+    data.mkdir()
+    for trial in subset:
+        (data / trial.name).symlink_to(trial)
+    out, png = tmp_path / "eval.json", tmp_path / "curve.png"
+    code = main(["evaluate", str(data), "--classifier", "mondrian", "--n-estimators", "10",
+                 "--permutations", "2", "--validation-trials", "3", "--json", str(out),
+                 "--plot", str(png), "--no-progress"])  # fmt: skip
+    assert code == 0 and png.stat().st_size > 1000
+    result = json.loads(out.read_text())
+    assert set(result) >= KEYS
+    assert [p["n_train_trials"] for p in result["curve"]] == [3, 4, 5, 6, 7]
+    assert 0.0 <= result["steady_state_accuracy"]["mean"] <= 1.0
+    assert set(result["steady_state_accuracy"]) == {"mean", "std"}
+    assert sum(map(sum, result["confusion_matrix"]["matrix"])) == 2 * 3 * 4
+    assert set(result["prefix_accuracy"]) == {"25%", "50%", "75%"}
+    assert result["without_near_empty"]["n_samples_removed"] > 0
+    assert result["best_of_splits"] >= result["trial_splits"]["mean"]
+    assert result["duration_baseline"]["curve"][0]["n_train_trials"] == 3
+
+
+@pytest.mark.shared_data
+def test_svm_curve_starts_at_one_trial_and_excludes_incomplete_trials(hiro_data: Path) -> None:
+    sim = sorted((hiro_data / "SIM_HIRO_ONE_SA_SUCCESS").iterdir())
+    names = [p for p in sim if p.name.startswith("20160911-21")][:6]
+    trials = load_trials(names)
+    assert any(not t.complete for t in trials)
+    result = evaluate(trials, Protocol(classifier="svm", permutations=1, n_validation=2, variant=False))
+    assert result["excluded_trials"] == ["20160911-2136-SideApproach-S"]
+    assert result["curve"][0]["n_train_trials"] == 1
+    assert result["n_trials"] == len(trials) - 1
+
+
+@pytest.mark.shared_data
+def test_train_writes_a_loadable_model(hiro_data: Path, tmp_path: Path, capsys) -> None:
+    trials = sorted((hiro_data / "REAL_HIRO_ONE_SA_SUCCESS").iterdir())[20:24]
+    out = tmp_path / "model.npz"
+    assert main(["train", *map(str, trials), "--out", str(out), "--classifier", "mondrian"]) == 0
+    assert "16 samples" in capsys.readouterr().out
+    model = load_model(out, expect_encoding="compact")
+    assert model.classifier == "mondrian" and len(model.classes_) == 4
+
+
+def test_bad_inputs_are_one_line_errors(tmp_path: Path, capsys) -> None:
+    assert main(["evaluate", str(tmp_path / "none"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("rcbht evaluate: error:") and err.count("\n") == 1

@@ -1,0 +1,147 @@
+"""Sub-task models on golden words: training, the safe model file (round trip, tampering,
+wrong version, wrong encoding), online updates, and the near-empty rotation sub-task."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.learn.data import load_samples, load_trials
+from rcbht_introspection.learn.models import load_model, save_model, train_model
+
+REAL = "REAL_HIRO_ONE_SA_SUCCESS"
+# S-01..S-21 have a long rotation, S-22..S-46 a 5 ms one: take both kinds
+TRAIN = ["20121127-HIROSA-S-01", "20121127-HIROSA-S-05", "20121127-HIROSA-S-09",
+         "20121127-HIROSA-S-13", "20121127-HIROSA-S-24", "20121127-HIROSA-S-28",
+         "20121127-HIROSA-S-32", "20121127-HIROSA-S-36"]  # fmt: skip
+VALID = ["20121127-HIROSA-S-03", "20121127-HIROSA-S-17", "20121127-HIROSA-S-30", "20121127-HIROSA-S-44"]
+
+
+@pytest.fixture(scope="module")
+def samples(hiro_data: Path) -> tuple[list, list]:
+    root = hiro_data / REAL
+    return load_samples([root / t for t in TRAIN], "golden"), load_samples([root / t for t in VALID], "golden")
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize(("classifier", "encoding"), [("svm", "compact"), ("mondrian", "compact"), ("svm", "paper")])
+def test_model_round_trips_through_the_safe_file(samples, tmp_path: Path, classifier: str, encoding: str) -> None:
+    train, valid = samples
+    model = train_model(train, classifier, encoding, random_state=1)
+    assert model.classes_ == ["approach", "insertion", "mating", "rotation"]
+    proba = model.predict_proba_samples(valid)
+    np.testing.assert_allclose(proba.sum(axis=1), 1.0)
+    path = save_model(model, tmp_path / "model.npz")
+    loaded = load_model(path, expect_encoding=encoding)
+    assert (loaded.classifier, loaded.encoding, loaded.classes_) == (classifier, encoding, model.classes_)
+    np.testing.assert_allclose(loaded.predict_proba_samples(valid), proba)
+    assert loaded.predict_samples(valid) == model.predict_samples(valid)
+
+
+@pytest.mark.shared_data
+def test_near_empty_rotation_is_classified_right(samples) -> None:
+    train, valid = samples
+    for classifier in ("svm", "mondrian"):
+        model = train_model(train, classifier, "compact")
+        short = [s for s in valid if s.duration < 0.05]
+        assert short and all(s.subtask == "rotation" for s in short)
+        assert model.predict_samples(short) == ["rotation"] * len(short)
+        accuracy = np.mean([p == s.subtask for p, s in zip(model.predict_samples(valid), valid, strict=True)])
+        assert accuracy >= 0.75, (classifier, accuracy)
+
+
+@pytest.mark.shared_data
+def test_online_update_continues_from_a_loaded_forest(samples, tmp_path: Path) -> None:
+    train, valid = samples
+    model = train_model(train[:8], "mondrian", "compact")
+    loaded = load_model(save_model(model, tmp_path / "mf.npz"))
+    for model_ in (model, loaded):
+        for start in range(8, len(train), 4):
+            model_.partial_fit_samples(train[start : start + 4])
+    # the stored random stream continues, so both forests grow identically
+    np.testing.assert_allclose(model.predict_proba_samples(valid), loaded.predict_proba_samples(valid))
+    with pytest.raises(InputError, match="mondrian"):
+        train_model(train, "svm", "compact").partial_fit_samples(train[:4])
+
+
+def _rewrite(path: Path, out: Path, edit) -> Path:
+    with np.load(path, allow_pickle=False) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    header = json.loads(arrays["header"].tobytes())
+    edit(header, arrays)
+    arrays["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
+    np.savez(out, **arrays)
+    return out
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize("classifier", ["svm", "mondrian"])
+def test_bad_model_files_give_one_line_errors(samples, tmp_path: Path, classifier: str) -> None:
+    train, _ = samples
+    path = save_model(train_model(train, classifier, "compact"), tmp_path / "m.npz")
+
+    def tamper(header: dict, arrays: dict) -> None:
+        name = "svm_skops" if classifier == "svm" else "mf_threshold"
+        value = arrays[name].copy()
+        value[len(value) // 2] += 1
+        arrays[name] = value
+
+    def version(header: dict, arrays: dict) -> None:
+        header["format_version"] = 99
+
+    def relabel(header: dict, arrays: dict) -> None:
+        header["classes"] = ["a", "b", "c", "d"]
+
+    cases = {
+        "checksum": _rewrite(path, tmp_path / "tampered.npz", tamper),
+        "format version 99": _rewrite(path, tmp_path / "version.npz", version),
+        "checksum mismatch": _rewrite(path, tmp_path / "relabel.npz", relabel),
+    }
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    cases["not a readable model file"] = truncated
+    garbage = tmp_path / "garbage.npz"
+    garbage.write_bytes(b"not a zip at all")
+    cases["not a readable model file "] = garbage
+    for expected, bad in cases.items():
+        with pytest.raises(InputError) as info:
+            load_model(bad)
+        message = str(info.value)
+        assert expected.strip() in message and "\n" not in message and str(bad) in message
+    with pytest.raises(InputError, match="expected 'paper'"):
+        load_model(path, expect_encoding="paper")
+    with pytest.raises(InputError, match="not found"):
+        load_model(tmp_path / "missing.npz")
+
+
+@pytest.mark.shared_data
+def test_trials_with_missing_subtasks_are_marked_incomplete(hiro_data: Path) -> None:
+    trial = load_trials([hiro_data / "SIM_HIRO_ONE_SA_SUCCESS" / "20160911-2136-SideApproach-S"])[0]
+    assert trial.source == "golden" and not trial.complete
+    assert [s.subtask for s in trial.samples] == ["approach", "rotation"]
+
+
+def test_unknown_word_source_and_missing_input(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="word source"):
+        load_samples([tmp_path], "magic")
+    with pytest.raises(InputError):
+        load_samples([tmp_path / "nowhere"])
+
+
+@pytest.mark.shared_data
+def test_engine_words_give_the_same_samples_as_golden(hiro_data: Path) -> None:
+    """words='engine' (batch RCBHT on the wrench) splits into the same sub-task words."""
+    trial = hiro_data / REAL / "20121127-HIROSA-S-30"
+    engine, golden = load_samples([trial], "engine"), load_samples([trial], "golden")
+    from rcbht_introspection.grammar.encoding import compact_raw_features
+
+    assert [(s.subtask, s.start, s.end) for s in engine] == [(s.subtask, s.start, s.end) for s in golden]
+    for ours, theirs in zip(engine, golden, strict=True):
+        a, b = compact_raw_features(ours, ["R"]), compact_raw_features(theirs, ["R"])
+        assert set(a) == set(b)
+        # golden files hold 5 decimals
+        assert max(abs(a[k] - b[k]) for k in a) < 1e-4
