@@ -32,6 +32,8 @@ class ClassifierNode(Node):
         super().__init__("classifier_node")
         self.cfg = declare_config(self, ClassifierConfig)
         cfg = self.cfg
+        # predictions on one sample at a time: skip sklearn's per-call input validation
+        sklearn_fast_predict()
         model, why = load_subtask_model(cfg.model_file, cfg.expected_profile)
         if model is None:
             self.get_logger().error(f"no usable model, /task_state stays {UNKNOWN!r}: {why}")
@@ -149,6 +151,16 @@ class ClassifierNode(Node):
 
     def publish_state(self) -> None:
         self.state_pub.publish(String(data=self.state))
+
+
+def sklearn_fast_predict() -> None:
+    """Per-sample predictions: skip scikit-learn's input validation (features are finite)."""
+    try:
+        import sklearn
+
+        sklearn.set_config(assume_finite=True, skip_parameter_validation=True)
+    except ImportError:  # no model can load without it anyway
+        pass
 
 
 def main(args: list[str] | None = None) -> int:
