@@ -89,3 +89,20 @@ def test_compact_state_round_trip_and_bad_state() -> None:
         encoding_from_state({"name": "compact", "arms": ["R"]})
     with pytest.raises(InputError, match="unknown encoding"):
         encoding_from_state({"name": "fourier"})
+
+
+def test_two_arm_samples_concatenate_both_arms() -> None:
+    def two_arm(subtask: str, duration: float, left: str, right: str) -> SubtaskSample:
+        tw = TrialWords(name="t")
+        for arm, label in (("L", left), ("R", right)):
+            tw.add(Word(axis="Fz", level=Level.BEHAVIOR, label=label, start=0.0, end=duration, arm=arm))
+        return SubtaskSample("t", subtask, 0.0, duration, tw)
+
+    train = [two_arm("approach", 2.0, "FX", "CT"), two_arm("mating", 3.0, "CT", "FX")]
+    paper = PaperEncoding().fit(train)
+    assert paper.arms == ("L", "R") and paper.n_features == 2 * 6 * 3
+    X = paper.transform(train)
+    fz_behavior = [i for i in range(X.shape[1]) if (i % (6 * 3)) == 2 * 6 + 2]  # level 2, axis Fz
+    assert X[0, fz_behavior].tolist() == [0, 1] and X[1, fz_behavior].tolist() == [1, 0]
+    compact = CompactEncoding(k=None).fit(train)
+    assert {"L/behavior/Fz/frac:FX", "R/behavior/Fz/frac:FX"} <= set(compact.feature_names)

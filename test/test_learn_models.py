@@ -28,7 +28,7 @@ def samples(hiro_data: Path) -> tuple[list, list]:
 
 
 @pytest.mark.shared_data
-@pytest.mark.parametrize(("classifier", "encoding"), [("svm", "compact"), ("mondrian", "compact"), ("svm", "paper")])
+@pytest.mark.parametrize(("classifier", "encoding"), [("svm", "compact"), ("mondrian", "compact"), ("svm", "paper"), ("svm-tuned", "compact")])
 def test_model_round_trips_through_the_safe_file(samples, tmp_path: Path, classifier: str, encoding: str) -> None:
     train, valid = samples
     model = train_model(train, classifier, encoding, random_state=1)
@@ -145,3 +145,15 @@ def test_engine_words_give_the_same_samples_as_golden(hiro_data: Path) -> None:
         assert set(a) == set(b)
         # golden files hold 5 decimals
         assert max(abs(a[k] - b[k]) for k in a) < 1e-4
+
+
+@pytest.mark.shared_data
+def test_prefix_augmentation_adds_the_prefixes_as_training_samples(samples) -> None:
+    train, valid = samples
+    model = train_model(train, "mondrian", "compact", augment_prefixes=(0.5,))
+    assert len(model.estimator._y) == 2 * len(train)
+    from rcbht_introspection.grammar.split import prefix_sample
+
+    halves = [prefix_sample(s, 0.5) for s in valid]
+    assert all(h.end - h.start == pytest.approx(0.5 * s.duration) for h, s in zip(halves, valid, strict=True))
+    assert model.predict_proba_samples(halves).shape == (len(valid), 4)

@@ -46,6 +46,8 @@ def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--encoding", choices=ENCODINGS, default="compact")
     parser.add_argument("--words", choices=WORD_SOURCES, default="auto",
                         help="golden label files, the batch engine, or golden when present")
+    parser.add_argument("--augment-prefixes", type=float, nargs="*", default=[], metavar="F",
+                        help="also train on these fractions of each sub-task (e.g. 0.25 0.5 0.75)")
 
 
 def run_train(args: argparse.Namespace) -> int:
@@ -53,7 +55,8 @@ def run_train(args: argparse.Namespace) -> int:
 
     trials = load_trials(args.inputs, args.words)
     samples = [s for t in trials for s in t.samples]
-    model = train_model(samples, args.classifier, args.encoding, random_state=args.seed)
+    model = train_model(samples, args.classifier, args.encoding, random_state=args.seed,
+                        augment_prefixes=tuple(args.augment_prefixes))
     save_model(model, args.out)
     print(
         f"wrote {args.out}: {args.classifier}/{args.encoding}, {len(samples)} samples from "
@@ -89,6 +92,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         seed=args.seed,
         n_estimators=args.n_estimators,
         variant=not args.no_variant,
+        augment_prefixes=tuple(args.augment_prefixes),
     )
     bar = None
     if not args.no_progress:

@@ -52,19 +52,29 @@ def sample_arms(samples: Sequence[SubtaskSample]) -> tuple[str, ...]:
     return tuple(sorted(arms)) or ("R",)
 
 
+def label_arrays(words: Sequence[Word], level: Level) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(starts, ends, label indices) of a word sequence sorted by start time."""
+    ordered = sorted(words, key=lambda w: w.start)
+    starts = np.array([w.start for w in ordered], dtype=float)
+    ends = np.maximum(np.array([w.end for w in ordered], dtype=float), starts)
+    codes = np.array([label_index(level, w.label) for w in ordered], dtype=int)
+    return starts, ends, codes
+
+
 def resample_labels(words: Sequence[Word], level: Level, n: int) -> np.ndarray:
     """Spec 3 'slice_and_find_mode': n equal-duration bins, each the label covering it longest.
 
     Times run from the first word's start to the last word's end (words sorted by start);
     ties go to the label that appears first. An empty sequence gives -1 everywhere.
     """
+    return resample_arrays(*label_arrays(words, level), n)
+
+
+def resample_arrays(starts: np.ndarray, ends: np.ndarray, codes: np.ndarray, n: int) -> np.ndarray:
+    """resample_labels on the output of label_arrays (lets callers cache the label arrays)."""
     out = np.full(n, -1.0)
-    if not words or n <= 0:
+    if not len(starts) or n <= 0:
         return out
-    ordered = sorted(words, key=lambda w: w.start)
-    starts = np.array([w.start for w in ordered])
-    ends = np.maximum(np.array([w.end for w in ordered]), starts)
-    codes = np.array([label_index(level, w.label) for w in ordered])
     t0, t1 = starts[0], max(ends[-1], starts[0])
     edges = t0 + (t1 - t0) * np.arange(n + 1) / n
     kinds = list(dict.fromkeys(codes.tolist()))  # first-appearance order breaks ties
@@ -162,13 +172,18 @@ class PaperEncoding:
                 for level in LEVELS:
                     n = self.n[level.value]
                     for axis in AXES:
+                        arrays = _CACHE.get(
+                            sample,
+                            ("labels", arm, level, axis),
+                            lambda a=arm, lv=level, ax=axis, s=sample: label_arrays(
+                                s.words.axis_words(a, lv, ax), lv
+                            ),
+                        )
                         parts.append(
                             _CACHE.get(
                                 sample,
                                 ("paper", arm, level, axis, n),
-                                lambda a=arm, lv=level, ax=axis, k=n, s=sample: resample_labels(
-                                    s.words.axis_words(a, lv, ax), lv, k
-                                ),
+                                lambda arr=arrays, k=n: resample_arrays(*arr, k),
                             )
                         )
             out[row] = np.concatenate(parts)

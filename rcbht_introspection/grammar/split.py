@@ -103,3 +103,9 @@ def window_sample(
                         continue
                     target.append(_clip(word, start, end))
     return SubtaskSample(words.name if trial is None else trial, subtask, start, end, out)
+
+
+def prefix_sample(sample: SubtaskSample, fraction: float) -> SubtaskSample:
+    """The first `fraction` of a sub-task's time: what a live classifier has seen so far."""
+    end = sample.start + fraction * sample.duration
+    return window_sample(sample.words, sample.start, end, subtask=sample.subtask, trial=sample.trial)

@@ -20,14 +20,14 @@ import numpy as np
 from sklearn.ensemble import RandomForestClassifier
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.grammar.split import SubtaskSample, window_sample
+from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn.data import TrialSamples
 from rcbht_introspection.learn.models import train_model
 
 VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
 """The paper's held-out trial counts by data-set size (REAL 36/10, SIM 30/8, two-arm 14/6)."""
-START_TRIALS: dict[str, int] = {"svm": 1, "mondrian": 3}
+START_TRIALS: dict[str, int] = {"svm": 1, "svm-tuned": 1, "mondrian": 3}
 PREFIX_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)
 NEAR_EMPTY_SECONDS = 0.05
 """Sub-tasks shorter than this (REAL S-22..S-46 rotation: 5 ms) are dropped in the variant."""
@@ -47,6 +47,8 @@ class Protocol:
     near_empty_seconds: float = NEAR_EMPTY_SECONDS
     variant: bool = True
     """Also run the variant without near-empty sub-tasks."""
+    augment_prefixes: tuple[float, ...] = ()
+    """Also train on these prefixes of every training sub-task (for live use); off by default."""
     prefixes: bool = True
 
 
@@ -72,12 +74,6 @@ def _accuracy(predicted: Sequence[str], samples: Sequence[SubtaskSample]) -> flo
     if not samples:
         return math.nan
     return float(np.mean([p == s.subtask for p, s in zip(predicted, samples, strict=True)]))
-
-
-def _prefix(sample: SubtaskSample, fraction: float) -> SubtaskSample:
-    """The first `fraction` of a sub-task's time (duration not yet known: the live question)."""
-    end = sample.start + fraction * sample.duration
-    return window_sample(sample.words, sample.start, end, subtask=sample.subtask, trial=sample.trial)
 
 
 def _mean_std(values: Sequence[float]) -> dict[str, float]:
@@ -138,6 +134,7 @@ def evaluate(
             model = train_model(
                 train_samples, protocol.classifier, protocol.encoding,
                 random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
+                augment_prefixes=protocol.augment_prefixes,
             )  # fmt: skip
             elapsed = time.perf_counter() - began
             curve[perm, j] = _accuracy(model.predict_samples(val_samples), val_samples)
@@ -148,6 +145,7 @@ def evaluate(
                 variant = train_model(
                     kept, protocol.classifier, protocol.encoding,
                     random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
+                    augment_prefixes=protocol.augment_prefixes,
                 )  # fmt: skip
                 i = tail_steps.index(k)
                 variant_curve[perm, i] = _accuracy(variant.predict_samples(val_kept), val_kept)
@@ -172,7 +170,7 @@ def evaluate(
             predict_ms.append(1000 * float(np.median(timings)))
             if protocol.prefixes:
                 for f in PREFIX_FRACTIONS:
-                    prefixes = [_prefix(s, f) for s in val_samples]
+                    prefixes = [prefix_sample(s, f) for s in val_samples]
                     prefix_acc[f].append(_accuracy(model.predict_samples(prefixes), prefixes))
                     prefix_base[f].append(
                         _accuracy(duration.predict(_log_duration(prefixes)), prefixes)
@@ -182,6 +180,7 @@ def evaluate(
     result: dict[str, Any] = {
         "classifier": protocol.classifier,
         "encoding": protocol.encoding,
+        "augment_prefixes": list(protocol.augment_prefixes),
         "permutations": protocol.permutations,
         "n_trials": len(complete),
         "n_validation_trials": n_val,

@@ -29,13 +29,20 @@ from rcbht_introspection.grammar.encoding import (
     encoding_from_state,
     make_encoding,
 )
-from rcbht_introspection.grammar.split import SubtaskSample
+from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
-from rcbht_introspection.learn.mondrian import NO_NODE, MondrianForestClassifier, _NodePool
+from rcbht_introspection.learn.mondrian import (
+    FEATURE_DTYPE,
+    NO_NODE,
+    MondrianForestClassifier,
+    _NodePool,
+)
 
 FORMAT = "rcbht-subtask-model"
 FORMAT_VERSION = 1
-CLASSIFIERS = ("svm", "mondrian")
+CLASSIFIERS = ("svm", "svm-tuned", "mondrian")
+TUNING_GRID: dict[str, list[float]] = {"C": [0.1, 1.0, 10.0, 100.0], "gamma_factor": [0.1, 1.0, 10.0]}
+"""svm-tuned: C and a multiple of the 'scale' gamma, chosen by trial-grouped CV on training data."""
 SVM_TRUSTED_TYPES: tuple[str, ...] = (
     "sklearn.pipeline.Pipeline",
     "sklearn.preprocessing._data.StandardScaler",
@@ -116,24 +123,55 @@ def train_model(
     random_state: int = 0,
     taxonomy_profile: str = "reference",
     n_estimators: int = 100,
+    augment_prefixes: Sequence[float] = (),
 ) -> SubtaskModel:
-    """Fit the encoding and the classifier on `samples` (training data only)."""
+    """Fit the encoding and the classifier on `samples` (training data only).
+
+    `augment_prefixes` (e.g. (0.25, 0.5, 0.75)) also trains on those first fractions of every
+    sub-task, so a live classifier is not surprised by a sub-task that has only just begun.
+    """
     if classifier not in CLASSIFIERS:
         raise InputError(f"unknown classifier {classifier!r} (known: {', '.join(CLASSIFIERS)})")
     if not samples:
         raise InputError("no training samples")
+    samples = list(samples) + [prefix_sample(s, f) for f in augment_prefixes for s in samples]
     encoder = make_encoding(encoding).fit(samples)
     X = encoder.transform(samples)
     y = [s.subtask for s in samples]
-    if classifier == "svm":
+    if classifier in ("svm", "svm-tuned"):
         if len(set(y)) < 2:
             raise InputError("the SVM needs samples of at least two sub-tasks")
-        estimator: Any = _fit_svm(make_svm(random_state), X, y)
+        svm = make_svm(random_state)
+        if classifier == "svm-tuned":
+            svm.set_params(**tune_svm(X, y, [s.trial for s in samples], random_state))
+        estimator: Any = _fit_svm(svm, X, y)
     else:
         classes = sorted(set(SUBTASKS) | set(y))
         estimator = MondrianForestClassifier(n_estimators=n_estimators, random_state=random_state)
         estimator.partial_fit(X, y, classes=classes)
     return SubtaskModel(classifier, encoder, estimator, taxonomy_profile, random_state)
+
+
+def tune_svm(X: np.ndarray, y: Sequence[str], groups: Sequence[str], random_state: int = 0) -> dict[str, Any]:
+    """Inner, trial-grouped 3-fold CV over TUNING_GRID on the training data only.
+
+    Returns pipeline parameters (svc__C, svc__gamma); the paper's C=1, gamma='scale' when there
+    are fewer than 3 training trials to cross-validate over.
+    """
+    from sklearn.model_selection import GroupKFold, cross_val_score
+
+    if len(set(groups)) < 3:
+        return {"svc__C": 1.0, "svc__gamma": "scale"}
+    scaled = StandardScaler().fit_transform(X)
+    scale_gamma = 1.0 / (X.shape[1] * max(float(scaled.var()), 1e-12))
+    best, best_score = {"svc__C": 1.0, "svc__gamma": "scale"}, -1.0
+    for c in TUNING_GRID["C"]:
+        for factor in TUNING_GRID["gamma_factor"]:
+            candidate = Pipeline([("scale", StandardScaler()), ("svc", SVC(C=c, gamma=factor * scale_gamma))])
+            score = cross_val_score(candidate, X, list(y), groups=list(groups), cv=GroupKFold(3)).mean()
+            if score > best_score + 1e-12:
+                best, best_score = {"svc__C": c, "svc__gamma": factor * scale_gamma}, score
+    return best
 
 
 # ------------------------------------------------------------------------------ model files
@@ -207,7 +245,7 @@ def _forest_from_arrays(params: dict[str, Any], arrays: dict[str, np.ndarray]) -
     forest._roots = arrays["mf_roots"].astype(np.int32)
     if len(forest._roots) != forest.n_estimators:
         raise ValueError("number of roots differs from n_estimators")
-    forest._X = arrays["mf_X"].astype(np.float64)
+    forest._X = arrays["mf_X"].astype(FEATURE_DTYPE)
     forest._y = arrays["mf_y"].astype(np.intp)
     forest.gamma_ = forest.discount_factor * n_features
     forest._update_posterior()
@@ -237,7 +275,7 @@ def save_model(model: SubtaskModel, path: Path | str) -> Path:
         "taxonomy_profile": model.taxonomy_profile,
         "random_state": model.random_state,
     }
-    if model.classifier == "svm":
+    if model.classifier in ("svm", "svm-tuned"):
         import skops.io as sio
 
         arrays = {"svm_skops": np.frombuffer(sio.dumps(model.estimator), dtype=np.uint8)}
@@ -285,7 +323,7 @@ def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskM
         )
     classifier = header.get("classifier")
     try:
-        if classifier == "svm":
+        if classifier in ("svm", "svm-tuned"):
             import skops.io as sio
 
             data = arrays["svm_skops"].tobytes()

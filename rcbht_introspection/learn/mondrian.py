@@ -16,6 +16,9 @@ from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, check_random_state, validate_data
 
 NO_NODE = -1
+FEATURE_DTYPE = np.float32
+"""Training data and node boxes are stored in float32 (half the memory of the wide paper
+encoding); test points are cast the same way, so boxes and points compare exactly."""
 
 
 class _NodePool:
@@ -29,8 +32,8 @@ class _NodePool:
         self.feature = np.zeros(capacity, dtype=np.int32)
         self.threshold = np.zeros(capacity, dtype=np.float64)
         self.tau = np.full(capacity, np.inf)
-        self.lower = np.zeros((capacity, n_features))
-        self.upper = np.zeros((capacity, n_features))
+        self.lower = np.zeros((capacity, n_features), dtype=FEATURE_DTYPE)
+        self.upper = np.zeros((capacity, n_features), dtype=FEATURE_DTYPE)
         self.counts = np.zeros((capacity, n_classes))
         self.points: list[np.ndarray | None] = [None] * capacity
 
@@ -95,6 +98,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         """Grow n_estimators Mondrian trees on (X, y) from scratch."""
         self._check_params()
         X, y = validate_data(self, X, y, dtype=np.float64)
+        X = X.astype(FEATURE_DTYPE)
         check_classification_targets(y)
         self.classes_, y_index = np.unique(y, return_inverse=True)
         self._start(X.shape[1])
@@ -112,6 +116,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             if classes is None:
                 raise ValueError("classes must be passed on the first call to partial_fit")
         X, y = validate_data(self, X, y, dtype=np.float64, reset=first)
+        X = X.astype(FEATURE_DTYPE)
         check_classification_targets(y)
         if first:
             self.classes_ = np.unique(np.asarray(classes))
@@ -138,16 +143,16 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self._rng = np.random.default_rng(
             check_random_state(self.random_state).randint(np.iinfo(np.int32).max)
         )
-        self._pool = _NodePool(n_features, len(self.classes_))
+        self._pool = _NodePool(n_features, len(self.classes_), capacity=32 * self.n_estimators)
         self._roots = np.full(self.n_estimators, NO_NODE, dtype=np.int32)
-        self._X = np.empty((0, n_features))
+        self._X = np.empty((0, n_features), dtype=FEATURE_DTYPE)
         self._y = np.empty(0, dtype=np.intp)
         self.gamma_ = self.discount_factor * n_features
 
     def _add_data(self, X: np.ndarray, y_index: np.ndarray) -> np.ndarray:
         """Store a batch once at forest level (paused leaves index into it); return its indices."""
         start = len(self._y)
-        self._X = np.concatenate([self._X, X]) if start else np.array(X, dtype=np.float64)
+        self._X = np.concatenate([self._X, X]) if start else np.array(X, dtype=FEATURE_DTYPE)
         self._y = np.concatenate([self._y, y_index])
         return np.arange(start, len(self._y))
 
@@ -180,7 +185,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             dim = min(dim, len(extent) - 1)
             while extent[dim] <= 0:  # guard the float edge of the cumulative sum
                 dim -= 1
-            cut = self._rng.uniform(lower[dim], upper[dim])
+            cut = np.float64(self._rng.uniform(lower[dim], upper[dim]))  # float64: never rounded
             go_left = data[:, dim] <= cut
             left, right = pool.new(), pool.new()
             pool.feature[node], pool.threshold[node] = dim, cut
@@ -198,36 +203,46 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             node, idx = stack.pop()
             if len(idx) == 0:
                 continue
-            data = X[idx]
-            low, high = data.min(axis=0), data.max(axis=0)
-            e_lower = np.maximum(pool.lower[node] - low, 0.0)
-            e_upper = np.maximum(high - pool.upper[node], 0.0)
-            new_counts = np.bincount(y[idx], minlength=n_classes).astype(np.float64)
+            if len(idx) == 1:  # the common case deep in a tree: no reductions needed
+                data = X[idx]
+                low = high = data[0]
+                new_counts = np.zeros(n_classes)
+                new_counts[y[idx[0]]] = 1.0
+            else:
+                data = X[idx]
+                low, high = data.min(axis=0), data.max(axis=0)
+                new_counts = np.bincount(y[idx], minlength=n_classes).astype(np.float64)
+            lower, upper = pool.lower[node], pool.upper[node]  # views, valid until pool.new()
             parent = int(pool.parent[node])
             tau_parent = 0.0 if parent == NO_NODE else float(pool.tau[parent])
             if pool.left[node] == NO_NODE:  # paused leaf: absorb, regrow if no longer pure
-                pool.lower[node] = np.minimum(pool.lower[node], low)
-                pool.upper[node] = np.maximum(pool.upper[node], high)
+                np.minimum(lower, low, out=lower)
+                np.maximum(upper, high, out=upper)
                 pool.counts[node] += new_counts
                 points = np.concatenate([pool.points[node], idx])
-                if self._paused(pool.counts[node], len(points), pool.lower[node], pool.upper[node]):
+                if self._paused(pool.counts[node], len(points), lower, upper):
                     pool.points[node] = points
                 else:
                     self._regrow(tree, node, points, parent, tau_parent)
                 continue
-            rate = float(e_lower.sum() + e_upper.sum())
+            e_lower = lower - low
+            e_upper = high - upper
+            np.maximum(e_lower, 0.0, out=e_lower)
+            np.maximum(e_upper, 0.0, out=e_upper)
+            rate = float(e_lower.sum()) + float(e_upper.sum())
             split_time = tau_parent + self._rng.exponential(1.0 / rate) if rate > 0 else np.inf
             if split_time < pool.tau[node]:
-                extent = e_lower + e_upper
+                extent = e_lower.astype(np.float64) + e_upper
                 dim = int(np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right"))
                 dim = min(dim, len(extent) - 1)
                 while extent[dim] <= 0:
                     dim -= 1
+                # cuts stay float64 so they are never rounded onto a data value
                 if self._rng.random() * extent[dim] <= e_lower[dim]:
-                    cut = self._rng.uniform(low[dim], pool.lower[node, dim])
+                    cut = np.float64(self._rng.uniform(low[dim], lower[dim]))
                     old_is_left = False
                 else:
-                    cut = self._rng.uniform(pool.upper[node, dim], high[dim])
+                    cut = np.float64(self._rng.uniform(upper[dim], high[dim]))
                     old_is_left = True
                 new_parent = pool.new()
                 pool.parent[new_parent] = parent
@@ -247,12 +262,17 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
                     pool.left[new_parent], pool.right[new_parent] = sibling, node
                 stack.append((node, near))
             else:
-                pool.lower[node] = np.minimum(pool.lower[node], low)
-                pool.upper[node] = np.maximum(pool.upper[node], high)
+                np.minimum(lower, low, out=lower)
+                np.maximum(upper, high, out=upper)
                 pool.counts[node] += new_counts
-                go_left = data[:, pool.feature[node]] <= pool.threshold[node]
-                stack.append((int(pool.left[node]), idx[go_left]))
-                stack.append((int(pool.right[node]), idx[~go_left]))
+                feature, threshold = pool.feature[node], pool.threshold[node]
+                if len(idx) == 1:
+                    child = pool.left[node] if data[0, feature] <= threshold else pool.right[node]
+                    stack.append((int(child), idx))
+                else:
+                    go_left = data[:, feature] <= threshold
+                    stack.append((int(pool.left[node]), idx[go_left]))
+                    stack.append((int(pool.right[node]), idx[~go_left]))
 
     def _replace_child(self, tree: int, parent: int, old: int, new: int) -> None:
         """Point `parent` (or the tree's root slot) at `new` instead of `old`."""
@@ -318,7 +338,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
     def predict_proba(self, X) -> np.ndarray:
         """Mean over trees of the predictive class distribution (rows sum to 1)."""
         check_is_fitted(self, "classes_")
-        X = validate_data(self, X, dtype=np.float64, reset=False)
+        X = validate_data(self, X, dtype=np.float64, reset=False).astype(FEATURE_DTYPE)
         n, n_classes, n_trees = len(X), len(self.classes_), self.n_estimators
         if n_classes == 1 or (self._roots == NO_NODE).any():
             proba = np.zeros((n, n_classes))
