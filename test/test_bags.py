@@ -143,3 +143,19 @@ def test_record_a_replay_between_processes(tmp_path: Path) -> None:
     np.testing.assert_array_equal(back.wrench["R"], trial.wrench["R"])
     np.testing.assert_array_equal(back.time, trial.time)
     assert back.state_times == trial.state_times
+
+
+@pytest.mark.shared_data
+def test_train_accepts_bags(hiro_data: Path, tmp_path: Path) -> None:
+    from ros_support import require_learn
+
+    require_learn()
+    from rcbht_introspection.learn.models import load_model
+
+    real = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS"
+    for i in (1, 2, 3):
+        folder = real / f"20121127-HIROSA-S-{i:02d}"
+        assert main(["bag", "from-hiro", str(folder), str(tmp_path / "bags" / f"{i}.db3")]) == 0
+    model = tmp_path / "model.rcbht"
+    assert main(["train", str(tmp_path / "bags"), "--out", str(model)]) == 0
+    assert sorted(load_model(model).classes_) == ["approach", "insertion", "mating", "rotation"]

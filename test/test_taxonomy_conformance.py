@@ -95,3 +95,18 @@ def test_conformance_command_reports_and_fails_on_a_difference(
     out = capsys.readouterr().out
     assert "Composites: 5/6 files identical" in out
     assert f"DIFF {source.name} composition Fy: record" in out
+
+
+@pytest.mark.parametrize(
+    "trial", ["20160930-HIRO_ERROR-02", "20160930-HIRO_ERROR-03", "20160930-HIRO_ERROR-04"]
+)
+def test_failure_trials_made_by_the_reference_code_state(hiro_data: Path, trial: str) -> None:
+    """These failure trials' Composites come from the reference code state (the others from a
+    later one, profile error_charac); they exercise the one-sample segment rule."""
+    folder = hiro_data / "REAL_HIRO_ONE_SA_ERROR_CHARAC" / trial
+    diffs = [
+        (level.value, axis, diff)
+        for level, axis, diff in compare_trial(folder, label_trial(read_trial(folder)))
+        if level is Level.COMPOSITION and diff is not None
+    ]
+    assert diffs == []

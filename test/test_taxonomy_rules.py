@@ -516,3 +516,12 @@ def test_ieee_division() -> None:
     assert pr.ieee_div(1.0, 0.0) == math.inf
     assert math.isnan(pr.ieee_div(0.0, 0.0))
     assert pr.ieee_div(-1.0, 0.0) == -math.inf
+
+
+def test_a_one_sample_segment_gets_the_twentieth_rule() -> None:
+    """First window closed, the next one fails at once: segment i..i, dFinish += dFinish/20."""
+    y = np.array([(-1.0) ** k for k in range(40)])
+    segs = segments_of(y)
+    assert segs[0][pr.START] == 0.0 and segs[0][pr.FINISH] == pytest.approx(0.025)
+    assert segs[1][pr.START] == pytest.approx(0.025)
+    assert segs[1][pr.FINISH] == pytest.approx(0.025 + 0.025 / 20)

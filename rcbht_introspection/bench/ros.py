@@ -62,7 +62,7 @@ def _sources(seconds_of_data: float) -> list[Trial]:
     return trials
 
 
-def _two_arm(a: Trial, b: Trial) -> Trial:
+def two_arm_trial(a: Trial, b: Trial) -> Trial:
     """Arm R from `a`, arm L from `b` (cut or tiled to a's length)."""
     n = len(a.time)
     idx = np.arange(n) % len(b.time)
@@ -105,7 +105,7 @@ def run(out_dir: Path) -> dict[str, Any]:
         bags = []
         for i, trial in enumerate(sources):
             if arms == 2:
-                trial = _two_arm(trial, sources[(i + 1) % len(sources)])
+                trial = two_arm_trial(trial, sources[(i + 1) % len(sources)])
             bag = work / name / f"{i:02d}-{trial.name}.mcap"
             write_trial_bag(trial, bag)
             bags.append(bag)

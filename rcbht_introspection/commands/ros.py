@@ -54,6 +54,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--json", type=Path, default=None, help="write the scores here")
     p.add_argument("--mode", choices=("boundary", "window"), default="boundary")
     p.add_argument("--profile", default="reference", help="taxonomy profile of the segmenter")
+    p.add_argument(
+        "--stream-profile",
+        choices=("reference", "causal"),
+        default="reference",
+        help="stream profile of the segmenter (causal: moment-axis words without waiting)",
+    )
     p.add_argument("--timeline", action="store_true", help="print the /task_state timeline")
     p.set_defaults(func=cmd_replay_eval)
 
@@ -157,7 +163,9 @@ def cmd_record(args: argparse.Namespace) -> int:
 def cmd_replay_eval(args: argparse.Namespace) -> int:
     from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval, summary
 
-    options = ReplayEvalOptions(rate=args.rate, mode=args.mode, profile=args.profile)
+    options = ReplayEvalOptions(
+        rate=args.rate, mode=args.mode, profile=args.profile, stream_profile=args.stream_profile
+    )
     result = replay_eval(_bags(args.bags), args.model, options)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

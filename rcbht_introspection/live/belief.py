@@ -10,7 +10,7 @@ Times are stream seconds; a new stream (new time origin) starts a new session.
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -180,7 +180,7 @@ class BeliefTracker:
             and self.last_final is not None
             and self._issued >= len(self.segments)
         ):
-            return self.last_final
+            return replace(self.last_final, final=False)
         start, end, phase = self.window()
         return self.classify(start, end, phase)
 

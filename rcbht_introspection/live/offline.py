@@ -47,7 +47,7 @@ def offline_stream_words(
                 if name == end_phase:
                     words.extend(stream.finish())  # type: ignore[attr-defined]
                     finished = True
-                elif t > 0.0:
+                else:
                     words.extend(stream.mark_boundary(t, name))  # type: ignore[attr-defined]
                 ev += 1
             if finished:

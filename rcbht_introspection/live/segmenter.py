@@ -21,7 +21,12 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.taxonomy.words import Word
 
-REJECT_REASONS: tuple[str, ...] = ("non_finite", "zero_stamp", "non_increasing_stamp")
+REJECT_REASONS: tuple[str, ...] = (
+    "non_finite",
+    "zero_stamp",
+    "non_increasing_stamp",
+    "published_before_end",
+)
 
 
 @dataclass
@@ -103,7 +108,7 @@ class SegmenterSession:
         stream_factory: Callable[[str], object],
         end_phases: Sequence[str] = ("done",),
         subtasks: Sequence[str] = SUBTASKS,
-        hold_s: float = 0.05,
+        hold_s: float = 1.0,
     ) -> None:
         self.arms = tuple(arms)
         self.stream_factory = stream_factory
@@ -114,6 +119,7 @@ class SegmenterSession:
         self.unknown_phases = 0
         self.late_phases = 0
         self.pending: list[_Pending] = []
+        self.end_source: int | None = None
         self.stream_id = -1
         self._new_stream()
 
@@ -138,7 +144,10 @@ class SegmenterSession:
         counts = self.counts[arm]
         st = self.state[arm]
         reason = None
-        if not all(math.isfinite(v) for v in wrench):
+        if source_ns is not None and self.end_source is not None and source_ns < self.end_source:
+            # a straggler of a stream that an end event already closed: it must not open a new one
+            reason = "published_before_end"
+        elif not all(math.isfinite(v) for v in wrench):
             reason = "non_finite"
         elif stamp_ns <= 0:
             reason = "zero_stamp"
@@ -227,6 +236,8 @@ class SegmenterSession:
                 )
             )
             if p.end:
+                if p.source_ns is not None:
+                    self.end_source = p.source_ns
                 self._new_stream()
                 break  # later events belong to the next stream: they wait for its first sample
 
@@ -245,8 +256,8 @@ class SegmenterSession:
                     arm, list(words), st.last_ns, self.origin_ns, self.stream_id, end_of_stream=True
                 )
             )
-        elif st.last_t is not None and st.first_t is not None and st.last_t > st.first_t:
-            # a boundary at or before an arm's first sample cuts nothing
+        elif st.last_t is not None:
+            # every sub-task start is marked (the stream reads rotation/mating starts by order)
             words = st.stream.mark_boundary(st.last_t, p.name)  # type: ignore[attr-defined]
             if words:
                 out.batches.append(
@@ -255,9 +266,12 @@ class SegmenterSession:
 
 
 def arm_stream_factory(
-    profile: str = "reference", taxonomy_file: str = "", stream_file: str = ""
+    profile: str = "reference",
+    taxonomy_file: str = "",
+    stream_file: str = "",
+    stream_profile: str = "reference",
 ) -> Callable[[str], object]:
-    """`arm -> ArmStream` with the taxonomy profile (or file) and stream config (or file)."""
+    """`arm -> ArmStream`: taxonomy thresholds (profile or file) and stream profile (or file)."""
     try:
         from rcbht_introspection.taxonomy.config import load_taxonomy_config
         from rcbht_introspection.taxonomy.stream import ArmStream
@@ -267,11 +281,15 @@ def arm_stream_factory(
         ) from None
     config = load_taxonomy_config(profile, taxonomy_file or None)
     stream_config = None
-    if stream_file:
-        from rcbht_introspection.config import load_yaml
-        from rcbht_introspection.taxonomy.stream import StreamConfig
+    try:
+        from rcbht_introspection.taxonomy.stream import load_stream_config
 
-        stream_config = load_yaml(StreamConfig, stream_file)
+        stream_config = load_stream_config(stream_profile, stream_file or None)
+    except ImportError:
+        if stream_file:
+            raise InputError(
+                "this taxonomy engine has no stream configuration", stream_file
+            ) from None
 
     def make(arm: str) -> object:
         return ArmStream(config=config, stream_config=stream_config, arm=arm)

@@ -32,6 +32,8 @@ class ClassifierNode(Node):
         super().__init__("classifier_node")
         self.cfg = declare_config(self, ClassifierConfig)
         cfg = self.cfg
+        # predictions on one sample at a time: skip sklearn's per-call input validation
+        sklearn_fast_predict()
         model, why = load_subtask_model(cfg.model_file, cfg.expected_profile)
         if model is None:
             self.get_logger().error(f"no usable model, /task_state stays {UNKNOWN!r}: {why}")
@@ -39,13 +41,16 @@ class ClassifierNode(Node):
         self.stream: tuple[int, int] | None = None
         self.state = UNKNOWN
         self.reported_error: str | None = None
-        self.batches: dict[tuple[str, int], int] = {}
+        self.batches: dict[tuple[str, int], tuple[int, int]] = {}
         qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         self.state_pub = self.create_publisher(String, cfg.state_topic, qos)
         self.belief_pub = self.create_publisher(BeliefMsg, cfg.belief_topic, qos)
-        for (arm, _), topic in word_topics(cfg.words_namespace, cfg.arms).items():
-            self.create_subscription(WordsMsg, topic, partial(self.on_words, arm), qos)
-        self.create_subscription(PhaseMsg, cfg.phase_topic, self.on_phase, qos)
+        self.word_subs = [
+            (arm, self.create_subscription(WordsMsg, topic, partial(self.on_words, arm), qos))
+            for (arm, _), topic in word_topics(cfg.words_namespace, cfg.arms).items()
+        ]
+        self.phase_sub = self.create_subscription(PhaseMsg, cfg.phase_topic, self.on_phase, qos)
+        self.trigger_ns: int | None = None  # earliest sample behind the evidence not yet classified
         if cfg.publish_rate_hz > 0:
             self.create_timer(1.0 / cfg.publish_rate_hz, self.publish_state)
         self.publish_state()
@@ -67,26 +72,65 @@ class ClassifierNode(Node):
             self.stream = key
 
     def on_words(self, arm: str, msg: WordsMsg) -> None:
+        self.ingest_words(arm, msg)
+        self.drain()
+
+    def on_phase(self, msg: PhaseMsg) -> None:
+        self.ingest_phase(msg)
+        self.drain()
+
+    def ingest_words(self, arm: str, msg: WordsMsg) -> None:
         self._stream(to_ns(msg.time_origin), msg.stream_id)
         words, now = words_from_msg(msg)
         self.tracker.add_words(arm, words, now)
         if msg.end_of_stream:
             self.tracker.end_of_stream(arm, LEVELS[msg.level])
-        # act once per wrench sample: when the last level message of its batch arrived
         stamp = to_ns(msg.header.stamp)
         key = (arm, stamp)
-        self.batches[key] = self.batches.get(key, 0) + 1
-        if self.batches[key] < msg.batch_size:
-            return
-        self.batches = {k: n for k, n in self.batches.items() if k[1] > stamp}
-        self.update(stamp)
+        count, _ = self.batches.get(key, (0, msg.batch_size))
+        self.batches[key] = (count + 1, msg.batch_size)
+        self._trigger(stamp)
 
-    def on_phase(self, msg: PhaseMsg) -> None:
+    def ingest_phase(self, msg: PhaseMsg) -> None:
         self._stream(to_ns(msg.time_origin), msg.stream_id)
         if not self.tracker.phase(msg.name, msg.time):
             self.get_logger().warning(f"ignored unknown sub-task event {msg.name!r}")
             return
-        self.update(to_ns(msg.header.stamp))
+        self._trigger(to_ns(msg.header.stamp))
+
+    def _trigger(self, stamp: int) -> None:
+        self.trigger_ns = stamp if self.trigger_ns is None else min(self.trigger_ns, stamp)
+
+    def drain(self) -> None:
+        """Take every message already delivered, then classify once (not once per message).
+
+        A belief is computed once all level messages of the newest sample's batch are in; its
+        trigger is the earliest sample behind the new evidence (the conservative latency).
+        """
+        for _ in range(10000):
+            taken = False
+            for arm, sub in self.word_subs:
+                with sub.handle:
+                    got = sub.handle.take_message(sub.msg_type, sub.raw)
+                if got is not None:
+                    self.ingest_words(arm, got[0])
+                    taken = True
+            with self.phase_sub.handle:
+                got = self.phase_sub.handle.take_message(
+                    self.phase_sub.msg_type, self.phase_sub.raw
+                )
+            if got is not None:
+                self.ingest_phase(got[0])
+                taken = True
+            if not taken:
+                break
+        newest = max((k[1] for k in self.batches), default=None)
+        if any(n < size for (_, stamp), (n, size) in self.batches.items() if stamp == newest):
+            return  # the other level messages of this sample are on their way
+        self.batches = {}
+        if self.trigger_ns is not None:
+            trigger, self.trigger_ns = self.trigger_ns, None
+            self.update(trigger)
 
     def update(self, trigger_ns: int) -> None:
         """Publish finished sub-task verdicts, then the current belief and a changed state."""
@@ -107,6 +151,16 @@ class ClassifierNode(Node):
 
     def publish_state(self) -> None:
         self.state_pub.publish(String(data=self.state))
+
+
+def sklearn_fast_predict() -> None:
+    """Per-sample predictions: skip scikit-learn's input validation (features are finite)."""
+    try:
+        import sklearn
+
+        sklearn.set_config(assume_finite=True, skip_parameter_validation=True)
+    except ImportError:  # no model can load without it anyway
+        pass
 
 
 def main(args: list[str] | None = None) -> int:

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import sys
+import threading
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -68,11 +68,6 @@ def run(node_factory: Callable[[], Node], name: str, args: list[str] | None = No
     return code
 
 
-def config_fields(cls: type) -> list[str]:
-    """Field names of a config class (for help texts)."""
-    return [f.name for f in dataclasses.fields(cls)]
-
-
 class RosSession:
     """An rclpy context + node spun by a background SingleThreadedExecutor (for CLI tools).
 
@@ -91,8 +86,6 @@ class RosSession:
         self.node = Node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
-        import threading
-
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 

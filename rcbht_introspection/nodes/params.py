@@ -49,12 +49,21 @@ class SegmenterConfig:
     )
     end_phases: tuple[str, ...] = _f(("done",), "event names that end the task (flush the streams)")
     event_hold_s: float = _f(
-        0.05, "a /task_phase event waits up to this long for the wrench samples published before it"
+        1.0,
+        "a /task_phase event waits up to this long (after samples stop) for the wrench samples "
+        "published before it; only the end event ever waits this long",
     )
     taxonomy_profile: str = _f("reference", "taxonomy threshold profile of config/rcbht.yaml")
     taxonomy_config_file: str = _f("", "optional YAML file overriding the taxonomy thresholds")
+    stream_profile: str = _f(
+        "reference",
+        "reference (words equal the batch engine's; whole-trial quantities are waited for) or "
+        "causal (past samples only: moment-axis words without waiting)",
+    )
     stream_config_file: str = _f("", "optional YAML file overriding config/stream.yaml")
-    qos_depth: int = _f(1000, "history depth of every subscription and publisher")
+    qos_depth: int = _f(
+        10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
+    )
     qos_reliability: str = _f("reliable", "reliable or best_effort")
 
 
@@ -75,7 +84,9 @@ class ClassifierConfig:
     belief_topic: str = _f("rcbht/belief", "rcbht_interfaces/Belief: probabilities and window")
     end_phases: tuple[str, ...] = _f(("done",), "event names that end the task")
     expected_profile: str = _f("", "taxonomy profile the model must be trained with ('' = any)")
-    qos_depth: int = _f(1000, "history depth of every subscription and publisher")
+    qos_depth: int = _f(
+        10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
+    )
     qos_reliability: str = _f("reliable", "reliable or best_effort")
 
 
@@ -137,6 +148,12 @@ def validate(cfg: T, path: Path | None = None) -> T:
             0 < cfg.event_hold_s <= 10,
             "event_hold_s",
             f"must be in (0, 10], got {cfg.event_hold_s}",
+            path,
+        )
+        _check(
+            cfg.stream_profile in ("reference", "causal"),
+            "stream_profile",
+            f"expected reference or causal, got {cfg.stream_profile!r}",
             path,
         )
         for name in ("taxonomy_config_file", "stream_config_file"):

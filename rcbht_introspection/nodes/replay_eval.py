@@ -55,6 +55,7 @@ class ReplayEvalOptions:
     rate: float = 1.0
     mode: str = "boundary"
     profile: str = "reference"
+    stream_profile: str = "reference"
     startup_timeout: float = 30.0
     drain_timeout: float = 20.0
     domain_id: int | None = None
@@ -165,7 +166,8 @@ class Observations:
     """(wall ns, stamp of the sample that finalised them) of each non-empty Words message"""
     origins: dict[int, int] = field(default_factory=dict)
     """stream id -> time origin (ns)"""
-    phases: list[tuple[int, str, float, int]] = field(default_factory=list)
+    phases: list[tuple[int, str, float, int, int]] = field(default_factory=list)
+    """(wall ns, name, stream time, stream id, stamp of the sample it was applied at)"""
 
 
 class Observer:
@@ -213,7 +215,9 @@ class Observer:
         from rcbht_introspection.nodes.conversions import to_ns
 
         with self.lock:
-            self.obs.phases.append((time.time_ns(), msg.name, msg.time, to_ns(msg.time_origin)))
+            self.obs.phases.append(
+                (time.time_ns(), msg.name, msg.time, msg.stream_id, to_ns(msg.header.stamp))
+            )
 
     def on_words(self, arm: str, level: str, msg: Any) -> None:
         wall = time.time_ns()  # conversion happens later: keep this callback short
@@ -306,6 +310,7 @@ def replay_eval(
             "arms": list(arms),
             "wrench_topics": list(seg.wrench_topics),
             "taxonomy_profile": options.profile,
+            "stream_profile": options.stream_profile,
         },
     )
     cls_params = write_params(
@@ -326,7 +331,7 @@ def replay_eval(
         codes: dict[str, int | None] = {}
         try:
             with RosSession("rcbht_replay_eval", domain_id=domain_id) as ros:
-                qos = qos_profile(1000, "reliable")
+                qos = qos_profile(seg.qos_depth, "reliable")
                 observer = Observer(ros.node, seg, cls_cfg, qos)
                 player = BagPlayer(ros.node, qos)
                 all_messages = [list(bag_messages(b)) for b in bags]
@@ -365,6 +370,7 @@ def replay_eval(
             "rate": options.rate,
             "mode": options.mode,
             "profile": options.profile,
+            "stream_profile": options.stream_profile,
             "model": str(model_path),
             "domain_id": domain_id,
             "exit_codes": codes,
@@ -414,6 +420,8 @@ def _play_one(
     player.play(msgs, rate=options.rate, on_publish=on_publish)
     play_s = time.monotonic() - t0
     n_subtasks = sum(1 for m in msgs if m.topic == PHASE_TOPIC) - 1  # minus the end event
+    if options.mode == "window":
+        n_subtasks = 0  # window mode issues no sub-task verdicts
     _wait(
         lambda: (
             observer.ended(stream_id, arms) and len(observer.finals_since(b_index)) >= n_subtasks
@@ -435,10 +443,12 @@ def _play_one(
         ends = {k[1:]: v for k, v in observer.obs.ends.items() if k[0] == stream_id}
         triggers = set(observer.obs.triggers.get(stream_id, set()))
         node_origin = observer.obs.origins.get(stream_id)
+        event_stamps = {p[4] for p in observer.obs.phases if p[3] == stream_id}
     return {
         "bag": bag,
         "origin": origin,
         "node_origin": node_origin,
+        "event_stamps": event_stamps,
         "published": published,
         "play_s": play_s,
         "pub_wall": pub_wall,
@@ -468,13 +478,14 @@ def _score(
         from rcbht_introspection.live.segmenter import arm_stream_factory
 
         model = load_model(model_path)
-        factory = arm_stream_factory(options.profile)
+        factory = arm_stream_factory(options.profile, stream_profile=options.stream_profile)
     correct = total = 0
     verdicts_match = words_match = True
     dropped = rejected = 0
     latencies: list[int] = []
     word_latencies: list[int] = []
     received_latencies: list[int] = []
+    event_latencies: list[int] = []
     time_acc: list[tuple[float, float]] = []
     bags_out = []
     prev_accepted = dict.fromkeys(arms, 0)
@@ -494,12 +505,17 @@ def _score(
         bag_dropped = rec["published"] - sum(accepted.values())
         dropped += bag_dropped
         # latency: wrench sample that finalised words -> each belief those words caused
+        # (words finalised by a sub-task or end event are the event's, not a sample's: the end
+        # event waits for sample silence, so they are reported apart)
         for wall, b, trig, sent in rec["beliefs"]:
             if trig in rec["triggers"] and trig in rec["pub_wall"] and not b.final:
+                if trig in rec["event_stamps"]:
+                    event_latencies.append(sent - rec["pub_wall"][trig])
+                    continue
                 latencies.append(sent - rec["pub_wall"][trig])
                 received_latencies.append(wall - rec["pub_wall"][trig])
         for wall, trig in rec["word_arrivals"]:
-            if trig in rec["pub_wall"]:
+            if trig in rec["pub_wall"] and trig not in rec["event_stamps"]:
                 word_latencies.append(wall - rec["pub_wall"][trig])
         # /task_state timeline on the stream clock (wall receive time -> data time)
         walls = np.asarray([w for w, _ in rec["pub_series"]], dtype=float)
@@ -554,14 +570,19 @@ def _score(
                 }
             )
             words_match &= not mismatch
-            verdicts_match &= verdicts == off_verdicts
+            if options.mode == "boundary":
+                verdicts_match &= verdicts == off_verdicts
         bags_out.append(bag_out)
     weight = sum(d for _, d in time_acc) or 1.0
     return {
-        "subtask_accuracy": round(correct / total, 4) if total else None,
+        "subtask_accuracy": round(correct / total, 4)
+        if total and options.mode == "boundary"
+        else None,
         "subtasks": total,
         "subtasks_correct": correct,
-        "verdicts_match_offline": verdicts_match if model is not None else None,
+        "verdicts_match_offline": verdicts_match
+        if model is not None and options.mode == "boundary"
+        else None,
         "time_accuracy": round(sum(a * d for a, d in time_acc) / weight, 4),
         "dropped_wrench": dropped,
         "rejected_wrench": rejected,
@@ -569,6 +590,7 @@ def _score(
         "latency_ms": offline.percentiles_ms(latencies),
         "latency_received_ms": offline.percentiles_ms(received_latencies),
         "word_latency_ms": offline.percentiles_ms(word_latencies),
+        "event_latency_ms": offline.percentiles_ms(event_latencies),
         "per_bag": bags_out,
     }
 

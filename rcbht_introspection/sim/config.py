@@ -121,6 +121,10 @@ class ControllerConfig:
     """After a failed insertion: time spent backing off before the trial ends."""
     force_gain: float = 0.00015
     """Admittance gain (m/s per N) of the force-controlled axis."""
+    force_ripple: float = 0.05
+    """Std of the force loop's hunting around its set-point, as a fraction of the set-point."""
+    force_ripple_time: float = 0.3
+    """Correlation time (s) of that ripple."""
     max_admittance_speed: float = 0.004
     """Speed limit (m/s) of the admittance loop."""
     lateral_gain: float = 1.5
@@ -171,15 +175,19 @@ class FailureConfig:
 class SensorConfig:
     """Force/torque sensor model: white noise std, low-frequency drift, output filtering."""
 
-    noise_force: float = 0.04
-    noise_torque: float = 0.0015
+    noise_force: float = 0.012
+    noise_torque: float = 0.0006
     drift_force: float = 0.05
     drift_torque: float = 0.002
-    vibration_force: float = 0.06
+    vibration_force: float = 0.035
     """Std (N) of the arm's structural vibration seen by the sensor (low-pass, see vibration_time)."""
-    vibration_torque: float = 0.002
-    vibration_time: float = 0.25
+    vibration_torque: float = 0.0015
+    vibration_time: float = 0.1
     """Correlation time (s) of the vibration (an Ornstein-Uhlenbeck process)."""
+    wander_force: float = 0.06
+    """Std (N) of the slow wander of the reading while the arm moves (a second, slower OU process)."""
+    wander_torque: float = 0.002
+    wander_time: float = 0.8
     quantization_force: float = 0.001
     quantization_torque: float = 0.0001
 

@@ -10,6 +10,7 @@ until the force is released. Sub-task switch times are recorded as the controlle
 from __future__ import annotations
 
 import math
+import random
 from dataclasses import dataclass, field
 
 from rcbht_introspection.sim.config import SimConfig
@@ -31,6 +32,8 @@ class ControlPlan:
     hold_force: float
     hold_time: float
     retract_speed: float
+    ripple_seed: int = 0
+    """Seed of the force loop's ripple (drawn per trial)."""
     retract_lateral: tuple[float, float] = (0.0, 0.0)
     """Lateral velocity (m/s) of the move-away path; the latched part resists it."""
 
@@ -71,6 +74,10 @@ class SnapController:
         self.pivot_z = 0.0
         self.admittance_z = 0.0
         self.trace: list[tuple[float, ...]] | None = None
+        self.rng = random.Random(plan.ripple_seed)
+        self.ripple = 0.0
+        dt = config.physics.timestep
+        self.ripple_kick = self.cfg.force_ripple * math.sqrt(2.0 * dt / self.cfg.force_ripple_time)
         self.seat_floor = -self.cfg.insertion_stroke
         """Lowest believed tool height the insertion may reach before it counts as done."""
 
@@ -182,9 +189,16 @@ class SnapController:
             u[i] += self.cfg.lateral_compliance * self.lateral[i] * dt
 
     def _admit(self, dt: float, f: float) -> None:
-        """Admittance on the tool axis: descend while the force is below its set-point."""
+        """Admittance on the tool axis: descend while the force is below its set-point.
+
+        The regulated force hunts around its set-point (an Ornstein-Uhlenbeck ripple of
+        `force_ripple` x set-point), as the real arm's force loop does.
+        """
+        a = dt / self.cfg.force_ripple_time
+        self.ripple += -a * self.ripple + self.ripple_kick * self.rng.gauss(0.0, 1.0)
+        target = self.force_set * (1.0 + self.ripple)
         limit = self.cfg.max_admittance_speed * dt
-        step = min(limit, max(-limit, self.cfg.force_gain * (self.force_set - f) * dt))
+        step = min(limit, max(-limit, self.cfg.force_gain * (target - f) * dt))
         self.target[2] -= step
         self.admittance_z -= step
 

@@ -59,22 +59,31 @@ def measure(
         2 * np.pi * time[:, None] / draw.drift_period + draw.drift_phase
     )
     out = wrench + draw.bias[None, :] + drift + rng.normal(0.0, 1.0, wrench.shape) * std[None, :]
-    out += vibration(time, config, draw.noise_scale, rng)
+    fast = (config.vibration_force, config.vibration_torque, config.vibration_time)
+    slow = (config.wander_force, config.wander_torque, config.wander_time)
+    for force_std, torque_std, tau in (fast, slow):
+        out += ornstein_uhlenbeck(time, force_std, torque_std, tau, draw.noise_scale, rng)
     return np.round(out / q) * q
 
 
-def vibration(
-    time: np.ndarray, config: SensorConfig, scale: float, rng: np.random.Generator
+def ornstein_uhlenbeck(
+    time: np.ndarray,
+    force_std: float,
+    torque_std: float,
+    tau: float,
+    scale: float,
+    rng: np.random.Generator,
 ) -> np.ndarray:
-    """Low-frequency structural vibration: an exact-discretised Ornstein-Uhlenbeck process."""
-    n = len(time)
-    out = np.zeros((n, 6))
-    if n < 2:
-        return out
-    dt = float(time[1] - time[0])
-    a = np.exp(-dt / config.vibration_time)
-    std = np.array([config.vibration_force] * 3 + [config.vibration_torque] * 3) * scale
-    kicks = rng.normal(0.0, 1.0, (n, 6)) * std[None, :] * np.sqrt(1.0 - a * a)
+    """Low-frequency disturbance (N, 6): an exact-discretised Ornstein-Uhlenbeck process."""
     from scipy.signal import lfilter
 
-    return lfilter([1.0], [1.0, -a], kicks, axis=0)
+    n = len(time)
+    if n < 2:
+        return np.zeros((n, 6))
+    dt = float(time[1] - time[0])
+    a = np.exp(-dt / tau)
+    std = np.array([force_std] * 3 + [torque_std] * 3) * scale
+    kicks = rng.normal(0.0, 1.0, (n, 6)) * std[None, :] * np.sqrt(1.0 - a * a)
+    start = rng.normal(0.0, 1.0, 6) * std  # stationary from the first sample
+    out, _ = lfilter([1.0], [1.0, -a], kicks, axis=0, zi=(a * start)[None, :])
+    return out

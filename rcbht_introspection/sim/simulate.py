@@ -85,6 +85,7 @@ def draw_trial(
         hold_time=_uniform(rng, cc.hold_time),
         retract_speed=_uniform(rng, cc.retract_speed),
         retract_lateral=(_uniform(rng, cc.retract_lateral), _uniform(rng, cc.retract_lateral)),
+        ripple_seed=int(rng.integers(0, 2**31)),
     )
     s = config.sensor
     scale6 = np.array([1.0] * 3 + [0.0] * 3)

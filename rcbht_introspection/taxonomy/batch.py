@@ -7,7 +7,6 @@ layer + refinement for every arm and axis.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -47,13 +46,9 @@ from rcbht_introspection.taxonomy.compositions import (
     Composition,
 )
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
-from rcbht_introspection.taxonomy.pipeline import AxisPipeline, StreamContext
 from rcbht_introspection.taxonomy.primitives import (
     Primitive,
     axis_domain,
-    axis_thresholds,
-    label_segments,
-    segment_arrays,
 )
 from rcbht_introspection.taxonomy.words import (
     AXES,
@@ -118,23 +113,6 @@ def behavior_word(b: Behavior, axis: str, arm: str, seq: int = 0) -> Word:
 # --------------------------------------------------------------------------- layers
 
 
-def upper_layers(
-    prims: list[Primitive], state_times: Sequence[float], end_time: float, config: TaxonomyConfig
-) -> tuple[list[Composition], list[Behavior]]:
-    """Clean-up, MCs + filtering, LLBs + refinement of one axis: the operator chain, fed whole."""
-    ctx = StreamContext(config, boundaries=list(state_times), now=math.inf, ended=True,
-                        end_time=end_time)  # fmt: skip
-    pipe = AxisPipeline(ctx)
-    mcs: list[Composition] = []
-    llbs: list[Behavior] = []
-    for p in prims:
-        m, b = pipe.push(p)
-        mcs += m
-        llbs += b
-    m, b = pipe.finish()
-    return mcs + m, llbs + b
-
-
 def label_arm(
     time: np.ndarray,
     wrench: np.ndarray,
@@ -143,23 +121,33 @@ def label_arm(
     arm: str = "R",
     out: TrialWords | None = None,
 ) -> TrialWords:
-    """All words of one arm ((N,) time, (N, 6) wrench) added to `out`."""
+    """All words of one arm ((N,) time, (N, 6) wrench) added to `out`.
+
+    The batch engine is the streaming engine fed the whole trial at once: every sub-task start
+    and the trial's moment-axis domains are known up front, and push_many() hands the segmenter
+    all window steps in one vectorised call. One implementation of every rule.
+    """
+    from rcbht_introspection.taxonomy.stream import ArmStream, StreamConfig
+
     out = out if out is not None else TrialWords(name="")
     wrench = np.asarray(wrench, dtype=np.float64)
     time = np.asarray(time, dtype=np.float64)
-    seg = segment_arrays(time, wrench, config)
-    end_time = float(time[-1]) if len(time) else 0.0
-    per_level = out.words.setdefault(arm, {})
-    prim_level = per_level.setdefault(Level.PRIMITIVE, {})
-    mc_level = per_level.setdefault(Level.COMPOSITION, {})
-    llb_level = per_level.setdefault(Level.BEHAVIOR, {})
-    for a, axis in enumerate(AXES[: wrench.shape[1] if wrench.ndim == 2 else 0]):
-        domain = axis_domain(wrench[:, a], config) if axis in config.domain_axes else None
-        prims = label_segments(seg.segments[a], axis_thresholds(axis, domain, config))
-        mcs, llbs = upper_layers(prims, state_times, end_time, config)
-        prim_level[axis] = [primitive_word(p, axis, arm) for p in prims]
-        mc_level[axis] = [composition_word(m, axis, arm) for m in mcs]
-        llb_level[axis] = [behavior_word(b, axis, arm) for b in llbs]
+    domains = {
+        axis: axis_domain(wrench[:, AXES.index(axis)], config)
+        for axis in config.domain_axes
+        if axis in AXES and len(time)
+    }
+    stream = ArmStream(config, StreamConfig(moment_domains=domains), arm)
+    for t in state_times:
+        stream.mark_boundary(t)
+    words = stream.push_many(time, wrench) + stream.finish()
+    per_arm = out.words.setdefault(arm, {})
+    for level in (Level.PRIMITIVE, Level.COMPOSITION, Level.BEHAVIOR):
+        per_level = per_arm.setdefault(level, {})
+        for axis in AXES:
+            per_level.setdefault(axis, [])
+    for w in words:
+        per_arm[w.level][w.axis].append(w)
     return out
 
 

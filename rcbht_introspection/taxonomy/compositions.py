@@ -1,10 +1,10 @@
-"""Motion-composition (MC) layer (spec 2.2) and MC filtering (spec 2.3, cleanUp.m): the rules.
+"""Motion-composition (MC) layer (spec 2.2) and the rules of MC filtering (spec 2.3, cleanUp.m).
 
 An MC record is a list in the original `motComps` layout: [label, avgVal, rmsVal, amplitude,
 glabel1, glabel2, t1Start, t1End, t2Start, t2End, tAvg], labels as 1-based integers
-(a i d k pc nc c u n z = 1..10; glabels are primitive integers). The filter passes follow the
-original loops, including rows that a merge empties (None) but that stay in place until the pass
-ends, because several [bug]-tagged behaviours depend on exactly that.
+(a i d k pc nc c u n z = 1..10; glabels are primitive integers). Here: the rule table, the MC
+record of a primitive pair, similarity, MergeCompositions and the sub-task limits; the passes
+that apply them in the original order are the operators of pipeline.py.
 """
 
 from __future__ import annotations

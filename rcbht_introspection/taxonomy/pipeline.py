@@ -42,6 +42,8 @@ class StreamContext:
     """Time of the latest sample; unmarked boundaries are not earlier than this."""
     ended: bool = False
     end_time: float = 0.0
+    _limit_key: tuple = ()
+    _limit: float | None = None
     waiting: set = field(default_factory=set)
     """Operators waiting for time to pass (the 'a'-chain limit); poll them as samples arrive."""
 
@@ -51,9 +53,12 @@ class StreamContext:
 
     def limit(self) -> float | None:
         """The 'a'-chain time limit (cleanUp stateVec(2,2)) if it is already determined."""
-        if len(self.boundaries) >= 4 or self.ended:
-            return mc.state_limits(self.boundaries, self.end_time)[1]
-        return None
+        key = (len(self.boundaries), self.ended, self.end_time)
+        if key != self._limit_key:
+            known = len(self.boundaries) >= 4 or self.ended
+            self._limit = mc.state_limits(self.boundaries, self.end_time)[1] if known else None
+            self._limit_key = key
+        return self._limit
 
 
 class Op:
@@ -117,8 +122,10 @@ class RepeatedPrimitives(Op):
         self.count += 1
         self.sum_avg += row[pr.AVG]
         self.sum_grad += row[pr.GRAD]
-        self.vmax = max(self.vmax, row[pr.MAX])
-        self.vmin = min(self.vmin, row[pr.MIN])
+        if row[pr.MAX] > self.vmax:
+            self.vmax = row[pr.MAX]
+        if row[pr.MIN] < self.vmin:
+            self.vmin = row[pr.MIN]
         return out
 
     def finish(self) -> list[Row]:
@@ -148,11 +155,6 @@ class PairPass(Op):
         self.pending: Row | None = None
         self.pos = 0  # position of the next input row
 
-    def _hold(self, row: Row, pos: int) -> bool:
-        if self.before_start is not None and self.before_start(pos):
-            return False
-        return self.can_start is None or self.can_start(row)
-
     def push(self, row: Row) -> list[Row]:
         pos = self.pos
         self.pos += 1
@@ -164,7 +166,9 @@ class PairPass(Op):
             if merged is not None:
                 return [merged]
             out.append(first)
-        if self._hold(row, pos):
+        if (self.before_start is None or not self.before_start(pos)) and (
+            self.can_start is None or self.can_start(row)
+        ):
             self.pending = row
         else:
             out.append(row)
@@ -813,6 +817,29 @@ class Chain(Op):
     def retained(self) -> int:
         return sum(op.retained() for op in self.ops)
 
+    def push_rows(self, rows: list[Row]) -> list[Row]:
+        """Several final rows at once, operator after operator (same rows as pushing each)."""
+        for op in self.ops:
+            if not rows:
+                break
+            push = op.push
+            out: list[Row] = []
+            for r in rows:
+                out.extend(push(r))
+            rows = out
+        return rows
+
+    def run_all(self, rows: list[Row]) -> list[Row]:
+        """A complete sequence, operator after operator (same rows as push + finish)."""
+        for op in self.ops:
+            push = op.push
+            out: list[Row] = []
+            for r in rows:
+                out.extend(push(r))
+            out.extend(op.finish())
+            rows = out
+        return rows
+
 
 def _labels(*labels: int, field: int) -> Callable[[Row], bool]:
     """can_start predicate: the row's label is one that can open a merging pair."""
@@ -946,6 +973,16 @@ class AxisPipeline:
                 return [], []
         return self._flow(self.compositions.push(prim))
 
+    def push_rows(self, prims: list[Row]) -> tuple[list[Row], list[Row]]:
+        """Several final labelled primitives in (e.g. from push_many); final MCs and LLBs out."""
+        if len(prims) == 1:
+            return self.push(prims[0])
+        if not self.ctx.config.final_segment:
+            prims = [self.held_last, *prims] if self.held_last is not None else list(prims)
+            self.held_last = prims.pop()
+        mcs = self.compositions.push_rows(prims)
+        return mcs, self.behaviors.push_rows([list(m) for m in mcs])
+
     def poll(self) -> tuple[list[Row], list[Row]]:
         """Rows released because time advanced or a boundary was marked."""
         mcs, llbs = self._flow(self.compositions.poll())
@@ -959,18 +996,20 @@ class AxisPipeline:
     def retained(self) -> int:
         return self.compositions.retained() + self.behaviors.retained()
 
+    def run_whole(self, prims: list[Row]) -> tuple[list[Row], list[Row]]:
+        """A whole axis at once (the batch engine): the same operators, one after the other."""
+        if not self.ctx.config.final_segment:
+            prims = prims[:-1]
+        mcs = self.compositions.run_all(prims)
+        return mcs, self.behaviors.run_all([list(m) for m in mcs])
+
 
 # --------------------------------------------------------------------------- whole lists
 
 
 def run_ops(ops: list[Op], rows: list[Row]) -> list[Row]:
     """Push a whole list through operators and finish: a pass applied to a complete sequence."""
-    chain = Chain(ops)
-    out: list[Row] = []
-    for r in rows:
-        out.extend(chain.push(r))
-    out.extend(chain.finish())
-    return out
+    return Chain(ops).run_all(rows)
 
 
 def whole_context(

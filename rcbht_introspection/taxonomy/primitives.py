@@ -1,4 +1,4 @@
-"""Primitive layer (spec 2.1): growing-window regression segmentation, gradient labels, clean-up.
+"""Primitive layer (spec 2.1): regression segmentation, gradient labels, clean-up rules, calibration.
 
 The segmenter is incremental: it is fed blocks of W samples and keeps, per axis, only the running
 least-squares statistics of the open segment (merged block by block with Chan's pairwise update,
@@ -110,8 +110,8 @@ def classify_gradient(g: float, thresholds: Sequence[float]) -> int:
 def block_stats(t: np.ndarray, y: np.ndarray) -> tuple:
     """Least-squares statistics of K blocks of m samples: t (K, m), y (K, m, A) -> nested lists.
 
-    Returns (m, mean_t, Stt, mean_y, Syy, Sty, max_y, min_y, last_t, last_y), per-axis entries as
-    (K, A) lists. Centred sums keep the precision of a direct polyfit. Every sum runs over the m
+    Returns (m, mean_t, Stt, mean_y, Syy, Sty, max_y, min_y, last_t, last_y); the per-axis entries
+    are axis-major (A, K) lists. Centred sums keep the precision of a direct polyfit. Every sum runs over the m
     samples in order with element-wise operations, so one block gives bit-identical numbers
     whether it is computed alone (streaming, `block_stats_one`) or among many (batch).
     """
@@ -142,13 +142,13 @@ def block_stats(t: np.ndarray, y: np.ndarray) -> tuple:
         m,
         mt.tolist(),
         stt.tolist(),
-        my.tolist(),
-        syy.tolist(),
-        sty.tolist(),
-        ymax.tolist(),
-        ymin.tolist(),
+        my.T.tolist(),
+        syy.T.tolist(),
+        sty.T.tolist(),
+        ymax.T.tolist(),
+        ymin.T.tolist(),
         t[:, -1].tolist(),
-        y[:, -1, :].tolist(),
+        y[:, -1, :].T.tolist(),
     )
 
 
@@ -158,6 +158,8 @@ def block_stats_one(ts: list[float], ys: list[list[float]]) -> tuple:
     ts: the block's m times; ys: its m samples of A axes. Used per window step by the stream.
     """
     m = len(ts)
+    if m == 5:  # the window step: the same sums, written out (left to right, same bits)
+        return _block_stats_five(ts, ys)
     st = ts[0]
     for j in range(1, m):
         st = st + ts[j]
@@ -166,26 +168,47 @@ def block_stats_one(ts: list[float], ys: list[list[float]]) -> tuple:
     stt = dts[0] * dts[0]
     for j in range(1, m):
         stt = stt + dts[j] * dts[j]
-    my_row, syy_row, sty_row, max_row, min_row = [], [], [], [], []
+    d0 = dts[0]
+    rest = dts[1:]
+    my_col, syy_col, sty_col, max_col, min_col = [], [], [], [], []
     for col in zip(*ys, strict=True):
         sy = col[0]
-        for j in range(1, m):
-            sy = sy + col[j]
+        for v in col[1:]:
+            sy = sy + v
         my = sy / m
         dy = col[0] - my
         syy = dy * dy
-        sty = dts[0] * dy
-        for j in range(1, m):
-            dy = col[j] - my
+        sty = d0 * dy
+        for dt, v in zip(rest, col[1:], strict=True):
+            dy = v - my
             syy = syy + dy * dy
-            sty = sty + dts[j] * dy
-        my_row.append(my)
-        syy_row.append(syy)
-        sty_row.append(sty)
-        max_row.append(max(col))
-        min_row.append(min(col))
-    return (m, [mt], [stt], [my_row], [syy_row], [sty_row], [max_row], [min_row], [ts[-1]],
-            [list(ys[-1])])  # fmt: skip
+            sty = sty + dt * dy
+        my_col.append([my])
+        syy_col.append([syy])
+        sty_col.append([sty])
+        max_col.append([max(col)])
+        min_col.append([min(col)])
+    return (m, [mt], [stt], my_col, syy_col, sty_col, max_col, min_col, [ts[-1]],
+            [[v] for v in ys[-1]])  # fmt: skip
+
+
+def _block_stats_five(ts: list[float], ys: list[list[float]]) -> tuple:
+    """block_stats_one for W = 5 samples, unrolled; Python adds left to right like the loops."""
+    t0, t1, t2, t3, t4 = ts
+    mt = (t0 + t1 + t2 + t3 + t4) / 5
+    d0, d1, d2, d3, d4 = t0 - mt, t1 - mt, t2 - mt, t3 - mt, t4 - mt
+    stt = d0 * d0 + d1 * d1 + d2 * d2 + d3 * d3 + d4 * d4
+    my_col, syy_col, sty_col, max_col, min_col = [], [], [], [], []
+    for y0, y1, y2, y3, y4 in zip(*ys, strict=True):
+        my = (y0 + y1 + y2 + y3 + y4) / 5
+        e0, e1, e2, e3, e4 = y0 - my, y1 - my, y2 - my, y3 - my, y4 - my
+        my_col.append([my])
+        syy_col.append([e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3 + e4 * e4])
+        sty_col.append([d0 * e0 + d1 * e1 + d2 * e2 + d3 * e3 + d4 * e4])
+        max_col.append([max(y0, y1, y2, y3, y4)])
+        min_col.append([min(y0, y1, y2, y3, y4)])
+    return (5, [mt], [stt], my_col, syy_col, sty_col, max_col, min_col, [t4],
+            [[v] for v in ys[-1]])  # fmt: skip
 
 
 class Segmenter:
@@ -242,17 +265,18 @@ class Segmenter:
             pt, py = self.last_t, self.last_y[a]
             segs = self.segments[a]
             before = len(segs)
+            amy, asyy, asty, amax, amin, aly = bmy[a], bsyy[a], bsty[a], bmax[a], bmin[a], bly[a]
             for j in range(n_full):
                 # W = S (+) block j  (Chan et al. pairwise update)
                 bt = bmt[j]
-                by = bmy[j][a]
+                by = amy[j]
                 nn = n + m
                 dt = bt - mt
                 dy = by - my
                 f = n * m / nn
                 wtt = stt + bstt[j] + dt * dt * f
-                wyy = syy + bsyy[j][a] + dy * dy * f
-                wty = sty + bsty[j][a] + dt * dy * f
+                wyy = syy + asyy[j] + dy * dy * f
+                wty = sty + asty[j] + dt * dy * f
                 # R^2 = 1 - SSres/SStot with the original's zero clamps and nan/inf -> 1
                 if wyy < zero:
                     good = True
@@ -263,17 +287,17 @@ class Segmenter:
                     n, stt, syy, sty = nn, wtt, wyy, wty
                     mt = mt + dt * m / nn
                     my = my + dy * m / nn
-                    v = bmax[j][a]
+                    v = amax[j]
                     if v > smax:
                         smax = v
-                    v = bmin[j][a]
+                    v = amin[j]
                     if v < smin:
                         smin = v
                 else:
                     slope = wty / wtt if wtt > 0 else 0.0
                     wmt = mt + dt * m / nn
                     wmy = my + dy * m / nn
-                    lt, ly = blt[j], bly[j][a]
+                    lt, ly = blt[j], aly[j]
                     # the first window of the signal keeps all of it; later ones end at i
                     finish = lt if k0 + j == 0 else pt
                     f0 = wmy + slope * (ts - wmt)
@@ -302,21 +326,21 @@ class Segmenter:
                         f = m / nn
                         n = nn
                         stt = bstt[j] + dt * dt * f
-                        syy = bsyy[j][a] + dy * dy * f
-                        sty = bsty[j][a] + dt * dy * f
+                        syy = asyy[j] + dy * dy * f
+                        sty = asty[j] + dt * dy * f
                         mt = pt + dt * m / nn
                         my = py + dy * m / nn
-                        smax = bmax[j][a] if bmax[j][a] > py else py
-                        smin = bmin[j][a] if bmin[j][a] < py else py
+                        smax = amax[j] if amax[j] > py else py
+                        smin = amin[j] if amin[j] < py else py
                         ts = pt
-                pt, py = blt[j], bly[j][a]
+                pt, py = blt[j], aly[j]
             self.state[a] = [n, mt, my, stt, syy, sty, smax, smin, ts]
             if len(segs) != before:
                 closed.append(a)
         if n_full:
             self.blocks += n_full
             self.last_t = blt[n_full - 1]
-            self.last_y = list(bly[n_full - 1])
+            self.last_y = [col[n_full - 1] for col in bly]
         if final:
             self._finish(stats if count > n_full and m else None, count - 1)
         return closed
@@ -333,12 +357,12 @@ class Segmenter:
                 m, bmt, bstt, bmy, _bsyy, bsty, bmax, bmin, blt, _bly = stats
                 nn = n + m
                 dt = bmt[j] - mt
-                dy = bmy[j][a] - my
+                dy = bmy[a][j] - my
                 f = n * m / nn
                 stt = stt + bstt[j] + dt * dt * f
-                sty = sty + bsty[j][a] + dt * dy * f
-                smax = max(smax, bmax[j][a])
-                smin = min(smin, bmin[j][a])
+                sty = sty + bsty[a][j] + dt * dy * f
+                smax = max(smax, bmax[a][j])
+                smin = min(smin, bmin[a][j])
                 end = blt[j]
             slope = sty / stt if stt > 0 else 0.0
             finish = end if end != ts else end + end / 20

@@ -110,20 +110,27 @@ class DomainTracker:
         self.top: list[float] = []  # descending
         self.bottom: list[float] = []  # ascending
 
-    def add(self, values: Sequence[float], vmax: float, vmin: float) -> None:
+    def add(self, values: Sequence[float], vmax: float, vmin: float) -> bool:
+        """Take in samples (with their max and min); True if the 4th largest/smallest changed."""
         rank = self.rank
+        if len(self.top) == rank and vmax <= self.top[-1] and vmin >= self.bottom[-1]:
+            return False  # the usual case: nothing new at either end
+        changed = False
         if len(self.top) < rank or vmax > self.top[-1]:
             for v in values:
                 if len(self.top) < rank or v > self.top[-1]:
                     self.top.append(v)
                     self.top.sort(reverse=True)
                     del self.top[rank:]
+                    changed = True
         if len(self.bottom) < rank or vmin < self.bottom[-1]:
             for v in values:
                 if len(self.bottom) < rank or v < self.bottom[-1]:
                     self.bottom.append(v)
                     self.bottom.sort()
                     del self.bottom[rank:]
+                    changed = True
+        return changed
 
     def domain(self, config: TaxonomyConfig) -> float:
         if not self.top:
@@ -200,33 +207,34 @@ class ArmStream:
         for b in llbs:
             out.append(self._word("b", b, axis))
 
-    def _primitive(self, a: int, seg: list[float], out: list[Word]) -> None:
-        """A closed segment: label it (or let it wait for the domain) and run the pipeline."""
+    def _primitives(self, a: int, segs: list[list[float]], out: list[Word]) -> None:
+        """Closed segments: label them (or let them wait for the domain) and run the pipeline."""
         thresholds = self._thresholds[a]
         if thresholds is None:
             if not self.causal:
-                self._waiting[a].append(seg)
+                self._waiting[a].extend(segs)
                 return
             thresholds = axis_thresholds(
                 AXES[a], self._trackers[a].domain(self.config), self.config
             )
-        prim = [*seg, classify_gradient(seg[5], thresholds)]
-        out.append(self._word("p", prim, AXES[a]))
-        mcs, llbs = self.pipes[a].push(prim)
+        axis = AXES[a]
+        prims = [[*seg, classify_gradient(seg[5], thresholds)] for seg in segs]
+        for prim in prims:
+            out.append(self._word("p", prim, axis))
+        mcs, llbs = self.pipes[a].push_rows(prims)
         self._emit(a, mcs, llbs, out)
 
     def _release_waiting(self, a: int, domain: float, out: list[Word]) -> None:
         self._thresholds[a] = axis_thresholds(AXES[a], domain, self.config)
         waiting = self._waiting.pop(a, [])
         self._trackers.pop(a, None)
-        for seg in waiting:
-            self._primitive(a, seg, out)
+        if waiting:
+            self._primitives(a, waiting, out)
 
     def _closed(self, out: list[Word]) -> None:
         for a, segs in enumerate(self.segmenter.segments):
             if segs:
-                for seg in segs:
-                    self._primitive(a, seg, out)
+                self._primitives(a, list(segs), out)
                 segs.clear()
 
     # ------------------------------------------------------------------ intake
@@ -306,20 +314,24 @@ class ArmStream:
             for a, tr in self._trackers.items():
                 tr.add((values[a],), values[a], values[a])
             return
-        self.segmenter.samples += 1
         self._ts.append(t)
         self._ys.append(values)
         if len(self._ts) == self.window:
             self._block(out)
 
     def _block(self, out: list[Word], final: bool = False) -> None:
+        self.ctx.now = self._ts[-1]
+        self.segmenter.samples += len(self._ts)
         stats = block_stats_one(self._ts, self._ys)
         if self._trackers:
-            bmax, bmin = stats[6][0], stats[7][0]
+            bmax, bmin = stats[6], stats[7]
             for a in list(self._trackers):
                 tr = self._trackers[a]
-                tr.add([y[a] for y in self._ys], bmax[a], bmin[a])
-                if not self.causal and tr.settled(self.config):
+                lo, hi = bmin[a][0], bmax[a][0]
+                if len(tr.top) == tr.rank and hi <= tr.top[-1] and lo >= tr.bottom[-1]:
+                    continue  # nothing new at either end (checked before building the column)
+                changed = tr.add([y[a] for y in self._ys], hi, lo)
+                if changed and not self.causal and tr.settled(self.config):
                     self._release_waiting(a, tr.domain(self.config), out)
         self._ts = []
         self._ys = []
@@ -338,7 +350,7 @@ class ArmStream:
         out: list[Word] = []
         try:
             t = float(t)
-            values = [float(v) for v in wrench6]
+            values = list(map(float, wrench6))
         except (TypeError, ValueError):
             self.counters.malformed_samples += 1
             return out
@@ -356,11 +368,10 @@ class ArmStream:
                         self._periods = []
                     self._last_t = t
                     self._last_y = values
-                    self.ctx.now = t
-                    self.segmenter.samples += 1
-                    self._ts.append(t)
+                    ts = self._ts
+                    ts.append(t)
                     self._ys.append(values)
-                    if len(self._ts) == self.window:
+                    if len(ts) == self.window:
                         self._block(out)
                     return out
             if self._finished:

@@ -44,7 +44,7 @@ class Word:
     `start`/`end` are the span used for sub-task splitting (primitive Start/Finish; MC and LLB
     t1Start/t2End). `features` holds the level's numeric record fields under their original
     keys (e.g. 'Gradient', 'Average Val', 't1End'), so the original text format round-trips.
-    `seq` is the per-stream sequence number (0 for batch output).
+    `seq` is the per-stream sequence number (batch words are numbered too: batch is a stream).
     """
 
     axis: str
