@@ -56,8 +56,8 @@ class ReplayEvalOptions:
     mode: str = "boundary"
     profile: str = "reference"
     stream_profile: str = "reference"
-    startup_timeout: float = 30.0
-    drain_timeout: float = 20.0
+    startup_timeout: float = 60.0
+    drain_timeout: float = 60.0
     domain_id: int | None = None
     log_dir: Path | None = None
     """Keep the node logs here (default: a temporary folder, removed afterwards)."""
