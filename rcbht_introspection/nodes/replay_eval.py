@@ -134,7 +134,7 @@ class NodeProcess:
         except OSError:
             return ""
 
-    def stop(self, timeout: float = 10.0) -> int | None:
+    def stop(self, timeout: float = 20.0) -> int | None:
         """SIGINT, then SIGKILL after `timeout`; returns the exit code (None if it was killed)."""
         code = self.proc.poll()
         if code is None:
