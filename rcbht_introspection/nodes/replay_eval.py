@@ -602,6 +602,10 @@ def summary(result: dict[str, Any], timeline: bool = False) -> str:
         lines.append(f"{b['name']}: truth {b['truth']}")
         lines.append(f"  verdicts {b['verdicts']}  (offline {b.get('offline_verdicts')})")
         if timeline:
+            truth = ", ".join(
+                f"{t:.2f}s {s}" for t, s in zip(b["truth_starts"], b["truth"], strict=True)
+            )
+            lines.append(f"  truth:       {truth}, end {b['duration']:.2f}s")
             steps = ", ".join(f"{t:.2f}s {s}" for t, s in b["timeline"])
             lines.append(f"  /task_state: start {b['initial_state']}, {steps}")
     lat = result["latency_ms"]
