@@ -13,7 +13,7 @@ import json
 import warnings
 import zipfile
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -86,6 +86,8 @@ class SubtaskModel:
     estimator: Any
     taxonomy_profile: str = "reference"
     random_state: int = 0
+    training: dict[str, Any] = field(default_factory=dict)
+    """How it was trained, stored in the header (e.g. live_augment settings, learn/live.py)."""
 
     @property
     def encoding(self) -> str:
@@ -275,6 +277,8 @@ def save_model(model: SubtaskModel, path: Path | str) -> Path:
         "taxonomy_profile": model.taxonomy_profile,
         "random_state": model.random_state,
     }
+    if model.training:
+        header["training"] = model.training
     if model.classifier in ("svm", "svm-tuned"):
         import skops.io as sio
 
@@ -347,6 +351,7 @@ def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskM
         estimator,
         str(header.get("taxonomy_profile", "reference")),
         int(header.get("random_state", 0)),
+        dict(header.get("training") or {}),
     )
 
 
@@ -359,6 +364,7 @@ def model_summary(path: Path | str) -> dict[str, Any]:
         "classes": model.classes_,
         "taxonomy_profile": model.taxonomy_profile,
         "n_features": model.encoder.n_features,
+        "training": model.training,
     }
 
 

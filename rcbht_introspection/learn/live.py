@@ -1,0 +1,153 @@
+"""Live-like training samples: what the classifier node sees while a sub-task runs.
+
+Live, the window of the running sub-task holds only the words already final at time t (primitives
+after ~25 ms, compositions after seconds, behaviours mostly at the end), clipped to [start, t].
+A model trained on complete sub-tasks only has never seen such windows. `live_samples` streams a
+training trial through the segmenter's own code path (live.replay.stream_trial), and at times t
+inside each sub-task (every `step_s` and at `fractions` of it) takes the words released by t,
+clipped to [start, t], labelled with the true sub-task. Settings: config/live.yaml.
+"""
+
+from __future__ import annotations
+
+from bisect import bisect_right
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rcbht_introspection.config import config_path, load_yaml, to_mapping
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar.split import SubtaskSample, window_sample
+from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
+
+LIVE_CONFIG_FILE = "live.yaml"
+
+
+@dataclass(frozen=True)
+class LiveAugmentConfig:
+    """How live-like samples are drawn (config/live.yaml, section live_augment)."""
+
+    enabled: bool = True
+    """`rcbht train` adds live samples unless --no-live-augment."""
+    step_s: float = 0.5
+    """A sample every step_s seconds after the sub-task start."""
+    fractions: tuple[float, ...] = (0.25, 0.5, 0.75)
+    """And at these fractions of the sub-task (so short sub-tasks get samples too)."""
+    max_per_subtask: int = 20
+    """At most this many per sub-task (evenly spread), so long sub-tasks do not dominate."""
+    taxonomy_profile: str = "reference"
+    stream_profile: str = "reference"
+    """Must match the segmenter node's stream_profile: it decides when words become final."""
+
+
+def load_live_config(path: Path | str | None = None) -> LiveAugmentConfig:
+    """The live_augment section of config/live.yaml (or of `path`)."""
+    file = Path(path) if path is not None else config_path(LIVE_CONFIG_FILE)
+    cfg = load_yaml(LiveAugmentConfig, file, section="live_augment")
+    if cfg.step_s <= 0 or cfg.max_per_subtask < 1 or any(not 0 < f <= 1 for f in cfg.fractions):
+        raise InputError("step_s > 0, max_per_subtask >= 1, fractions in (0, 1] required", path=file)
+    return cfg
+
+
+def sample_times(start: float, end: float, config: LiveAugmentConfig) -> list[float]:
+    """Times t in (start, end] at which a live sample of the sub-task [start, end] is taken."""
+    span = end - start
+    times = set(np.round(start + config.step_s * np.arange(1, int(span / config.step_s) + 1), 9))
+    times |= {round(start + f * span, 9) for f in config.fractions}
+    times = sorted(t for t in times if start < t <= end)
+    if len(times) > config.max_per_subtask:
+        pick = np.linspace(0, len(times) - 1, config.max_per_subtask).round().astype(int)
+        times = [times[i] for i in sorted(set(pick))]
+    return [float(t) for t in times]
+
+
+def live_samples(streamed: StreamedTrial, config: LiveAugmentConfig) -> list[SubtaskSample]:
+    """Windows [start, t] of each sub-task with only the words released by t (empty ones skipped).
+
+    t is moved back to the last segmenter step at or before it: the classifier node's window ends
+    at the stream time of the newest evidence it has.
+    """
+    released = streamed.released()
+    step_times = [s.t for s in streamed.steps]
+    out = []
+    for subtask, start, end in streamed.subtask_windows():
+        for t in sample_times(start, end, config):
+            i = bisect_right(step_times, t) - 1
+            now = max(start, step_times[i]) if i >= 0 else start
+            words = words_until(released, now, streamed.name)
+            sample = window_sample(words, start, now, subtask=subtask, trial=streamed.name)
+            if sample_word_count(sample):
+                out.append(sample)
+    return out
+
+
+def sample_word_count(sample: SubtaskSample) -> int:
+    """Number of words in a sample (every arm, level, axis)."""
+    return sum(len(s) for lv in sample.words.words.values() for ax in lv.values() for s in ax.values())
+
+
+def stream_factory(config: LiveAugmentConfig) -> Any:
+    """`arm -> ArmStream` with the configured taxonomy and stream profiles."""
+    from rcbht_introspection.live.segmenter import arm_stream_factory
+
+    return arm_stream_factory(config.taxonomy_profile, stream_profile=config.stream_profile)
+
+
+def read_any_trial(path: Path) -> Trial:
+    """A trial folder or a bag as a Trial."""
+    from rcbht_introspection.io.hiro import read_trial
+    from rcbht_introspection.learn.data import _bag_module
+
+    bags = _bag_module()
+    if Path(path).is_file() and bags is not None and bags.is_bag(path):
+        return bags.read_trial_bag(path)
+    return read_trial(path)
+
+
+def trial_live_samples(
+    paths: Iterable[Path], config: LiveAugmentConfig, factory: Any | None = None
+) -> dict[str, list[SubtaskSample]]:
+    """Live samples per trial path (trial folders or bags)."""
+    factory = factory or stream_factory(config)
+    out = {}
+    for path in paths:
+        trial = read_any_trial(Path(path))
+        out[str(path)] = live_samples(stream_trial(trial, factory), config)
+    return out
+
+
+def training_header(config: LiveAugmentConfig | None, n_live: int) -> dict[str, Any]:
+    """What the model header records about live augmentation (nodes and users can check it)."""
+    if config is None:
+        return {"live_augment": None}
+    settings = to_mapping(config)
+    settings.pop("enabled", None)
+    return {"live_augment": {**settings, "n_samples": int(n_live)}}
+
+
+def train_live_model(
+    samples: Sequence[SubtaskSample],
+    live: Sequence[SubtaskSample],
+    config: LiveAugmentConfig | None,
+    **train_kwargs: Any,
+) -> Any:
+    """train_model on complete sub-tasks plus live samples; the header records the settings."""
+    from rcbht_introspection.learn.models import train_model
+
+    model = train_model([*samples, *(live if config is not None else ())], **train_kwargs)
+    model.training = training_header(config, len(live) if config is not None else 0)
+    return model
+
+
+__all__ = [
+    "LiveAugmentConfig",
+    "live_samples",
+    "load_live_config",
+    "sample_times",
+    "train_live_model",
+    "trial_live_samples",
+]

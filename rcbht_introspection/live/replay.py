@@ -1,0 +1,186 @@
+"""Offline live-belief replay: what /task_state the nodes publish for a trial, without ROS.
+
+`stream_trial` feeds a trial to `SegmenterSession` (the segmenter node's own state) sample by
+sample, each /task_phase event applied right after the last sample before it, and logs every step
+that released words or applied an event, with its stream time: the exact release time of each
+word. `replay_beliefs` drives `BeliefTracker` (the classifier node's own state) with that log as
+the classifier node does (words, then events, then final verdicts, then the current belief; a
+/task_state change whenever the belief's sub-task changes) and scores the timeline with
+`offline.time_accuracy`. Differences from a DDS replay: no transport delays (a belief changes at
+the stream time of the sample that caused it) and one classification per step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rcbht_introspection.io.trial import SUBTASKS, Trial
+from rcbht_introspection.live import offline
+from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker
+from rcbht_introspection.live.segmenter import PhaseEvent, SegmenterSession, WordBatch
+from rcbht_introspection.taxonomy.words import TrialWords, Word
+
+STAMP_ORIGIN_NS = 1_000_000_000
+"""Absolute stamp of trial time 0 (a zero stamp is rejected by the segmenter, as in bags)."""
+
+
+@dataclass(frozen=True)
+class StreamStep:
+    """What one sample (or the events after it) released, at stream time `t`."""
+
+    t: float
+    batches: tuple[WordBatch, ...]
+    phases: tuple[PhaseEvent, ...]
+
+
+@dataclass
+class StreamedTrial:
+    """The segmenter's output for one trial, step by step (only steps with output)."""
+
+    name: str
+    arms: tuple[str, ...]
+    steps: list[StreamStep]
+    duration: float
+
+    def released(self) -> list[tuple[float, Word]]:
+        """(release time, word) for every word, in release order."""
+        return [(s.t, w) for s in self.steps for b in s.batches for w in b.words]
+
+    def subtask_windows(self) -> list[tuple[str, float, float]]:
+        """(sub-task, start, end) on the stream clock, as the classifier sees the events."""
+        events = [p for s in self.steps for p in s.phases]
+        out: list[tuple[str, float, float]] = []
+        for i, p in enumerate(events):
+            if p.end or p.name not in SUBTASKS:
+                continue
+            end = events[i + 1].time if i + 1 < len(events) else self.duration
+            out.append((p.name, p.time, end))
+        return out
+
+
+def stream_trial(
+    trial: Trial, stream_factory: Callable[[str], object], end_phase: str = "done"
+) -> StreamedTrial:
+    """Feed `trial` to a SegmenterSession as segmenter_node is fed by its trial bag."""
+    arms = trial.arms
+    session = SegmenterSession(arms, stream_factory, end_phases=(end_phase,))
+    ns = STAMP_ORIGIN_NS + np.rint(np.asarray(trial.time, dtype=float) * 1e9).astype(np.int64)
+    events = offline.trial_events(trial, end_phase)
+    event_ns = [STAMP_ORIGIN_NS + round(t * 1e9) for t, _ in events]
+    steps: list[StreamStep] = []
+    ev = 0
+    for i in range(len(ns)):
+        stamp = int(ns[i])
+        batches: list[WordBatch] = []
+        phases: list[PhaseEvent] = []
+        for arm in arms:
+            out = session.push(arm, stamp, trial.wrench[arm][i])
+            batches.extend(out.batches)
+        ended = False
+        # events before the next sample apply at this one (the bag plays them right after it)
+        while ev < len(events) and (i + 1 == len(ns) or event_ns[ev] < ns[i + 1]):
+            out = session.phase(events[ev][1])
+            batches.extend(out.batches)
+            phases.extend(out.phases)
+            ended = ended or any(p.end for p in out.phases)
+            ev += 1
+        if batches or phases:
+            t = (stamp - int(ns[0])) / 1e9
+            steps.append(StreamStep(t, tuple(batches), tuple(phases)))
+        if ended:
+            break
+    duration = float(trial.time[-1] - trial.time[0]) if len(trial.time) else 0.0
+    return StreamedTrial(trial.name, arms, steps, duration)
+
+
+@dataclass
+class LiveReplay:
+    """The /task_state timeline and verdicts the classifier node produces for one trial."""
+
+    name: str
+    mode: str
+    changes: list[tuple[float, str]]
+    finals: list[Belief]
+    initial: str = UNKNOWN
+    time_accuracy: float = float("nan")
+    n_beliefs: int = 0
+    extra: dict[str, object] = field(default_factory=dict)
+
+    @property
+    def verdicts(self) -> list[str]:
+        return [b.subtask for b in self.finals]
+
+
+def replay_beliefs(
+    streamed: StreamedTrial,
+    model: object | None,
+    mode: str = "boundary",
+    window_s: float = 2.0,
+    end_phase: str = "done",
+    trial: Trial | None = None,
+) -> LiveReplay:
+    """Drive BeliefTracker with the segmenter's steps as classifier_node does; score vs `trial`."""
+    tracker = BeliefTracker(model, mode, window_s, end_phases=(end_phase,), trial=streamed.name)
+    state = UNKNOWN
+    changes: list[tuple[float, str]] = []
+    finals: list[Belief] = []
+    n = 0
+    for step in streamed.steps:
+        for batch in step.batches:
+            now = (batch.stamp_ns - batch.origin_ns) / 1e9
+            tracker.add_words(batch.arm, batch.words, now)
+            if batch.end_of_stream:
+                tracker.end_of_stream(batch.arm)
+        for p in step.phases:
+            tracker.phase(p.name, p.time)
+        finals.extend(tracker.take_finals())
+        belief = tracker.current()
+        n += 1
+        if belief.subtask != state:
+            state = belief.subtask
+            changes.append((step.t, state))
+    out = LiveReplay(streamed.name, mode, changes, finals, UNKNOWN, n_beliefs=n)
+    if trial is not None:
+        out.time_accuracy = offline.time_accuracy(trial, changes, initial=UNKNOWN)
+    return out
+
+
+def live_replay(
+    trial: Trial,
+    model: object | None,
+    stream_factory: Callable[[str], object],
+    mode: str = "boundary",
+    window_s: float = 2.0,
+) -> LiveReplay:
+    """stream_trial + replay_beliefs for one trial."""
+    return replay_beliefs(stream_trial(trial, stream_factory), model, mode, window_s, trial=trial)
+
+
+def replay_summary(replays: Sequence[LiveReplay], trials: Sequence[Trial]) -> dict[str, object]:
+    """Duration-weighted time_accuracy and sub-task accuracy of final verdicts over trials."""
+    weights = [float(t.time[-1] - t.time[0]) for t in trials]
+    acc = [r.time_accuracy for r in replays]
+    correct = total = 0
+    for r, t in zip(replays, trials, strict=True):
+        truth = [s for s, _, _ in t.subtask_bounds()]
+        total += len(truth)
+        correct += sum(v == s for v, s in zip(r.verdicts, truth, strict=False))
+    return {
+        "time_accuracy": round(float(np.average(acc, weights=weights)), 4) if replays else None,
+        "subtask_accuracy": round(correct / total, 4) if total and replays[0].mode == "boundary" else None,
+        "subtasks": total,
+        "per_trial": {r.name: round(r.time_accuracy, 4) for r in replays},
+    }
+
+
+def words_until(released: Sequence[tuple[float, Word]], t: float, name: str = "") -> TrialWords:
+    """TrialWords of the words released at or before stream time `t`."""
+    out = TrialWords(name=name)
+    for when, w in released:
+        if when > t:
+            break
+        out.add(w)
+    return out
