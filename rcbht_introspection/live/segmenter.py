@@ -15,6 +15,7 @@ An end event finishes every arm's stream; the next sample starts a new stream (n
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -22,6 +23,8 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.taxonomy.words import Word
 
+RECENT_SAMPLES = 2000
+"""Samples per arm remembered to place an event that arrives after later-published samples."""
 REJECT_REASONS: tuple[str, ...] = (
     "non_finite",
     "zero_stamp",
@@ -86,6 +89,7 @@ class _Pending:
     waiting: set[str]
     time: float | None = None
     stamp_ns: int = 0
+    late: bool = False
 
 
 class _Arm:
@@ -97,6 +101,8 @@ class _Arm:
         self.last_t: float | None = None
         self.first_t: float | None = None
         self.last_source: int | None = None
+        self.recent: deque[tuple[int, float, int]] = deque(maxlen=RECENT_SAMPLES)
+        """(source ns, stream time, stamp ns) of the latest samples, to place late events."""
         self.source_interval = 0.0
         """Running mean of the publication interval of this arm's samples (ns)."""
         self.finished = False
@@ -173,6 +179,8 @@ class SegmenterSession:
                 gap if st.source_interval == 0 else 0.9 * st.source_interval + 0.1 * gap
             )
         st.last_source = source_ns
+        if source_ns is not None:
+            st.recent.append((source_ns, t, stamp_ns))
         if st.first_t is None:
             st.first_t = t
         counts.accepted += 1
@@ -214,6 +222,7 @@ class SegmenterSession:
             ]
             if late:
                 self.late_phases += 1
+                self.pending[-1].late = True
             for arm in late:
                 self._apply_due(out, lambda p: p.source_ns is None or p.source_ns <= source_ns, arm)
         return out
@@ -273,9 +282,16 @@ class SegmenterSession:
         st = self.state[arm]
         p.waiting.discard(arm)
         assert self.origin_ns is not None
+        at_t, at_ns = st.last_t, st.last_ns
+        if p.late and p.source_ns is not None:
+            # the event came after later-published samples: mark it at the sample before it
+            for source, t, stamp in reversed(st.recent):
+                if source < p.source_ns:
+                    at_t, at_ns = t, stamp
+                    break
         if p.time is None or arm == self.arms[0]:
-            p.time = st.last_t if st.last_t is not None else 0.0
-            p.stamp_ns = st.last_ns or self.origin_ns
+            p.time = at_t if at_t is not None else 0.0
+            p.stamp_ns = at_ns or self.origin_ns
         if p.end:
             words = st.stream.finish()  # type: ignore[attr-defined]
             st.finished = True
@@ -284,9 +300,9 @@ class SegmenterSession:
                     arm, list(words), st.last_ns, self.origin_ns, self.stream_id, end_of_stream=True
                 )
             )
-        elif st.last_t is not None:
+        elif at_t is not None:
             # every sub-task start is marked (the stream reads rotation/mating starts by order)
-            words = st.stream.mark_boundary(st.last_t, p.name)  # type: ignore[attr-defined]
+            words = st.stream.mark_boundary(at_t, p.name)  # type: ignore[attr-defined]
             if words:
                 out.batches.append(
                     WordBatch(arm, list(words), st.last_ns, self.origin_ns, self.stream_id)
