@@ -151,10 +151,13 @@ class BeliefTracker:
         if self.model is None or n == 0:
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
         try:
-            # the verdict is the model's own prediction (as offline evaluation uses it), which
-            # for a probabilistic SVM need not be the arg-max of its calibrated probabilities
-            verdict = str(self.model.predict_samples([sample])[0])  # type: ignore[attr-defined]
             proba = np.asarray(self.model.predict_proba_samples([sample]))[0]  # type: ignore[attr-defined]
+            if final:
+                # a verdict is the model's own prediction (as offline evaluation uses it), which
+                # for a probabilistic SVM need not be the arg-max of its probabilities
+                verdict = str(self.model.predict_samples([sample])[0])  # type: ignore[attr-defined]
+            else:
+                verdict = self.classes[int(np.argmax(proba))]  # live: one model call
         except Exception as exc:  # a bad model must not stop the node
             self.last_error = f"{type(exc).__name__}: {exc}"
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
