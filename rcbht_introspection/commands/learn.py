@@ -22,6 +22,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--out", type=Path, required=True, metavar="MODEL")
     _common(train)
     train.add_argument("--seed", type=int, default=0)
+    train.add_argument("--live-augment", action=argparse.BooleanOptionalAction, default=None,
+                       help="also train on live-like windows (words final by t); default from "
+                       "config/live.yaml (docs/live.md)")
+    train.add_argument("--live-config", type=Path, default=None, metavar="YAML",
+                       help="live_augment settings (default config/live.yaml)")
     train.set_defaults(func=run_train)
 
     ev = subparsers.add_parser("evaluate", help="learning-curve evaluation of a classifier")
@@ -51,16 +56,21 @@ def _common(parser: argparse.ArgumentParser) -> None:
 
 
 def run_train(args: argparse.Namespace) -> int:
-    from rcbht_introspection.learn.models import save_model, train_model
+    from rcbht_introspection.learn.live import live_training
+    from rcbht_introspection.learn.models import save_model
 
     trials = load_trials(args.inputs, args.words)
     samples = [s for t in trials for s in t.samples]
-    model = train_model(samples, args.classifier, args.encoding, random_state=args.seed,
-                        augment_prefixes=tuple(args.augment_prefixes))
+    model, n_live = live_training(
+        trials, args.live_augment, args.live_config, classifier=args.classifier,
+        encoding=args.encoding, random_state=args.seed,
+        augment_prefixes=tuple(args.augment_prefixes),
+    )  # fmt: skip
     save_model(model, args.out)
     print(
-        f"wrote {args.out}: {args.classifier}/{args.encoding}, {len(samples)} samples from "
-        f"{len(trials)} trials, {model.encoder.n_features} features, classes {model.classes_}"
+        f"wrote {args.out}: {args.classifier}/{args.encoding}, {len(samples)} samples "
+        f"(+{n_live} live) from {len(trials)} trials, {model.encoder.n_features} features, "
+        f"classes {model.classes_}"
     )
     return 0
 

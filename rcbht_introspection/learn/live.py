@@ -146,8 +146,25 @@ def train_live_model(
 __all__ = [
     "LiveAugmentConfig",
     "live_samples",
+    "live_training",
     "load_live_config",
     "sample_times",
     "train_live_model",
     "trial_live_samples",
 ]
+
+
+def live_training(
+    trials: Sequence[Any],
+    enabled: bool | None = None,
+    config_file: Path | str | None = None,
+    **train_kwargs: Any,
+) -> tuple[Any, int]:
+    """(model, number of live samples) for TrialSamples `trials`; `enabled` None = config's."""
+    config = load_live_config(config_file)
+    use = config.enabled if enabled is None else enabled
+    samples = [s for t in trials for s in t.samples]
+    live: list[SubtaskSample] = []
+    if use:
+        live = [s for v in trial_live_samples([t.path for t in trials], config).values() for s in v]
+    return train_live_model(samples, live, config if use else None, **train_kwargs), len(live)
