@@ -8,6 +8,7 @@ dropped and counted (Words.samples_rejected).
 
 from __future__ import annotations
 
+import struct
 import sys
 import time
 from functools import partial
@@ -16,8 +17,10 @@ from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
+from rcbht_introspection.io.bags import decode_wrench
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
 from rcbht_introspection.nodes.common import declare_config, qos_profile, run
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
@@ -52,11 +55,18 @@ class SegmenterNode(Node):
         }
         self.phase_pub = self.create_publisher(PhaseMsg, cfg.applied_phase_topic, qos)
         self.wrench_subs = [
-            (arm, self.create_subscription(WrenchStamped, topic, partial(self.on_wrench, arm), qos))
+            (
+                arm,
+                # raw CDR: decoding six doubles and a stamp beats building message objects
+                self.create_subscription(
+                    WrenchStamped, topic, partial(self.on_wrench, arm), qos, raw=True
+                ),
+            )
             for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True)
         ]
         self.phase_sub = self.create_subscription(String, cfg.phase_topic, self.on_phase, qos)
         self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
+        self.cpu_at_start = time.process_time()
         self.get_logger().info(
             f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
             f"profile {cfg.taxonomy_profile}, stream {cfg.stream_profile}"
@@ -76,7 +86,7 @@ class SegmenterNode(Node):
                 return
             self.on_phase(*taken)
 
-    def on_wrench(self, arm: str, msg: WrenchStamped, info: dict) -> None:
+    def on_wrench(self, arm: str, msg: bytes, info: dict) -> None:
         """One executor wake-up handles every sample already delivered (arms in turn), in order.
 
         rclpy's per-callback cost dominates at 1 kHz; taking a burst at once keeps the node
@@ -94,10 +104,13 @@ class SegmenterNode(Node):
             if not taken:
                 return
 
-    def sample(self, arm: str, msg: WrenchStamped, info: dict) -> None:
+    def sample(self, arm: str, raw: bytes, info: dict) -> None:
         self.last_sample = time.monotonic()
         self.take_phases()
-        stamp, wrench = wrench_sample(msg)
+        try:
+            stamp, _, wrench = decode_wrench(raw)
+        except (ValueError, struct.error):
+            stamp, wrench = wrench_sample(deserialize_message(raw, WrenchStamped))
         out = self.session.push(arm, stamp, wrench, info.get("source_timestamp") or None)
         if out.rejected:
             self.get_logger().warning(
@@ -125,6 +138,15 @@ class SegmenterNode(Node):
         idle = time.monotonic() - self.last_sample > self.cfg.event_hold_s
         if self.session.pending and idle:
             self.publish(self.session.flush(time.time_ns()))
+
+    def close(self) -> None:
+        """Log what the node did (samples, rejections, CPU time) when it shuts down."""
+        counts = {arm: (c.accepted, c.rejected_total) for arm, c in self.session.counts.items()}
+        self.get_logger().info(
+            f"samples (accepted, rejected) per arm {counts}, unknown events "
+            f"{self.session.unknown_phases}, late events {self.session.late_phases}, "
+            f"CPU {time.process_time() - self.cpu_at_start:.2f} s after start-up"
+        )
 
     def publish(self, out: Output) -> None:
         """One Words message per batch and level with words (every level at stream end), then events."""
