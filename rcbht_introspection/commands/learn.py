@@ -40,6 +40,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ev.add_argument("--n-estimators", type=int, default=100, help="Mondrian trees")
     ev.add_argument("--no-variant", action="store_true",
                     help="skip the variant without near-empty sub-tasks")
+    ev.add_argument("--live-augment", action="store_true",
+                    help="also train on live-like windows of the training trials (docs/live.md)")
+    ev.add_argument("--live-score", action="store_true",
+                    help="score on the validation trials' live windows (live_accuracy)")
     ev.add_argument("--json", type=Path, default=None, metavar="OUT")
     ev.add_argument("--plot", type=Path, default=None, metavar="OUT.png")
     ev.add_argument("--no-progress", action="store_true")
@@ -103,6 +107,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
         n_estimators=args.n_estimators,
         variant=not args.no_variant,
         augment_prefixes=tuple(args.augment_prefixes),
+        live_augment=args.live_augment,
+        live_score=args.live_score,
     )
     bar = None
     if not args.no_progress:
@@ -125,6 +131,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
         f"best of splits {result['best_of_splits']:.4f} ({result['n_trials']} trials, "
         f"{result['n_validation_trials']} held out, {args.permutations} permutations)"
     )
+    if "live_accuracy" in result:
+        live = result["live_accuracy"]
+        print(f"live windows of the validation trials: {live['mean']:.4f} +- {live['std']:.4f}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))

@@ -50,6 +50,10 @@ class Protocol:
     augment_prefixes: tuple[float, ...] = ()
     """Also train on these prefixes of every training sub-task (for live use); off by default."""
     prefixes: bool = True
+    live_augment: bool = False
+    """Also train on live-like windows of the training trials (learn/live.py, config/live.yaml)."""
+    live_score: bool = False
+    """Score the final model on the validation trials' live windows (live_accuracy)."""
 
 
 def default_validation(n_trials: int, two_arm: bool = False) -> int:
@@ -121,6 +125,8 @@ def evaluate(
     prefix_base: dict[float, list[float]] = {f: [] for f in PREFIX_FRACTIONS}
     near_empty = lambda s: s.duration < protocol.near_empty_seconds  # noqa: E731
     n_near_empty = sum(near_empty(s) for t in complete for s in t.samples)
+    live = _live_windows(complete) if protocol.live_augment or protocol.live_score else {}
+    live_acc: list[float] = []
 
     for perm in range(protocol.permutations):
         rng = np.random.default_rng(protocol.seed + perm)
@@ -130,9 +136,13 @@ def evaluate(
         val_kept = [s for s in val_samples if not near_empty(s)]
         for j, k in enumerate(steps):
             train_samples = [s for t in training[:k] for s in t.samples]
+            if protocol.live_augment:
+                fit_samples = train_samples + [s for t in training[:k] for s in live[t.trial]]
+            else:
+                fit_samples = train_samples
             began = time.perf_counter()
             model = train_model(
-                train_samples, protocol.classifier, protocol.encoding,
+                fit_samples, protocol.classifier, protocol.encoding,
                 random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
                 augment_prefixes=protocol.augment_prefixes,
             )  # fmt: skip
@@ -141,7 +151,7 @@ def evaluate(
             duration = _duration_model(train_samples, protocol.seed + perm)
             base_curve[perm, j] = _accuracy(duration.predict(_log_duration(val_samples)), val_samples)
             if protocol.variant and k in tail_steps and n_near_empty:
-                kept = [s for s in train_samples if not near_empty(s)]
+                kept = [s for s in fit_samples if not near_empty(s)]
                 variant = train_model(
                     kept, protocol.classifier, protocol.encoding,
                     random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
@@ -168,6 +178,9 @@ def evaluate(
                 model.predict_proba_samples([s])
                 timings.append(time.perf_counter() - t0)
             predict_ms.append(1000 * float(np.median(timings)))
+            if live:
+                windows = [s for t in validation for s in live[t.trial]]
+                live_acc.append(_accuracy(model.predict_samples(windows), windows))
             if protocol.prefixes:
                 for f in PREFIX_FRACTIONS:
                     prefixes = [prefix_sample(s, f) for s in val_samples]
@@ -216,6 +229,9 @@ def evaluate(
             if prefix_acc[f]
         },
     }
+    if live:
+        result["live_augment"] = protocol.live_augment
+        result["live_accuracy"] = {**_mean_std(live_acc), "n_windows": sum(map(len, live.values()))}
     if protocol.variant:
         result["without_near_empty"] = {
             "near_empty_seconds": protocol.near_empty_seconds,
@@ -228,6 +244,14 @@ def evaluate(
             else {k: result["duration_baseline"][k] for k in ("mean", "std")},
         }
     return result
+
+
+def _live_windows(trials: Sequence[TrialSamples]) -> dict[str, list[SubtaskSample]]:
+    """Live-like windows of every trial (words final by t, learn/live.py), by trial name."""
+    from rcbht_introspection.learn.live import load_live_config, trial_live_samples
+
+    by_path = trial_live_samples([t.path for t in trials], load_live_config())
+    return {t.trial: by_path[str(t.path)] for t in trials}
 
 
 def total_steps(trials: Sequence[TrialSamples], protocol: Protocol) -> int:
