@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 from pathlib import Path
 from typing import Any
 
@@ -77,16 +78,22 @@ def run_live_eval(args: argparse.Namespace) -> int:
     }
     for name, model in models.items():
         for mode in modes:
+            began = time.perf_counter()
             reps = [
                 replay_beliefs(s, model, mode, args.window_s, trial=t)
                 for s, t in zip(streamed, held, strict=True)
             ]
+            elapsed = time.perf_counter() - began
             summary = replay_summary(reps, held)
+            # classification cost per belief update (window split + encoding + predict): the
+            # classifier node pays this once per word batch
+            summary["ms_per_belief"] = round(1000 * elapsed / max(1, sum(r.n_beliefs for r in reps)), 3)
             summary["timelines"] = {r.name: [(round(t, 3), s) for t, s in r.changes] for r in reps}
             result["results"][f"{name}/{mode}"] = summary
             print(
                 f"{name:7s} {mode:8s} time_accuracy {summary['time_accuracy']}"
-                f"  subtask_accuracy {summary['subtask_accuracy']}  per trial {summary['per_trial']}"
+                f"  subtask_accuracy {summary['subtask_accuracy']}  ms/belief {summary['ms_per_belief']}"
+                f"  per trial {summary['per_trial']}"
             )
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
