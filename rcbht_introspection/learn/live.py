@@ -39,6 +39,9 @@ class LiveAugmentConfig:
     """And at these fractions of the sub-task (so short sub-tasks get samples too)."""
     max_per_subtask: int = 20
     """At most this many per sub-task (evenly spread), so long sub-tasks do not dominate."""
+    window_s: float = 2.0
+    """> 0: also the classifier's window mode: words of [t - window_s, t] final by t, labelled
+    with the sub-task at t (0: boundary-mode windows only)."""
     taxonomy_profile: str = "reference"
     stream_profile: str = "reference"
     """Must match the segmenter node's stream_profile: it decides when words become final."""
@@ -48,8 +51,8 @@ def load_live_config(path: Path | str | None = None) -> LiveAugmentConfig:
     """The live_augment section of config/live.yaml (or of `path`)."""
     file = Path(path) if path is not None else config_path(LIVE_CONFIG_FILE)
     cfg = load_yaml(LiveAugmentConfig, file, section="live_augment")
-    if cfg.step_s <= 0 or cfg.max_per_subtask < 1 or any(not 0 < f <= 1 for f in cfg.fractions):
-        raise InputError("step_s > 0, max_per_subtask >= 1, fractions in (0, 1] required", path=file)
+    if cfg.step_s <= 0 or cfg.window_s < 0 or cfg.max_per_subtask < 1 or any(not 0 < f <= 1 for f in cfg.fractions):
+        raise InputError("step_s > 0, window_s >= 0, max_per_subtask >= 1, fractions in (0, 1] required", path=file)
     return cfg
 
 
@@ -82,6 +85,11 @@ def live_samples(streamed: StreamedTrial, config: LiveAugmentConfig) -> list[Sub
             sample = window_sample(words, start, now, subtask=subtask, trial=streamed.name)
             if sample_word_count(sample):
                 out.append(sample)
+            if config.window_s > 0:
+                lo = max(0.0, now - config.window_s)
+                sample = window_sample(words, lo, now, subtask=subtask, trial=streamed.name)
+                if sample_word_count(sample):
+                    out.append(sample)
     return out
 
 
