@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from rcbht_introspection.cli import main
+from rcbht_introspection.grammar.split import prefix_sample
 from rcbht_introspection.io.hiro import read_trial
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn.data import load_samples, load_trials
@@ -18,6 +19,7 @@ from rcbht_introspection.learn.live import (
     sample_times,
     stream_factory,
     train_live_model,
+    trial_live_samples,
 )
 from rcbht_introspection.learn.models import load_model, save_model
 from rcbht_introspection.live import offline
@@ -42,7 +44,9 @@ def case(real: Path) -> dict:
     config = LiveAugmentConfig()
     factory = stream_factory(config)
     trial = read_trial(real / TEST_TRIAL)
-    model = train_live_model(load_samples([real / n for n in TRAIN_TRIALS]), [], None)
+    train = [real / n for n in TRAIN_TRIALS]
+    live = [s for v in trial_live_samples(train, config, factory).values() for s in v]
+    model = train_live_model(load_samples(train), live, config)
     return {"trial": trial, "factory": factory, "streamed": stream_trial(trial, factory),
             "model": model, "config": config}  # fmt: skip
 
@@ -78,6 +82,8 @@ def test_replay_state_equals_a_fresh_tracker_fed_everything_released_by_t(case: 
     released, events = _independent_release(trial, case["factory"])
     t0 = float(trial.time[0])
     rep = replay_beliefs(case["streamed"], model, "boundary", trial=trial)
+    # final verdicts come from the complete-sub-task model, running windows from the live head
+    assert model.live is not None and model.head(True) is model and model.head(False) is model.live
     words = offline.offline_stream_words(trial, case["factory"])
     assert rep.verdicts == offline.offline_verdicts(model, trial, words)
     assert 0.0 < rep.time_accuracy <= 1.0
@@ -150,14 +156,20 @@ def test_live_augment_round_trips_through_the_model_file(real: Path, tmp_path: P
     out = tmp_path / "m.rcbht"
     inputs = [str(real / n) for n in TRAIN_TRIALS]
     assert main(["train", *inputs, "--out", str(out), "--live-augment"]) == 0
-    header = load_model(out).training["live_augment"]
+    loaded = load_model(out)
+    assert loaded.live is not None and loaded.live.classes_ == loaded.classes_
+    header = loaded.training["live_augment"]
     assert header["stream_profile"] == load_live_config().stream_profile
     assert header["n_samples"] > 12 and header["step_s"] == 0.5
     assert main(["train", *inputs, "--out", str(out), "--no-live-augment"]) == 0
-    assert load_model(out).training == {"live_augment": None}
+    assert load_model(out).training == {"live_augment": None} and load_model(out).live is None
     # the header is covered by the checksum and survives a save/load cycle unchanged
-    model = train_live_model(
-        [s for t in load_trials(inputs) for s in t.samples], [], LiveAugmentConfig(step_s=0.25)
-    )
+    samples = [s for t in load_trials(inputs) for s in t.samples]
+    windows = [prefix_sample(s, 0.3) for s in samples]
+    model = train_live_model(samples, windows, LiveAugmentConfig(step_s=0.25))
     again = load_model(save_model(model, tmp_path / "again.rcbht"))
     assert again.training == model.training and again.training["live_augment"]["step_s"] == 0.25
+    assert again.live is not None
+    np.testing.assert_allclose(
+        again.live.predict_proba_samples(windows), model.live.predict_proba_samples(windows)
+    )

@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ev.add_argument("--no-variant", action="store_true",
                     help="skip the variant without near-empty sub-tasks")
     ev.add_argument("--live-augment", action="store_true",
-                    help="also train on live-like windows of the training trials (docs/live.md)")
+                    help="score live windows with a live head trained on live windows too (docs/live.md)")
     ev.add_argument("--live-score", action="store_true",
                     help="score on the validation trials' live windows (live_accuracy)")
     ev.add_argument("--json", type=Path, default=None, metavar="OUT")

@@ -51,7 +51,8 @@ class Protocol:
     """Also train on these prefixes of every training sub-task (for live use); off by default."""
     prefixes: bool = True
     live_augment: bool = False
-    """Also train on live-like windows of the training trials (learn/live.py, config/live.yaml)."""
+    """Score live windows with a live head also trained on the training trials' live windows
+    (learn/live.py, config/live.yaml); the curve and verdicts use the complete-sub-task model."""
     live_score: bool = False
     """Score the final model on the validation trials' live windows (live_accuracy)."""
 
@@ -136,13 +137,9 @@ def evaluate(
         val_kept = [s for s in val_samples if not near_empty(s)]
         for j, k in enumerate(steps):
             train_samples = [s for t in training[:k] for s in t.samples]
-            if protocol.live_augment:
-                fit_samples = train_samples + [s for t in training[:k] for s in live[t.trial]]
-            else:
-                fit_samples = train_samples
             began = time.perf_counter()
             model = train_model(
-                fit_samples, protocol.classifier, protocol.encoding,
+                train_samples, protocol.classifier, protocol.encoding,
                 random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
                 augment_prefixes=protocol.augment_prefixes,
             )  # fmt: skip
@@ -151,7 +148,7 @@ def evaluate(
             duration = _duration_model(train_samples, protocol.seed + perm)
             base_curve[perm, j] = _accuracy(duration.predict(_log_duration(val_samples)), val_samples)
             if protocol.variant and k in tail_steps and n_near_empty:
-                kept = [s for s in fit_samples if not near_empty(s)]
+                kept = [s for s in train_samples if not near_empty(s)]
                 variant = train_model(
                     kept, protocol.classifier, protocol.encoding,
                     random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
@@ -179,8 +176,18 @@ def evaluate(
                 timings.append(time.perf_counter() - t0)
             predict_ms.append(1000 * float(np.median(timings)))
             if live:
+                # running windows: the live head (complete + live windows of the training
+                # trials) when augmenting, else the model itself (learn/live.py)
+                head = model
+                if protocol.live_augment:
+                    live_train = train_samples + [s for t in training for s in live[t.trial]]
+                    head = train_model(
+                        live_train, protocol.classifier, protocol.encoding,
+                        random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
+                        augment_prefixes=protocol.augment_prefixes,
+                    )  # fmt: skip
                 windows = [s for t in validation for s in live[t.trial]]
-                live_acc.append(_accuracy(model.predict_samples(windows), windows))
+                live_acc.append(_accuracy(head.predict_samples(windows), windows))
             if protocol.prefixes:
                 for f in PREFIX_FRACTIONS:
                     prefixes = [prefix_sample(s, f) for s in val_samples]

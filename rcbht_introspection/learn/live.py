@@ -143,10 +143,16 @@ def train_live_model(
     config: LiveAugmentConfig | None,
     **train_kwargs: Any,
 ) -> Any:
-    """train_model on complete sub-tasks plus live samples; the header records the settings."""
+    """Model on complete sub-tasks; with `config`, plus a live head on them and the live samples.
+
+    Final verdicts (finished sub-tasks) keep the complete-sub-task model, so they and the
+    steady-state accuracy are unchanged; running windows go to the live head (model.head).
+    """
     from rcbht_introspection.learn.models import train_model
 
-    model = train_model([*samples, *(live if config is not None else ())], **train_kwargs)
+    model = train_model(samples, **train_kwargs)
+    if config is not None:
+        model.live = train_model([*samples, *live], **train_kwargs)
     model.training = training_header(config, len(live) if config is not None else 0)
     return model
 
