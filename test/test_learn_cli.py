@@ -34,7 +34,8 @@ def test_evaluate_writes_the_documented_json_and_plot(hiro_data: Path, tmp_path:
     assert [p["n_train_trials"] for p in result["curve"]] == [3, 4, 5, 6, 7]
     assert 0.0 <= result["steady_state_accuracy"]["mean"] <= 1.0
     assert set(result["steady_state_accuracy"]) == {"mean", "std"}
-    assert sum(map(sum, result["confusion_matrix"]["matrix"])) == 2 * 3 * 4
+    assert sum(map(sum, result["confusion_matrix"])) == 2 * 3 * 4
+    assert result["confusion_labels"] == ["approach", "rotation", "insertion", "mating"]
     assert set(result["prefix_accuracy"]) == {"25%", "50%", "75%"}
     assert result["without_near_empty"]["n_samples_removed"] > 0
     assert result["best_of_splits"] >= result["trial_splits"]["mean"]

@@ -161,3 +161,22 @@ def test_session_rejects_malformed_samples() -> None:
     counts = session.counts["R"]
     assert counts.accepted == 2 and counts.rejected_total == 4
     assert session.phase("pirouette").unknown_phase == "pirouette"
+
+
+def test_end_event_waits_for_samples_still_in_flight() -> None:
+    """The end event is flushed early only when no sample published before it is missing."""
+    require_stream()
+    from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
+
+    ms = 1_000_000
+    base = 1_700_000_000 * 10**9
+    for last_sample, expect_early in ((99, True), (49, False)):
+        session = SegmenterSession(("R",), arm_stream_factory(), hold_s=0.2, max_hold_s=10.0)
+        for i in range(last_sample + 1):  # samples published every 1 ms
+            session.push("R", base + i * 5 * ms, [float(i % 7)] * 6, source_ns=i * ms)
+        done_at = 100 * ms  # published right after sample 99
+        assert session.phase("done", source_ns=done_at).phases == []  # waits for a later sample
+        early = session.flush(done_at + 300 * ms)
+        assert bool(early.phases) is expect_early
+        if not expect_early:  # samples 50..99 are missing: only the maximum hold applies it
+            assert session.flush(done_at + 10_000 * ms).phases[0].name == "done"

@@ -62,10 +62,11 @@ def test_training_points_get_their_own_label_and_far_points_the_base() -> None:
 
 
 def test_vectorised_prediction_matches_the_node_by_node_reference() -> None:
-    X, y = make_classification(n_samples=80, n_features=6, n_informative=4, n_classes=3, random_state=1)
+    X, y = make_classification(n_samples=110, n_features=6, n_informative=4, n_classes=3, random_state=1)
     forest = MondrianForestClassifier(n_estimators=8, random_state=3).fit(X[:60], y[:60])
-    forest.partial_fit(X[60:70], y[60:70])
-    probe = np.vstack([X[70:], X[:3] * 3.0])
+    forest.partial_fit(X[60:70], y[60:70])  # small batch: point by point across trees
+    forest.partial_fit(X[70:100], y[70:100])  # large batch: block by block per tree
+    probe = np.vstack([X[100:], X[:3] * 3.0])
     fast = forest.predict_proba(probe)
     slow = np.array([_reference_proba(forest, x) for x in probe])
     np.testing.assert_allclose(fast, slow, atol=1e-10)

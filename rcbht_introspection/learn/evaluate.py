@@ -215,7 +215,8 @@ def evaluate(
             name: (float(confusion[i, i] / rows[i]) if rows[i] else math.nan)
             for i, name in enumerate(SUBTASKS)
         },
-        "confusion_matrix": {"labels": list(SUBTASKS), "matrix": confusion.tolist()},
+        "confusion_matrix": confusion.tolist(),
+        "confusion_labels": list(SUBTASKS),
         "trial_splits": {**_mean_std(final_acc), "n": len(final_acc)},
         "best_of_splits": float(np.nanmax(final_acc)) if final_acc else math.nan,
         "fit_seconds": float(np.mean(fit_seconds)) if fit_seconds else math.nan,

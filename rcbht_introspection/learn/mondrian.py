@@ -16,6 +16,9 @@ from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, check_random_state, validate_data
 
 NO_NODE = -1
+POINTWISE_BATCH = 16
+"""Mini-batches up to this size are added point by point across all trees (vectorised);
+larger ones block by block per tree (fewer passes)."""
 FEATURE_DTYPE = np.float32
 """Training data and node boxes are stored in float32 (half the memory of the wide paper
 encoding); test points are cast the same way, so boxes and points compare exactly."""
@@ -129,11 +132,17 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         except KeyError as exc:
             raise ValueError(f"label {exc.args[0]!r} is not in classes {self.classes_}") from None
         new = self._add_data(X, y_index)
-        for tree in range(self.n_estimators):
-            if self._roots[tree] == NO_NODE:
+        if (self._roots == NO_NODE).all():
+            for tree in range(self.n_estimators):
                 self._roots[tree] = self._grow(new, NO_NODE, 0.0)
-            else:
-                self._extend(tree, self._roots[tree], new)
+        elif len(new) <= POINTWISE_BATCH:
+            # one point at a time through all trees at once (Mondrian trees are projective:
+            # extending point by point has the same distribution as extending by the batch)
+            for point in new:
+                self._extend_point(int(point))
+        else:
+            for tree in range(self.n_estimators):
+                self._extend(tree, int(self._roots[tree]), new)
         self._update_posterior()
         return self
 
@@ -273,6 +282,81 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
                     go_left = data[:, feature] <= threshold
                     stack.append((int(pool.left[node]), idx[go_left]))
                     stack.append((int(pool.right[node]), idx[~go_left]))
+
+    def _extend_point(self, point: int) -> None:
+        """ExtendMondrianBlock for one point in every tree, level by level with NumPy.
+
+        Descending through a node whose box only widens is vectorised over trees; the rare
+        structural changes (a new parent cut outside a box, a leaf absorbing or regrowing) go
+        through the per-tree code with the split time already drawn here.
+        """
+        pool = self._pool
+        x, label = self._X[point], int(self._y[point])
+        idx = np.array([point])
+        node = self._roots.astype(np.intp)
+        tau_parent = np.zeros(self.n_estimators)
+        active = np.arange(self.n_estimators)
+        while len(active):
+            nd = node[active]
+            lower, upper = pool.lower[nd], pool.upper[nd]
+            e_lower = np.maximum(lower - x, 0.0)
+            e_upper = np.maximum(x - upper, 0.0)
+            rate = e_lower.sum(axis=1, dtype=np.float64) + e_upper.sum(axis=1, dtype=np.float64)
+            leaf = pool.left[nd] == NO_NODE
+            draw = self._rng.exponential(size=len(nd))
+            with np.errstate(divide="ignore"):
+                split_time = np.where(rate > 0, tau_parent[active] + draw / rate, np.inf)
+            split = ~leaf & (split_time < pool.tau[nd])
+            descend = ~leaf & ~split
+            dn = nd[descend]
+            pool.lower[dn] = np.minimum(lower[descend], x)
+            pool.upper[dn] = np.maximum(upper[descend], x)
+            pool.counts[dn, label] += 1.0
+            go_left = x[pool.feature[dn]] <= pool.threshold[dn]
+            moving = active[descend]
+            tau_parent[moving] = pool.tau[dn]
+            node[moving] = np.where(go_left, pool.left[dn], pool.right[dn])
+            for k in np.flatnonzero(leaf):
+                self._extend(int(active[k]), int(nd[k]), idx)
+            for k in np.flatnonzero(split):
+                self._insert_parent(
+                    int(active[k]), int(nd[k]), idx, x, e_lower[k], e_upper[k], float(rate[k]),
+                    float(split_time[k]),
+                )  # fmt: skip
+            active = moving
+
+    def _insert_parent(
+        self, tree: int, node: int, idx: np.ndarray, x: np.ndarray, e_lower: np.ndarray,
+        e_upper: np.ndarray, rate: float, split_time: float,
+    ) -> None:  # fmt: skip
+        """Cut outside the box of `node` for one new point: new parent, the point a new leaf."""
+        pool = self._pool
+        parent = int(pool.parent[node])
+        extent = e_lower.astype(np.float64) + e_upper
+        dim = int(np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right"))
+        dim = min(dim, len(extent) - 1)
+        while extent[dim] <= 0:
+            dim -= 1
+        lower_side = self._rng.random() * extent[dim] <= e_lower[dim]
+        if lower_side:
+            cut = np.float64(self._rng.uniform(x[dim], pool.lower[node, dim]))
+        else:
+            cut = np.float64(self._rng.uniform(pool.upper[node, dim], x[dim]))
+        new_parent = pool.new()
+        pool.parent[new_parent] = parent
+        pool.lower[new_parent] = np.minimum(pool.lower[node], x)
+        pool.upper[new_parent] = np.maximum(pool.upper[node], x)
+        pool.counts[new_parent] = pool.counts[node]
+        pool.counts[new_parent, self._y[idx[0]]] += 1.0
+        pool.tau[new_parent] = split_time
+        pool.feature[new_parent], pool.threshold[new_parent] = dim, cut
+        self._replace_child(tree, parent, node, new_parent)
+        pool.parent[node] = new_parent
+        sibling = self._grow(idx, new_parent, split_time)
+        if lower_side:
+            pool.left[new_parent], pool.right[new_parent] = sibling, node
+        else:
+            pool.left[new_parent], pool.right[new_parent] = node, sibling
 
     def _replace_child(self, tree: int, parent: int, old: int, new: int) -> None:
         """Point `parent` (or the tree's root slot) at `new` instead of `old`."""

@@ -7,7 +7,8 @@ finite or its stamp is zero or not after the arm's previous stamp.
 A sub-task event (/task_phase) applies at each arm's last sample published before it. Wrench and
 events travel on different topics, so their arrival order is not their publication order; when
 both carry the publisher's source timestamp, an event waits until a later-published sample of the
-arm arrives (or `flush` finds it older than the hold time), which makes replays deterministic.
+arm arrives (or `flush` finds that no sample published before it is missing), which makes
+replays deterministic.
 An end event finishes every arm's stream; the next sample starts a new stream (new id and origin).
 """
 
@@ -96,6 +97,8 @@ class _Arm:
         self.last_t: float | None = None
         self.first_t: float | None = None
         self.last_source: int | None = None
+        self.source_interval = 0.0
+        """Running mean of the publication interval of this arm's samples (ns)."""
         self.finished = False
 
 
@@ -108,13 +111,15 @@ class SegmenterSession:
         stream_factory: Callable[[str], object],
         end_phases: Sequence[str] = ("done",),
         subtasks: Sequence[str] = SUBTASKS,
-        hold_s: float = 1.0,
+        hold_s: float = 0.2,
+        max_hold_s: float = 10.0,
     ) -> None:
         self.arms = tuple(arms)
         self.stream_factory = stream_factory
         self.end_phases = tuple(end_phases)
         self.subtasks = tuple(subtasks)
         self.hold_ns = int(hold_s * 1e9)
+        self.max_hold_ns = int(max_hold_s * 1e9)
         self.counts = {arm: ArmCounts() for arm in self.arms}
         self.unknown_phases = 0
         self.late_phases = 0
@@ -162,6 +167,11 @@ class SegmenterSession:
             self.origin_ns = stamp_ns
         t = self.stream_time(stamp_ns)
         st.last_ns, st.last_t = stamp_ns, t
+        if source_ns is not None and st.last_source is not None and source_ns > st.last_source:
+            gap = source_ns - st.last_source
+            st.source_interval = (
+                gap if st.source_interval == 0 else 0.9 * st.source_interval + 0.1 * gap
+            )
         st.last_source = source_ns
         if st.first_t is None:
             st.first_t = t
@@ -209,13 +219,31 @@ class SegmenterSession:
         return out
 
     def flush(self, now_ns: int) -> Output:
-        """Apply events published more than the hold time before `now_ns` (same clock as sources)."""
+        """Apply events that no later sample will apply (`now_ns` on the sources' clock).
+
+        An event is due after the hold time if every waiting arm's last sample was published
+        just before it (within a few sample intervals): nothing published before it is missing.
+        Otherwise samples are still in flight (e.g. being repaired by reliable delivery) and it
+        waits up to the maximum hold.
+        """
         out = Output()
         if self.origin_ns is not None:
-            self._apply_due(
-                out, lambda p: p.source_ns is None or p.source_ns + self.hold_ns <= now_ns
-            )
+            self._apply_due(out, lambda p: self._flushable(p, now_ns))
         return out
+
+    def _flushable(self, p: _Pending, now_ns: int) -> bool:
+        if p.source_ns is None or p.source_ns + self.max_hold_ns <= now_ns:
+            return True
+        if p.source_ns + self.hold_ns > now_ns:
+            return False
+        for arm in p.waiting:
+            st = self.state[arm]
+            if st.last_source is None:
+                continue
+            tolerance = max(3 * st.source_interval, 10_000_000)
+            if p.source_ns - st.last_source > tolerance:
+                return False
+        return True
 
     def _apply_due(
         self, out: Output, due: Callable[[_Pending], bool], only: str | None = None
