@@ -17,6 +17,7 @@ from rcbht_introspection.errors import InputError
 COMMAND_MODULES: tuple[str, ...] = (
     "rcbht_introspection.commands.taxonomy",  # label, conformance, plot
     "rcbht_introspection.commands.learn",  # train, evaluate
+    "rcbht_introspection.commands.live",  # live-eval (offline live /task_state replay)
     "rcbht_introspection.commands.sim",  # sim, sim-report
     "rcbht_introspection.commands.ros",  # bag, replay-eval
     "rcbht_introspection.commands.demo",  # demo

@@ -133,7 +133,7 @@ def test_session_orders_events_by_source_time() -> None:
     assert session.stream_id == 1 and session.late_phases == 0  # the end event closed stream 0
 
 
-def test_late_event_applies_at_the_latest_sample() -> None:
+def test_late_event_is_placed_at_the_sample_before_it() -> None:
     require_stream()
     from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
 
@@ -142,7 +142,7 @@ def test_late_event_applies_at_the_latest_sample() -> None:
     for i in range(10):
         session.push("R", base + i * 5_000_000, [float(i)] * 6, source_ns=100 * i)
     out = session.phase("rotation", source_ns=450)  # published after sample 4, arrives after 9
-    assert [p.time for p in out.phases] == [0.045]
+    assert [p.time for p in out.phases] == [0.02]  # placed at sample 4 all the same (counted)
     assert session.late_phases == 1
 
 
@@ -161,3 +161,54 @@ def test_session_rejects_malformed_samples() -> None:
     counts = session.counts["R"]
     assert counts.accepted == 2 and counts.rejected_total == 4
     assert session.phase("pirouette").unknown_phase == "pirouette"
+
+
+def test_end_event_waits_for_samples_still_in_flight() -> None:
+    """The end event is flushed early only when no sample published before it is missing."""
+    require_stream()
+    from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
+
+    ms = 1_000_000
+    base = 1_700_000_000 * 10**9
+    for last_sample, expect_early in ((99, True), (49, False)):
+        session = SegmenterSession(("R",), arm_stream_factory(), hold_s=0.2, max_hold_s=10.0)
+        for i in range(last_sample + 1):  # samples published every 1 ms
+            session.push("R", base + i * 5 * ms, [float(i % 7)] * 6, source_ns=i * ms)
+        done_at = 100 * ms  # published right after sample 99
+        assert session.phase("done", source_ns=done_at).phases == []  # waits for a later sample
+        early = session.flush(done_at + 300 * ms)
+        assert bool(early.phases) is expect_early
+        if not expect_early:  # samples 50..99 are missing: only the maximum hold applies it
+            assert session.flush(done_at + 10_000 * ms).phases[0].name == "done"
+
+
+def test_late_events_give_the_offline_words() -> None:
+    """Events delivered after later-published samples still give the offline stream's words."""
+    require_stream()
+    from rcbht_introspection.io.bags import END_PHASE
+    from rcbht_introspection.live.offline import offline_stream_words, trial_events
+    from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
+
+    trial = _stream_trial()
+    factory = arm_stream_factory()
+    session = SegmenterSession(("R",), factory)
+    origin = 1_700_000_000 * 10**9
+    ns = origin + np.rint(trial.time * 1e9).astype(np.int64)
+    events = [(t, name) for t, name in trial_events(trial, END_PHASE) if name != END_PHASE]
+    follows = [
+        int(np.searchsorted(ns - origin, round(t * 1e9), side="right")) - 1 for t, _ in events
+    ]
+    got: list[Word] = []
+    for i in range(len(ns)):
+        out = session.push("R", int(ns[i]), trial.wrench["R"][i], source_ns=10 * i)
+        got += [w for b in out.batches for w in b.words]
+        for (_, name), j in zip(events, follows, strict=True):
+            if j + 5 == i:  # delivered five samples late
+                got += [
+                    w for b in session.phase(name, source_ns=10 * j + 5).batches for w in b.words
+                ]
+    out = session.phase(END_PHASE, source_ns=10 * len(ns))
+    got += [w for b in [*out.batches, *session.flush(10**12).batches] for w in b.words]
+    offline = offline_stream_words(trial, factory, END_PHASE)["R"]
+    assert session.late_phases == len(events)
+    assert got == offline and [w.seq for w in got] == [w.seq for w in offline]

@@ -85,23 +85,38 @@ def test_bad_segmenter_parameter_from_file(tmp_path: Path, env: dict[str, str]) 
     assert "field wrench_topics: expected one topic per arm (2), got 1" in proc.stderr
 
 
-@pytest.mark.parametrize("model", ["missing", "garbage"])
+@pytest.mark.parametrize("model", ["missing", "garbage", "other_profile"])
 def test_classifier_without_usable_model_says_unknown(
     tmp_path: Path, env: dict[str, str], model: str
 ) -> None:
-    if model == "garbage":
-        require_learn()
     from std_msgs.msg import String
 
     from rcbht_introspection.nodes.common import RosSession
 
     path = tmp_path / "model.rcbht"
+    params: dict[str, object] = {"model_file": str(path), "publish_rate_hz": 20.0}
+    expect = str(path)
     if model == "garbage":
+        require_learn()
         path.write_text("this is not a model\n")
+    if model == "other_profile":
+        require_learn()
+        from rcbht_introspection.grammar.split import SubtaskSample
+        from rcbht_introspection.learn.models import save_model, train_model
+        from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
+
+        samples = []
+        for i, (subtask, label) in enumerate([("approach", "bpos"), ("mating", "cons")] * 3):
+            tw = TrialWords(name=f"t{i}")
+            tw.add(Word("Fz", Level.PRIMITIVE, label, 0.0, 1.0 + i, arm="R"))
+            samples.append(SubtaskSample(f"t{i}", subtask, 0.0, 1.0 + i, tw))
+        save_model(train_model(samples), path)
+        params["expected_profile"] = "error_charac"
+        expect = "trained with taxonomy profile 'reference', the segmenter uses 'error_charac'"
     log = tmp_path / "classifier.log"
     with log.open("w") as out:
         proc = subprocess.Popen(
-            node_command("classifier_node", {"model_file": str(path), "publish_rate_hz": 20.0}),
+            node_command("classifier_node", params),
             env=env, stdout=out, stderr=subprocess.STDOUT,
         )  # fmt: skip
     states: list[str] = []
@@ -114,7 +129,7 @@ def test_classifier_without_usable_model_says_unknown(
     finally:
         code = stop(proc)
     text = log.read_text()
-    assert "no usable model" in text and str(path) in text
+    assert "no usable model" in text and expect in text
     assert code == 0, text
 
 

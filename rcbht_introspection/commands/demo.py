@@ -93,8 +93,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     from rcbht_introspection.io.bags import write_trial_bag
     from rcbht_introspection.io.hiro import find_trials, read_trial
-    from rcbht_introspection.learn.data import load_samples
-    from rcbht_introspection.learn.models import save_model, train_model
+    from rcbht_introspection.learn.data import load_trials
+    from rcbht_introspection.learn.live import live_training
+    from rcbht_introspection.learn.models import save_model
     from rcbht_introspection.live.plot import plot_timelines
     from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval, summary
 
@@ -117,11 +118,17 @@ def cmd_demo(args: argparse.Namespace) -> int:
         train = [f for f in folders if int(f.name.rsplit("-", 1)[1]) <= 40]
         held = [f for f in folders if int(f.name.rsplit("-", 1)[1]) > 40]
         source = "REAL HIRO (shared data)"
-    _step(f"2. train an SVM on {len(train)} trials")
-    samples = load_samples(train, words="auto")
-    model = train_model(samples, classifier="svm", encoding="compact", random_state=args.seed)
+    _step(f"2. train an SVM on {len(train)} trials (plus live windows: config/live.yaml)")
+    trials = load_trials(train, words="auto")
+    model, n_live = live_training(
+        trials, classifier="svm", encoding="compact", random_state=args.seed
+    )
     model_path = save_model(model, out / "model.rcbht")
-    print(f"   {model_path}: classes {model.classes_}, {len(samples)} sub-task samples")
+    n_samples = sum(len(t.samples) for t in trials)
+    print(
+        f"   {model_path}: classes {model.classes_}, {n_samples} sub-task samples "
+        f"+ {n_live} live windows"
+    )
     _step(f"3. convert {len(held)} held-out trials to bags -> {out / 'bags'}")
     bags = []
     durations = {}

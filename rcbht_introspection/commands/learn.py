@@ -22,6 +22,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--out", type=Path, required=True, metavar="MODEL")
     _common(train)
     train.add_argument("--seed", type=int, default=0)
+    train.add_argument("--live-augment", action=argparse.BooleanOptionalAction, default=None,
+                       help="also train on live-like windows (words final by t); default from "
+                       "config/live.yaml (docs/live.md)")
+    train.add_argument("--live-config", type=Path, default=None, metavar="YAML",
+                       help="live_augment settings (default config/live.yaml)")
     train.set_defaults(func=run_train)
 
     ev = subparsers.add_parser("evaluate", help="learning-curve evaluation of a classifier")
@@ -35,6 +40,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ev.add_argument("--n-estimators", type=int, default=100, help="Mondrian trees")
     ev.add_argument("--no-variant", action="store_true",
                     help="skip the variant without near-empty sub-tasks")
+    ev.add_argument("--live-augment", action="store_true",
+                    help="score live windows with a live head trained on live windows too (docs/live.md)")
+    ev.add_argument("--live-score", action="store_true",
+                    help="score on the validation trials' live windows (live_accuracy)")
     ev.add_argument("--json", type=Path, default=None, metavar="OUT")
     ev.add_argument("--plot", type=Path, default=None, metavar="OUT.png")
     ev.add_argument("--no-progress", action="store_true")
@@ -51,16 +60,21 @@ def _common(parser: argparse.ArgumentParser) -> None:
 
 
 def run_train(args: argparse.Namespace) -> int:
-    from rcbht_introspection.learn.models import save_model, train_model
+    from rcbht_introspection.learn.live import live_training
+    from rcbht_introspection.learn.models import save_model
 
     trials = load_trials(args.inputs, args.words)
     samples = [s for t in trials for s in t.samples]
-    model = train_model(samples, args.classifier, args.encoding, random_state=args.seed,
-                        augment_prefixes=tuple(args.augment_prefixes))
+    model, n_live = live_training(
+        trials, args.live_augment, args.live_config, classifier=args.classifier,
+        encoding=args.encoding, random_state=args.seed,
+        augment_prefixes=tuple(args.augment_prefixes),
+    )  # fmt: skip
     save_model(model, args.out)
     print(
-        f"wrote {args.out}: {args.classifier}/{args.encoding}, {len(samples)} samples from "
-        f"{len(trials)} trials, {model.encoder.n_features} features, classes {model.classes_}"
+        f"wrote {args.out}: {args.classifier}/{args.encoding}, {len(samples)} samples "
+        f"(+{n_live} live) from {len(trials)} trials, {model.encoder.n_features} features, "
+        f"classes {model.classes_}"
     )
     return 0
 
@@ -93,6 +107,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
         n_estimators=args.n_estimators,
         variant=not args.no_variant,
         augment_prefixes=tuple(args.augment_prefixes),
+        live_augment=args.live_augment,
+        live_score=args.live_score,
     )
     bar = None
     if not args.no_progress:
@@ -115,6 +131,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
         f"best of splits {result['best_of_splits']:.4f} ({result['n_trials']} trials, "
         f"{result['n_validation_trials']} held out, {args.permutations} permutations)"
     )
+    if "live_accuracy" in result:
+        live = result["live_accuracy"]
+        print(f"live windows of the validation trials: {live['mean']:.4f} +- {live['std']:.4f}")
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))

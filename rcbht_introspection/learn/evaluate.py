@@ -50,6 +50,11 @@ class Protocol:
     augment_prefixes: tuple[float, ...] = ()
     """Also train on these prefixes of every training sub-task (for live use); off by default."""
     prefixes: bool = True
+    live_augment: bool = False
+    """Score live windows with a live head also trained on the training trials' live windows
+    (learn/live.py, config/live.yaml); the curve and verdicts use the complete-sub-task model."""
+    live_score: bool = False
+    """Score the final model on the validation trials' live windows (live_accuracy)."""
 
 
 def default_validation(n_trials: int, two_arm: bool = False) -> int:
@@ -121,6 +126,8 @@ def evaluate(
     prefix_base: dict[float, list[float]] = {f: [] for f in PREFIX_FRACTIONS}
     near_empty = lambda s: s.duration < protocol.near_empty_seconds  # noqa: E731
     n_near_empty = sum(near_empty(s) for t in complete for s in t.samples)
+    live = _live_windows(complete) if protocol.live_augment or protocol.live_score else {}
+    live_acc: list[float] = []
 
     for perm in range(protocol.permutations):
         rng = np.random.default_rng(protocol.seed + perm)
@@ -168,6 +175,19 @@ def evaluate(
                 model.predict_proba_samples([s])
                 timings.append(time.perf_counter() - t0)
             predict_ms.append(1000 * float(np.median(timings)))
+            if live:
+                # running windows: the live head (complete + live windows of the training
+                # trials) when augmenting, else the model itself (learn/live.py)
+                head = model
+                if protocol.live_augment:
+                    live_train = train_samples + [s for t in training for s in live[t.trial]]
+                    head = train_model(
+                        live_train, protocol.classifier, protocol.encoding,
+                        random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
+                        augment_prefixes=protocol.augment_prefixes,
+                    )  # fmt: skip
+                windows = [s for t in validation for s in live[t.trial]]
+                live_acc.append(_accuracy(head.predict_samples(windows), windows))
             if protocol.prefixes:
                 for f in PREFIX_FRACTIONS:
                     prefixes = [prefix_sample(s, f) for s in val_samples]
@@ -217,6 +237,9 @@ def evaluate(
             if prefix_acc[f]
         },
     }
+    if live:
+        result["live_augment"] = protocol.live_augment
+        result["live_accuracy"] = {**_mean_std(live_acc), "n_windows": sum(map(len, live.values()))}
     if protocol.variant:
         result["without_near_empty"] = {
             "near_empty_seconds": protocol.near_empty_seconds,
@@ -229,6 +252,14 @@ def evaluate(
             else {k: result["duration_baseline"][k] for k in ("mean", "std")},
         }
     return result
+
+
+def _live_windows(trials: Sequence[TrialSamples]) -> dict[str, list[SubtaskSample]]:
+    """Live-like windows of every trial (words final by t, learn/live.py), by trial name."""
+    from rcbht_introspection.learn.live import load_live_config, trial_live_samples
+
+    by_path = trial_live_samples([t.path for t in trials], load_live_config())
+    return {t.trial: by_path[str(t.path)] for t in trials}
 
 
 def total_steps(trials: Sequence[TrialSamples], protocol: Protocol) -> int:

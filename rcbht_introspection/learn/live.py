@@ -39,6 +39,9 @@ class LiveAugmentConfig:
     """And at these fractions of the sub-task (so short sub-tasks get samples too)."""
     max_per_subtask: int = 20
     """At most this many per sub-task (evenly spread), so long sub-tasks do not dominate."""
+    window_s: float = 2.0
+    """> 0: also the classifier's window mode: words of [t - window_s, t] final by t, labelled
+    with the sub-task at t (0: boundary-mode windows only)."""
     taxonomy_profile: str = "reference"
     stream_profile: str = "reference"
     """Must match the segmenter node's stream_profile: it decides when words become final."""
@@ -48,8 +51,8 @@ def load_live_config(path: Path | str | None = None) -> LiveAugmentConfig:
     """The live_augment section of config/live.yaml (or of `path`)."""
     file = Path(path) if path is not None else config_path(LIVE_CONFIG_FILE)
     cfg = load_yaml(LiveAugmentConfig, file, section="live_augment")
-    if cfg.step_s <= 0 or cfg.max_per_subtask < 1 or any(not 0 < f <= 1 for f in cfg.fractions):
-        raise InputError("step_s > 0, max_per_subtask >= 1, fractions in (0, 1] required", path=file)
+    if cfg.step_s <= 0 or cfg.window_s < 0 or cfg.max_per_subtask < 1 or any(not 0 < f <= 1 for f in cfg.fractions):
+        raise InputError("step_s > 0, window_s >= 0, max_per_subtask >= 1, fractions in (0, 1] required", path=file)
     return cfg
 
 
@@ -82,6 +85,11 @@ def live_samples(streamed: StreamedTrial, config: LiveAugmentConfig) -> list[Sub
             sample = window_sample(words, start, now, subtask=subtask, trial=streamed.name)
             if sample_word_count(sample):
                 out.append(sample)
+            if config.window_s > 0:
+                lo = max(0.0, now - config.window_s)
+                sample = window_sample(words, lo, now, subtask=subtask, trial=streamed.name)
+                if sample_word_count(sample):
+                    out.append(sample)
     return out
 
 
@@ -135,10 +143,16 @@ def train_live_model(
     config: LiveAugmentConfig | None,
     **train_kwargs: Any,
 ) -> Any:
-    """train_model on complete sub-tasks plus live samples; the header records the settings."""
+    """Model on complete sub-tasks; with `config`, plus a live head on them and the live samples.
+
+    Final verdicts (finished sub-tasks) keep the complete-sub-task model, so they and the
+    steady-state accuracy are unchanged; running windows go to the live head (model.head).
+    """
     from rcbht_introspection.learn.models import train_model
 
-    model = train_model([*samples, *(live if config is not None else ())], **train_kwargs)
+    model = train_model(samples, **train_kwargs)
+    if config is not None:
+        model.live = train_model([*samples, *live], **train_kwargs)
     model.training = training_header(config, len(live) if config is not None else 0)
     return model
 
@@ -146,8 +160,25 @@ def train_live_model(
 __all__ = [
     "LiveAugmentConfig",
     "live_samples",
+    "live_training",
     "load_live_config",
     "sample_times",
     "train_live_model",
     "trial_live_samples",
 ]
+
+
+def live_training(
+    trials: Sequence[Any],
+    enabled: bool | None = None,
+    config_file: Path | str | None = None,
+    **train_kwargs: Any,
+) -> tuple[Any, int]:
+    """(model, number of live samples) for TrialSamples `trials`; `enabled` None = config's."""
+    config = load_live_config(config_file)
+    use = config.enabled if enabled is None else enabled
+    samples = [s for t in trials for s in t.samples]
+    live: list[SubtaskSample] = []
+    if use:
+        live = [s for v in trial_live_samples([t.path for t in trials], config).values() for s in v]
+    return train_live_model(samples, live, config if use else None, **train_kwargs), len(live)

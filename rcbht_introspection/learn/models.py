@@ -88,6 +88,13 @@ class SubtaskModel:
     random_state: int = 0
     training: dict[str, Any] = field(default_factory=dict)
     """How it was trained, stored in the header (e.g. live_augment settings, learn/live.py)."""
+    live: SubtaskModel | None = None
+    """Optional head for running (unfinished) windows, trained with live-like windows
+    (learn/live.py); final verdicts on finished sub-tasks always use this model itself."""
+
+    def head(self, final: bool) -> SubtaskModel:
+        """The model for a finished sub-task (final) or a running window (the live head if any)."""
+        return self if final or self.live is None else self.live
 
     @property
     def encoding(self) -> str:
@@ -268,6 +275,24 @@ def _checksum(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
 def save_model(model: SubtaskModel, path: Path | str) -> Path:
     """Write `model` as a safe .npz model file (no pickled objects)."""
     path = Path(path)
+    header, arrays = _model_parts(model)
+    if model.live is not None:
+        header["live"], live_arrays = _model_parts(model.live)
+        arrays.update({LIVE_PREFIX + k: v for k, v in live_arrays.items()})
+    header["checksum"] = _checksum(header, arrays)
+    payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("wb") as handle:
+        np.savez_compressed(handle, **payload)
+    return path
+
+
+LIVE_PREFIX = "live__"
+"""Array-name prefix of the live head's arrays in a model file."""
+
+
+def _model_parts(model: SubtaskModel) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Header fields and arrays of one model (without checksum)."""
     header: dict[str, Any] = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -285,12 +310,7 @@ def save_model(model: SubtaskModel, path: Path | str) -> Path:
         arrays = {"svm_skops": np.frombuffer(sio.dumps(model.estimator), dtype=np.uint8)}
     else:
         header["mondrian"], arrays = _forest_arrays(model.estimator)
-    header["checksum"] = _checksum(header, arrays)
-    payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("wb") as handle:
-        np.savez_compressed(handle, **payload)
-    return path
+    return header, arrays
 
 
 def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskModel:
@@ -320,6 +340,18 @@ def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskM
         )
     if header.get("checksum") != _checksum(header, arrays):
         raise InputError("checksum mismatch: the model file is corrupt or was modified", path, field="checksum")
+    main = {k: v for k, v in arrays.items() if not k.startswith(LIVE_PREFIX)}
+    model = _model_from_parts(header, main, path, expect_encoding)
+    if isinstance(header.get("live"), dict):
+        live = {k[len(LIVE_PREFIX) :]: v for k, v in arrays.items() if k.startswith(LIVE_PREFIX)}
+        model.live = _model_from_parts(header["live"], live, path, expect_encoding)
+    return model
+
+
+def _model_from_parts(
+    header: dict[str, Any], arrays: dict[str, np.ndarray], path: Path, expect_encoding: str | None
+) -> SubtaskModel:
+    """One model from its header fields and arrays (the checksum is already verified)."""
     encoder = encoding_from_state(header.get("encoding") or {})
     if expect_encoding is not None and encoder.name != expect_encoding:
         raise InputError(

@@ -150,11 +150,16 @@ class BeliefTracker:
         base = dict(start=start, end=end, mode=self.mode, phase=phase, final=final, n_words=n)
         if self.model is None or n == 0:
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
+        # a running window goes to the model's live head when it has one (learn/live.py)
+        model = self.model.head(final) if hasattr(self.model, "head") else self.model
         try:
-            # the verdict is the model's own prediction (as offline evaluation uses it), which
-            # for a probabilistic SVM need not be the arg-max of its calibrated probabilities
-            verdict = str(self.model.predict_samples([sample])[0])  # type: ignore[attr-defined]
-            proba = np.asarray(self.model.predict_proba_samples([sample]))[0]  # type: ignore[attr-defined]
+            proba = np.asarray(model.predict_proba_samples([sample]))[0]  # type: ignore[attr-defined]
+            if final:
+                # a verdict is the model's own prediction (as offline evaluation uses it), which
+                # for a probabilistic SVM need not be the arg-max of its probabilities
+                verdict = str(model.predict_samples([sample])[0])  # type: ignore[attr-defined]
+            else:
+                verdict = self.classes[int(np.argmax(proba))]  # live: one model call
         except Exception as exc:  # a bad model must not stop the node
             self.last_error = f"{type(exc).__name__}: {exc}"
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)

@@ -7,13 +7,15 @@ finite or its stamp is zero or not after the arm's previous stamp.
 A sub-task event (/task_phase) applies at each arm's last sample published before it. Wrench and
 events travel on different topics, so their arrival order is not their publication order; when
 both carry the publisher's source timestamp, an event waits until a later-published sample of the
-arm arrives (or `flush` finds it older than the hold time), which makes replays deterministic.
+arm arrives (or `flush` finds that no sample published before it is missing), which makes
+replays deterministic.
 An end event finishes every arm's stream; the next sample starts a new stream (new id and origin).
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -21,6 +23,8 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.taxonomy.words import Word
 
+RECENT_SAMPLES = 2000
+"""Samples per arm remembered to place an event that arrives after later-published samples."""
 REJECT_REASONS: tuple[str, ...] = (
     "non_finite",
     "zero_stamp",
@@ -85,6 +89,7 @@ class _Pending:
     waiting: set[str]
     time: float | None = None
     stamp_ns: int = 0
+    late: bool = False
 
 
 class _Arm:
@@ -96,6 +101,10 @@ class _Arm:
         self.last_t: float | None = None
         self.first_t: float | None = None
         self.last_source: int | None = None
+        self.recent: deque[tuple[int, float, int]] = deque(maxlen=RECENT_SAMPLES)
+        """(source ns, stream time, stamp ns) of the latest samples, to place late events."""
+        self.source_interval = 0.0
+        """Running mean of the publication interval of this arm's samples (ns)."""
         self.finished = False
 
 
@@ -108,13 +117,15 @@ class SegmenterSession:
         stream_factory: Callable[[str], object],
         end_phases: Sequence[str] = ("done",),
         subtasks: Sequence[str] = SUBTASKS,
-        hold_s: float = 1.0,
+        hold_s: float = 0.2,
+        max_hold_s: float = 10.0,
     ) -> None:
         self.arms = tuple(arms)
         self.stream_factory = stream_factory
         self.end_phases = tuple(end_phases)
         self.subtasks = tuple(subtasks)
         self.hold_ns = int(hold_s * 1e9)
+        self.max_hold_ns = int(max_hold_s * 1e9)
         self.counts = {arm: ArmCounts() for arm in self.arms}
         self.unknown_phases = 0
         self.late_phases = 0
@@ -162,7 +173,14 @@ class SegmenterSession:
             self.origin_ns = stamp_ns
         t = self.stream_time(stamp_ns)
         st.last_ns, st.last_t = stamp_ns, t
+        if source_ns is not None and st.last_source is not None and source_ns > st.last_source:
+            gap = source_ns - st.last_source
+            st.source_interval = (
+                gap if st.source_interval == 0 else 0.9 * st.source_interval + 0.1 * gap
+            )
         st.last_source = source_ns
+        if source_ns is not None:
+            st.recent.append((source_ns, t, stamp_ns))
         if st.first_t is None:
             st.first_t = t
         counts.accepted += 1
@@ -204,18 +222,37 @@ class SegmenterSession:
             ]
             if late:
                 self.late_phases += 1
+                self.pending[-1].late = True
             for arm in late:
                 self._apply_due(out, lambda p: p.source_ns is None or p.source_ns <= source_ns, arm)
         return out
 
     def flush(self, now_ns: int) -> Output:
-        """Apply events published more than the hold time before `now_ns` (same clock as sources)."""
+        """Apply events that no later sample will apply (`now_ns` on the sources' clock).
+
+        An event is due after the hold time if every waiting arm's last sample was published
+        just before it (within a few sample intervals): nothing published before it is missing.
+        Otherwise samples are still in flight (e.g. being repaired by reliable delivery) and it
+        waits up to the maximum hold.
+        """
         out = Output()
         if self.origin_ns is not None:
-            self._apply_due(
-                out, lambda p: p.source_ns is None or p.source_ns + self.hold_ns <= now_ns
-            )
+            self._apply_due(out, lambda p: self._flushable(p, now_ns))
         return out
+
+    def _flushable(self, p: _Pending, now_ns: int) -> bool:
+        if p.source_ns is None or p.source_ns + self.max_hold_ns <= now_ns:
+            return True
+        if p.source_ns + self.hold_ns > now_ns:
+            return False
+        for arm in p.waiting:
+            st = self.state[arm]
+            if st.last_source is None:
+                continue
+            tolerance = max(3 * st.source_interval, 10_000_000)
+            if p.source_ns - st.last_source > tolerance:
+                return False
+        return True
 
     def _apply_due(
         self, out: Output, due: Callable[[_Pending], bool], only: str | None = None
@@ -245,9 +282,16 @@ class SegmenterSession:
         st = self.state[arm]
         p.waiting.discard(arm)
         assert self.origin_ns is not None
+        at_t, at_ns = st.last_t, st.last_ns
+        if p.late and p.source_ns is not None:
+            # the event came after later-published samples: mark it at the sample before it
+            for source, t, stamp in reversed(st.recent):
+                if source < p.source_ns:
+                    at_t, at_ns = t, stamp
+                    break
         if p.time is None or arm == self.arms[0]:
-            p.time = st.last_t if st.last_t is not None else 0.0
-            p.stamp_ns = st.last_ns or self.origin_ns
+            p.time = at_t if at_t is not None else 0.0
+            p.stamp_ns = at_ns or self.origin_ns
         if p.end:
             words = st.stream.finish()  # type: ignore[attr-defined]
             st.finished = True
@@ -256,9 +300,9 @@ class SegmenterSession:
                     arm, list(words), st.last_ns, self.origin_ns, self.stream_id, end_of_stream=True
                 )
             )
-        elif st.last_t is not None:
+        elif at_t is not None:
             # every sub-task start is marked (the stream reads rotation/mating starts by order)
-            words = st.stream.mark_boundary(st.last_t, p.name)  # type: ignore[attr-defined]
+            words = st.stream.mark_boundary(at_t, p.name)  # type: ignore[attr-defined]
             if words:
                 out.batches.append(
                     WordBatch(arm, list(words), st.last_ns, self.origin_ns, self.stream_id)

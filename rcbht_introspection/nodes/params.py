@@ -49,9 +49,12 @@ class SegmenterConfig:
     )
     end_phases: tuple[str, ...] = _f(("done",), "event names that end the task (flush the streams)")
     event_hold_s: float = _f(
-        1.0,
-        "a /task_phase event waits up to this long (after samples stop) for the wrench samples "
-        "published before it; only the end event ever waits this long",
+        0.2,
+        "an event no later sample applies (the end event) is applied after this long once the "
+        "samples published before it have all arrived",
+    )
+    event_max_hold_s: float = _f(
+        10.0, "... and after this long in any case (samples lost or the sensor stopped earlier)"
     )
     taxonomy_profile: str = _f("reference", "taxonomy threshold profile of config/rcbht.yaml")
     taxonomy_config_file: str = _f("", "optional YAML file overriding the taxonomy thresholds")
@@ -148,6 +151,12 @@ def validate(cfg: T, path: Path | None = None) -> T:
             0 < cfg.event_hold_s <= 10,
             "event_hold_s",
             f"must be in (0, 10], got {cfg.event_hold_s}",
+            path,
+        )
+        _check(
+            cfg.event_hold_s <= cfg.event_max_hold_s <= 600,
+            "event_max_hold_s",
+            f"must be in [event_hold_s, 600], got {cfg.event_max_hold_s}",
             path,
         )
         _check(

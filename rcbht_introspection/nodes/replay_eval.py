@@ -56,8 +56,8 @@ class ReplayEvalOptions:
     mode: str = "boundary"
     profile: str = "reference"
     stream_profile: str = "reference"
-    startup_timeout: float = 30.0
-    drain_timeout: float = 20.0
+    startup_timeout: float = 60.0
+    drain_timeout: float = 60.0
     domain_id: int | None = None
     log_dir: Path | None = None
     """Keep the node logs here (default: a temporary folder, removed afterwards)."""
@@ -134,7 +134,7 @@ class NodeProcess:
         except OSError:
             return ""
 
-    def stop(self, timeout: float = 10.0) -> int | None:
+    def stop(self, timeout: float = 20.0) -> int | None:
         """SIGINT, then SIGKILL after `timeout`; returns the exit code (None if it was killed)."""
         code = self.proc.poll()
         if code is None:
@@ -602,6 +602,10 @@ def summary(result: dict[str, Any], timeline: bool = False) -> str:
         lines.append(f"{b['name']}: truth {b['truth']}")
         lines.append(f"  verdicts {b['verdicts']}  (offline {b.get('offline_verdicts')})")
         if timeline:
+            truth = ", ".join(
+                f"{t:.2f}s {s}" for t, s in zip(b["truth_starts"], b["truth"], strict=True)
+            )
+            lines.append(f"  truth:       {truth}, end {b['duration']:.2f}s")
             steps = ", ".join(f"{t:.2f}s {s}" for t, s in b["timeline"])
             lines.append(f"  /task_state: start {b['initial_state']}, {steps}")
     lat = result["latency_ms"]

@@ -45,7 +45,13 @@ class SegmenterNode(Node):
             cfg.stream_profile,
         )
         self.last_sample = time.monotonic()
-        self.session = SegmenterSession(cfg.arms, factory, cfg.end_phases, hold_s=cfg.event_hold_s)
+        self.session = SegmenterSession(
+            cfg.arms,
+            factory,
+            cfg.end_phases,
+            hold_s=cfg.event_hold_s,
+            max_hold_s=cfg.event_max_hold_s,
+        )
         qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         topics = word_topics(cfg.words_namespace, cfg.arms)
         self.word_pubs = {

@@ -1,0 +1,101 @@
+"""`rcbht live-eval`: offline live /task_state replay of held-out trials (no ROS), before/after."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar.encoding import ENCODINGS
+from rcbht_introspection.learn.data import WORD_SOURCES
+from rcbht_introspection.learn.models import CLASSIFIERS
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the live-eval subcommand."""
+    p = subparsers.add_parser(
+        "live-eval",
+        help="replay held-out trials through the live segmenter + belief tracker offline",
+        description="Train on all but the last --held-out trials (without and with live "
+        "augmentation, or use --model), replay the held-out trials through SegmenterSession + "
+        "BeliefTracker exactly as the nodes run them, and report time_accuracy and the final "
+        "sub-task verdicts.",
+    )
+    p.add_argument("inputs", nargs="+", type=Path, metavar="TRIAL_OR_DATASET_DIR")
+    p.add_argument("--held-out", type=int, required=True, help="last N trials (sorted) replayed")
+    p.add_argument("--model", type=Path, default=None, help="replay this model instead of training")
+    p.add_argument("--classifier", choices=CLASSIFIERS, default="svm")
+    p.add_argument("--encoding", choices=ENCODINGS, default="compact")
+    p.add_argument("--words", choices=WORD_SOURCES, default="auto")
+    p.add_argument("--mode", choices=("boundary", "window", "both"), default="both")
+    p.add_argument("--window-s", type=float, default=2.0)
+    p.add_argument("--live-config", type=Path, default=None, metavar="YAML")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", type=Path, default=None, metavar="OUT")
+    p.set_defaults(func=run_live_eval)
+
+
+def run_live_eval(args: argparse.Namespace) -> int:
+    from rcbht_introspection.learn.data import find_inputs, load_trials
+    from rcbht_introspection.learn.live import (
+        load_live_config,
+        read_any_trial,
+        stream_factory,
+        train_live_model,
+        trial_live_samples,
+    )
+    from rcbht_introspection.learn.models import load_model
+    from rcbht_introspection.live.replay import replay_beliefs, replay_summary, stream_trial
+
+    paths = find_inputs(args.inputs)
+    if not 1 <= args.held_out < len(paths) + (args.model is not None):
+        raise InputError(f"--held-out must be 1..{len(paths) - 1}", field="--held-out")
+    train_paths, held_paths = paths[: -args.held_out], paths[-args.held_out :]
+    config = load_live_config(args.live_config)
+    factory = stream_factory(config)
+    models: dict[str, Any] = {}
+    if args.model is not None:
+        models["model"] = load_model(args.model)
+    else:
+        trials = load_trials(train_paths, args.words)
+        samples = [s for t in trials for s in t.samples]
+        live = [s for v in trial_live_samples(train_paths, config, factory).values() for s in v]
+        kw = dict(classifier=args.classifier, encoding=args.encoding, random_state=args.seed)
+        models["before"] = train_live_model(samples, live, None, **kw)
+        models["after"] = train_live_model(samples, live, config, **kw)
+        print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{len(live)} live")
+    held = [read_any_trial(p) for p in held_paths]
+    streamed = [stream_trial(t, factory) for t in held]
+    modes = ("boundary", "window") if args.mode == "both" else (args.mode,)
+    result: dict[str, Any] = {
+        "train": [p.name for p in train_paths],
+        "held_out": [p.name for p in held_paths],
+        "stream_profile": config.stream_profile,
+        "results": {},
+    }
+    for name, model in models.items():
+        for mode in modes:
+            began = time.perf_counter()
+            reps = [
+                replay_beliefs(s, model, mode, args.window_s, trial=t)
+                for s, t in zip(streamed, held, strict=True)
+            ]
+            elapsed = time.perf_counter() - began
+            summary = replay_summary(reps, held)
+            # classification cost per belief update (window split + encoding + predict): the
+            # classifier node pays this once per word batch
+            summary["ms_per_belief"] = round(1000 * elapsed / max(1, sum(r.n_beliefs for r in reps)), 3)
+            summary["timelines"] = {r.name: [(round(t, 3), s) for t, s in r.changes] for r in reps}
+            result["results"][f"{name}/{mode}"] = summary
+            print(
+                f"{name:7s} {mode:8s} time_accuracy {summary['time_accuracy']}"
+                f"  subtask_accuracy {summary['subtask_accuracy']}  ms/belief {summary['ms_per_belief']}"
+                f"  per trial {summary['per_trial']}"
+            )
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2))
+    return 0
