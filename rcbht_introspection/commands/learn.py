@@ -138,7 +138,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))
     if args.plot:
-        from rcbht_introspection.learn.plot import plot_learning_curve
+        from rcbht_introspection.plots.learning_curve import plot_learning_curve
 
         plot_learning_curve([result], args.plot, title=", ".join(p.name for p in args.inputs))
     return 0

@@ -188,7 +188,7 @@ def run_conformance(args: argparse.Namespace) -> int:
 
 def run_plot(args: argparse.Namespace) -> int:
     from rcbht_introspection.io.hiro import read_trial
-    from rcbht_introspection.taxonomy_plot import plot_trial
+    from rcbht_introspection.plots.action_grammar import plot_trial
 
     trial = read_trial(args.trial)
     words = labeller("batch", args.profile)(trial)
