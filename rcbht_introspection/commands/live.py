@@ -9,9 +9,9 @@ from pathlib import Path
 from typing import Any
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.grammar.encoding import ENCODINGS
+from rcbht_introspection.grammar import ENCODINGS
+from rcbht_introspection.learn import CLASSIFIERS
 from rcbht_introspection.learn.data import WORD_SOURCES
-from rcbht_introspection.learn.models import CLASSIFIERS
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

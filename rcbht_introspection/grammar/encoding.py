@@ -20,6 +20,7 @@ import numpy as np
 from sklearn.feature_selection import f_classif
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, Word
 
@@ -330,9 +331,6 @@ class CompactEncoding:
             "lower": list(self.lower),
             "scale": list(self.scale),
         }
-
-
-ENCODINGS = ("compact", "paper")
 
 
 def make_encoding(name: str) -> PaperEncoding | CompactEncoding:

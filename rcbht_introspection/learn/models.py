@@ -31,6 +31,7 @@ from rcbht_introspection.grammar.encoding import (
 )
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.learn import CLASSIFIERS
 from rcbht_introspection.learn.mondrian import (
     FEATURE_DTYPE,
     NO_NODE,
@@ -40,7 +41,6 @@ from rcbht_introspection.learn.mondrian import (
 
 FORMAT = "rcbht-subtask-model"
 FORMAT_VERSION = 1
-CLASSIFIERS = ("svm", "svm-tuned", "mondrian")
 TUNING_GRID: dict[str, list[float]] = {"C": [0.1, 1.0, 10.0, 100.0], "gamma_factor": [0.1, 1.0, 10.0]}
 """svm-tuned: C and a multiple of the 'scale' gamma, chosen by trial-grouped CV on training data."""
 SVM_TRUSTED_TYPES: tuple[str, ...] = (
