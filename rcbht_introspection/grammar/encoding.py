@@ -194,7 +194,77 @@ class PaperEncoding:
 
 
 def compact_raw_features(sample: SubtaskSample, arms: Sequence[str]) -> dict[str, float]:
-    """Unscaled compact features of one sample (names are 'arm/level/axis/kind:label')."""
+    """Unscaled compact features of one sample (names are 'arm/level/axis/kind:label').
+
+    Per-word work is NumPy over the words of each arm/level/axis; every sum is taken in the
+    word order of the plain definition (`compact_raw_features_reference`), so the floats are
+    bit-identical to it.
+    """
+    features: dict[str, float] = {}
+    duration = max(sample.duration, 0.0)
+    features["log_duration"] = math.log(max(duration, MIN_DURATION))
+    for arm in arms:
+        for level in LEVELS:
+            value_key = VALUE_KEYS[level]
+            for axis in AXES:
+                words = sample.words.axis_words(arm, level, axis)
+                if not words:
+                    continue
+                prefix = f"{arm}/{level.value}/{axis}/"
+                _axis_features(features, prefix, words, value_key)
+    return features
+
+
+def _axis_features(features: dict[str, float], prefix: str, words: Sequence[Word], value_key: str) -> None:
+    """Add the compact features of one arm/level/axis word sequence to `features`."""
+    starts = np.fromiter((w.start for w in words), dtype=float, count=len(words))
+    if len(words) > 1 and np.any(starts[1:] < starts[:-1]):
+        order = np.argsort(starts, kind="stable")  # = sorted(key=start), which is stable
+        words = [words[i] for i in order]
+        starts = starts[order]
+    n = len(words)
+    ends = np.fromiter((w.end for w in words), dtype=float, count=n)
+    values = np.fromiter((w.features.get(value_key, 0.0) for w in words), dtype=float, count=n)
+    names: dict[str, int] = {}
+    codes = np.fromiter(
+        (names.setdefault(_LABEL_NAMES.get(w.label) or _label_name(w.label), len(names)) for w in words),
+        dtype=np.intp,
+        count=n,
+    )
+    spans = np.maximum(ends - starts, 0.0)
+    total = sum(spans.tolist())
+    weights = spans if total > 0 else np.ones(n)
+    wsum = sum(weights.tolist())
+    features[prefix + "n_words"] = math.log1p(n)
+    kinds = len(names)
+    counts = np.bincount(codes, minlength=kinds).tolist()
+    fracs = np.bincount(codes, weights=weights / wsum, minlength=kinds).tolist()
+    for label, code in names.items():
+        features[prefix + "count:" + label] = math.log1p(float(counts[code]))
+        features[prefix + "frac:" + label] = fracs[code]
+    if n > 1:
+        pairs = np.bincount(codes[:-1] * kinds + codes[1:], minlength=kinds * kinds).tolist()
+        labels = list(names)
+        for pair in np.flatnonzero(pairs).tolist():
+            a, b = labels[pair // kinds], labels[pair % kinds]
+            features[prefix + f"bigram:{a}>{b}"] = math.log1p(float(pairs[pair]))
+    features[prefix + "mean_value"] = sum((values * weights).tolist()) / wsum
+
+
+_LABEL_NAMES: dict[str, str] = {}
+"""Memo of `_label_name` (the label vocabularies are small)."""
+
+
+def _label_name(label: str) -> str:
+    """A word label with its alias resolved (spec 3: 'const' = 'cons')."""
+    name = LABEL_ALIASES.get(label.strip(), label.strip())
+    if len(_LABEL_NAMES) < 10000:
+        _LABEL_NAMES[label] = name
+    return name
+
+
+def compact_raw_features_reference(sample: SubtaskSample, arms: Sequence[str]) -> dict[str, float]:
+    """The plain per-word definition of `compact_raw_features` (kept as its test oracle)."""
     features: dict[str, float] = {}
     duration = max(sample.duration, 0.0)
     features["log_duration"] = math.log(max(duration, MIN_DURATION))

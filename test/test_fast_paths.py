@@ -1,0 +1,101 @@
+"""The fast feature, window and SVM paths equal their plain definitions bit for bit.
+
+On real words (golden sub-tasks and live windows of a streamed REAL trial) and on generated
+word sequences (unsorted, zero-length, aliased and unknown labels).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from rcbht_introspection.grammar.encoding import (
+    compact_raw_features,
+    compact_raw_features_reference,
+)
+from rcbht_introspection.grammar.split import SubtaskSample, window_sample
+from rcbht_introspection.io.hiro import read_trial
+from rcbht_introspection.learn.data import load_trials
+from rcbht_introspection.learn.live import LiveAugmentConfig, stream_factory
+from rcbht_introspection.learn.models import svm_predict_proba, train_model
+from rcbht_introspection.live.replay import stream_trial
+from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
+
+REAL = "REAL_HIRO_ONE_SA_SUCCESS"
+TRIALS = ("20121127-HIROSA-S-01", "20121127-HIROSA-S-45")
+
+
+def _same(a: dict[str, float], b: dict[str, float]) -> bool:
+    """Same keys and bit-identical values (repr distinguishes every float, NaN included)."""
+    return a.keys() == b.keys() and all(repr(a[k]) == repr(b[k]) for k in a)
+
+
+@pytest.mark.shared_data
+def test_fast_features_equal_reference_on_golden_subtasks(hiro_data: Path) -> None:
+    samples = [s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples]
+    assert len(samples) >= 8
+    for sample in samples:
+        assert _same(compact_raw_features(sample, ["R"]), compact_raw_features_reference(sample, ["R"]))
+
+
+@pytest.mark.shared_data
+def test_fast_windows_and_features_equal_reference_on_live_words(hiro_data: Path) -> None:
+    """Live windows of a streamed trial: bisected window == scanned window, fast == plain features."""
+    streamed = stream_trial(read_trial(hiro_data / REAL / TRIALS[1]), stream_factory(LiveAugmentConfig()))
+    words = TrialWords(name=streamed.name)
+    checked = 0
+    for i, (t, w) in enumerate(streamed.released()):
+        words.add(w)
+        if i % 25:
+            continue
+        for start in (max(0.0, t - 2.0), t / 2, 0.0, t):
+            fast = window_sample(words, start, t, ordered=True)
+            plain = window_sample(words, start, t)
+            assert fast.words == plain.words
+            assert _same(compact_raw_features(fast, ["R"]), compact_raw_features_reference(plain, ["R"]))
+            checked += 1
+    assert checked > 100
+
+
+_LABELS = st.sampled_from(["pos", "neg", "cons", "const", " const ", "a", "k", "weird"])
+
+
+@st.composite
+def _axis_words(draw: st.DrawFn) -> list[Word]:
+    spans = draw(st.lists(st.tuples(st.floats(0, 10), st.floats(-1, 3), _LABELS, st.floats(-5, 5)), max_size=12))
+    return [
+        Word(axis="Fz", level=Level.COMPOSITION, label=label, start=s, end=s + d, features={"Average Val": v})
+        for s, d, label, v in spans
+    ]
+
+
+@settings(max_examples=200, deadline=None)
+@given(_axis_words(), st.floats(0, 20))
+def test_fast_features_equal_reference_on_generated_words(words: list[Word], duration: float) -> None:
+    tw = TrialWords(name="t")
+    for w in words:
+        tw.add(w)
+    sample = SubtaskSample("t", "approach", 0.0, duration, tw)
+    assert _same(compact_raw_features(sample, ["R"]), compact_raw_features_reference(sample, ["R"]))
+
+
+@pytest.mark.shared_data
+def test_svm_fast_probabilities_equal_checked_pipeline(hiro_data: Path) -> None:
+    """svm_predict_proba == Pipeline.predict_proba bit for bit; bad input still raises."""
+    samples = [s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples]
+    model = train_model(samples)
+    X = model.features(samples)
+    assert np.array_equal(svm_predict_proba(model.estimator, X), model.estimator.predict_proba(X))
+    for row in X:
+        one = row[None, :]
+        assert np.array_equal(svm_predict_proba(model.estimator, one), model.estimator.predict_proba(one))
+    bad = X[:1].copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError):
+        svm_predict_proba(model.estimator, bad)
+    with pytest.raises(ValueError):
+        svm_predict_proba(model.estimator, X[:, :-1])
