@@ -99,3 +99,20 @@ def test_svm_fast_probabilities_equal_checked_pipeline(hiro_data: Path) -> None:
         svm_predict_proba(model.estimator, bad)
     with pytest.raises(ValueError):
         svm_predict_proba(model.estimator, X[:, :-1])
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.tuples(st.sampled_from([0.0, 0.5, 1.0]), st.sampled_from([0.0, 0.5, 1.5])), max_size=10),
+    st.sampled_from([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.5]),
+    st.sampled_from([0.0, 0.5, 1.0, 2.0, 2.5, 4.0, 9.0]),
+)
+def test_bisected_window_equals_scanned_window(steps: list[tuple[float, float]], start: float, end: float) -> None:
+    """Touching, overlapping and zero-length words, windows on and between their bounds."""
+    tw = TrialWords(name="t")
+    t = last_end = 0.0
+    for gap, length in steps:  # non-decreasing starts and ends, as a live stream gives
+        t += gap
+        last_end = max(last_end, t + length)
+        tw.add(Word(axis="Fz", level=Level.PRIMITIVE, label="pos", start=t, end=last_end))
+    assert window_sample(tw, start, end, ordered=True).words == window_sample(tw, start, end).words

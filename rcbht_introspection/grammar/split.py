@@ -100,23 +100,43 @@ def window_sample(
     then only the candidate range found by bisection is examined, with the same rule.
     """
     out = TrialWords(name=words.name)
+    ordered = ordered and start <= end
     for arm, per_level in words.words.items():
         for level, per_axis in per_level.items():
             for axis, sequence in per_axis.items():
                 target = out.words.setdefault(arm, {}).setdefault(level, {}).setdefault(axis, [])
                 if ordered:
-                    lo = bisect_left(sequence, start, key=_word_end)
-                    hi = bisect_right(sequence, end, lo=lo, key=_word_start)
-                    candidates = sequence[lo:hi]
-                else:
-                    candidates = sequence
-                for word in candidates:
+                    _ordered_window(sequence, start, end, target)
+                    continue
+                for word in sequence:
                     if word.end < start or word.start > end:
                         continue
                     if word.end == start and word.start < start:
                         continue
                     target.append(_clip(word, start, end))
     return SubtaskSample(words.name if trial is None else trial, subtask, start, end, out)
+
+
+def _ordered_window(sequence: list[Word], start: float, end: float, target: list[Word]) -> None:
+    """window_sample's rule on a sequence with non-decreasing starts and ends, in O(log n + edges).
+
+    Candidates lie between the first word ending at/after `start` and the last starting at/before
+    `end`; only a prefix (starting before `start`) and a suffix (ending after `end`) can be
+    dropped or clipped, the words between are taken unchanged as one slice.
+    """
+    lo = bisect_left(sequence, start, key=_word_end)
+    hi = bisect_right(sequence, end, lo=lo, key=_word_start)
+    while lo < hi and sequence[lo].start < start:
+        word = sequence[lo]
+        if not (word.end < start or word.end == start):
+            target.append(_clip(word, start, end))
+        lo += 1
+    tail: list[Word] = []
+    while hi > lo and sequence[hi - 1].end > end:
+        tail.append(_clip(sequence[hi - 1], start, end))
+        hi -= 1
+    target.extend(sequence[lo:hi])
+    target.extend(reversed(tail))
 
 
 def _word_start(word: Word) -> float:
