@@ -14,6 +14,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rcbht_introspection.grammar.encoding import (
+    NUMPY_MIN_WORDS,
+    VALUE_KEYS,
+    _axis_features,
+    _axis_features_small,
     compact_raw_features,
     compact_raw_features_reference,
 )
@@ -23,7 +27,7 @@ from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.live import LiveAugmentConfig, stream_factory
 from rcbht_introspection.learn.models import svm_predict_proba, train_model
 from rcbht_introspection.live.replay import stream_trial
-from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
+from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
 
 REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 TRIALS = ("20121127-HIROSA-S-01", "20121127-HIROSA-S-45")
@@ -116,3 +120,24 @@ def test_bisected_window_equals_scanned_window(steps: list[tuple[float, float]],
         last_end = max(last_end, t + length)
         tw.add(Word(axis="Fz", level=Level.PRIMITIVE, label="pos", start=t, end=last_end))
     assert window_sample(tw, start, end, ordered=True).words == window_sample(tw, start, end).words
+
+
+@pytest.mark.shared_data
+def test_both_axis_paths_equal_reference_on_golden_axes(hiro_data: Path) -> None:
+    """The NumPy and the short-sequence path each equal the plain definition on every golden axis."""
+    samples = [s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples]
+    longest = 0
+    for sample in samples:
+        for level in LEVELS:
+            for axis in AXES:
+                words = sample.words.axis_words("R", level, axis)
+                if not words:
+                    continue
+                longest = max(longest, len(words))
+                one = SubtaskSample("t", "approach", 0.0, 1.0, TrialWords("t", {"R": {level: {axis: words}}}))
+                expected = compact_raw_features_reference(one, ["R"])
+                for path in (_axis_features, _axis_features_small):
+                    got = {"log_duration": expected["log_duration"]}
+                    path(got, f"R/{level.value}/{axis}/", words, VALUE_KEYS[level])
+                    assert _same(got, expected)
+    assert longest >= NUMPY_MIN_WORDS

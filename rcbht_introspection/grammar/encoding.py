@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import math
 import warnings
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -31,6 +32,8 @@ VALUE_KEYS: dict[Level, str] = {
     Level.BEHAVIOR: "AVG_MAG_VAL",
 }
 """The record field holding a word's mean wrench value, per level."""
+NUMPY_MIN_WORDS = 128
+"""Sequences at least this long get NumPy compact features (measured break-even ~120 words)."""
 MIN_DURATION = 1e-3
 """Floor (s) for the log sub-task duration, so a zero-length window stays finite."""
 
@@ -196,9 +199,9 @@ class PaperEncoding:
 def compact_raw_features(sample: SubtaskSample, arms: Sequence[str]) -> dict[str, float]:
     """Unscaled compact features of one sample (names are 'arm/level/axis/kind:label').
 
-    Per-word work is NumPy over the words of each arm/level/axis; every sum is taken in the
-    word order of the plain definition (`compact_raw_features_reference`), so the floats are
-    bit-identical to it.
+    Per arm/level/axis, NumPy over long word sequences and plain Python with per-label keys over
+    short ones (NumPy's fixed cost dominates there); every sum is taken in the word order of the
+    plain definition (`compact_raw_features_reference`), so the floats are bit-identical to it.
     """
     features: dict[str, float] = {}
     duration = max(sample.duration, 0.0)
@@ -211,8 +214,38 @@ def compact_raw_features(sample: SubtaskSample, arms: Sequence[str]) -> dict[str
                 if not words:
                     continue
                 prefix = f"{arm}/{level.value}/{axis}/"
-                _axis_features(features, prefix, words, value_key)
+                if len(words) < NUMPY_MIN_WORDS:
+                    _axis_features_small(features, prefix, words, value_key)
+                else:
+                    _axis_features(features, prefix, words, value_key)
     return features
+
+
+def _axis_features_small(
+    features: dict[str, float], prefix: str, words: Sequence[Word], value_key: str
+) -> None:
+    """_axis_features for short sequences: plain Python, one key string per label, not per word."""
+    if any(b.start < a.start for a, b in itertools.pairwise(words)):
+        words = sorted(words, key=lambda w: w.start)
+    n = len(words)
+    names = [_LABEL_NAMES.get(w.label) or _label_name(w.label) for w in words]
+    spans = [w.end - w.start for w in words]
+    spans = [0.0 if x < 0.0 else x for x in spans]  # = max(x, 0.0), NaN and -0.0 included
+    total = sum(spans)
+    weights = spans if total > 0 else [1.0] * n
+    wsum = sum(weights)
+    features[prefix + "n_words"] = math.log1p(n)
+    fracs: dict[str, float] = {}
+    for name, weight in zip(names, weights, strict=True):
+        fracs[name] = fracs.get(name, 0.0) + weight / wsum
+    counts = Counter(names)
+    for name, frac in fracs.items():
+        features[prefix + "count:" + name] = math.log1p(float(counts[name]))
+        features[prefix + "frac:" + name] = frac
+    for (a, b), count in Counter(itertools.pairwise(names)).items():
+        features[prefix + f"bigram:{a}>{b}"] = math.log1p(float(count))
+    mean = sum(w.features.get(value_key, 0.0) * wt for w, wt in zip(words, weights, strict=True))
+    features[prefix + "mean_value"] = mean / wsum
 
 
 def _axis_features(features: dict[str, float], prefix: str, words: Sequence[Word], value_key: str) -> None:
