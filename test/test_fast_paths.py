@@ -18,6 +18,7 @@ from rcbht_introspection.grammar.encoding import (
     VALUE_KEYS,
     _axis_features,
     _axis_features_small,
+    _SampleCache,
     compact_raw_features,
     compact_raw_features_reference,
 )
@@ -141,3 +142,25 @@ def test_both_axis_paths_equal_reference_on_golden_axes(hiro_data: Path) -> None
                     path(got, f"R/{level.value}/{axis}/", words, VALUE_KEYS[level])
                     assert _same(got, expected)
     assert longest >= NUMPY_MIN_WORDS
+
+
+def test_sample_cache_evicts_oldest_samples_and_forgets() -> None:
+    """Bounded by results, oldest sample first; forget drops a sample; hits do not recompute."""
+    cache = _SampleCache(limit=3)
+    a, b, c = (SubtaskSample("t", "approach", 0.0, float(i), TrialWords("t")) for i in range(3))
+    calls: list[str] = []
+
+    def compute(tag: str) -> str:
+        calls.append(tag)
+        return tag
+
+    assert cache.get(a, 1, lambda: compute("a1")) == "a1"
+    assert cache.get(a, 2, lambda: compute("a2")) == "a2"
+    assert cache.get(b, 1, lambda: compute("b1")) == "b1"
+    assert cache.get(a, 1, lambda: compute("x")) == "a1"  # hit
+    assert cache.get(c, 1, lambda: compute("c1")) == "c1"  # full: a (2 results) goes
+    assert cache.size == 2 and set(cache.entries) == {id(b), id(c)}
+    cache.forget(b)
+    assert cache.size == 1 and set(cache.entries) == {id(c)}
+    assert cache.get(a, 1, lambda: compute("a1")) == "a1"
+    assert calls == ["a1", "a2", "b1", "c1", "a1"]

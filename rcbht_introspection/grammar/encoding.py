@@ -114,26 +114,42 @@ class Encoding(Protocol):
 class _SampleCache:
     """Per-sample memo of expensive intermediate results, keyed by object identity.
 
-    Holds a reference to each sample so an id is never reused while cached; bounded size.
+    Holds a reference to each sample so an id is never reused while cached. Bounded to `limit`
+    results: the oldest samples go first, one at a time, so no call pays for freeing them all.
     """
 
     def __init__(self, limit: int = 20000) -> None:
         self.limit = limit
-        self.entries: dict[tuple[int, Any], tuple[SubtaskSample, Any]] = {}
+        self.entries: dict[int, tuple[SubtaskSample, dict[Any, Any]]] = {}
+        self.size = 0
 
     def get(self, sample: SubtaskSample, key: Any, compute: Any) -> Any:
-        full = (id(sample), key)
-        hit = self.entries.get(full)
-        if hit is not None and hit[0] is sample:
-            return hit[1]
+        hit = self.entries.get(id(sample))
+        if hit is not None and hit[0] is sample and key in hit[1]:
+            return hit[1][key]
         value = compute()
-        if len(self.entries) >= self.limit:
-            self.entries.clear()
-        self.entries[full] = (sample, value)
+        if hit is None or hit[0] is not sample:
+            self.forget(sample)
+            while self.entries and self.size >= self.limit:
+                self.size -= len(self.entries.pop(next(iter(self.entries)))[1])
+            hit = self.entries[id(sample)] = (sample, {})
+        hit[1][key] = value
+        self.size += 1
         return value
+
+    def forget(self, sample: SubtaskSample) -> None:
+        """Drop every result of `sample` (a live window is never asked again)."""
+        hit = self.entries.pop(id(sample), None)
+        if hit is not None:
+            self.size -= len(hit[1])
 
 
 _CACHE = _SampleCache()
+
+
+def forget_sample(sample: SubtaskSample) -> None:
+    """Release the cached features of a sample that will not be encoded again (live windows)."""
+    _CACHE.forget(sample)
 
 
 @dataclass

@@ -143,6 +143,7 @@ class BeliefTracker:
                 if w.end >= start and w.start <= end
             )
             return Belief(UNKNOWN, (), (), start, end, self.mode, phase, final, n)
+        from rcbht_introspection.grammar.encoding import forget_sample
         from rcbht_introspection.grammar.split import window_sample
 
         sample = window_sample(
@@ -170,6 +171,9 @@ class BeliefTracker:
         except Exception as exc:  # a bad model must not stop the node
             self.last_error = f"{type(exc).__name__}: {exc}"
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
+        finally:
+            # each window is a new sample: caching it would only grow memory and GC pauses
+            forget_sample(sample)
         return Belief(verdict, self.classes, tuple(float(p) for p in proba), **base)
 
     def window(self) -> tuple[float, float, str]:
