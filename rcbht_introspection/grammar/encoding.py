@@ -12,6 +12,7 @@ from __future__ import annotations
 import itertools
 import math
 import warnings
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -32,6 +33,8 @@ VALUE_KEYS: dict[Level, str] = {
     Level.BEHAVIOR: "AVG_MAG_VAL",
 }
 """The record field holding a word's mean wrench value, per level."""
+NUMPY_MIN_WORDS = 128
+"""Sequences at least this long get NumPy compact features (measured break-even ~120 words)."""
 MIN_DURATION = 1e-3
 """Floor (s) for the log sub-task duration, so a zero-length window stays finite."""
 
@@ -112,26 +115,42 @@ class Encoding(Protocol):
 class _SampleCache:
     """Per-sample memo of expensive intermediate results, keyed by object identity.
 
-    Holds a reference to each sample so an id is never reused while cached; bounded size.
+    Holds a reference to each sample so an id is never reused while cached. Bounded to `limit`
+    results: the oldest samples go first, one at a time, so no call pays for freeing them all.
     """
 
     def __init__(self, limit: int = 20000) -> None:
         self.limit = limit
-        self.entries: dict[tuple[int, Any], tuple[SubtaskSample, Any]] = {}
+        self.entries: dict[int, tuple[SubtaskSample, dict[Any, Any]]] = {}
+        self.size = 0
 
     def get(self, sample: SubtaskSample, key: Any, compute: Any) -> Any:
-        full = (id(sample), key)
-        hit = self.entries.get(full)
-        if hit is not None and hit[0] is sample:
-            return hit[1]
+        hit = self.entries.get(id(sample))
+        if hit is not None and hit[0] is sample and key in hit[1]:
+            return hit[1][key]
         value = compute()
-        if len(self.entries) >= self.limit:
-            self.entries.clear()
-        self.entries[full] = (sample, value)
+        if hit is None or hit[0] is not sample:
+            self.forget(sample)
+            while self.entries and self.size >= self.limit:
+                self.size -= len(self.entries.pop(next(iter(self.entries)))[1])
+            hit = self.entries[id(sample)] = (sample, {})
+        hit[1][key] = value
+        self.size += 1
         return value
+
+    def forget(self, sample: SubtaskSample) -> None:
+        """Drop every result of `sample` (a live window is never asked again)."""
+        hit = self.entries.pop(id(sample), None)
+        if hit is not None:
+            self.size -= len(hit[1])
 
 
 _CACHE = _SampleCache()
+
+
+def forget_sample(sample: SubtaskSample) -> None:
+    """Release the cached features of a sample that will not be encoded again (live windows)."""
+    _CACHE.forget(sample)
 
 
 @dataclass
@@ -195,7 +214,107 @@ class PaperEncoding:
 
 
 def compact_raw_features(sample: SubtaskSample, arms: Sequence[str]) -> dict[str, float]:
-    """Unscaled compact features of one sample (names are 'arm/level/axis/kind:label')."""
+    """Unscaled compact features of one sample (names are 'arm/level/axis/kind:label').
+
+    Per arm/level/axis, NumPy over long word sequences and plain Python with per-label keys over
+    short ones (NumPy's fixed cost dominates there); every sum is taken in the word order of the
+    plain definition (`compact_raw_features_reference`), so the floats are bit-identical to it.
+    """
+    features: dict[str, float] = {}
+    duration = max(sample.duration, 0.0)
+    features["log_duration"] = math.log(max(duration, MIN_DURATION))
+    for arm in arms:
+        for level in LEVELS:
+            value_key = VALUE_KEYS[level]
+            for axis in AXES:
+                words = sample.words.axis_words(arm, level, axis)
+                if not words:
+                    continue
+                prefix = f"{arm}/{level.value}/{axis}/"
+                if len(words) < NUMPY_MIN_WORDS:
+                    _axis_features_small(features, prefix, words, value_key)
+                else:
+                    _axis_features(features, prefix, words, value_key)
+    return features
+
+
+def _axis_features_small(
+    features: dict[str, float], prefix: str, words: Sequence[Word], value_key: str
+) -> None:
+    """_axis_features for short sequences: plain Python, one key string per label, not per word."""
+    if any(b.start < a.start for a, b in itertools.pairwise(words)):
+        words = sorted(words, key=lambda w: w.start)
+    n = len(words)
+    names = [_LABEL_NAMES.get(w.label) or _label_name(w.label) for w in words]
+    spans = [w.end - w.start for w in words]
+    spans = [0.0 if x < 0.0 else x for x in spans]  # = max(x, 0.0), NaN and -0.0 included
+    total = sum(spans)
+    weights = spans if total > 0 else [1.0] * n
+    wsum = sum(weights)
+    features[prefix + "n_words"] = math.log1p(n)
+    fracs: dict[str, float] = {}
+    for name, weight in zip(names, weights, strict=True):
+        fracs[name] = fracs.get(name, 0.0) + weight / wsum
+    counts = Counter(names)
+    for name, frac in fracs.items():
+        features[prefix + "count:" + name] = math.log1p(float(counts[name]))
+        features[prefix + "frac:" + name] = frac
+    for (a, b), count in Counter(itertools.pairwise(names)).items():
+        features[prefix + f"bigram:{a}>{b}"] = math.log1p(float(count))
+    mean = sum(w.features.get(value_key, 0.0) * wt for w, wt in zip(words, weights, strict=True))
+    features[prefix + "mean_value"] = mean / wsum
+
+
+def _axis_features(features: dict[str, float], prefix: str, words: Sequence[Word], value_key: str) -> None:
+    """Add the compact features of one arm/level/axis word sequence to `features`."""
+    starts = np.fromiter((w.start for w in words), dtype=float, count=len(words))
+    if len(words) > 1 and np.any(starts[1:] < starts[:-1]):
+        order = np.argsort(starts, kind="stable")  # = sorted(key=start), which is stable
+        words = [words[i] for i in order]
+        starts = starts[order]
+    n = len(words)
+    ends = np.fromiter((w.end for w in words), dtype=float, count=n)
+    values = np.fromiter((w.features.get(value_key, 0.0) for w in words), dtype=float, count=n)
+    names: dict[str, int] = {}
+    codes = np.fromiter(
+        (names.setdefault(_LABEL_NAMES.get(w.label) or _label_name(w.label), len(names)) for w in words),
+        dtype=np.intp,
+        count=n,
+    )
+    spans = np.maximum(ends - starts, 0.0)
+    total = sum(spans.tolist())
+    weights = spans if total > 0 else np.ones(n)
+    wsum = sum(weights.tolist())
+    features[prefix + "n_words"] = math.log1p(n)
+    kinds = len(names)
+    counts = np.bincount(codes, minlength=kinds).tolist()
+    fracs = np.bincount(codes, weights=weights / wsum, minlength=kinds).tolist()
+    for label, code in names.items():
+        features[prefix + "count:" + label] = math.log1p(float(counts[code]))
+        features[prefix + "frac:" + label] = fracs[code]
+    if n > 1:
+        pairs = np.bincount(codes[:-1] * kinds + codes[1:], minlength=kinds * kinds).tolist()
+        labels = list(names)
+        for pair in np.flatnonzero(pairs).tolist():
+            a, b = labels[pair // kinds], labels[pair % kinds]
+            features[prefix + f"bigram:{a}>{b}"] = math.log1p(float(pairs[pair]))
+    features[prefix + "mean_value"] = sum((values * weights).tolist()) / wsum
+
+
+_LABEL_NAMES: dict[str, str] = {}
+"""Memo of `_label_name` (the label vocabularies are small)."""
+
+
+def _label_name(label: str) -> str:
+    """A word label with its alias resolved (spec 3: 'const' = 'cons')."""
+    name = LABEL_ALIASES.get(label.strip(), label.strip())
+    if len(_LABEL_NAMES) < 10000:
+        _LABEL_NAMES[label] = name
+    return name
+
+
+def compact_raw_features_reference(sample: SubtaskSample, arms: Sequence[str]) -> dict[str, float]:
+    """The plain per-word definition of `compact_raw_features` (kept as its test oracle)."""
     features: dict[str, float] = {}
     duration = max(sample.duration, 0.0)
     features["log_duration"] = math.log(max(duration, MIN_DURATION))

@@ -6,6 +6,7 @@ earlier sub-task and the rest is re-examined for the next one, as data_folder_pa
 
 from __future__ import annotations
 
+from bisect import bisect_left, bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -84,18 +85,29 @@ def split_words(
 
 
 def window_sample(
-    words: TrialWords, start: float, end: float, subtask: str = "", trial: str | None = None
+    words: TrialWords,
+    start: float,
+    end: float,
+    subtask: str = "",
+    trial: str | None = None,
+    ordered: bool = False,
 ) -> SubtaskSample:
     """The words overlapping [start, end], clipped to it (a live or prefix view of a sub-task).
 
     A word overlaps when it ends after `start` and starts before `end`; a zero-length window
-    keeps the words that contain its instant, so a 5 ms sub-task is never empty.
+    keeps the words that contain its instant, so a 5 ms sub-task is never empty. `ordered`
+    promises that every sequence's starts and ends are non-decreasing (a live word stream):
+    then only the candidate range found by bisection is examined, with the same rule.
     """
     out = TrialWords(name=words.name)
+    ordered = ordered and start <= end
     for arm, per_level in words.words.items():
         for level, per_axis in per_level.items():
             for axis, sequence in per_axis.items():
                 target = out.words.setdefault(arm, {}).setdefault(level, {}).setdefault(axis, [])
+                if ordered:
+                    _ordered_window(sequence, start, end, target)
+                    continue
                 for word in sequence:
                     if word.end < start or word.start > end:
                         continue
@@ -103,6 +115,36 @@ def window_sample(
                         continue
                     target.append(_clip(word, start, end))
     return SubtaskSample(words.name if trial is None else trial, subtask, start, end, out)
+
+
+def _ordered_window(sequence: list[Word], start: float, end: float, target: list[Word]) -> None:
+    """window_sample's rule on a sequence with non-decreasing starts and ends, in O(log n + edges).
+
+    Candidates lie between the first word ending at/after `start` and the last starting at/before
+    `end`; only a prefix (starting before `start`) and a suffix (ending after `end`) can be
+    dropped or clipped, the words between are taken unchanged as one slice.
+    """
+    lo = bisect_left(sequence, start, key=_word_end)
+    hi = bisect_right(sequence, end, lo=lo, key=_word_start)
+    while lo < hi and sequence[lo].start < start:
+        word = sequence[lo]
+        if not (word.end < start or word.end == start):
+            target.append(_clip(word, start, end))
+        lo += 1
+    tail: list[Word] = []
+    while hi > lo and sequence[hi - 1].end > end:
+        tail.append(_clip(sequence[hi - 1], start, end))
+        hi -= 1
+    target.extend(sequence[lo:hi])
+    target.extend(reversed(tail))
+
+
+def _word_start(word: Word) -> float:
+    return word.start
+
+
+def _word_end(word: Word) -> float:
+    return word.end
 
 
 def prefix_sample(sample: SubtaskSample, fraction: float) -> SubtaskSample:

@@ -84,13 +84,18 @@ class BeliefTracker:
         self._issued = 0
         self._added = 0
         self.last_final: Belief | None = None
+        self._ordered = True
+        """Every axis sequence has non-decreasing starts and ends (lets windows bisect)."""
 
     # --- input -------------------------------------------------------------------------------
     def add_words(self, arm: str, words: Iterable[Word], now: float | None = None) -> None:
         """Add final words of `arm`; `now` is the stream time of the sample that finalised them."""
         self.arms.add(arm)
         for w in words:
-            self.words.add(w)
+            seq = self.words.words.setdefault(w.arm, {}).setdefault(w.level, {}).setdefault(w.axis, [])
+            if seq and (w.start < seq[-1].start or w.end < seq[-1].end):
+                self._ordered = False
+            seq.append(w)
             key = (w.arm, w.level, w.axis)
             if w.end > self.watermark.get(key, -np.inf):
                 self.watermark[key] = w.end
@@ -138,9 +143,12 @@ class BeliefTracker:
                 if w.end >= start and w.start <= end
             )
             return Belief(UNKNOWN, (), (), start, end, self.mode, phase, final, n)
+        from rcbht_introspection.grammar.encoding import forget_sample
         from rcbht_introspection.grammar.split import window_sample
 
-        sample = window_sample(self.words, start, end, subtask=phase, trial=self.trial)
+        sample = window_sample(
+            self.words, start, end, subtask=phase, trial=self.trial, ordered=self._ordered
+        )
         n = sum(
             len(ws)
             for lv in sample.words.words.values()
@@ -163,6 +171,9 @@ class BeliefTracker:
         except Exception as exc:  # a bad model must not stop the node
             self.last_error = f"{type(exc).__name__}: {exc}"
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
+        finally:
+            # each window is a new sample: caching it would only grow memory and GC pauses
+            forget_sample(sample)
         return Belief(verdict, self.classes, tuple(float(p) for p in proba), **base)
 
     def window(self) -> tuple[float, float, str]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import gc
 import sys
 import threading
 from collections.abc import Callable
@@ -51,6 +52,10 @@ def run(node_factory: Callable[[], Node], name: str, args: list[str] | None = No
         node = node_factory()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        # start-up objects (rclpy, NumPy, scikit-learn, the model) live until exit: keep them
+        # out of the cyclic collector, whose full passes over them stall a 1 kHz callback
+        gc.collect()
+        gc.freeze()
         executor.spin()
     except InputError as exc:
         # one line naming the parameter; the node never started

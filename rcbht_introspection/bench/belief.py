@@ -1,0 +1,82 @@
+"""Belief-update latency of the classifier node's state (BeliefTracker), offline, no ROS.
+
+One update = what classifier_node does per received step: add the words, apply the events,
+take final verdicts, classify the running window (live/replay.py replay_beliefs). Measured on a
+REAL HIRO trial streamed through the segmenter session, with an SVM/compact model trained on
+REAL trials 1-40 (the ROS benchmark's model), in boundary and window mode.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+HIRO = Path(os.environ.get("RCBHT_HIRO_DATA", Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hiro"))
+REAL = "REAL_HIRO_ONE_SA_SUCCESS"
+TEST_TRIALS = ("20121127-HIROSA-S-45", "20121127-HIROSA-S-46")
+
+
+def timed_updates(streamed: Any, model: object, mode: str) -> tuple[list[float], list[str]]:
+    """(seconds per update, belief sub-task per update) of replay_beliefs' loop on `streamed`."""
+    from rcbht_introspection.live.belief import BeliefTracker
+
+    tracker = BeliefTracker(model, mode, 2.0, trial=streamed.name)
+    times: list[float] = []
+    states: list[str] = []
+    clock = time.perf_counter
+    for step in streamed.steps:
+        began = clock()
+        for batch in step.batches:
+            tracker.add_words(batch.arm, batch.words, (batch.stamp_ns - batch.origin_ns) / 1e9)
+            if batch.end_of_stream:
+                tracker.end_of_stream(batch.arm)
+        for p in step.phases:
+            tracker.phase(p.name, p.time)
+        tracker.take_finals()
+        states.append(tracker.current().subtask)
+        times.append(clock() - began)
+    return times, states
+
+
+def _stats(times: list[float]) -> dict[str, float]:
+    ms = 1000.0 * np.asarray(times)
+    return {
+        "updates": len(ms),
+        "median_ms": round(float(np.median(ms)), 3),
+        "p99_ms": round(float(np.percentile(ms, 99)), 3),
+        "max_ms": round(float(ms.max()), 3),
+    }
+
+
+def run(out_dir: Path) -> dict[str, Any]:
+    """Median / p99 / max ms per belief update, per mode, over the held-out REAL trials."""
+    if not (HIRO / REAL).is_dir():
+        return {"skipped": f"no shared data at {HIRO / REAL}"}
+    from rcbht_introspection.io.hiro import find_trials, read_trial
+    from rcbht_introspection.learn.data import load_samples
+    from rcbht_introspection.learn.live import LiveAugmentConfig, stream_factory
+    from rcbht_introspection.learn.models import train_model
+    from rcbht_introspection.live.replay import stream_trial
+
+    train = [f for f in find_trials([HIRO / REAL]) if int(f.name.rsplit("-", 1)[1]) <= 40]
+    model = train_model(load_samples(train, words="auto"))
+    factory = stream_factory(LiveAugmentConfig())
+    streamed = [stream_trial(read_trial(HIRO / REAL / name), factory) for name in TEST_TRIALS]
+    out: dict[str, Any] = {"trials": list(TEST_TRIALS), "model": "svm/compact, REAL 1-40"}
+    for mode in ("boundary", "window"):
+        times: list[float] = []
+        for s in streamed:
+            times += timed_updates(s, model, mode)[0]
+        out[mode] = _stats(times)
+    out["loadavg"] = [round(x, 2) for x in os.getloadavg()]
+    return out
+
+
+if __name__ == "__main__":
+    import json
+
+    print(json.dumps(run(Path("bench_out")), indent=1))

@@ -1,0 +1,166 @@
+"""The fast feature, window and SVM paths equal their plain definitions bit for bit.
+
+On real words (golden sub-tasks and live windows of a streamed REAL trial) and on generated
+word sequences (unsorted, zero-length, aliased and unknown labels).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from rcbht_introspection.grammar.encoding import (
+    NUMPY_MIN_WORDS,
+    VALUE_KEYS,
+    _axis_features,
+    _axis_features_small,
+    _SampleCache,
+    compact_raw_features,
+    compact_raw_features_reference,
+)
+from rcbht_introspection.grammar.split import SubtaskSample, window_sample
+from rcbht_introspection.io.hiro import read_trial
+from rcbht_introspection.learn.data import load_trials
+from rcbht_introspection.learn.live import LiveAugmentConfig, stream_factory
+from rcbht_introspection.learn.models import svm_predict_proba, train_model
+from rcbht_introspection.live.replay import stream_trial
+from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
+
+REAL = "REAL_HIRO_ONE_SA_SUCCESS"
+TRIALS = ("20121127-HIROSA-S-01", "20121127-HIROSA-S-45")
+
+
+def _same(a: dict[str, float], b: dict[str, float]) -> bool:
+    """Same keys and bit-identical values (repr distinguishes every float, NaN included)."""
+    return a.keys() == b.keys() and all(repr(a[k]) == repr(b[k]) for k in a)
+
+
+@pytest.mark.shared_data
+def test_fast_features_equal_reference_on_golden_subtasks(hiro_data: Path) -> None:
+    samples = [s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples]
+    assert len(samples) >= 8
+    for sample in samples:
+        assert _same(compact_raw_features(sample, ["R"]), compact_raw_features_reference(sample, ["R"]))
+
+
+@pytest.mark.shared_data
+def test_fast_windows_and_features_equal_reference_on_live_words(hiro_data: Path) -> None:
+    """Live windows of a streamed trial: bisected window == scanned window, fast == plain features."""
+    streamed = stream_trial(read_trial(hiro_data / REAL / TRIALS[1]), stream_factory(LiveAugmentConfig()))
+    words = TrialWords(name=streamed.name)
+    checked = 0
+    for i, (t, w) in enumerate(streamed.released()):
+        words.add(w)
+        if i % 25:
+            continue
+        for start in (max(0.0, t - 2.0), t / 2, 0.0, t):
+            fast = window_sample(words, start, t, ordered=True)
+            plain = window_sample(words, start, t)
+            assert fast.words == plain.words
+            assert _same(compact_raw_features(fast, ["R"]), compact_raw_features_reference(plain, ["R"]))
+            checked += 1
+    assert checked > 100
+
+
+_LABELS = st.sampled_from(["pos", "neg", "cons", "const", " const ", "a", "k", "weird"])
+
+
+@st.composite
+def _axis_words(draw: st.DrawFn) -> list[Word]:
+    spans = draw(st.lists(st.tuples(st.floats(0, 10), st.floats(-1, 3), _LABELS, st.floats(-5, 5)), max_size=12))
+    return [
+        Word(axis="Fz", level=Level.COMPOSITION, label=label, start=s, end=s + d, features={"Average Val": v})
+        for s, d, label, v in spans
+    ]
+
+
+@settings(max_examples=200, deadline=None)
+@given(_axis_words(), st.floats(0, 20))
+def test_fast_features_equal_reference_on_generated_words(words: list[Word], duration: float) -> None:
+    tw = TrialWords(name="t")
+    for w in words:
+        tw.add(w)
+    sample = SubtaskSample("t", "approach", 0.0, duration, tw)
+    assert _same(compact_raw_features(sample, ["R"]), compact_raw_features_reference(sample, ["R"]))
+
+
+@pytest.mark.shared_data
+def test_svm_fast_probabilities_equal_checked_pipeline(hiro_data: Path) -> None:
+    """svm_predict_proba == Pipeline.predict_proba bit for bit; bad input still raises."""
+    samples = [s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples]
+    model = train_model(samples)
+    X = model.features(samples)
+    assert np.array_equal(svm_predict_proba(model.estimator, X), model.estimator.predict_proba(X))
+    for row in X:
+        one = row[None, :]
+        assert np.array_equal(svm_predict_proba(model.estimator, one), model.estimator.predict_proba(one))
+    bad = X[:1].copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError):
+        svm_predict_proba(model.estimator, bad)
+    with pytest.raises(ValueError):
+        svm_predict_proba(model.estimator, X[:, :-1])
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    st.lists(st.tuples(st.sampled_from([0.0, 0.5, 1.0]), st.sampled_from([0.0, 0.5, 1.5])), max_size=10),
+    st.sampled_from([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.5]),
+    st.sampled_from([0.0, 0.5, 1.0, 2.0, 2.5, 4.0, 9.0]),
+)
+def test_bisected_window_equals_scanned_window(steps: list[tuple[float, float]], start: float, end: float) -> None:
+    """Touching, overlapping and zero-length words, windows on and between their bounds."""
+    tw = TrialWords(name="t")
+    t = last_end = 0.0
+    for gap, length in steps:  # non-decreasing starts and ends, as a live stream gives
+        t += gap
+        last_end = max(last_end, t + length)
+        tw.add(Word(axis="Fz", level=Level.PRIMITIVE, label="pos", start=t, end=last_end))
+    assert window_sample(tw, start, end, ordered=True).words == window_sample(tw, start, end).words
+
+
+@pytest.mark.shared_data
+def test_both_axis_paths_equal_reference_on_golden_axes(hiro_data: Path) -> None:
+    """The NumPy and the short-sequence path each equal the plain definition on every golden axis."""
+    samples = [s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples]
+    longest = 0
+    for sample in samples:
+        for level in LEVELS:
+            for axis in AXES:
+                words = sample.words.axis_words("R", level, axis)
+                if not words:
+                    continue
+                longest = max(longest, len(words))
+                one = SubtaskSample("t", "approach", 0.0, 1.0, TrialWords("t", {"R": {level: {axis: words}}}))
+                expected = compact_raw_features_reference(one, ["R"])
+                for path in (_axis_features, _axis_features_small):
+                    got = {"log_duration": expected["log_duration"]}
+                    path(got, f"R/{level.value}/{axis}/", words, VALUE_KEYS[level])
+                    assert _same(got, expected)
+    assert longest >= NUMPY_MIN_WORDS
+
+
+def test_sample_cache_evicts_oldest_samples_and_forgets() -> None:
+    """Bounded by results, oldest sample first; forget drops a sample; hits do not recompute."""
+    cache = _SampleCache(limit=3)
+    a, b, c = (SubtaskSample("t", "approach", 0.0, float(i), TrialWords("t")) for i in range(3))
+    calls: list[str] = []
+
+    def compute(tag: str) -> str:
+        calls.append(tag)
+        return tag
+
+    assert cache.get(a, 1, lambda: compute("a1")) == "a1"
+    assert cache.get(a, 2, lambda: compute("a2")) == "a2"
+    assert cache.get(b, 1, lambda: compute("b1")) == "b1"
+    assert cache.get(a, 1, lambda: compute("x")) == "a1"  # hit
+    assert cache.get(c, 1, lambda: compute("c1")) == "c1"  # full: a (2 results) goes
+    assert cache.size == 2 and set(cache.entries) == {id(b), id(c)}
+    cache.forget(b)
+    assert cache.size == 1 and set(cache.entries) == {id(c)}
+    assert cache.get(a, 1, lambda: compute("a1")) == "a1"
+    assert calls == ["a1", "a2", "b1", "c1", "a1"]
