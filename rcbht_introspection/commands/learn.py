@@ -24,7 +24,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--seed", type=int, default=0)
     train.add_argument("--live-augment", action=argparse.BooleanOptionalAction, default=None,
                        help="also train on live-like windows (words final by t); default from "
-                       "config/live.yaml (docs/live.md)")
+                       "config/live.yaml (README, 'Live /task_state')")
     train.add_argument("--live-config", type=Path, default=None, metavar="YAML",
                        help="live_augment settings (default config/live.yaml)")
     train.set_defaults(func=run_train)
@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ev.add_argument("--no-variant", action="store_true",
                     help="skip the variant without near-empty sub-tasks")
     ev.add_argument("--live-augment", action="store_true",
-                    help="score live windows with a live head trained on live windows too (docs/live.md)")
+                    help="score live windows with a live head trained on live windows too (README, 'Live /task_state')")
     ev.add_argument("--live-score", action="store_true",
                     help="score on the validation trials' live windows (live_accuracy)")
     ev.add_argument("--json", type=Path, default=None, metavar="OUT")
