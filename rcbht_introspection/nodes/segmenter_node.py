@@ -16,6 +16,7 @@ from functools import partial
 from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
@@ -68,12 +69,19 @@ class SegmenterNode(Node):
         )
         qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         topics = word_topics(cfg.words_namespace, cfg.arms)
+        # no default QoS-event handlers on the outputs: each is a waitable that the executor adds
+        # to its wait set on every wake-up (1-2 kHz); the input subscriptions keep theirs
+        quiet = PublisherEventCallbacks(use_default_callbacks=False)
         self.word_pubs = {
-            (arm, level): self.create_publisher(WordsMsg, topics[(arm, level.value + "s")], qos)
+            (arm, level): self.create_publisher(
+                WordsMsg, topics[(arm, level.value + "s")], qos, event_callbacks=quiet
+            )
             for arm in cfg.arms
             for level in LEVELS
         }
-        self.phase_pub = self.create_publisher(PhaseMsg, cfg.applied_phase_topic, qos)
+        self.phase_pub = self.create_publisher(
+            PhaseMsg, cfg.applied_phase_topic, qos, event_callbacks=quiet
+        )
         self.wrench_subs = [
             (
                 arm,
