@@ -150,15 +150,16 @@ class SegmenterSession:
     ) -> Output:
         """Feed one sample (after applying events published before it); returns what it finalised."""
         out = Output()
-        if source_ns is not None and self.origin_ns is not None:
+        if self.pending and source_ns is not None and self.origin_ns is not None:
             self._apply_due(out, lambda p: p.source_ns is not None and p.source_ns < source_ns, arm)
         counts = self.counts[arm]
         st = self.state[arm]
         reason = None
+        total = sum(wrench)  # finite sum => every value finite (an overflow takes the exact check)
         if source_ns is not None and self.end_source is not None and source_ns < self.end_source:
             # a straggler of a stream that an end event already closed: it must not open a new one
             reason = "published_before_end"
-        elif not all(math.isfinite(v) for v in wrench):
+        elif total - total != 0.0 and not all(math.isfinite(v) for v in wrench):
             reason = "non_finite"
         elif stamp_ns <= 0:
             reason = "zero_stamp"
@@ -171,7 +172,7 @@ class SegmenterSession:
         first_of_stream = self.origin_ns is None
         if first_of_stream:
             self.origin_ns = stamp_ns
-        t = self.stream_time(stamp_ns)
+        t = (stamp_ns - self.origin_ns) / 1e9  # stream_time, inlined on the per-sample path
         st.last_ns, st.last_t = stamp_ns, t
         if source_ns is not None and st.last_source is not None and source_ns > st.last_source:
             gap = source_ns - st.last_source

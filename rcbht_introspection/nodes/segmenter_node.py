@@ -16,11 +16,11 @@ from functools import partial
 from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
-from rcbht_introspection.io.bags import decode_wrench
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
 from rcbht_introspection.nodes.common import declare_config, qos_profile, run
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
@@ -29,6 +29,21 @@ from rcbht_introspection.taxonomy.words import LEVELS
 
 MAX_BURST = 1000
 """Most samples per arm taken in one executor wake-up."""
+_CDR_HEADER = struct.Struct("<2s2xiII")
+_CDR_WRENCH = struct.Struct("<6d")
+
+
+def wrench_of_cdr(raw: bytes) -> tuple[int, tuple[float, ...]]:
+    """(stamp ns, (Fx..Mz)) of a little-endian CDR WrenchStamped: decode_wrench without the frame.
+
+    The per-sample path at 1 kHz per arm; the frame id is not used here.
+    """
+    kind, sec, nanosec, n = _CDR_HEADER.unpack_from(raw)
+    if kind != b"\x00\x01":
+        raise ValueError("not little-endian CDR")
+    off = 16 + n
+    off += (-(off - 4)) % 8  # doubles align to 8 relative to the CDR payload start
+    return sec * 1_000_000_000 + nanosec, _CDR_WRENCH.unpack_from(raw, off)
 
 
 class SegmenterNode(Node):
@@ -54,12 +69,19 @@ class SegmenterNode(Node):
         )
         qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         topics = word_topics(cfg.words_namespace, cfg.arms)
+        # no default QoS-event handlers on the outputs: each is a waitable that the executor adds
+        # to its wait set on every wake-up (1-2 kHz); the input subscriptions keep theirs
+        quiet = PublisherEventCallbacks(use_default_callbacks=False)
         self.word_pubs = {
-            (arm, level): self.create_publisher(WordsMsg, topics[(arm, level.value + "s")], qos)
+            (arm, level): self.create_publisher(
+                WordsMsg, topics[(arm, level.value + "s")], qos, event_callbacks=quiet
+            )
             for arm in cfg.arms
             for level in LEVELS
         }
-        self.phase_pub = self.create_publisher(PhaseMsg, cfg.applied_phase_topic, qos)
+        self.phase_pub = self.create_publisher(
+            PhaseMsg, cfg.applied_phase_topic, qos, event_callbacks=quiet
+        )
         self.wrench_subs = [
             (
                 arm,
@@ -114,17 +136,18 @@ class SegmenterNode(Node):
         self.last_sample = time.monotonic()
         self.take_phases()
         try:
-            stamp, _, wrench = decode_wrench(raw)
+            stamp, wrench = wrench_of_cdr(raw)
         except (ValueError, struct.error):
             stamp, wrench = wrench_sample(deserialize_message(raw, WrenchStamped))
         out = self.session.push(arm, stamp, wrench, info.get("source_timestamp") or None)
+        if out.batches or out.phases:
+            self.publish(out)
         if out.rejected:
             self.get_logger().warning(
                 f"dropped a wrench sample of arm {arm}: {out.rejected} "
                 f"(rejected so far: {self.session.counts[arm].rejected})",
                 throttle_duration_sec=1.0,
             )
-        self.publish(out)
 
     def on_phase(self, msg: String, info: dict) -> None:
         out = self.session.phase(msg.data, info.get("source_timestamp") or None)
