@@ -79,6 +79,25 @@ class Op:
         return []
 
 
+class BufferedOp(Op):
+    """A pass that buffers rows and decides in `_step(ended)` how many it can release."""
+
+    rows: list[Row]
+
+    def _step(self, ended: bool) -> list[Row]:
+        raise NotImplementedError
+
+    def push(self, row: Row) -> list[Row]:
+        self.rows.append(row)
+        return self._step(False)
+
+    def finish(self) -> list[Row]:
+        return self._step(True)
+
+    def retained(self) -> int:
+        return len(self.rows)
+
+
 # --------------------------------------------------------------------------- primitive clean-up
 
 
@@ -610,7 +629,7 @@ def similar_pairs(pairs: frozenset, widths: tuple[float, float], label: int) -> 
 # --------------------------------------------------------------------------- LLB layer
 
 
-class ComposeBehaviors(Op):
+class ComposeBehaviors(BufferedOp):
     """llbehComposition: the time flag is set once and never reset; 'a' may look two MCs ahead."""
 
     def __init__(self, config: TaxonomyConfig) -> None:
@@ -636,18 +655,8 @@ class ComposeBehaviors(Op):
             del self.rows[:nxt]
         return out
 
-    def push(self, row: Row) -> list[Row]:
-        self.rows.append(row)
-        return self._step(False)
 
-    def finish(self) -> list[Row]:
-        return self._step(True)
-
-    def retained(self) -> int:
-        return len(self.rows)
-
-
-class BehaviorDurations(Op):
+class BehaviorDurations(BufferedOp):
     """Refinement step 1: a prefix pass that stops at the first pair that does not merge."""
 
     def __init__(self, config: TaxonomyConfig) -> None:
@@ -702,16 +711,6 @@ class BehaviorDurations(Op):
                 continue
             out.append(self.rows.pop(0))
         return out
-
-    def push(self, row: Row) -> list[Row]:
-        self.rows.append(row)
-        return self._step(False)
-
-    def finish(self) -> list[Row]:
-        return self._step(True)
-
-    def retained(self) -> int:
-        return len(self.rows)
 
 
 def behavior_pairs(test: Callable[[Row, Row], bool], label: int | None) -> Callable:
