@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -11,6 +13,9 @@ from ros_support import require_learn, require_stream
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live.belief import UNKNOWN, BeliefTracker
 from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
+
+if TYPE_CHECKING:
+    from rcbht_introspection.live.segmenter import SegmenterSession
 
 REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 
@@ -96,24 +101,35 @@ def _stream_trial() -> Trial:
                  state_times=(0.0, 1.2, 1.6, 2.5))  # fmt: skip
 
 
+ORIGIN_NS = 1_700_000_000 * 10**9
+
+
+def _session_with_stamps() -> tuple[Trial, Callable[..., object], SegmenterSession, np.ndarray]:
+    """The synthetic trial, its stream factory, a one-arm session and the samples' stamps (ns)."""
+    from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
+
+    trial = _stream_trial()
+    factory = arm_stream_factory()
+    ns = ORIGIN_NS + np.rint(trial.time * 1e9).astype(np.int64)
+    return trial, factory, SegmenterSession(("R",), factory), ns
+
+
+def _last_sample_before(events: list[tuple[float, str]], ns: np.ndarray) -> list[int]:
+    """Index of the last sample at or before each event's time."""
+    return [int(np.searchsorted(ns - ORIGIN_NS, round(t * 1e9), side="right")) - 1 for t, _ in events]
+
+
 def test_session_orders_events_by_source_time() -> None:
     """An event that arrives before samples published ahead of it still applies after them."""
     require_stream()
     from rcbht_introspection.io.bags import END_PHASE
     from rcbht_introspection.live.offline import offline_stream_words, trial_events
-    from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
 
-    trial = _stream_trial()
-    factory = arm_stream_factory()
-    session = SegmenterSession(("R",), factory)
-    origin = 1_700_000_000 * 10**9
-    ns = origin + np.rint(trial.time * 1e9).astype(np.int64)
+    trial, factory, session, ns = _session_with_stamps()
     events = trial_events(trial, END_PHASE)
     # the publisher sends sample i at source time 10*i and an event right after the last sample
     # before it (source 10*i + 5); the session receives each event two samples early
-    follows = [
-        int(np.searchsorted(ns - origin, round(t * 1e9), side="right")) - 1 for t, _ in events
-    ]
+    follows = _last_sample_before(events, ns)
     got: list[Word] = []
     applied = []
 
@@ -187,17 +203,10 @@ def test_late_events_give_the_offline_words() -> None:
     require_stream()
     from rcbht_introspection.io.bags import END_PHASE
     from rcbht_introspection.live.offline import offline_stream_words, trial_events
-    from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
 
-    trial = _stream_trial()
-    factory = arm_stream_factory()
-    session = SegmenterSession(("R",), factory)
-    origin = 1_700_000_000 * 10**9
-    ns = origin + np.rint(trial.time * 1e9).astype(np.int64)
+    trial, factory, session, ns = _session_with_stamps()
     events = [(t, name) for t, name in trial_events(trial, END_PHASE) if name != END_PHASE]
-    follows = [
-        int(np.searchsorted(ns - origin, round(t * 1e9), side="right")) - 1 for t, _ in events
-    ]
+    follows = _last_sample_before(events, ns)
     got: list[Word] = []
     for i in range(len(ns)):
         out = session.push("R", int(ns[i]), trial.wrench["R"][i], source_ns=10 * i)
