@@ -19,7 +19,7 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker, load_subtask_model
-from rcbht_introspection.nodes.common import declare_config, qos_profile, run
+from rcbht_introspection.nodes.common import DrainedGroup, declare_config, qos_profile, run
 from rcbht_introspection.nodes.conversions import belief_msg, to_ns, words_from_msg
 from rcbht_introspection.nodes.params import ClassifierConfig, word_topics
 from rcbht_introspection.taxonomy.words import LEVELS
@@ -45,11 +45,20 @@ class ClassifierNode(Node):
         qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         self.state_pub = self.create_publisher(String, cfg.state_topic, qos)
         self.belief_pub = self.create_publisher(BeliefMsg, cfg.belief_topic, qos)
+        # the inputs are taken by drain() (common.spin_draining), not by executor callbacks
+        drained = DrainedGroup()
         self.word_subs = [
-            (arm, self.create_subscription(WordsMsg, topic, partial(self.on_words, arm), qos))
+            (
+                arm,
+                self.create_subscription(
+                    WordsMsg, topic, partial(self.ingest_words, arm), qos, callback_group=drained
+                ),
+            )
             for (arm, _), topic in word_topics(cfg.words_namespace, cfg.arms).items()
         ]
-        self.phase_sub = self.create_subscription(PhaseMsg, cfg.phase_topic, self.on_phase, qos)
+        self.phase_sub = self.create_subscription(
+            PhaseMsg, cfg.phase_topic, self.ingest_phase, qos, callback_group=drained
+        )
         self.trigger_ns: int | None = None  # earliest sample behind the evidence not yet classified
         if cfg.publish_rate_hz > 0:
             self.create_timer(1.0 / cfg.publish_rate_hz, self.publish_state)
@@ -70,14 +79,6 @@ class ClassifierNode(Node):
                     self.publish_belief(final, 0)
                 self.tracker.reset()
             self.stream = key
-
-    def on_words(self, arm: str, msg: WordsMsg) -> None:
-        self.ingest_words(arm, msg)
-        self.drain()
-
-    def on_phase(self, msg: PhaseMsg) -> None:
-        self.ingest_phase(msg)
-        self.drain()
 
     def ingest_words(self, arm: str, msg: WordsMsg) -> None:
         self._stream(to_ns(msg.time_origin), msg.stream_id)

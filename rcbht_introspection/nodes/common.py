@@ -6,14 +6,23 @@ import contextlib
 import gc
 import sys
 import threading
+import time
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar, runtime_checkable
 
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.callback_groups import CallbackGroup
+from rclpy.executors import (
+    ExternalShutdownException,
+    SingleThreadedExecutor,
+    TimeoutException,
+)
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerGuardCondition
+from rclpy.subscription import Subscription
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.nodes.params import config_from_parameters, defaults, descriptions
@@ -43,8 +52,94 @@ def declare_config(node: Node, cls: type[T]) -> T:
     return config_from_parameters(cls, values)
 
 
+HOUSEKEEPING_S = 0.02
+"""How often a draining node's other entities (parameter services, QoS events) are served."""
+HOUSEKEEPING_CALLBACKS = 16
+"""Most executor callbacks served per housekeeping round (the hot inputs must not wait long)."""
+
+
+class DrainedGroup(CallbackGroup):
+    """Callback group of subscriptions that `spin_draining` takes itself; the executor skips them.
+
+    Their QoS-event handlers (incompatible QoS, lost messages) still run through the executor.
+    """
+
+    def can_execute(self, entity: object) -> bool:
+        return not isinstance(entity, Subscription)
+
+    def beginning_execution(self, entity: object) -> bool:
+        return not isinstance(entity, Subscription)
+
+    def ending_execution(self, entity: object) -> None:
+        pass
+
+
+@runtime_checkable
+class Draining(Protocol):
+    """A node whose high-rate inputs (subscriptions in a DrainedGroup) are taken by `drain`."""
+
+    def drain(self) -> None:
+        """Take and handle every message already delivered on the drained subscriptions."""
+
+
+def serve_ready(executor: SingleThreadedExecutor, limit: int) -> None:
+    """Run up to `limit` callbacks the executor finds ready now, without blocking."""
+    for _ in range(limit):
+        try:
+            handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0)
+        except TimeoutException:
+            return
+        handler()
+        if handler.exception() is not None:
+            raise handler.exception()
+
+
+def spin_draining(executor: SingleThreadedExecutor, node: Node) -> None:
+    """Wait on the drained subscriptions and timers with one small wait set; drain on each wake-up.
+
+    rclpy's executor rebuilds a wait set over every entity of the node (parameter services,
+    QoS events, ...) on each wake-up: ~0.3 ms of CPU per 1 kHz sample. This loop is rclpy's own
+    `wait_for_message` pattern; timers and the rest still run through the executor, when a timer
+    is due and at least every HOUSEKEEPING_S.
+    """
+    context = executor.context
+    if not isinstance(node, Draining):
+        raise TypeError(f"{type(node).__name__} has no drain()")
+    subs = [sub for sub in node.subscriptions if isinstance(sub.callback_group, DrainedGroup)]
+    timers = list(node.timers)
+    sigint = SignalHandlerGuardCondition(context)
+    wait_set = _rclpy.WaitSet(len(subs), 1, len(timers), 0, 0, 0, context.handle)
+    timeout_ns = int(HOUSEKEEPING_S * 1e9)
+    due = time.monotonic()
+    try:
+        with contextlib.ExitStack() as handles:
+            for entity in (*subs, *timers, sigint):
+                handles.enter_context(entity.handle)
+            while context.ok():
+                wait_set.clear_entities()
+                for sub in subs:
+                    wait_set.add_subscription(sub.handle)
+                for timer in timers:
+                    wait_set.add_timer(timer.handle)
+                wait_set.add_guard_condition(sigint.handle)
+                wait_set.wait(timeout_ns)
+                if not context.ok():
+                    break
+                node.drain()
+                now = time.monotonic()
+                if now >= due or wait_set.get_ready_entities("timer"):
+                    due = now + HOUSEKEEPING_S
+                    serve_ready(executor, HOUSEKEEPING_CALLBACKS)
+        raise ExternalShutdownException()
+    finally:
+        sigint.destroy()
+
+
 def run(node_factory: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
-    """Create the node, spin a SingleThreadedExecutor until SIGINT/SIGTERM, shut down cleanly."""
+    """Create the node, spin it until SIGINT/SIGTERM, shut down cleanly.
+
+    A `Draining` node is spun by `spin_draining`, any other by a SingleThreadedExecutor.
+    """
     rclpy.init(args=args)
     node = None
     code = 0
@@ -56,7 +151,10 @@ def run(node_factory: Callable[[], Node], name: str, args: list[str] | None = No
         # out of the cyclic collector, whose full passes over them stall a 1 kHz callback
         gc.collect()
         gc.freeze()
-        executor.spin()
+        if isinstance(node, Draining):
+            spin_draining(executor, node)
+        else:
+            executor.spin()
     except InputError as exc:
         # one line naming the parameter; the node never started
         print(f"[{name}] error: {exc}", file=sys.stderr, flush=True)

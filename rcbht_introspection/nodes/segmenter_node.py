@@ -22,7 +22,7 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
-from rcbht_introspection.nodes.common import declare_config, qos_profile, run
+from rcbht_introspection.nodes.common import DrainedGroup, declare_config, qos_profile, run
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
 from rcbht_introspection.nodes.params import SegmenterConfig, word_topics
 from rcbht_introspection.taxonomy.words import LEVELS
@@ -82,17 +82,26 @@ class SegmenterNode(Node):
         self.phase_pub = self.create_publisher(
             PhaseMsg, cfg.applied_phase_topic, qos, event_callbacks=quiet
         )
+        # the inputs are taken by drain() (common.spin_draining), not by executor callbacks
+        drained = DrainedGroup()
         self.wrench_subs = [
             (
                 arm,
                 # raw CDR: decoding six doubles and a stamp beats building message objects
                 self.create_subscription(
-                    WrenchStamped, topic, partial(self.on_wrench, arm), qos, raw=True
+                    WrenchStamped,
+                    topic,
+                    partial(self.sample, arm),
+                    qos,
+                    raw=True,
+                    callback_group=drained,
                 ),
             )
             for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True)
         ]
-        self.phase_sub = self.create_subscription(String, cfg.phase_topic, self.on_phase, qos)
+        self.phase_sub = self.create_subscription(
+            String, cfg.phase_topic, self.on_phase, qos, callback_group=drained
+        )
         self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
         self.cpu_at_start = time.process_time()
         self.get_logger().info(
@@ -114,13 +123,13 @@ class SegmenterNode(Node):
                 return
             self.on_phase(*taken)
 
-    def on_wrench(self, arm: str, msg: bytes, info: dict) -> None:
-        """One executor wake-up handles every sample already delivered (arms in turn), in order.
+    def drain(self) -> None:
+        """Handle every event and sample already delivered (arms in turn), in order.
 
-        rclpy's per-callback cost dominates at 1 kHz; taking a burst at once keeps the node
+        rclpy's per-wake-up cost dominates at 1 kHz; taking a burst at once keeps the node
         ahead of two 1 kHz arms. Bounded, so the flush timer still runs.
         """
-        self.sample(arm, msg, info)
+        self.take_phases()
         for _ in range(MAX_BURST):
             taken = False
             for other, sub in self.wrench_subs:
