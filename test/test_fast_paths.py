@@ -6,6 +6,7 @@ word sequences (unsorted, zero-length, aliased and unknown labels).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,9 +17,11 @@ from hypothesis import strategies as st
 from rcbht_introspection.grammar.encoding import (
     NUMPY_MIN_WORDS,
     VALUE_KEYS,
+    AxisMemo,
     _axis_features,
     _axis_features_small,
     _SampleCache,
+    axis_memo,
     compact_raw_features,
     compact_raw_features_reference,
 )
@@ -41,16 +44,22 @@ def _same(a: dict[str, float], b: dict[str, float]) -> bool:
 
 @pytest.mark.shared_data
 def test_fast_features_equal_reference_on_golden_subtasks(hiro_data: Path) -> None:
-    samples = [s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples]
+    samples = [
+        s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples
+    ]
     assert len(samples) >= 8
     for sample in samples:
-        assert _same(compact_raw_features(sample, ["R"]), compact_raw_features_reference(sample, ["R"]))
+        assert _same(
+            compact_raw_features(sample, ["R"]), compact_raw_features_reference(sample, ["R"])
+        )
 
 
 @pytest.mark.shared_data
 def test_fast_windows_and_features_equal_reference_on_live_words(hiro_data: Path) -> None:
     """Live windows of a streamed trial: bisected window == scanned window, fast == plain features."""
-    streamed = stream_trial(read_trial(hiro_data / REAL / TRIALS[1]), stream_factory(LiveAugmentConfig()))
+    streamed = stream_trial(
+        read_trial(hiro_data / REAL / TRIALS[1]), stream_factory(LiveAugmentConfig())
+    )
     words = TrialWords(name=streamed.name)
     checked = 0
     for i, (t, w) in enumerate(streamed.released()):
@@ -61,7 +70,9 @@ def test_fast_windows_and_features_equal_reference_on_live_words(hiro_data: Path
             fast = window_sample(words, start, t, ordered=True)
             plain = window_sample(words, start, t)
             assert fast.words == plain.words
-            assert _same(compact_raw_features(fast, ["R"]), compact_raw_features_reference(plain, ["R"]))
+            assert _same(
+                compact_raw_features(fast, ["R"]), compact_raw_features_reference(plain, ["R"])
+            )
             checked += 1
     assert checked > 100
 
@@ -69,18 +80,94 @@ def test_fast_windows_and_features_equal_reference_on_live_words(hiro_data: Path
 _LABELS = st.sampled_from(["pos", "neg", "cons", "const", " const ", "a", "k", "weird"])
 
 
+@pytest.mark.shared_data
+def test_axis_memo_gives_the_fresh_features_of_every_running_window(hiro_data: Path) -> None:
+    """Growing boundary windows and sliding 2 s windows of a streamed trial, after every word."""
+    streamed = stream_trial(
+        read_trial(hiro_data / REAL / TRIALS[1]), stream_factory(LiveAugmentConfig())
+    )
+    words = TrialWords(name=streamed.name)
+    memos = {"boundary": AxisMemo(), "window": AxisMemo()}
+    longest = 0
+    for i, (t, w) in enumerate(streamed.released()):
+        words.add(w)
+        for mode, start in (("boundary", 0.0 if t < 20 else 20.0), ("window", max(0.0, t - 2.0))):
+            sample = window_sample(words, start, t, ordered=True)
+            with axis_memo(memos[mode]):
+                memoised = compact_raw_features(sample, ["R"])
+            assert _same(memoised, compact_raw_features(sample, ["R"])), (i, mode)
+        longest = max(longest, *(len(e.words) for e in memos["boundary"].entries.values()))
+    assert longest >= 2 * NUMPY_MIN_WORDS  # the long sequences grew through the array path
+
+
+@st.composite
+def _growing_axis(draw: st.DrawFn) -> list[list[Word]]:
+    """Successive views of one axis: words appended, the last and first word clipped anew."""
+    n = draw(st.integers(1, 3 * NUMPY_MIN_WORDS))
+    labels = draw(st.lists(_LABELS, min_size=n, max_size=n))
+    starts = np.cumsum(draw(st.lists(st.sampled_from([0.0, 0.1, 0.25]), min_size=n, max_size=n)))
+    full = [
+        Word(
+            axis="Fz",
+            level=Level.PRIMITIVE,
+            label=lab,
+            start=float(s),
+            end=float(s) + 0.3,
+            features={"Average": float(k % 7)},
+        )
+        for k, (lab, s) in enumerate(zip(labels, starts, strict=True))
+    ]
+    views = []
+    for cut in sorted(draw(st.lists(st.integers(1, n), min_size=1, max_size=6))):
+        view = list(full[:cut])
+        if draw(st.booleans()):  # a window end inside the last word
+            view[-1] = replace(view[-1], end=view[-1].start + draw(st.sampled_from([0.0, 0.1])))
+        if draw(st.booleans()) and len(view) > 1:  # a window start inside the first word
+            view[0] = replace(view[0], start=view[0].start + 0.05)
+        if draw(st.booleans()) and len(view) > 2:  # a late word out of start order
+            view.append(replace(view[-2], start=view[-2].start - 0.01))
+        views.append(view)
+    return views
+
+
+@settings(max_examples=150, deadline=None)
+@given(_growing_axis())
+def test_axis_memo_gives_the_fresh_features_of_generated_views(views: list[list[Word]]) -> None:
+    memo = AxisMemo()
+    for view in views:
+        fresh: dict[str, float] = {}
+        if len(view) < NUMPY_MIN_WORDS:
+            _axis_features_small(fresh, "R/p/Fz/", view, "Average")
+        else:
+            _axis_features(fresh, "R/p/Fz/", view, "Average")
+        assert _same(memo.features("R/p/Fz/", view, "Average"), fresh)
+
+
 @st.composite
 def _axis_words(draw: st.DrawFn) -> list[Word]:
-    spans = draw(st.lists(st.tuples(st.floats(0, 10), st.floats(-1, 3), _LABELS, st.floats(-5, 5)), max_size=12))
+    spans = draw(
+        st.lists(
+            st.tuples(st.floats(0, 10), st.floats(-1, 3), _LABELS, st.floats(-5, 5)), max_size=12
+        )
+    )
     return [
-        Word(axis="Fz", level=Level.COMPOSITION, label=label, start=s, end=s + d, features={"Average Val": v})
+        Word(
+            axis="Fz",
+            level=Level.COMPOSITION,
+            label=label,
+            start=s,
+            end=s + d,
+            features={"Average Val": v},
+        )
         for s, d, label, v in spans
     ]
 
 
 @settings(max_examples=200, deadline=None)
 @given(_axis_words(), st.floats(0, 20))
-def test_fast_features_equal_reference_on_generated_words(words: list[Word], duration: float) -> None:
+def test_fast_features_equal_reference_on_generated_words(
+    words: list[Word], duration: float
+) -> None:
     tw = TrialWords(name="t")
     for w in words:
         tw.add(w)
@@ -91,13 +178,17 @@ def test_fast_features_equal_reference_on_generated_words(words: list[Word], dur
 @pytest.mark.shared_data
 def test_svm_fast_probabilities_equal_checked_pipeline(hiro_data: Path) -> None:
     """svm_predict_proba == Pipeline.predict_proba bit for bit; bad input still raises."""
-    samples = [s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples]
+    samples = [
+        s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples
+    ]
     model = train_model(samples)
     X = model.features(samples)
     assert np.array_equal(svm_predict_proba(model.estimator, X), model.estimator.predict_proba(X))
     for row in X:
         one = row[None, :]
-        assert np.array_equal(svm_predict_proba(model.estimator, one), model.estimator.predict_proba(one))
+        assert np.array_equal(
+            svm_predict_proba(model.estimator, one), model.estimator.predict_proba(one)
+        )
     bad = X[:1].copy()
     bad[0, 0] = np.nan
     with pytest.raises(ValueError):
@@ -108,11 +199,15 @@ def test_svm_fast_probabilities_equal_checked_pipeline(hiro_data: Path) -> None:
 
 @settings(max_examples=300, deadline=None)
 @given(
-    st.lists(st.tuples(st.sampled_from([0.0, 0.5, 1.0]), st.sampled_from([0.0, 0.5, 1.5])), max_size=10),
+    st.lists(
+        st.tuples(st.sampled_from([0.0, 0.5, 1.0]), st.sampled_from([0.0, 0.5, 1.5])), max_size=10
+    ),
     st.sampled_from([0.0, 0.5, 1.0, 1.5, 2.0, 3.0, 4.5]),
     st.sampled_from([0.0, 0.5, 1.0, 2.0, 2.5, 4.0, 9.0]),
 )
-def test_bisected_window_equals_scanned_window(steps: list[tuple[float, float]], start: float, end: float) -> None:
+def test_bisected_window_equals_scanned_window(
+    steps: list[tuple[float, float]], start: float, end: float
+) -> None:
     """Touching, overlapping and zero-length words, windows on and between their bounds."""
     tw = TrialWords(name="t")
     t = last_end = 0.0
@@ -126,7 +221,9 @@ def test_bisected_window_equals_scanned_window(steps: list[tuple[float, float]],
 @pytest.mark.shared_data
 def test_both_axis_paths_equal_reference_on_golden_axes(hiro_data: Path) -> None:
     """The NumPy and the short-sequence path each equal the plain definition on every golden axis."""
-    samples = [s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples]
+    samples = [
+        s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples
+    ]
     longest = 0
     for sample in samples:
         for level in LEVELS:
@@ -135,7 +232,9 @@ def test_both_axis_paths_equal_reference_on_golden_axes(hiro_data: Path) -> None
                 if not words:
                     continue
                 longest = max(longest, len(words))
-                one = SubtaskSample("t", "approach", 0.0, 1.0, TrialWords("t", {"R": {level: {axis: words}}}))
+                one = SubtaskSample(
+                    "t", "approach", 0.0, 1.0, TrialWords("t", {"R": {level: {axis: words}}})
+                )
                 expected = compact_raw_features_reference(one, ["R"])
                 for path in (_axis_features, _axis_features_small):
                     got = {"log_duration": expected["log_duration"]}

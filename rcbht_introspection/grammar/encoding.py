@@ -9,11 +9,14 @@ the training data are dropped, the rest are min-max scaled with bounds fixed at 
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
+import operator
 import warnings
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextvars import ContextVar
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -219,8 +222,10 @@ def compact_raw_features(sample: SubtaskSample, arms: Sequence[str]) -> dict[str
     Per arm/level/axis, NumPy over long word sequences and plain Python with per-label keys over
     short ones (NumPy's fixed cost dominates there); every sum is taken in the word order of the
     plain definition (`compact_raw_features_reference`), so the floats are bit-identical to it.
+    Inside `axis_memo`, unchanged axes are taken from the memo.
     """
     features: dict[str, float] = {}
+    memo = _AXIS_MEMO.get()
     duration = max(sample.duration, 0.0)
     features["log_duration"] = math.log(max(duration, MIN_DURATION))
     for arm in arms:
@@ -231,11 +236,92 @@ def compact_raw_features(sample: SubtaskSample, arms: Sequence[str]) -> dict[str
                 if not words:
                     continue
                 prefix = f"{arm}/{level.value}/{axis}/"
-                if len(words) < NUMPY_MIN_WORDS:
+                if memo is not None:
+                    features.update(memo.features(prefix, words, value_key))
+                elif len(words) < NUMPY_MIN_WORDS:
                     _axis_features_small(features, prefix, words, value_key)
                 else:
                     _axis_features(features, prefix, words, value_key)
     return features
+
+
+@dataclass
+class _AxisEntry:
+    words: list[Word]
+    features: dict[str, float]
+    arrays: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+    """(starts, ends, values, label codes) of a long, start-ordered sequence."""
+    names: dict[str, int] = field(default_factory=dict)
+    """Label -> code, in order of first appearance."""
+
+
+class AxisMemo:
+    """The compact features of each axis' last word sequence, reused while it is unchanged.
+
+    A running window grows by a few words per update on one or two of its axes; the others'
+    features come from here, and a grown long sequence only converts its new words to arrays.
+    Results are bit-identical: same words, same arrays, same computation. Same words means the
+    same objects, except the edge words, which a window clips into new ones: compared by value.
+    """
+
+    def __init__(self) -> None:
+        self.entries: dict[str, _AxisEntry] = {}
+
+    def features(self, prefix: str, words: Sequence[Word], value_key: str) -> dict[str, float]:
+        """The features of `words` under `prefix` (computed unless the last sequence was the same)."""
+        old = self.entries.get(prefix)
+        if old is not None and _same_words(old.words, words):
+            return old.features
+        entry = _AxisEntry(list(words), {})
+        if len(words) < NUMPY_MIN_WORDS:
+            _axis_features_small(entry.features, prefix, words, value_key)
+        else:
+            if old is not None and old.arrays is not None and _grown(old.words, words):
+                keep = len(old.words) - 1  # its last word may be clipped differently now
+                entry.names = dict(old.names)
+                tail = _word_arrays(words[keep:], value_key, entry.names)
+                arrays = tuple(
+                    np.concatenate((a[:keep], t)) for a, t in zip(old.arrays, tail, strict=True)
+                )
+            else:
+                arrays = _word_arrays(words, value_key, entry.names)
+            starts = arrays[0]
+            if np.any(starts[1:] < starts[:-1]):
+                entry.names = {}
+                _axis_features(entry.features, prefix, words, value_key)
+            else:
+                entry.arrays = arrays  # type: ignore[assignment]
+                _array_features(entry.features, prefix, *arrays, entry.names)
+        self.entries[prefix] = entry
+        return entry.features
+
+
+def _same_words(a: Sequence[Word], b: Sequence[Word]) -> bool:
+    n = len(a)
+    if n != len(b) or a[0] != b[0] or a[-1] != b[-1]:
+        return False
+    return all(map(operator.is_, itertools.islice(a, 1, n - 1), itertools.islice(b, 1, n - 1)))
+
+
+def _grown(a: Sequence[Word], b: Sequence[Word]) -> bool:
+    """`b` is `a` with words appended (the first and last word of `a` compared by value/label)."""
+    m = len(a)
+    if m < 2 or len(b) < m or a[0] != b[0] or a[-1].label != b[m - 1].label:
+        return False
+    return all(map(operator.is_, itertools.islice(a, 1, m - 1), itertools.islice(b, 1, m - 1)))
+
+
+_AXIS_MEMO: ContextVar[AxisMemo | None] = ContextVar("axis_memo", default=None)
+
+
+@contextlib.contextmanager
+def axis_memo(memo: AxisMemo) -> Iterator[None]:
+    """Within the block, compact_raw_features reuses and updates `memo` (one live stream's)."""
+    token = _AXIS_MEMO.set(memo)
+    try:
+        yield
+    finally:
+        _AXIS_MEMO.reset(token)
 
 
 def _axis_features_small(
@@ -265,22 +351,50 @@ def _axis_features_small(
     features[prefix + "mean_value"] = mean / wsum
 
 
-def _axis_features(features: dict[str, float], prefix: str, words: Sequence[Word], value_key: str) -> None:
-    """Add the compact features of one arm/level/axis word sequence to `features`."""
-    starts = np.fromiter((w.start for w in words), dtype=float, count=len(words))
-    if len(words) > 1 and np.any(starts[1:] < starts[:-1]):
-        order = np.argsort(starts, kind="stable")  # = sorted(key=start), which is stable
-        words = [words[i] for i in order]
-        starts = starts[order]
+def _word_arrays(
+    words: Sequence[Word], value_key: str, names: dict[str, int]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(starts, ends, values, label codes) of `words`; new labels get the next code in `names`."""
     n = len(words)
+    starts = np.fromiter((w.start for w in words), dtype=float, count=n)
     ends = np.fromiter((w.end for w in words), dtype=float, count=n)
     values = np.fromiter((w.features.get(value_key, 0.0) for w in words), dtype=float, count=n)
-    names: dict[str, int] = {}
     codes = np.fromiter(
-        (names.setdefault(_LABEL_NAMES.get(w.label) or _label_name(w.label), len(names)) for w in words),
+        (
+            names.setdefault(_LABEL_NAMES.get(w.label) or _label_name(w.label), len(names))
+            for w in words
+        ),
         dtype=np.intp,
         count=n,
     )
+    return starts, ends, values, codes
+
+
+def _axis_features(
+    features: dict[str, float], prefix: str, words: Sequence[Word], value_key: str
+) -> None:
+    """Add the compact features of one arm/level/axis word sequence to `features`."""
+    names: dict[str, int] = {}
+    arrays = _word_arrays(words, value_key, names)
+    starts = arrays[0]
+    if len(words) > 1 and np.any(starts[1:] < starts[:-1]):
+        order = np.argsort(starts, kind="stable")  # = sorted(key=start), which is stable
+        names = {}
+        arrays = _word_arrays([words[i] for i in order], value_key, names)
+    _array_features(features, prefix, *arrays, names)
+
+
+def _array_features(
+    features: dict[str, float],
+    prefix: str,
+    starts: np.ndarray,
+    ends: np.ndarray,
+    values: np.ndarray,
+    codes: np.ndarray,
+    names: dict[str, int],
+) -> None:
+    """_axis_features of a start-ordered sequence given as arrays."""
+    n = len(starts)
     spans = np.maximum(ends - starts, 0.0)
     total = sum(spans.tolist())
     weights = spans if total > 0 else np.ones(n)
@@ -340,7 +454,10 @@ def compact_raw_features_reference(sample: SubtaskSample, arms: Sequence[str]) -
                 for a, b in itertools.pairwise(labels):
                     key = prefix + f"bigram:{a}>{b}"
                     features[key] = features.get(key, 0.0) + 1.0
-                mean = sum(w.features.get(value_key, 0.0) * wt for w, wt in zip(words, weights, strict=True))
+                mean = sum(
+                    w.features.get(value_key, 0.0) * wt
+                    for w, wt in zip(words, weights, strict=True)
+                )
                 features[prefix + "mean_value"] = mean / wsum
     for key in list(features):
         if "/count:" in key or "/bigram:" in key:

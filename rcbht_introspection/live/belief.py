@@ -11,11 +11,15 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rcbht_introspection.io.trial import AXES, SUBTASKS
 from rcbht_introspection.taxonomy.words import LEVELS, Level, TrialWords, Word
+
+if TYPE_CHECKING:  # the encodings pull in scikit-learn: imported when a model is used
+    from rcbht_introspection.grammar.encoding import AxisMemo
 
 UNKNOWN = "unknown"
 MODES: tuple[str, ...] = ("boundary", "window")
@@ -86,13 +90,19 @@ class BeliefTracker:
         self.last_final: Belief | None = None
         self._ordered = True
         """Every axis sequence has non-decreasing starts and ends (lets windows bisect)."""
+        self._axis_memo: AxisMemo | None = None
+        """The running window's per-axis compact features (grammar.encoding.AxisMemo)."""
 
     # --- input -------------------------------------------------------------------------------
     def add_words(self, arm: str, words: Iterable[Word], now: float | None = None) -> None:
         """Add final words of `arm`; `now` is the stream time of the sample that finalised them."""
         self.arms.add(arm)
         for w in words:
-            seq = self.words.words.setdefault(w.arm, {}).setdefault(w.level, {}).setdefault(w.axis, [])
+            seq = (
+                self.words.words.setdefault(w.arm, {})
+                .setdefault(w.level, {})
+                .setdefault(w.axis, [])
+            )
             if seq and (w.start < seq[-1].start or w.end < seq[-1].end):
                 self._ordered = False
             seq.append(w)
@@ -143,7 +153,7 @@ class BeliefTracker:
                 if w.end >= start and w.start <= end
             )
             return Belief(UNKNOWN, (), (), start, end, self.mode, phase, final, n)
-        from rcbht_introspection.grammar.encoding import forget_sample
+        from rcbht_introspection.grammar.encoding import AxisMemo, axis_memo, forget_sample
         from rcbht_introspection.grammar.split import window_sample
 
         sample = window_sample(
@@ -160,8 +170,11 @@ class BeliefTracker:
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
         # a running window goes to the model's live head when it has one (learn/live.py)
         model = self.model.head(final) if hasattr(self.model, "head") else self.model
+        if self._axis_memo is None:
+            self._axis_memo = AxisMemo()
         try:
-            proba = np.asarray(model.predict_proba_samples([sample]))[0]  # type: ignore[attr-defined]
+            with axis_memo(self._axis_memo):
+                proba = np.asarray(model.predict_proba_samples([sample]))[0]  # type: ignore[attr-defined]
             if final:
                 # a verdict is the model's own prediction (as offline evaluation uses it), which
                 # for a probabilistic SVM need not be the arg-max of its probabilities
