@@ -20,6 +20,7 @@ import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -171,7 +172,11 @@ class Observations:
 
 
 class Observer:
-    """Subscribes the nodes' outputs in this process and records them."""
+    """Subscribes the nodes' outputs in this process and records them.
+
+    Callbacks only keep the raw CDR and the receive time: decoding waits for `convert`, between
+    bags, so the observer's CPU during playback is small and the nodes under test keep theirs.
+    """
 
     def __init__(
         self, node: Any, seg: SegmenterConfig, cls_cfg: ClassifierConfig, qos: Any
@@ -183,71 +188,78 @@ class Observer:
 
         self.obs = Observations()
         self.lock = threading.Lock()
-        self.raw_words: list[tuple[int, str, str, Any]] = []
+        self.received: list[tuple[int, str, tuple[str, str], bytes]] = []
+        """(wall ns, kind, (arm, level) of words, raw CDR) not yet decoded"""
+        self.types = {"state": String, "belief": BeliefMsg, "phase": PhaseMsg, "words": WordsMsg}
         self.subs = [
-            node.create_subscription(String, cls_cfg.state_topic, self.on_state, qos),
-            node.create_subscription(BeliefMsg, cls_cfg.belief_topic, self.on_belief, qos),
-            node.create_subscription(PhaseMsg, seg.applied_phase_topic, self.on_phase, qos),
+            node.create_subscription(
+                self.types[kind], topic, partial(self.on_message, kind, ("", "")), qos, raw=True
+            )
+            for kind, topic in (
+                ("state", cls_cfg.state_topic),
+                ("belief", cls_cfg.belief_topic),
+                ("phase", seg.applied_phase_topic),
+            )
         ]
         self.word_topics = word_topics(seg.words_namespace, seg.arms)
-        for (arm, level), topic in self.word_topics.items():
+        for key, topic in self.word_topics.items():
             self.subs.append(
                 node.create_subscription(
-                    WordsMsg, topic, lambda m, a=arm, lv=level: self.on_words(a, lv, m), qos
+                    WordsMsg, topic, partial(self.on_message, "words", key), qos, raw=True
                 )
             )
 
-    def on_state(self, msg: Any) -> None:
-        with self.lock:
-            if not self.obs.states or self.obs.states[-1][1] != msg.data:
-                self.obs.states.append((time.time_ns(), msg.data))
-
-    def on_belief(self, msg: Any) -> None:
-        from rcbht_introspection.nodes.conversions import belief_from_msg, to_ns
-
+    def on_message(self, kind: str, key: tuple[str, str], raw: bytes) -> None:
         wall = time.time_ns()
         with self.lock:
-            self.obs.beliefs.append(
-                (wall, belief_from_msg(msg), to_ns(msg.trigger_stamp), to_ns(msg.header.stamp))
-            )
-
-    def on_phase(self, msg: Any) -> None:
-        from rcbht_introspection.nodes.conversions import to_ns
-
-        with self.lock:
-            self.obs.phases.append(
-                (time.time_ns(), msg.name, msg.time, msg.stream_id, to_ns(msg.header.stamp))
-            )
-
-    def on_words(self, arm: str, level: str, msg: Any) -> None:
-        wall = time.time_ns()  # conversion happens later: keep this callback short
-        with self.lock:
-            self.raw_words.append((wall, arm, level, msg))
-            if msg.end_of_stream:
-                self.obs.ends[(msg.stream_id, arm, level)] = (
-                    int(msg.samples_accepted),
-                    int(msg.samples_rejected),
-                )
+            self.received.append((wall, kind, key, raw))
 
     def convert(self) -> None:
-        """Turn the Words messages received so far into words, triggers and arrival times."""
-        from rcbht_introspection.nodes.conversions import msg_to_word, to_ns
+        """Decode what arrived since the last call into the observations."""
+        from rclpy.serialization import deserialize_message
+
+        from rcbht_introspection.nodes.conversions import belief_from_msg, msg_to_word, to_ns
 
         with self.lock:
-            raw, self.raw_words = self.raw_words, []
-        for wall, arm, level, msg in raw:
-            sid = msg.stream_id
+            received, self.received = self.received, []
+        for wall, kind, (arm, level), raw in received:
+            msg = deserialize_message(raw, self.types[kind])
             with self.lock:
-                self.obs.origins[sid] = to_ns(msg.time_origin)
-                self.obs.words.setdefault((sid, arm, level), []).extend(
-                    msg_to_word(w) for w in msg.words
-                )
-                if msg.words:
-                    stamp = to_ns(msg.header.stamp)
-                    self.obs.triggers.setdefault(sid, set()).add(stamp)
-                    self.obs.word_arrivals.append((wall, stamp))
+                obs = self.obs
+                if kind == "state":
+                    if not obs.states or obs.states[-1][1] != msg.data:
+                        obs.states.append((wall, msg.data))
+                elif kind == "belief":
+                    obs.beliefs.append(
+                        (
+                            wall,
+                            belief_from_msg(msg),
+                            to_ns(msg.trigger_stamp),
+                            to_ns(msg.header.stamp),
+                        )
+                    )
+                elif kind == "phase":
+                    obs.phases.append(
+                        (wall, msg.name, msg.time, msg.stream_id, to_ns(msg.header.stamp))
+                    )
+                else:
+                    sid = msg.stream_id
+                    obs.origins[sid] = to_ns(msg.time_origin)
+                    obs.words.setdefault((sid, arm, level), []).extend(
+                        msg_to_word(w) for w in msg.words
+                    )
+                    if msg.words:
+                        stamp = to_ns(msg.header.stamp)
+                        obs.triggers.setdefault(sid, set()).add(stamp)
+                        obs.word_arrivals.append((wall, stamp))
+                    if msg.end_of_stream:
+                        obs.ends[(sid, arm, level)] = (
+                            int(msg.samples_accepted),
+                            int(msg.samples_rejected),
+                        )
 
     def ended(self, origin: int, arms: tuple[str, ...]) -> bool:
+        self.convert()
         with self.lock:
             return all(
                 (origin, arm, level) in self.obs.ends
@@ -256,6 +268,7 @@ class Observer:
             )
 
     def finals_since(self, index: int) -> list[tuple[int, Any, int]]:
+        self.convert()
         with self.lock:
             return [b for b in self.obs.beliefs[index:] if b[1].final]
 
