@@ -2,8 +2,9 @@
 
 One update = what classifier_node does per received step: add the words, apply the events,
 take final verdicts, classify the running window (live/replay.py replay_beliefs). Measured on a
-REAL HIRO trial streamed through the segmenter session, with an SVM/compact model trained on
-REAL trials 1-40 (the ROS benchmark's model), in boundary and window mode.
+REAL HIRO trial streamed through the segmenter session, with the model `rcbht train` writes by
+default for REAL trials 1-40 (SVM/compact with its live head; the ROS benchmark's model), in
+boundary and window mode.
 """
 
 from __future__ import annotations
@@ -57,16 +58,18 @@ def run(out_dir: Path) -> dict[str, Any]:
     if not (HIRO / REAL).is_dir():
         return {"skipped": f"no shared data at {HIRO / REAL}"}
     from rcbht_introspection.io.hiro import find_trials, read_trial
-    from rcbht_introspection.learn.data import load_samples
-    from rcbht_introspection.learn.live import LiveAugmentConfig, stream_factory
-    from rcbht_introspection.learn.models import train_model
+    from rcbht_introspection.learn.data import load_trials
+    from rcbht_introspection.learn.live import LiveAugmentConfig, live_training, stream_factory
     from rcbht_introspection.live.replay import stream_trial
 
     train = [f for f in find_trials([HIRO / REAL]) if int(f.name.rsplit("-", 1)[1]) <= 40]
-    model = train_model(load_samples(train, words="auto"))
+    model, _ = live_training(load_trials(train, "auto"))  # `rcbht train`'s default model
     factory = stream_factory(LiveAugmentConfig())
     streamed = [stream_trial(read_trial(HIRO / REAL / name), factory) for name in TEST_TRIALS]
-    out: dict[str, Any] = {"trials": list(TEST_TRIALS), "model": "svm/compact, REAL 1-40"}
+    out: dict[str, Any] = {
+        "trials": list(TEST_TRIALS),
+        "model": "svm/compact with live head (rcbht train default), REAL 1-40",
+    }
     for mode in ("boundary", "window"):
         times: list[float] = []
         for s in streamed:

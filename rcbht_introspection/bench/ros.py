@@ -4,7 +4,8 @@ Two scenarios through segmenter_node + classifier_node as separate processes (th
 machinery): one arm at 1 kHz and two arms at 2 x 1 kHz, each for RCBHT_BENCH_ROS_SECONDS of
 playback (default 60). The wrench comes from REAL HIRO trials (200 Hz recordings played at 5x =
 1 kHz) when ../shared data is present, else from a synthetic contact signal. The classifier uses
-a model trained on HIRO trials 1-40 when the learn work and the data are present, else none.
+the default `rcbht train` model (with its live head) of HIRO trials 1-40 when the data are
+present, else none.
 """
 
 from __future__ import annotations
@@ -70,10 +71,12 @@ def two_arm_trial(a: Trial, b: Trial) -> Trial:
 
 
 def _model(out_dir: Path) -> Path | None:
+    """The model `rcbht train` writes by default (live head included) for HIRO trials 1-40."""
     hiro = _hiro()
     try:
-        from rcbht_introspection.learn.data import load_samples
-        from rcbht_introspection.learn.models import save_model, train_model
+        from rcbht_introspection.learn.data import load_trials
+        from rcbht_introspection.learn.live import live_training
+        from rcbht_introspection.learn.models import save_model
     except ImportError:
         return None
     if hiro is None:
@@ -81,7 +84,8 @@ def _model(out_dir: Path) -> Path | None:
     from rcbht_introspection.io.hiro import find_trials
 
     train = [f for f in find_trials([hiro]) if int(f.name.rsplit("-", 1)[1]) <= 40]
-    return save_model(train_model(load_samples(train, words="auto")), out_dir / "bench_model.rcbht")
+    model, _ = live_training(load_trials(train, "auto"))
+    return save_model(model, out_dir / "bench_model.rcbht")
 
 
 def run(out_dir: Path) -> dict[str, Any]:
