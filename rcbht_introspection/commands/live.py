@@ -32,6 +32,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--words", choices=WORD_SOURCES, default="auto")
     p.add_argument("--mode", choices=("boundary", "window", "both"), default="both")
     p.add_argument("--window-s", type=float, default=2.0)
+    p.add_argument(
+        "--state-hold-s",
+        type=float,
+        default=0.0,
+        help="classifier_node's state_hold_s: a new /task_state must hold this long (s)",
+    )
     p.add_argument("--live-config", type=Path, default=None, metavar="YAML")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", type=Path, default=None, metavar="OUT")
@@ -80,7 +86,7 @@ def run_live_eval(args: argparse.Namespace) -> int:
         for mode in modes:
             began = time.perf_counter()
             reps = [
-                replay_beliefs(s, model, mode, args.window_s, trial=t)
+                replay_beliefs(s, model, mode, args.window_s, trial=t, state_hold_s=args.state_hold_s)
                 for s, t in zip(streamed, held, strict=True)
             ]
             elapsed = time.perf_counter() - began
@@ -89,10 +95,12 @@ def run_live_eval(args: argparse.Namespace) -> int:
             # classifier node pays this once per word batch
             summary["ms_per_belief"] = round(1000 * elapsed / max(1, sum(r.n_beliefs for r in reps)), 3)
             summary["timelines"] = {r.name: [(round(t, 3), s) for t, s in r.changes] for r in reps}
+            summary["state_changes"] = sum(len(r.changes) for r in reps)
             result["results"][f"{name}/{mode}"] = summary
             print(
                 f"{name:7s} {mode:8s} time_accuracy {summary['time_accuracy']}"
                 f"  subtask_accuracy {summary['subtask_accuracy']}  ms/belief {summary['ms_per_belief']}"
+                f"  state changes {summary['state_changes']}"
                 f"  per trial {summary['per_trial']}"
             )
     if args.json:

@@ -60,6 +60,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="reference",
         help="stream profile of the segmenter (causal: moment-axis words without waiting)",
     )
+    p.add_argument(
+        "--state-hold-s",
+        type=float,
+        default=0.0,
+        help="classifier_node's state_hold_s: a new /task_state must hold this long (s)",
+    )
     p.add_argument("--timeline", action="store_true", help="print the /task_state timeline")
     p.set_defaults(func=cmd_replay_eval)
 
@@ -164,7 +170,11 @@ def cmd_replay_eval(args: argparse.Namespace) -> int:
     from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval, summary
 
     options = ReplayEvalOptions(
-        rate=args.rate, mode=args.mode, profile=args.profile, stream_profile=args.stream_profile
+        rate=args.rate,
+        mode=args.mode,
+        profile=args.profile,
+        stream_profile=args.stream_profile,
+        state_hold_s=args.state_hold_s,
     )
     result = replay_eval(_bags(args.bags), args.model, options)
     if args.json is not None:

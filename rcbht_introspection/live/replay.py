@@ -19,7 +19,7 @@ import numpy as np
 
 from rcbht_introspection.io.trial import SUBTASKS, Trial
 from rcbht_introspection.live import offline
-from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker
+from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker, StateFilter
 from rcbht_introspection.live.segmenter import PhaseEvent, SegmenterSession, WordBatch
 from rcbht_introspection.taxonomy.words import TrialWords, Word
 
@@ -121,10 +121,11 @@ def replay_beliefs(
     window_s: float = 2.0,
     end_phase: str = "done",
     trial: Trial | None = None,
+    state_hold_s: float = 0.0,
 ) -> LiveReplay:
     """Drive BeliefTracker with the segmenter's steps as classifier_node does; score vs `trial`."""
     tracker = BeliefTracker(model, mode, window_s, end_phases=(end_phase,), trial=streamed.name)
-    state = UNKNOWN
+    state = StateFilter(state_hold_s)
     changes: list[tuple[float, str]] = []
     finals: list[Belief] = []
     n = 0
@@ -139,9 +140,8 @@ def replay_beliefs(
         finals.extend(tracker.take_finals())
         belief = tracker.current()
         n += 1
-        if belief.subtask != state:
-            state = belief.subtask
-            changes.append((step.t, state))
+        if state.update(tracker.now, belief.subtask):
+            changes.append((step.t, state.state))
     out = LiveReplay(streamed.name, mode, changes, finals, UNKNOWN, n_beliefs=n)
     if trial is not None:
         out.time_accuracy = offline.time_accuracy(trial, changes, initial=UNKNOWN)
@@ -170,7 +170,9 @@ def replay_summary(replays: Sequence[LiveReplay], trials: Sequence[Trial]) -> di
         correct += sum(v == s for v, s in zip(r.verdicts, truth, strict=False))
     return {
         "time_accuracy": round(float(np.average(acc, weights=weights)), 4) if replays else None,
-        "subtask_accuracy": round(correct / total, 4) if total and replays[0].mode == "boundary" else None,
+        "subtask_accuracy": round(correct / total, 4)
+        if total and replays[0].mode == "boundary"
+        else None,
         "subtasks": total,
         "per_trial": {r.name: round(r.time_accuracy, 4) for r in replays},
     }

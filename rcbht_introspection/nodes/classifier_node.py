@@ -2,8 +2,8 @@
 
 Parameters: see config/classifier.yaml. Without a usable model (missing, unreadable, wrong
 classes or taxonomy profile) it logs why once and publishes "unknown". /task_state is published
-when the belief changes and at `publish_rate_hz`; each verdict on a finished sub-task is a
-Belief with final=true.
+when the belief changes (once held `state_hold_s`) and at `publish_rate_hz`; each verdict on a
+finished sub-task is a Belief with final=true.
 """
 
 from __future__ import annotations
@@ -18,7 +18,13 @@ from rcbht_interfaces.msg import Words as WordsMsg
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker, load_subtask_model
+from rcbht_introspection.live.belief import (
+    UNKNOWN,
+    Belief,
+    BeliefTracker,
+    StateFilter,
+    load_subtask_model,
+)
 from rcbht_introspection.nodes.common import DrainedGroup, declare_config, qos_profile, run
 from rcbht_introspection.nodes.conversions import belief_msg, to_ns, words_from_msg
 from rcbht_introspection.nodes.params import ClassifierConfig, word_topics
@@ -39,7 +45,7 @@ class ClassifierNode(Node):
             self.get_logger().error(f"no usable model, /task_state stays {UNKNOWN!r}: {why}")
         self.tracker = BeliefTracker(model, cfg.mode, cfg.window_s, end_phases=cfg.end_phases)
         self.stream: tuple[int, int] | None = None
-        self.state = UNKNOWN
+        self.state = StateFilter(cfg.state_hold_s)
         self.reported_error: str | None = None
         self.batches: dict[tuple[str, int], tuple[int, int]] = {}
         qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
@@ -78,6 +84,7 @@ class ClassifierNode(Node):
                 for final in self.tracker.take_finals():
                     self.publish_belief(final, 0)
                 self.tracker.reset()
+                self.state.new_stream()
             self.stream = key
 
     def ingest_words(self, arm: str, msg: WordsMsg) -> None:
@@ -139,8 +146,7 @@ class ClassifierNode(Node):
             self.publish_belief(final, trigger_ns)
         belief = self.tracker.current()
         self.publish_belief(belief, trigger_ns)
-        if belief.subtask != self.state:
-            self.state = belief.subtask
+        if self.state.update(self.tracker.now, belief.subtask):
             self.publish_state()
         error = self.tracker.last_error
         if error and error != self.reported_error:
@@ -151,7 +157,7 @@ class ClassifierNode(Node):
         self.belief_pub.publish(belief_msg(belief, time.time_ns(), trigger_ns))
 
     def publish_state(self) -> None:
-        self.state_pub.publish(String(data=self.state))
+        self.state_pub.publish(String(data=self.state.state))
 
 
 def sklearn_fast_predict() -> None:

@@ -80,6 +80,11 @@ class ClassifierConfig:
     publish_rate_hz: float = _f(
         10.0, "/task_state is also republished at this rate (0: only on change)"
     )
+    state_hold_s: float = _f(
+        0.0,
+        "a new sub-task reaches /task_state once the belief held it this long (stream seconds; "
+        "0: at once; 'unknown' always at once); fewer short-lived states, later changes",
+    )
     arms: tuple[str, ...] = _f(("R",), "arm names whose words are classified, as in the segmenter")
     words_namespace: str = _f("rcbht", "namespace of the word topics, as in the segmenter")
     phase_topic: str = _f("rcbht/phase", "rcbht_interfaces/Phase events from the segmenter")
@@ -180,6 +185,12 @@ def validate(cfg: T, path: Path | None = None) -> T:
             cfg.publish_rate_hz >= 0,
             "publish_rate_hz",
             f"must be >= 0, got {cfg.publish_rate_hz}",
+            path,
+        )
+        _check(
+            0 <= cfg.state_hold_s <= 10,
+            "state_hold_s",
+            f"must be in [0, 10], got {cfg.state_hold_s}",
             path,
         )
         _check(bool(cfg.state_topic), "state_topic", "must not be empty", path)

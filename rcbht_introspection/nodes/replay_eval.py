@@ -19,6 +19,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -57,6 +58,8 @@ class ReplayEvalOptions:
     mode: str = "boundary"
     profile: str = "reference"
     stream_profile: str = "reference"
+    state_hold_s: float = 0.0
+    """classifier_node's state_hold_s (how long a new /task_state must hold)."""
     startup_timeout: float = 60.0
     drain_timeout: float = 60.0
     domain_id: int | None = None
@@ -273,7 +276,14 @@ class Observer:
             return [b for b in self.obs.beliefs[index:] if b[1].final]
 
 
-def _wait(condition: Any, timeout: float, procs: list[NodeProcess], what: str) -> None:
+def _wait(
+    condition: Any,
+    timeout: float,
+    procs: list[NodeProcess],
+    what: str,
+    progress: Callable[[], str] | None = None,
+) -> None:
+    """Poll `condition`; on a timeout or a dead node, raise with the node logs (and `progress`)."""
     deadline = time.monotonic() + timeout
     while not condition():
         for p in procs:
@@ -281,7 +291,8 @@ def _wait(condition: Any, timeout: float, procs: list[NodeProcess], what: str) -
                 raise InputError(f"{p.name} exited (code {p.proc.returncode}):\n{p.tail()}")
         if time.monotonic() > deadline:
             logs = "\n".join(f"--- {p.name}\n{p.tail()}" for p in procs)
-            raise InputError(f"timed out after {timeout:.0f} s waiting for {what}\n{logs}")
+            got = f" ({progress()})" if progress is not None else ""
+            raise InputError(f"timed out after {timeout:.0f} s waiting for {what}{got}\n{logs}")
         time.sleep(0.05)
 
 
@@ -329,7 +340,12 @@ def replay_eval(
     cls_params = write_params(
         work / "classifier.yaml",
         ClassifierConfig,
-        {"model_file": cls_cfg.model_file, "mode": options.mode, "arms": list(arms)},
+        {
+            "model_file": cls_cfg.model_file,
+            "mode": options.mode,
+            "arms": list(arms),
+            "state_hold_s": options.state_hold_s,
+        },
     )
     started = time.monotonic()
     result: dict[str, Any] = {}
@@ -442,6 +458,11 @@ def _play_one(
         options.drain_timeout,
         procs,
         f"the verdicts of {bag.name}",
+        lambda: (
+            f"{len(observer.finals_since(b_index))}/{n_subtasks} verdicts, end of stream "
+            f"{sorted(k[1:] for k in observer.obs.ends if k[0] == stream_id)}, "
+            f"{published} wrench published"
+        ),
     )
     observer.convert()
     with observer.lock:
@@ -500,6 +521,7 @@ def _score(
     received_latencies: list[int] = []
     event_latencies: list[int] = []
     time_acc: list[tuple[float, float]] = []
+    state_changes = 0
     bags_out = []
     prev_accepted = dict.fromkeys(arms, 0)
     for rec, trial in zip(per_bag, trials, strict=True):
@@ -535,6 +557,7 @@ def _score(
         data_t = (np.asarray([s for _, s in rec["pub_series"]], dtype=float) - rec["origin"]) / 1e9
         changes = [(float(np.interp(w, walls, data_t)), s) for w, s in rec["states"]]
         acc_t = offline.time_accuracy(trial, changes, initial=rec["initial_state"])
+        state_changes += len(changes)
         duration = float(trial.time[-1] - trial.time[0])
         time_acc.append((acc_t, duration))
         bag_out: dict[str, Any] = {
@@ -597,6 +620,7 @@ def _score(
         if model is not None and options.mode == "boundary"
         else None,
         "time_accuracy": round(sum(a * d for a, d in time_acc) / weight, 4),
+        "state_changes": state_changes,
         "dropped_wrench": dropped,
         "rejected_wrench": rejected,
         "words_match_offline": words_match if model is not None else None,
