@@ -20,8 +20,12 @@ from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
 
 
-def _w(label: str, start: float, end: float, level: Level = Level.COMPOSITION, axis: str = "Fx") -> Word:
-    return Word(axis=axis, level=level, label=label, start=start, end=end, features={"Average Val": 1.0})
+def _w(
+    label: str, start: float, end: float, level: Level = Level.COMPOSITION, axis: str = "Fx"
+) -> Word:
+    return Word(
+        axis=axis, level=level, label=label, start=start, end=end, features={"Average Val": 1.0}
+    )
 
 
 def test_resample_is_a_duration_weighted_mode_per_bin() -> None:
@@ -45,7 +49,9 @@ def test_zero_length_sequence_gets_its_first_label() -> None:
     ("REAL_HIRO_ONE_SA_SUCCESS", 6204, {"primitive": 844, "composition": 161, "behavior": 29}),
     ("SIM_HIRO_ONE_SA_SUCCESS", 1428, {"primitive": 179, "composition": 37, "behavior": 22}),
 ])  # fmt: skip
-def test_paper_dimensions_from_golden_labels(hiro_data: Path, dataset: str, dims: int, n: dict) -> None:
+def test_paper_dimensions_from_golden_labels(
+    hiro_data: Path, dataset: str, dims: int, n: dict
+) -> None:
     trials = [t for t in load_trials([hiro_data / dataset], "golden") if t.complete]
     samples = [s for t in trials for s in t.samples]
     encoding = PaperEncoding().fit(samples)
@@ -95,7 +101,9 @@ def test_two_arm_samples_concatenate_both_arms() -> None:
     def two_arm(subtask: str, duration: float, left: str, right: str) -> SubtaskSample:
         tw = TrialWords(name="t")
         for arm, label in (("L", left), ("R", right)):
-            tw.add(Word(axis="Fz", level=Level.BEHAVIOR, label=label, start=0.0, end=duration, arm=arm))
+            tw.add(
+                Word(axis="Fz", level=Level.BEHAVIOR, label=label, start=0.0, end=duration, arm=arm)
+            )
         return SubtaskSample("t", subtask, 0.0, duration, tw)
 
     train = [two_arm("approach", 2.0, "FX", "CT"), two_arm("mating", 3.0, "CT", "FX")]

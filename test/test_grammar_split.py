@@ -20,7 +20,9 @@ def _words(spans: list[tuple[str, float, float]], arm: str = "R") -> TrialWords:
 
 
 def _spans(sample, arm: str = "R") -> list[tuple[str, float, float]]:
-    return [(w.label, w.start, w.end) for w in sample.words.axis_words(arm, Level.COMPOSITION, "Fx")]
+    return [
+        (w.label, w.start, w.end) for w in sample.words.axis_words(arm, Level.COMPOSITION, "Fx")
+    ]
 
 
 def test_word_spanning_two_marks_is_cut_into_three() -> None:

@@ -48,7 +48,9 @@ def test_svm_curve_starts_at_one_trial_and_excludes_incomplete_trials(hiro_data:
     names = [p for p in sim if p.name.startswith("20160911-21")][:6]
     trials = load_trials(names)
     assert any(not t.complete for t in trials)
-    result = evaluate(trials, Protocol(classifier="svm", permutations=1, n_validation=2, variant=False))
+    result = evaluate(
+        trials, Protocol(classifier="svm", permutations=1, n_validation=2, variant=False)
+    )
     assert result["excluded_trials"] == ["20160911-2136-SideApproach-S"]
     assert result["curve"][0]["n_train_trials"] == 1
     assert result["n_trials"] == len(trials) - 1

@@ -18,18 +18,30 @@ REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 TRAIN = ["20121127-HIROSA-S-01", "20121127-HIROSA-S-05", "20121127-HIROSA-S-09",
          "20121127-HIROSA-S-13", "20121127-HIROSA-S-24", "20121127-HIROSA-S-28",
          "20121127-HIROSA-S-32", "20121127-HIROSA-S-36"]  # fmt: skip
-VALID = ["20121127-HIROSA-S-03", "20121127-HIROSA-S-17", "20121127-HIROSA-S-30", "20121127-HIROSA-S-44"]
+VALID = [
+    "20121127-HIROSA-S-03",
+    "20121127-HIROSA-S-17",
+    "20121127-HIROSA-S-30",
+    "20121127-HIROSA-S-44",
+]
 
 
 @pytest.fixture(scope="module")
 def samples(hiro_data: Path) -> tuple[list, list]:
     root = hiro_data / REAL
-    return load_samples([root / t for t in TRAIN], "golden"), load_samples([root / t for t in VALID], "golden")
+    return load_samples([root / t for t in TRAIN], "golden"), load_samples(
+        [root / t for t in VALID], "golden"
+    )
 
 
 @pytest.mark.shared_data
-@pytest.mark.parametrize(("classifier", "encoding"), [("svm", "compact"), ("mondrian", "compact"), ("svm", "paper"), ("svm-tuned", "compact")])
-def test_model_round_trips_through_the_safe_file(samples, tmp_path: Path, classifier: str, encoding: str) -> None:
+@pytest.mark.parametrize(
+    ("classifier", "encoding"),
+    [("svm", "compact"), ("mondrian", "compact"), ("svm", "paper"), ("svm-tuned", "compact")],
+)
+def test_model_round_trips_through_the_safe_file(
+    samples, tmp_path: Path, classifier: str, encoding: str
+) -> None:
     train, valid = samples
     model = train_model(train, classifier, encoding, random_state=1)
     assert model.classes_ == ["approach", "insertion", "mating", "rotation"]
@@ -37,7 +49,11 @@ def test_model_round_trips_through_the_safe_file(samples, tmp_path: Path, classi
     np.testing.assert_allclose(proba.sum(axis=1), 1.0)
     path = save_model(model, tmp_path / "model.npz")
     loaded = load_model(path, expect_encoding=encoding)
-    assert (loaded.classifier, loaded.encoding, loaded.classes_) == (classifier, encoding, model.classes_)
+    assert (loaded.classifier, loaded.encoding, loaded.classes_) == (
+        classifier,
+        encoding,
+        model.classes_,
+    )
     np.testing.assert_allclose(loaded.predict_proba_samples(valid), proba)
     assert loaded.predict_samples(valid) == model.predict_samples(valid)
 
@@ -50,7 +66,9 @@ def test_near_empty_rotation_is_classified_right(samples) -> None:
         short = [s for s in valid if s.duration < 0.05]
         assert short and all(s.subtask == "rotation" for s in short)
         assert model.predict_samples(short) == ["rotation"] * len(short)
-        accuracy = np.mean([p == s.subtask for p, s in zip(model.predict_samples(valid), valid, strict=True)])
+        accuracy = np.mean(
+            [p == s.subtask for p, s in zip(model.predict_samples(valid), valid, strict=True)]
+        )
         assert accuracy >= 0.75, (classifier, accuracy)
 
 
@@ -63,7 +81,9 @@ def test_online_update_continues_from_a_loaded_forest(samples, tmp_path: Path) -
         for start in range(8, len(train), 4):
             model_.partial_fit_samples(train[start : start + 4])
     # the stored random stream continues, so both forests grow identically
-    np.testing.assert_allclose(model.predict_proba_samples(valid), loaded.predict_proba_samples(valid))
+    np.testing.assert_allclose(
+        model.predict_proba_samples(valid), loaded.predict_proba_samples(valid)
+    )
     with pytest.raises(InputError, match="mondrian"):
         train_model(train, "svm", "compact").partial_fit_samples(train[:4])
 
@@ -139,7 +159,9 @@ def test_engine_words_give_the_same_samples_as_golden(hiro_data: Path) -> None:
     engine, golden = load_samples([trial], "engine"), load_samples([trial], "golden")
     from rcbht_introspection.grammar.encoding import compact_raw_features
 
-    assert [(s.subtask, s.start, s.end) for s in engine] == [(s.subtask, s.start, s.end) for s in golden]
+    assert [(s.subtask, s.start, s.end) for s in engine] == [
+        (s.subtask, s.start, s.end) for s in golden
+    ]
     for ours, theirs in zip(engine, golden, strict=True):
         a, b = compact_raw_features(ours, ["R"]), compact_raw_features(theirs, ["R"])
         assert set(a) == set(b)
@@ -155,5 +177,8 @@ def test_prefix_augmentation_adds_the_prefixes_as_training_samples(samples) -> N
     from rcbht_introspection.grammar.split import prefix_sample
 
     halves = [prefix_sample(s, 0.5) for s in valid]
-    assert all(h.end - h.start == pytest.approx(0.5 * s.duration) for h, s in zip(halves, valid, strict=True))
+    assert all(
+        h.end - h.start == pytest.approx(0.5 * s.duration)
+        for h, s in zip(halves, valid, strict=True)
+    )
     assert model.predict_proba_samples(halves).shape == (len(valid), 4)

@@ -141,7 +141,9 @@ def _session_with_stamps() -> tuple[Trial, Callable[..., object], SegmenterSessi
 
 def _last_sample_before(events: list[tuple[float, str]], ns: np.ndarray) -> list[int]:
     """Index of the last sample at or before each event's time."""
-    return [int(np.searchsorted(ns - ORIGIN_NS, round(t * 1e9), side="right")) - 1 for t, _ in events]
+    return [
+        int(np.searchsorted(ns - ORIGIN_NS, round(t * 1e9), side="right")) - 1 for t, _ in events
+    ]
 
 
 def test_session_orders_events_by_source_time() -> None:

@@ -19,31 +19,51 @@ def _reference_proba(forest: MondrianForestClassifier, x: np.ndarray) -> np.ndar
     pool, gamma, k = forest._pool, forest.gamma_, len(forest.classes_)
     total = np.zeros(k)
     for root in forest._roots:
-        node, parent_g, p_not, tau_parent, proba = int(root), np.full(k, 1.0 / k), 1.0, 0.0, np.zeros(k)
+        node, parent_g, p_not, tau_parent, proba = (
+            int(root),
+            np.full(k, 1.0 / k),
+            1.0,
+            0.0,
+            np.zeros(k),
+        )
         while True:
             leaf = pool.left[node] == NO_NODE
             if leaf:
                 c = pool.counts[node].copy()
             else:
-                c = np.minimum(pool.counts[pool.left[node]], 1) + np.minimum(pool.counts[pool.right[node]], 1)
+                c = np.minimum(pool.counts[pool.left[node]], 1) + np.minimum(
+                    pool.counts[pool.right[node]], 1
+                )
             tab = np.minimum(c, 1)
             delta = pool.tau[node] - tau_parent
             d = math.exp(-gamma * delta) if math.isfinite(delta) else 0.0
             g = (c - d * tab + d * tab.sum() * parent_g) / c.sum()
-            eta = float(np.maximum(x - pool.upper[node], 0).sum() + np.maximum(pool.lower[node] - x, 0).sum())
+            eta = float(
+                np.maximum(x - pool.upper[node], 0).sum()
+                + np.maximum(pool.lower[node] - x, 0).sum()
+            )
             if eta > 0:
                 p_sep = 1.0 if math.isinf(delta) else 1 - math.exp(-delta * eta)
                 if math.isinf(delta):
                     d_bar = eta / (eta + gamma)
                 else:
-                    d_bar = eta / (eta + gamma) * (1 - math.exp(-(eta + gamma) * delta)) / (1 - math.exp(-eta * delta))
+                    d_bar = (
+                        eta
+                        / (eta + gamma)
+                        * (1 - math.exp(-(eta + gamma) * delta))
+                        / (1 - math.exp(-eta * delta))
+                    )
                 proba += p_not * p_sep * (c - d_bar * tab + d_bar * tab.sum() * parent_g) / c.sum()
                 p_not *= 1 - p_sep
             if leaf:
                 proba += p_not * g
                 break
             parent_g, tau_parent = g, pool.tau[node]
-            node = int(pool.left[node] if x[pool.feature[node]] <= pool.threshold[node] else pool.right[node])
+            node = int(
+                pool.left[node]
+                if x[pool.feature[node]] <= pool.threshold[node]
+                else pool.right[node]
+            )
         total += proba
     return total / len(forest._roots)
 
@@ -56,13 +76,17 @@ def test_training_points_get_their_own_label_and_far_points_the_base() -> None:
     far = forest.predict_proba([[1e9]])
     np.testing.assert_allclose(far, [[0.5, 0.5]], atol=1e-6)
     # one class only: every prediction is that class with probability 1
-    single = MondrianForestClassifier(n_estimators=3, random_state=0).fit([[0.0], [2.0]], ["x", "x"])
+    single = MondrianForestClassifier(n_estimators=3, random_state=0).fit(
+        [[0.0], [2.0]], ["x", "x"]
+    )
     assert single.predict([[5.0]]).tolist() == ["x"]
     np.testing.assert_allclose(single.predict_proba([[5.0]]), [[1.0]])
 
 
 def test_vectorised_prediction_matches_the_node_by_node_reference() -> None:
-    X, y = make_classification(n_samples=110, n_features=6, n_informative=4, n_classes=3, random_state=1)
+    X, y = make_classification(
+        n_samples=110, n_features=6, n_informative=4, n_classes=3, random_state=1
+    )
     forest = MondrianForestClassifier(n_estimators=8, random_state=3).fit(X[:60], y[:60])
     forest.partial_fit(X[60:70], y[60:70])  # small batch: point by point across trees
     forest.partial_fit(X[70:100], y[70:100])  # large batch: block by block per tree
@@ -73,7 +97,9 @@ def test_vectorised_prediction_matches_the_node_by_node_reference() -> None:
 
 
 def test_probabilities_sum_to_one_inside_and_outside_the_data() -> None:
-    X, y = make_classification(n_samples=120, n_features=10, n_classes=4, n_informative=6, random_state=0)
+    X, y = make_classification(
+        n_samples=120, n_features=10, n_classes=4, n_informative=6, random_state=0
+    )
     forest = MondrianForestClassifier(random_state=0).fit(X, y)
     rng = np.random.default_rng(0)
     probe = np.vstack([X, rng.normal(scale=10.0, size=(50, 10))])
@@ -94,7 +120,9 @@ def test_pure_points_widen_a_paused_leaf_without_splitting() -> None:
 
 
 def test_unseen_class_in_first_batch_is_handled_through_classes() -> None:
-    X, y = make_classification(n_samples=200, n_features=8, n_informative=6, n_classes=4, random_state=2)
+    X, y = make_classification(
+        n_samples=200, n_features=8, n_informative=6, n_classes=4, random_state=2
+    )
     labels = np.array(["approach", "rotation", "insertion", "mating"])[y]
     first = np.isin(labels, ["approach", "rotation"])
     forest = MondrianForestClassifier(n_estimators=30, random_state=0)
@@ -138,7 +166,11 @@ def test_online_in_12_minibatches_matches_batch_accuracy_over_seeds() -> None:
 
 def test_get_set_params_and_random_state() -> None:
     forest = MondrianForestClassifier()
-    assert forest.get_params() == {"n_estimators": 100, "discount_factor": 10.0, "random_state": None}
+    assert forest.get_params() == {
+        "n_estimators": 100,
+        "discount_factor": 10.0,
+        "random_state": None,
+    }
     forest.set_params(n_estimators=7, random_state=4)
     X, y = make_classification(n_samples=40, n_features=4, random_state=0)
     a = forest.fit(X, y).predict_proba(X)
@@ -149,7 +181,9 @@ def test_get_set_params_and_random_state() -> None:
 
 def test_passes_sklearn_estimator_checks() -> None:
     results = check_estimator(MondrianForestClassifier(random_state=0), on_fail=None)
-    failed = [(r["check_name"], str(r["exception"])[:200]) for r in results if r["status"] == "failed"]
+    failed = [
+        (r["check_name"], str(r["exception"])[:200]) for r in results if r["status"] == "failed"
+    ]
     assert not failed
     skipped = {r["check_name"] for r in results if r["status"] == "skipped"}
     # only environment-dependent checks may skip (array API, pandas not installed)

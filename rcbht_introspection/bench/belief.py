@@ -16,7 +16,11 @@ from typing import Any
 
 import numpy as np
 
-HIRO = Path(os.environ.get("RCBHT_HIRO_DATA", Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hiro"))
+HIRO = Path(
+    os.environ.get(
+        "RCBHT_HIRO_DATA", Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hiro"
+    )
+)
 REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 TEST_TRIALS = ("20121127-HIROSA-S-45", "20121127-HIROSA-S-46")
 

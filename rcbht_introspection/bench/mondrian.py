@@ -14,7 +14,11 @@ import numpy as np
 
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 
-HIRO = Path(os.environ.get("RCBHT_HIRO_DATA", Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hiro"))
+HIRO = Path(
+    os.environ.get(
+        "RCBHT_HIRO_DATA", Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hiro"
+    )
+)
 REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 
 
@@ -46,7 +50,14 @@ def run(out_dir: Path) -> dict:
         rng = np.random.default_rng(0)
         X = rng.random((184, 101))
         y = [("approach", "rotation", "insertion", "mating")[i % 4] for i in range(184)]
-        X_train, y_train, X_rest, y_rest, rest, encoder = X[:144], y[:144], X[144:], y[144:], None, None
+        X_train, y_train, X_rest, y_rest, rest, encoder = (
+            X[:144],
+            y[:144],
+            X[144:],
+            y[144:],
+            None,
+            None,
+        )
         source = "synthetic 184 x 101"
     else:
         X_train, y_train, X_rest, y_rest, rest, encoder = data
@@ -79,7 +90,9 @@ def run(out_dir: Path) -> dict:
         "n_estimators": 100,
         "fit_seconds": round(fit_s, 3),
         "predict_proba_1_sample_ms": _median_ms(predict),
-        "predict_proba_1_sample_with_encoding_ms": _median_ms(with_encoding) if with_encoding else None,
+        "predict_proba_1_sample_with_encoding_ms": _median_ms(with_encoding)
+        if with_encoding
+        else None,
         "partial_fit_4_samples_ms": _median_ms(updates),
         "n_nodes": forest.n_nodes_,
         "targets": {"predict_proba_1_sample_ms": 2.0, "partial_fit_4_samples_ms": 50.0},

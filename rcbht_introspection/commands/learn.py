@@ -22,28 +22,48 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--out", type=Path, required=True, metavar="MODEL")
     _common(train)
     train.add_argument("--seed", type=int, default=0)
-    train.add_argument("--live-augment", action=argparse.BooleanOptionalAction, default=None,
-                       help="also train on live-like windows (words final by t); default from "
-                       "config/live.yaml (README, 'Live /task_state')")
-    train.add_argument("--live-config", type=Path, default=None, metavar="YAML",
-                       help="live_augment settings (default config/live.yaml)")
+    train.add_argument(
+        "--live-augment",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="also train on live-like windows (words final by t); default from "
+        "config/live.yaml (README, 'Live /task_state')",
+    )
+    train.add_argument(
+        "--live-config",
+        type=Path,
+        default=None,
+        metavar="YAML",
+        help="live_augment settings (default config/live.yaml)",
+    )
     train.set_defaults(func=run_train)
 
     ev = subparsers.add_parser("evaluate", help="learning-curve evaluation of a classifier")
     ev.add_argument("inputs", nargs="+", type=Path, metavar="DATASET_DIR")
     _common(ev)
     ev.add_argument("--permutations", type=int, default=20)
-    ev.add_argument("--validation-trials", type=int, default=None,
-                    help="held-out trials (default: 10 of 46, 8 of 38, 6 of 20, else ~22%%)")
+    ev.add_argument(
+        "--validation-trials",
+        type=int,
+        default=None,
+        help="held-out trials (default: 10 of 46, 8 of 38, 6 of 20, else ~22%%)",
+    )
     ev.add_argument("--trials", type=int, default=None, help="use only the first N trials")
     ev.add_argument("--seed", type=int, default=0)
     ev.add_argument("--n-estimators", type=int, default=100, help="Mondrian trees")
-    ev.add_argument("--no-variant", action="store_true",
-                    help="skip the variant without near-empty sub-tasks")
-    ev.add_argument("--live-augment", action="store_true",
-                    help="score live windows with a live head trained on live windows too (README, 'Live /task_state')")
-    ev.add_argument("--live-score", action="store_true",
-                    help="score on the validation trials' live windows (live_accuracy)")
+    ev.add_argument(
+        "--no-variant", action="store_true", help="skip the variant without near-empty sub-tasks"
+    )
+    ev.add_argument(
+        "--live-augment",
+        action="store_true",
+        help="score live windows with a live head trained on live windows too (README, 'Live /task_state')",
+    )
+    ev.add_argument(
+        "--live-score",
+        action="store_true",
+        help="score on the validation trials' live windows (live_accuracy)",
+    )
     ev.add_argument("--json", type=Path, default=None, metavar="OUT")
     ev.add_argument("--plot", type=Path, default=None, metavar="OUT.png")
     ev.add_argument("--no-progress", action="store_true")
@@ -53,10 +73,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--classifier", choices=CLASSIFIERS, default="svm")
     parser.add_argument("--encoding", choices=ENCODINGS, default="compact")
-    parser.add_argument("--words", choices=WORD_SOURCES, default="auto",
-                        help="golden label files, the batch engine, or golden when present")
-    parser.add_argument("--augment-prefixes", type=float, nargs="*", default=[], metavar="F",
-                        help="also train on these fractions of each sub-task (e.g. 0.25 0.5 0.75)")
+    parser.add_argument(
+        "--words",
+        choices=WORD_SOURCES,
+        default="auto",
+        help="golden label files, the batch engine, or golden when present",
+    )
+    parser.add_argument(
+        "--augment-prefixes",
+        type=float,
+        nargs="*",
+        default=[],
+        metavar="F",
+        help="also train on these fractions of each sub-task (e.g. 0.25 0.5 0.75)",
+    )
 
 
 def run_train(args: argparse.Namespace) -> int:
@@ -114,8 +144,12 @@ def run_evaluate(args: argparse.Namespace) -> int:
     if not args.no_progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=total_steps(trials, protocol), desc=f"{args.classifier}/{args.encoding}",
-                   unit="step", file=sys.stderr)
+        bar = tqdm(
+            total=total_steps(trials, protocol),
+            desc=f"{args.classifier}/{args.encoding}",
+            unit="step",
+            file=sys.stderr,
+        )
     try:
         result = evaluate(trials, protocol, progress=bar.update if bar else None)
     finally:

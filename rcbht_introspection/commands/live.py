@@ -86,14 +86,18 @@ def run_live_eval(args: argparse.Namespace) -> int:
         for mode in modes:
             began = time.perf_counter()
             reps = [
-                replay_beliefs(s, model, mode, args.window_s, trial=t, state_hold_s=args.state_hold_s)
+                replay_beliefs(
+                    s, model, mode, args.window_s, trial=t, state_hold_s=args.state_hold_s
+                )
                 for s, t in zip(streamed, held, strict=True)
             ]
             elapsed = time.perf_counter() - began
             summary = replay_summary(reps, held)
             # classification cost per belief update (window split + encoding + predict): the
             # classifier node pays this once per word batch
-            summary["ms_per_belief"] = round(1000 * elapsed / max(1, sum(r.n_beliefs for r in reps)), 3)
+            summary["ms_per_belief"] = round(
+                1000 * elapsed / max(1, sum(r.n_beliefs for r in reps)), 3
+            )
             summary["timelines"] = {r.name: [(round(t, 3), s) for t, s in r.changes] for r in reps}
             summary["state_changes"] = sum(len(r.changes) for r in reps)
             result["results"][f"{name}/{mode}"] = summary

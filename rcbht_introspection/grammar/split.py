@@ -150,4 +150,6 @@ def _word_end(word: Word) -> float:
 def prefix_sample(sample: SubtaskSample, fraction: float) -> SubtaskSample:
     """The first `fraction` of a sub-task's time: what a live classifier has seen so far."""
     end = sample.start + fraction * sample.duration
-    return window_sample(sample.words, sample.start, end, subtask=sample.subtask, trial=sample.trial)
+    return window_sample(
+        sample.words, sample.start, end, subtask=sample.subtask, trial=sample.trial
+    )

@@ -75,7 +75,9 @@ def _end_time(folder: Path) -> float:
                 handle.seek(0, 2)
                 size = handle.tell()
                 handle.seek(max(0, size - 4096))
-                lines = [ln for ln in handle.read().decode(errors="replace").splitlines() if ln.strip()]
+                lines = [
+                    ln for ln in handle.read().decode(errors="replace").splitlines() if ln.strip()
+                ]
             try:
                 return float(lines[-1].split()[0])
             except (IndexError, ValueError):

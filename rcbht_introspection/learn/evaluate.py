@@ -146,7 +146,9 @@ def evaluate(
             elapsed = time.perf_counter() - began
             curve[perm, j] = _accuracy(model.predict_samples(val_samples), val_samples)
             duration = _duration_model(train_samples, protocol.seed + perm)
-            base_curve[perm, j] = _accuracy(duration.predict(_log_duration(val_samples)), val_samples)
+            base_curve[perm, j] = _accuracy(
+                duration.predict(_log_duration(val_samples)), val_samples
+            )
             if protocol.variant and k in tail_steps and n_near_empty:
                 kept = [s for s in train_samples if not near_empty(s)]
                 variant = train_model(

@@ -51,8 +51,16 @@ def load_live_config(path: Path | str | None = None) -> LiveAugmentConfig:
     """The live_augment section of config/live.yaml (or of `path`)."""
     file = Path(path) if path is not None else config_path(LIVE_CONFIG_FILE)
     cfg = load_yaml(LiveAugmentConfig, file, section="live_augment")
-    if cfg.step_s <= 0 or cfg.window_s < 0 or cfg.max_per_subtask < 1 or any(not 0 < f <= 1 for f in cfg.fractions):
-        raise InputError("step_s > 0, window_s >= 0, max_per_subtask >= 1, fractions in (0, 1] required", path=file)
+    if (
+        cfg.step_s <= 0
+        or cfg.window_s < 0
+        or cfg.max_per_subtask < 1
+        or any(not 0 < f <= 1 for f in cfg.fractions)
+    ):
+        raise InputError(
+            "step_s > 0, window_s >= 0, max_per_subtask >= 1, fractions in (0, 1] required",
+            path=file,
+        )
     return cfg
 
 
@@ -95,7 +103,9 @@ def live_samples(streamed: StreamedTrial, config: LiveAugmentConfig) -> list[Sub
 
 def sample_word_count(sample: SubtaskSample) -> int:
     """Number of words in a sample (every arm, level, axis)."""
-    return sum(len(s) for lv in sample.words.words.values() for ax in lv.values() for s in ax.values())
+    return sum(
+        len(s) for lv in sample.words.words.values() for ax in lv.values() for s in ax.values()
+    )
 
 
 def stream_factory(config: LiveAugmentConfig) -> Any:

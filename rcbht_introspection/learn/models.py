@@ -41,7 +41,10 @@ from rcbht_introspection.learn.mondrian import (
 
 FORMAT = "rcbht-subtask-model"
 FORMAT_VERSION = 1
-TUNING_GRID: dict[str, list[float]] = {"C": [0.1, 1.0, 10.0, 100.0], "gamma_factor": [0.1, 1.0, 10.0]}
+TUNING_GRID: dict[str, list[float]] = {
+    "C": [0.1, 1.0, 10.0, 100.0],
+    "gamma_factor": [0.1, 1.0, 10.0],
+}
 """svm-tuned: C and a multiple of the 'scale' gamma, chosen by trial-grouped CV on training data."""
 SVM_TRUSTED_TYPES: tuple[str, ...] = (
     "sklearn.pipeline.Pipeline",
@@ -197,7 +200,9 @@ def train_model(
     return SubtaskModel(classifier, encoder, estimator, taxonomy_profile, random_state)
 
 
-def tune_svm(X: np.ndarray, y: Sequence[str], groups: Sequence[str], random_state: int = 0) -> dict[str, Any]:
+def tune_svm(
+    X: np.ndarray, y: Sequence[str], groups: Sequence[str], random_state: int = 0
+) -> dict[str, Any]:
     """Inner, trial-grouped 3-fold CV over TUNING_GRID on the training data only.
 
     Returns pipeline parameters (svc__C, svc__gamma); the paper's C=1, gamma='scale' when there
@@ -212,15 +217,21 @@ def tune_svm(X: np.ndarray, y: Sequence[str], groups: Sequence[str], random_stat
     best, best_score = {"svc__C": 1.0, "svc__gamma": "scale"}, -1.0
     for c in TUNING_GRID["C"]:
         for factor in TUNING_GRID["gamma_factor"]:
-            candidate = Pipeline([("scale", StandardScaler()), ("svc", SVC(C=c, gamma=factor * scale_gamma))])
-            score = cross_val_score(candidate, X, list(y), groups=list(groups), cv=GroupKFold(3)).mean()
+            candidate = Pipeline(
+                [("scale", StandardScaler()), ("svc", SVC(C=c, gamma=factor * scale_gamma))]
+            )
+            score = cross_val_score(
+                candidate, X, list(y), groups=list(groups), cv=GroupKFold(3)
+            ).mean()
             if score > best_score + 1e-12:
                 best, best_score = {"svc__C": c, "svc__gamma": factor * scale_gamma}, score
     return best
 
 
 # ------------------------------------------------------------------------------ model files
-def _forest_arrays(forest: MondrianForestClassifier) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+def _forest_arrays(
+    forest: MondrianForestClassifier,
+) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """Parameters and arrays that fully describe a fitted forest (including online state)."""
     pool, size = forest._pool, forest._pool.size
     leaves = [i for i in range(size) if pool.points[i] is not None]
@@ -255,7 +266,9 @@ def _forest_arrays(forest: MondrianForestClassifier) -> tuple[dict[str, Any], di
     return params, arrays
 
 
-def _forest_from_arrays(params: dict[str, Any], arrays: dict[str, np.ndarray]) -> MondrianForestClassifier:
+def _forest_from_arrays(
+    params: dict[str, Any], arrays: dict[str, np.ndarray]
+) -> MondrianForestClassifier:
     """Rebuild a forest from _forest_arrays output; inconsistent arrays raise ValueError."""
     forest = MondrianForestClassifier(
         n_estimators=int(params["n_estimators"]),
@@ -271,13 +284,25 @@ def _forest_from_arrays(params: dict[str, Any], arrays: dict[str, np.ndarray]) -
     forest._rng.bit_generator.state = params["rng_state"]
     pool = _NodePool(n_features, len(classes), capacity=max(size, 1))
     pool.size = size
-    for name in ("left", "right", "parent", "feature", "threshold", "tau", "lower", "upper", "counts"):
+    for name in (
+        "left",
+        "right",
+        "parent",
+        "feature",
+        "threshold",
+        "tau",
+        "lower",
+        "upper",
+        "counts",
+    ):
         value = arrays[f"mf_{name}"]
         target = getattr(pool, name)
         if value.shape != target[:size].shape:
             raise ValueError(f"array mf_{name} has shape {value.shape}")
         target[:size] = value
-    links = np.concatenate([pool.left[:size], pool.right[:size], pool.parent[:size], arrays["mf_roots"]])
+    links = np.concatenate(
+        [pool.left[:size], pool.right[:size], pool.parent[:size], arrays["mf_roots"]]
+    )
     if size == 0 or links.max() >= size or links.min() < NO_NODE:
         raise ValueError("node links point outside the node arrays")
     offsets, flat = arrays["mf_leaf_offsets"], arrays["mf_leaf_points"]
@@ -300,7 +325,9 @@ def _forest_from_arrays(params: dict[str, Any], arrays: dict[str, np.ndarray]) -
 def _checksum(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
     """SHA-256 over the header (without its checksum) and every array's name, dtype, shape, bytes."""
     digest = hashlib.sha256()
-    digest.update(json.dumps({k: v for k, v in header.items() if k != "checksum"}, sort_keys=True).encode())
+    digest.update(
+        json.dumps({k: v for k, v in header.items() if k != "checksum"}, sort_keys=True).encode()
+    )
     for name in sorted(arrays):
         value = np.ascontiguousarray(arrays[name])
         digest.update(f"{name}|{value.dtype.str}|{value.shape}".encode())
@@ -375,7 +402,9 @@ def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskM
             field="format_version",
         )
     if header.get("checksum") != _checksum(header, arrays):
-        raise InputError("checksum mismatch: the model file is corrupt or was modified", path, field="checksum")
+        raise InputError(
+            "checksum mismatch: the model file is corrupt or was modified", path, field="checksum"
+        )
     main = {k: v for k, v in arrays.items() if not k.startswith(LIVE_PREFIX)}
     model = _model_from_parts(header, main, path, expect_encoding)
     if isinstance(header.get("live"), dict):
@@ -391,7 +420,9 @@ def _model_from_parts(
     encoder = encoding_from_state(header.get("encoding") or {})
     if expect_encoding is not None and encoder.name != expect_encoding:
         raise InputError(
-            f"model uses the {encoder.name!r} encoding, expected {expect_encoding!r}", path, field="encoding"
+            f"model uses the {encoder.name!r} encoding, expected {expect_encoding!r}",
+            path,
+            field="encoding",
         )
     classifier = header.get("classifier")
     try:
@@ -399,7 +430,9 @@ def _model_from_parts(
             import skops.io as sio
 
             data = arrays["svm_skops"].tobytes()
-            untrusted = [t for t in sio.get_untrusted_types(data=data) if t not in SVM_TRUSTED_TYPES]
+            untrusted = [
+                t for t in sio.get_untrusted_types(data=data) if t not in SVM_TRUSTED_TYPES
+            ]
             if untrusted:
                 raise InputError(f"SVM holds untrusted types {untrusted}", path, field="svm_skops")
             estimator: Any = sio.loads(data, trusted=list(SVM_TRUSTED_TYPES))
@@ -410,7 +443,9 @@ def _model_from_parts(
     except InputError:
         raise
     except (KeyError, ValueError, TypeError, IndexError) as exc:
-        raise InputError(f"inconsistent model content: {exc}", path, field=str(classifier)) from None
+        raise InputError(
+            f"inconsistent model content: {exc}", path, field=str(classifier)
+        ) from None
     if [str(c) for c in estimator.classes_] != header.get("classes"):
         raise InputError("class names differ from the header", path, field="classes")
     return SubtaskModel(

@@ -165,7 +165,9 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self._y = np.concatenate([self._y, y_index])
         return np.arange(start, len(self._y))
 
-    def _paused(self, counts: np.ndarray, n_points: int, lower: np.ndarray, upper: np.ndarray) -> bool:
+    def _paused(
+        self, counts: np.ndarray, n_points: int, lower: np.ndarray, upper: np.ndarray
+    ) -> bool:
         """A block pauses when its labels are all equal, it has < 2 points or zero volume."""
         return np.count_nonzero(counts) <= 1 or n_points < 2 or not np.any(upper > lower)
 
@@ -242,7 +244,9 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             split_time = tau_parent + self._rng.exponential(1.0 / rate) if rate > 0 else np.inf
             if split_time < pool.tau[node]:
                 extent = e_lower.astype(np.float64) + e_upper
-                dim = int(np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right"))
+                dim = int(
+                    np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right")
+                )
                 dim = min(dim, len(extent) - 1)
                 while extent[dim] <= 0:
                     dim -= 1
@@ -263,7 +267,11 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
                 self._replace_child(tree, parent, node, new_parent)
                 pool.parent[node] = new_parent
                 left_side = data[:, dim] <= cut
-                near, far = (idx[left_side], idx[~left_side]) if old_is_left else (idx[~left_side], idx[left_side])
+                near, far = (
+                    (idx[left_side], idx[~left_side])
+                    if old_is_left
+                    else (idx[~left_side], idx[left_side])
+                )
                 sibling = self._grow(far, new_parent, split_time)
                 if old_is_left:
                     pool.left[new_parent], pool.right[new_parent] = node, sibling
@@ -368,7 +376,9 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         else:
             pool.right[parent] = new
 
-    def _regrow(self, tree: int, node: int, points: np.ndarray, parent: int, tau_parent: float) -> None:
+    def _regrow(
+        self, tree: int, node: int, points: np.ndarray, parent: int, tau_parent: float
+    ) -> None:
         """Replace the leaf `node` by a freshly grown block on `points` (an unpaused leaf)."""
         fresh = self._grow(points, parent, tau_parent)
         self._replace_child(tree, parent, node, fresh)
@@ -398,7 +408,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             c = cnt[frontier]
             tables = np.minimum(c, 1.0)
             discount = np.exp(-self.gamma_ * delta[frontier])[:, None]
-            g = (c - discount * tables + discount * tables.sum(axis=1, keepdims=True) * base)
+            g = c - discount * tables + discount * tables.sum(axis=1, keepdims=True) * base
             g /= c.sum(axis=1, keepdims=True)
             self._posterior[frontier] = g
             inner = frontier[~is_leaf[frontier]]
@@ -450,7 +460,9 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         nodes = paths[valid]
         x = X[np.broadcast_to(sample, paths.shape)[valid]]
         # 2. probability that the test point separates from the tree at each node of its path
-        eta = (np.maximum(self._lower[nodes] - x, 0.0) + np.maximum(x - self._upper[nodes], 0.0)).sum(axis=1)
+        eta = (
+            np.maximum(self._lower[nodes] - x, 0.0) + np.maximum(x - self._upper[nodes], 0.0)
+        ).sum(axis=1)
         delta = self._delta[nodes]
         outside = eta > 0
         p_sep = np.zeros(len(nodes))
@@ -479,7 +491,9 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             ) / self._n_customers[on][:, None]
             contrib[o] = weight_sep[o][:, None] * mean
         leaf = self._left[nodes] == NO_NODE
-        contrib[leaf] += ((not_before[valid] * (1.0 - p_sep))[leaf])[:, None] * self._posterior[nodes[leaf]]
+        contrib[leaf] += (
+            ((not_before[valid] * (1.0 - p_sep))[leaf])[:, None] * self._posterior[nodes[leaf]]
+        )
         full = np.zeros((*paths.shape, n_classes))
         full[valid] = contrib
         proba = full.sum(axis=0)
@@ -508,6 +522,9 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
                 node, d = stack.pop()
                 best = max(best, d)
                 if self._pool.left[node] != NO_NODE:
-                    stack += [(int(self._pool.left[node]), d + 1), (int(self._pool.right[node]), d + 1)]
+                    stack += [
+                        (int(self._pool.left[node]), d + 1),
+                        (int(self._pool.right[node]), d + 1),
+                    ]
             depth[tree] = best
         return depth

@@ -19,7 +19,11 @@ def plot_learning_curve(results: list[dict[str, Any]], out: Path | str, title: s
         label = f"{result['classifier']} / {result['encoding']}"
         for curve, style, name in (
             (result["curve"], "-", label),
-            (result["duration_baseline"]["curve"], "--", f"{label}: duration only (RF on log duration)"),
+            (
+                result["duration_baseline"]["curve"],
+                "--",
+                f"{label}: duration only (RF on log duration)",
+            ),
         ):
             x = [p["n_train_trials"] for p in curve]
             mean = [p["mean"] for p in curve]
