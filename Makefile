@@ -37,8 +37,7 @@ $(VENV)/.pkg-stamp: $(VENV)/.msgs-stamp $(PKG_SOURCES)
 demo: setup
 	$(VENV)/bin/rcbht demo --out demo_out
 
-test: setup
-	$(VENV)/bin/ruff check rcbht_introspection test
+test: lint
 	$(PY) -m pytest -q
 
 bench: setup
