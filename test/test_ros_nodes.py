@@ -198,3 +198,45 @@ def test_segmenter_survives_malformed_input_and_sigint(tmp_path: Path, env: dict
     assert "ignored unknown /task_phase name 'pirouette'" in text
     assert "dropped a wrench sample" in text
     assert code == 0, text
+
+
+def test_a_late_subscriber_still_gets_the_applied_sub_task_events(
+    tmp_path: Path, env: dict[str, str]
+) -> None:
+    """rcbht/phase is latched: a classifier that matches after an event was applied still sees it."""
+    require_stream()
+    from geometry_msgs.msg import WrenchStamped
+    from rcbht_interfaces.msg import Phase
+    from std_msgs.msg import String
+
+    from rcbht_introspection.nodes.common import RosSession, phase_qos, qos_profile
+    from rcbht_introspection.nodes.conversions import to_time
+
+    log = tmp_path / "segmenter.log"
+    with log.open("w") as out:
+        proc = subprocess.Popen(
+            node_command("segmenter_node", {}), env=env, stdout=out, stderr=subprocess.STDOUT
+        )
+    try:
+        with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+            qos = qos_profile(1000, "reliable")
+            wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
+            phase = ros.node.create_publisher(String, "/task_phase", qos)
+            assert wait_for(
+                lambda: wrench.get_subscription_count() > 0 and phase.get_subscription_count() > 0
+            ), log.read_text()
+            phase.publish(String(data="approach"))
+            for i in range(20):
+                msg = WrenchStamped()
+                msg.header.stamp = to_time(1_700_000_000 * 10**9 + i * 5_000_000)
+                msg.wrench.force.z = float(i)
+                wrench.publish(msg)
+                time.sleep(0.005)
+            time.sleep(1.0)  # the event was applied and published with nobody listening
+            got: list[str] = []
+            ros.node.create_subscription(
+                Phase, "/rcbht/phase", lambda m: got.append(m.name), phase_qos("reliable")
+            )
+            assert wait_for(lambda: got == ["approach"], 10), (got, log.read_text())
+    finally:
+        assert stop(proc) == 0, log.read_text()

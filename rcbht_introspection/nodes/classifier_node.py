@@ -25,7 +25,13 @@ from rcbht_introspection.live.belief import (
     StateFilter,
     load_subtask_model,
 )
-from rcbht_introspection.nodes.common import DrainedGroup, declare_config, qos_profile, run
+from rcbht_introspection.nodes.common import (
+    DrainedGroup,
+    declare_config,
+    phase_qos,
+    qos_profile,
+    run,
+)
 from rcbht_introspection.nodes.conversions import belief_msg, to_ns, words_from_msg
 from rcbht_introspection.nodes.params import ClassifierConfig, word_topics
 from rcbht_introspection.taxonomy.words import LEVELS
@@ -63,7 +69,11 @@ class ClassifierNode(Node):
             for (arm, _), topic in word_topics(cfg.words_namespace, cfg.arms).items()
         ]
         self.phase_sub = self.create_subscription(
-            PhaseMsg, cfg.phase_topic, self.ingest_phase, qos, callback_group=drained
+            PhaseMsg,
+            cfg.phase_topic,
+            self.ingest_phase,
+            phase_qos(cfg.qos_reliability),
+            callback_group=drained,
         )
         self.trigger_ns: int | None = None  # earliest sample behind the evidence not yet classified
         if cfg.publish_rate_hz > 0:

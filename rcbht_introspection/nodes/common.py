@@ -20,7 +20,7 @@ from rclpy.executors import (
 )
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerGuardCondition
 from rclpy.subscription import Subscription
 
@@ -39,6 +39,21 @@ def qos_profile(depth: int, reliability: str) -> QoSProfile:
         if reliability == "reliable"
         else ReliabilityPolicy.BEST_EFFORT,
     )
+
+
+PHASE_HISTORY = 16
+"""Applied sub-task events a late-joining subscriber still receives (one task has five)."""
+
+
+def phase_qos(reliability: str) -> QoSProfile:
+    """QoS of the applied sub-task events (rcbht/phase): latched, like a static transform.
+
+    A classifier that starts (or matches) after a sub-task event still gets the current task's
+    boundaries; without them it would wait forever for verdicts on sub-tasks it never saw.
+    """
+    qos = qos_profile(PHASE_HISTORY, reliability)
+    qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
+    return qos
 
 
 def declare_config(node: Node, cls: type[T]) -> T:

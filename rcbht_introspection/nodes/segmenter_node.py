@@ -22,7 +22,13 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
-from rcbht_introspection.nodes.common import DrainedGroup, declare_config, qos_profile, run
+from rcbht_introspection.nodes.common import (
+    DrainedGroup,
+    declare_config,
+    phase_qos,
+    qos_profile,
+    run,
+)
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
 from rcbht_introspection.nodes.params import SegmenterConfig, word_topics
 from rcbht_introspection.taxonomy.words import LEVELS
@@ -80,7 +86,7 @@ class SegmenterNode(Node):
             for level in LEVELS
         }
         self.phase_pub = self.create_publisher(
-            PhaseMsg, cfg.applied_phase_topic, qos, event_callbacks=quiet
+            PhaseMsg, cfg.applied_phase_topic, phase_qos(cfg.qos_reliability), event_callbacks=quiet
         )
         # the inputs are taken by drain() (common.spin_draining), not by executor callbacks
         drained = DrainedGroup()
