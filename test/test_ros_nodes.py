@@ -240,3 +240,48 @@ def test_a_late_subscriber_still_gets_the_applied_sub_task_events(
             assert wait_for(lambda: got == ["approach"], 10), (got, log.read_text())
     finally:
         assert stop(proc) == 0, log.read_text()
+
+
+def test_a_draining_node_still_answers_parameter_requests(
+    tmp_path: Path, env: dict[str, str]
+) -> None:
+    """spin_draining serves the parameter services through the executor between bursts."""
+    require_stream()
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.parameter_client import AsyncParameterClient
+
+    from rcbht_introspection.nodes.common import RosSession, qos_profile
+    from rcbht_introspection.nodes.conversions import to_time
+    from rcbht_introspection.nodes.params import SegmenterConfig, descriptions
+
+    log = tmp_path / "segmenter.log"
+    with log.open("w") as out:
+        proc = subprocess.Popen(
+            node_command("segmenter_node", {"event_hold_s": 0.3}),
+            env=env,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+    try:
+        with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+            client = AsyncParameterClient(ros.node, "segmenter_node")
+            assert client.wait_for_services(20.0), log.read_text()
+            wrench = ros.node.create_publisher(
+                WrenchStamped, "/wrench", qos_profile(1000, "reliable")
+            )
+            assert wait_for(lambda: wrench.get_subscription_count() > 0), log.read_text()
+            for i in range(400):  # keep the node busy draining while the requests come
+                msg = WrenchStamped()
+                msg.header.stamp = to_time(1_700_000_000 * 10**9 + i * 1_000_000)
+                msg.wrench.force.z = math.sin(i / 20)
+                wrench.publish(msg)
+                if i % 100 == 50:
+                    values = client.get_parameters(["event_hold_s"])
+                    described = client.describe_parameters(["event_hold_s"])
+                    assert wait_for(lambda v=values, d=described: v.done() and d.done(), 10)
+                    assert values.result().values[0].double_value == 0.3
+                    text = described.result().descriptors[0].description
+                    assert text == descriptions(SegmenterConfig)["event_hold_s"]
+                time.sleep(0.001)
+    finally:
+        assert stop(proc) == 0, log.read_text()
