@@ -461,7 +461,9 @@ def _play_one(
         lambda: (
             f"{len(observer.finals_since(b_index))}/{n_subtasks} verdicts, end of stream "
             f"{sorted(k[1:] for k in observer.obs.ends if k[0] == stream_id)}, "
-            f"{published} wrench published"
+            f"{published} wrench published; received {len(observer.obs.word_arrivals) - w_index} "
+            f"word messages, {len(observer.obs.beliefs) - b_index} beliefs, "
+            f"{len(observer.obs.states) - s_index} state changes, {len(observer.obs.phases)} events"
         ),
     )
     observer.convert()
