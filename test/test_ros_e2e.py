@@ -43,7 +43,7 @@ def test_replay_eval_of_held_out_trials(hiro_data: Path, model: Path, tmp_path: 
         main(["replay-eval", *bags, "--model", str(model), "--rate", "5", "--json", str(out)]) == 0
     )
     result = json.loads(out.read_text())
-    assert result["clean_shutdown"], result["exit_codes"]
+    assert result["clean_shutdown"], (result["exit_codes"], result.get("shutdown_logs"))
     assert result["dropped_wrench"] == 0
     assert result["words_match_offline"], [b["words_mismatch"] for b in result["per_bag"]]
     assert result["verdicts_match_offline"], [
@@ -75,5 +75,6 @@ def test_two_arm_replay_matches_offline(hiro_data: Path, model: Path, tmp_path: 
     bag = result["per_bag"][0]
     assert result["words_match_offline"], bag["words_mismatch"]
     assert result["verdicts_match_offline"], (bag["verdicts"], bag["offline_verdicts"])
-    assert result["dropped_wrench"] == 0 and result["clean_shutdown"]
+    assert result["dropped_wrench"] == 0
+    assert result["clean_shutdown"], (result["exit_codes"], result.get("shutdown_logs"))
     assert bag["published_wrench"] == 2 * len(trial.time)

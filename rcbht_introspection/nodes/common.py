@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import gc
 import signal
 import sys
@@ -164,6 +165,7 @@ def run(node_factory: Callable[[], Node], name: str, args: list[str] | None = No
     # executor callback and leave rclpy objects half released (a classifier segfaulted at exit
     # once in ~30 replay runs); the node stops where its spin sees the context shut down instead
     signal.signal(signal.SIGINT, _stop_quietly)
+    faulthandler.enable()  # a crash in native code leaves the Python stack in the node log
     rclpy.init(args=args)
     node = None
     executor = None

@@ -392,6 +392,8 @@ def replay_eval(
         finally:
             for p in procs:
                 codes[p.name] = p.stop()
+                if codes[p.name] != 0:  # the node log is in a temporary folder: keep its end
+                    result.setdefault("shutdown_logs", {})[p.name] = p.tail(40)
     result.update(_score(per_bag, trials, model_path, options, arms))
     result.update(
         {
