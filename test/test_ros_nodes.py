@@ -35,6 +35,43 @@ def wait_for(condition, timeout: float = 20.0) -> bool:
     return True
 
 
+def start_node(module: str, params: dict[str, object], env: dict[str, str], log: Path):
+    """The node as a child process, its output in `log`."""
+    with log.open("w") as out:
+        return subprocess.Popen(
+            node_command(module, params), env=env, stdout=out, stderr=subprocess.STDOUT
+        )
+
+
+def segmenter_inputs(ros, log: Path) -> tuple:
+    """(/wrench, /task_phase) publishers of the probe, once the segmenter subscribes both."""
+    from geometry_msgs.msg import WrenchStamped
+    from std_msgs.msg import String
+
+    from rcbht_introspection.nodes.common import qos_profile
+
+    qos = qos_profile(1000, "reliable")
+    wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
+    phase = ros.node.create_publisher(String, "/task_phase", qos)
+    assert wait_for(
+        lambda: wrench.get_subscription_count() > 0 and phase.get_subscription_count() > 0
+    ), log.read_text()
+    return wrench, phase
+
+
+def wrench_msg(stamp_ns: int, fz: float, mx: float = 0.0):
+    """A WrenchStamped with force z and torque x."""
+    from geometry_msgs.msg import WrenchStamped
+
+    from rcbht_introspection.nodes.conversions import to_time
+
+    msg = WrenchStamped()
+    msg.header.stamp = to_time(stamp_ns)
+    msg.wrench.force.z = fz
+    msg.wrench.torque.x = mx
+    return msg
+
+
 def test_ament_index_finds_the_executables(monkeypatch: pytest.MonkeyPatch) -> None:
     """`ros2 run` resolves <prefix>/lib/<package>/<executable> through the ament index."""
     require_ros()
@@ -114,11 +151,7 @@ def test_classifier_without_usable_model_says_unknown(
         params["expected_profile"] = "error_charac"
         expect = "trained with taxonomy profile 'reference', the segmenter uses 'error_charac'"
     log = tmp_path / "classifier.log"
-    with log.open("w") as out:
-        proc = subprocess.Popen(
-            node_command("classifier_node", params),
-            env=env, stdout=out, stderr=subprocess.STDOUT,
-        )  # fmt: skip
+    proc = start_node("classifier_node", params, env, log)
     states: list[str] = []
     try:
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
@@ -135,18 +168,13 @@ def test_classifier_without_usable_model_says_unknown(
 
 def test_segmenter_survives_malformed_input_and_sigint(tmp_path: Path, env: dict[str, str]) -> None:
     require_stream()
-    from geometry_msgs.msg import WrenchStamped
     from rcbht_interfaces.msg import Words
     from std_msgs.msg import String
 
     from rcbht_introspection.nodes.common import RosSession, qos_profile
-    from rcbht_introspection.nodes.conversions import to_time
 
     log = tmp_path / "segmenter.log"
-    with log.open("w") as out:
-        proc = subprocess.Popen(
-            node_command("segmenter_node", {}), env=env, stdout=out, stderr=subprocess.STDOUT
-        )
+    proc = start_node("segmenter_node", {}, env, log)
     ends: list[Words] = []
     words = 0
     try:
@@ -160,18 +188,10 @@ def test_segmenter_survives_malformed_input_and_sigint(tmp_path: Path, env: dict
                     ends.append(msg)
 
             ros.node.create_subscription(Words, "/rcbht/primitives", on_words, qos)
-            wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
-            phase = ros.node.create_publisher(String, "/task_phase", qos)
-            assert wait_for(
-                lambda: wrench.get_subscription_count() > 0 and phase.get_subscription_count() > 0
-            ), log.read_text()
+            wrench, phase = segmenter_inputs(ros, log)
 
             def send(stamp_ns: int, value: float) -> None:
-                msg = WrenchStamped()
-                msg.header.stamp = to_time(stamp_ns)
-                msg.wrench.force.z = value
-                msg.wrench.torque.x = 0.1 * value
-                wrench.publish(msg)
+                wrench.publish(wrench_msg(stamp_ns, value, 0.1 * value))
                 time.sleep(0.0005)
 
             base = 1_700_000_000 * 10**9
@@ -205,32 +225,19 @@ def test_a_late_subscriber_still_gets_the_applied_sub_task_events(
 ) -> None:
     """rcbht/phase is latched: a classifier that matches after an event was applied still sees it."""
     require_stream()
-    from geometry_msgs.msg import WrenchStamped
     from rcbht_interfaces.msg import Phase
     from std_msgs.msg import String
 
-    from rcbht_introspection.nodes.common import RosSession, phase_qos, qos_profile
-    from rcbht_introspection.nodes.conversions import to_time
+    from rcbht_introspection.nodes.common import RosSession, phase_qos
 
     log = tmp_path / "segmenter.log"
-    with log.open("w") as out:
-        proc = subprocess.Popen(
-            node_command("segmenter_node", {}), env=env, stdout=out, stderr=subprocess.STDOUT
-        )
+    proc = start_node("segmenter_node", {}, env, log)
     try:
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
-            qos = qos_profile(1000, "reliable")
-            wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
-            phase = ros.node.create_publisher(String, "/task_phase", qos)
-            assert wait_for(
-                lambda: wrench.get_subscription_count() > 0 and phase.get_subscription_count() > 0
-            ), log.read_text()
+            wrench, phase = segmenter_inputs(ros, log)
             phase.publish(String(data="approach"))
             for i in range(20):
-                msg = WrenchStamped()
-                msg.header.stamp = to_time(1_700_000_000 * 10**9 + i * 5_000_000)
-                msg.wrench.force.z = float(i)
-                wrench.publish(msg)
+                wrench.publish(wrench_msg(1_700_000_000 * 10**9 + i * 5_000_000, float(i)))
                 time.sleep(0.005)
             time.sleep(1.0)  # the event was applied and published with nobody listening
             got: list[str] = []
@@ -251,17 +258,10 @@ def test_a_draining_node_still_answers_parameter_requests(
     from rclpy.parameter_client import AsyncParameterClient
 
     from rcbht_introspection.nodes.common import RosSession, qos_profile
-    from rcbht_introspection.nodes.conversions import to_time
     from rcbht_introspection.nodes.params import SegmenterConfig, descriptions
 
     log = tmp_path / "segmenter.log"
-    with log.open("w") as out:
-        proc = subprocess.Popen(
-            node_command("segmenter_node", {"event_hold_s": 0.3}),
-            env=env,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-        )
+    proc = start_node("segmenter_node", {"event_hold_s": 0.3}, env, log)
     try:
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
             client = AsyncParameterClient(ros.node, "segmenter_node")
@@ -271,10 +271,7 @@ def test_a_draining_node_still_answers_parameter_requests(
             )
             assert wait_for(lambda: wrench.get_subscription_count() > 0), log.read_text()
             for i in range(400):  # keep the node busy draining while the requests come
-                msg = WrenchStamped()
-                msg.header.stamp = to_time(1_700_000_000 * 10**9 + i * 1_000_000)
-                msg.wrench.force.z = math.sin(i / 20)
-                wrench.publish(msg)
+                wrench.publish(wrench_msg(1_700_000_000 * 10**9 + i * 1_000_000, math.sin(i / 20)))
                 if i % 100 == 50:
                     values = client.get_parameters(["event_hold_s"])
                     described = client.describe_parameters(["event_hold_s"])
