@@ -31,6 +31,7 @@ from rcbht_introspection.nodes.common import (
     phase_qos,
     qos_profile,
     run,
+    take,
 )
 from rcbht_introspection.nodes.conversions import belief_msg, to_ns, words_from_msg
 from rcbht_introspection.nodes.params import ClassifierConfig, word_topics
@@ -128,15 +129,11 @@ class ClassifierNode(Node):
         for _ in range(10000):
             taken = False
             for arm, sub in self.word_subs:
-                with sub.handle:
-                    got = sub.handle.take_message(sub.msg_type, sub.raw)
+                got = take(sub)
                 if got is not None:
                     self.ingest_words(arm, got[0])
                     taken = True
-            with self.phase_sub.handle:
-                got = self.phase_sub.handle.take_message(
-                    self.phase_sub.msg_type, self.phase_sub.raw
-                )
+            got = take(self.phase_sub)
             if got is not None:
                 self.ingest_phase(got[0])
                 taken = True

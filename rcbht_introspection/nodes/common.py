@@ -99,6 +99,12 @@ class Draining(Protocol):
         """Take and handle every message already delivered on the drained subscriptions."""
 
 
+def take(sub: Subscription) -> tuple[Any, Any] | None:
+    """The next delivered message of `sub` as (message, info), or None: what drain() loops on."""
+    with sub.handle:
+        return sub.handle.take_message(sub.msg_type, sub.raw)
+
+
 def serve_ready(executor: SingleThreadedExecutor, limit: int) -> None:
     """Run up to `limit` callbacks the executor finds ready now, without blocking."""
     for _ in range(limit):

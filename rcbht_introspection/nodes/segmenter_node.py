@@ -28,6 +28,7 @@ from rcbht_introspection.nodes.common import (
     phase_qos,
     qos_profile,
     run,
+    take,
 )
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
 from rcbht_introspection.nodes.params import SegmenterConfig, word_topics
@@ -121,12 +122,7 @@ class SegmenterNode(Node):
         The executor serves ready subscriptions in a fixed order, so an event published just
         before a sample could otherwise be handled after it (one sample late).
         """
-        sub = self.phase_sub
-        while True:
-            with sub.handle:
-                taken = sub.handle.take_message(sub.msg_type, sub.raw)
-            if taken is None:
-                return
+        while (taken := take(self.phase_sub)) is not None:
             self.on_phase(*taken)
 
     def drain(self) -> None:
@@ -139,8 +135,7 @@ class SegmenterNode(Node):
         for _ in range(MAX_BURST):
             taken = False
             for other, sub in self.wrench_subs:
-                with sub.handle:
-                    got = sub.handle.take_message(sub.msg_type, sub.raw)
+                got = take(sub)
                 if got is not None:
                     self.sample(other, *got)
                     taken = True
