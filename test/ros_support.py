@@ -56,7 +56,7 @@ def node_command(module: str, params: dict[str, object]) -> list[str]:
 
     import yaml
 
-    args = [sys.executable, "-m", f"rcbht_introspection.nodes.{module}", "--ros-args"]
+    args = [sys.executable, "-m", "rcbht_introspection.nodes", module, "--ros-args"]
     for name, value in params.items():
         text = yaml.safe_dump(value, default_flow_style=True).strip()
         text = text.removesuffix("\n...").removesuffix("...").strip()

@@ -114,7 +114,7 @@ def test_bad_segmenter_parameter_from_file(tmp_path: Path, env: dict[str, str]) 
     params = tmp_path / "seg.yaml"
     params.write_text("segmenter_node:\n  ros__parameters:\n    arms: [L, R]\n")
     proc = subprocess.run(
-        [sys.executable, "-m", "rcbht_introspection.nodes.segmenter_node", "--ros-args",
+        [sys.executable, "-m", "rcbht_introspection.nodes", "segmenter_node", "--ros-args",
          "--params-file", str(params)],
         env=env, capture_output=True, text=True, timeout=60,
     )  # fmt: skip

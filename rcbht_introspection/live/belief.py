@@ -38,6 +38,8 @@ class Belief:
     phase: str = ""
     final: bool = False
     n_words: int = 0
+    blind: bool = False
+    """The window overlaps words that never arrived: judged UNKNOWN whatever the model says."""
 
 
 @dataclass
@@ -88,6 +90,11 @@ class BeliefTracker:
         self._issued = 0
         self._added = 0
         self.last_final: Belief | None = None
+        self.seen: dict[str, tuple[int, int]] = {}
+        """Per arm, (highest word seq, words received): the stream numbers its words 1, 2, ..."""
+        self.lost = 0
+        self.blind_until = -np.inf
+        """Windows starting before this stream time overlap lost words (a late join)."""
         self._ordered = True
         """Every axis sequence has non-decreasing starts and ends (lets windows bisect)."""
         self._axis_memo: AxisMemo | None = None
@@ -97,7 +104,9 @@ class BeliefTracker:
     def add_words(self, arm: str, words: Iterable[Word], now: float | None = None) -> None:
         """Add final words of `arm`; `now` is the stream time of the sample that finalised them."""
         self.arms.add(arm)
+        top, count = self.seen.get(arm, (0, 0))
         for w in words:
+            top, count = max(top, w.seq), count + 1
             seq = (
                 self.words.words.setdefault(w.arm, {})
                 .setdefault(w.level, {})
@@ -111,6 +120,7 @@ class BeliefTracker:
                 self.watermark[key] = w.end
             self.now = max(self.now, w.end)
             self._added += 1
+        self.seen[arm] = (top, count)
         if now is not None:
             self.now = max(self.now, now)
         if self.mode == "window" and self._added > 2000:
@@ -140,9 +150,29 @@ class BeliefTracker:
         self.now = max(self.now, t)
         return True
 
+    def account_losses(self) -> int:
+        """Words skipped in the streams' numbering since the last call (call once a batch is in).
+
+        A classifier that joined a running stream (or lost messages) misses words; a window that
+        starts before the newest evidence at that moment is judged UNKNOWN (`Belief.blind`), so
+        the sub-task under way is unknown until the next boundary and no verdict rests on part
+        of its words.
+        """
+        lost = sum(top - count for top, count in self.seen.values())
+        new = lost - self.lost
+        if new > 0:
+            self.lost = lost
+            self.blind_until = max(self.blind_until, self.now)
+        return max(new, 0)
+
     # --- output ------------------------------------------------------------------------------
     def classify(self, start: float, end: float, phase: str = "", final: bool = False) -> Belief:
         """Belief over the words overlapping [start, end] (UNKNOWN without words or model)."""
+        if start < self.blind_until:
+            probs = (0.0,) * len(self.classes)
+            return Belief(
+                UNKNOWN, self.classes, probs, start, end, self.mode, phase, final, blind=True
+            )
         if self.model is None:
             n = sum(
                 1

@@ -15,7 +15,6 @@ from functools import partial
 from rcbht_interfaces.msg import Belief as BeliefMsg
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
-from rclpy.node import Node
 from std_msgs.msg import String
 
 from rcbht_introspection.live.belief import (
@@ -25,50 +24,66 @@ from rcbht_introspection.live.belief import (
     StateFilter,
     load_subtask_model,
 )
-from rcbht_introspection.nodes.common import (
-    DrainedGroup,
-    declare_config,
-    phase_qos,
-    qos_profile,
-    run,
-    take,
+from rcbht_introspection.live.health import (
+    CounterWatch,
+    Health,
+    LatencyWindow,
+    classifier_health,
+    file_sha256,
 )
+from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import belief_msg, to_ns, words_from_msg
+from rcbht_introspection.nodes.draining import DrainedGroup, take
+from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import ClassifierConfig, word_topics
 from rcbht_introspection.taxonomy.words import LEVELS
 
 
-class ClassifierNode(Node):
+class ClassifierNode(ManagedNode):
     """Thin adapter: Words / Phase messages -> BeliefTracker -> Belief and /task_state."""
 
     def __init__(self) -> None:
-        super().__init__("classifier_node")
-        self.cfg = declare_config(self, ClassifierConfig)
-        cfg = self.cfg
+        super().__init__("classifier_node", ClassifierConfig)
         # predictions on one sample at a time: skip sklearn's per-call input validation
         sklearn_fast_predict()
-        model, why = load_subtask_model(cfg.model_file, cfg.expected_profile)
+        self.counts = {"words lost": 0, "sub-tasks judged unknown after a loss": 0}
+        self.watch = CounterWatch()
+        self.latency = LatencyWindow()
+
+    def configure(self, cfg: ClassifierConfig) -> None:
+        self.cfg = cfg
+        model, self.model_problem = load_subtask_model(cfg.model_file, cfg.expected_profile)
+        self.model_sha256 = file_sha256(cfg.model_file)
         if model is None:
-            self.get_logger().error(f"no usable model, /task_state stays {UNKNOWN!r}: {why}")
+            self.get_logger().error(
+                f"no usable model, /task_state stays {UNKNOWN!r}: {self.model_problem}"
+            )
         self.tracker = BeliefTracker(model, cfg.mode, cfg.window_s, end_phases=cfg.end_phases)
         self.stream: tuple[int, int] | None = None
         self.state = StateFilter(cfg.state_hold_s)
         self.reported_error: str | None = None
         self.batches: dict[tuple[str, int], tuple[int, int]] = {}
-        qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
-        self.state_pub = self.create_publisher(String, cfg.state_topic, qos)
-        self.belief_pub = self.create_publisher(BeliefMsg, cfg.belief_topic, qos)
-        # the inputs are taken by drain() (common.spin_draining), not by executor callbacks
+        self.trigger_ns: int | None = None  # earliest sample behind the evidence not yet classified
+        self.qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
+        self.state_pub = self.create_publisher(String, cfg.state_topic, self.qos)
+        self.belief_pub = self.create_publisher(BeliefMsg, cfg.belief_topic, self.qos)
+        self.cpu_at_start = time.process_time()
+        self.beliefs = 0
+
+    def activate(self) -> None:
+        cfg = self.cfg
+        # the inputs are taken by drain() (draining.spin_draining), not by executor callbacks
         drained = DrainedGroup()
         self.word_subs = [
             (
                 arm,
                 self.create_subscription(
-                    WordsMsg, topic, partial(self.ingest_words, arm), qos, callback_group=drained
+                    WordsMsg, topic, partial(self.ingest_words, arm), self.qos,
+                    callback_group=drained,
                 ),
             )
             for (arm, _), topic in word_topics(cfg.words_namespace, cfg.arms).items()
-        ]
+        ]  # fmt: skip
         self.phase_sub = self.create_subscription(
             PhaseMsg,
             cfg.phase_topic,
@@ -76,13 +91,46 @@ class ClassifierNode(Node):
             phase_qos(cfg.qos_reliability),
             callback_group=drained,
         )
-        self.trigger_ns: int | None = None  # earliest sample behind the evidence not yet classified
-        if cfg.publish_rate_hz > 0:
+        self.state_timer = (
             self.create_timer(1.0 / cfg.publish_rate_hz, self.publish_state)
+            if cfg.publish_rate_hz > 0
+            else None
+        )
         self.publish_state()
         self.get_logger().info(
             f"mode {cfg.mode}, model {cfg.model_file or '(none)'}, classes {list(self.tracker.classes)}"
         )
+
+    def deactivate(self) -> None:
+        for _, sub in self.word_subs:
+            self.destroy_subscription(sub)
+        self.destroy_subscription(self.phase_sub)
+        if self.state_timer is not None:
+            self.destroy_timer(self.state_timer)
+        self.word_subs = []
+        self.get_logger().info(
+            f"beliefs published {self.beliefs}, {self.counts}, "
+            f"CPU {time.process_time() - self.cpu_at_start:.2f} s after configure"
+        )
+
+    def cleanup(self) -> None:
+        self.destroy_publisher(self.state_pub)
+        self.destroy_publisher(self.belief_pub)
+
+    def health(self, period_s: float) -> list[Health]:
+        """Model, belief-update latency of the period, words lost to a late join."""
+        return [
+            classifier_health(
+                state=self.state_label,
+                model_file=self.cfg.model_file,
+                model_sha256=self.model_sha256,
+                model_problem=self.model_problem,
+                prediction_error=self.tracker.last_error,
+                latency=self.latency,
+                counts=self.counts,
+                watch=self.watch,
+            )
+        ]
 
     def _stream(self, origin_ns: int, stream_id: int) -> None:
         """A message of a new stream (new time origin or stream id): start a new session."""
@@ -149,18 +197,30 @@ class ClassifierNode(Node):
 
     def update(self, trigger_ns: int) -> None:
         """Publish finished sub-task verdicts, then the current belief and a changed state."""
+        t0 = time.perf_counter()
+        lost = self.tracker.account_losses()
+        if lost:
+            self.counts["words lost"] += lost
+            self.get_logger().warning(
+                f"{lost} words of this stream never arrived (joined late or lost): the sub-task "
+                f"under way is judged {UNKNOWN!r} until the next boundary"
+            )
         for final in self.tracker.take_finals():
             self.publish_belief(final, trigger_ns)
         belief = self.tracker.current()
         self.publish_belief(belief, trigger_ns)
         if self.state.update(self.tracker.now, belief.subtask):
             self.publish_state()
+        self.latency.add((time.perf_counter() - t0) * 1e3)
         error = self.tracker.last_error
         if error and error != self.reported_error:
             self.reported_error = error
             self.get_logger().error(f"model prediction failed, publishing {UNKNOWN!r}: {error}")
 
     def publish_belief(self, belief: Belief, trigger_ns: int) -> None:
+        if belief.final and belief.blind:
+            self.counts["sub-tasks judged unknown after a loss"] += 1
+        self.beliefs += 1
         self.belief_pub.publish(belief_msg(belief, time.time_ns(), trigger_ns))
 
     def publish_state(self) -> None:
@@ -177,9 +237,9 @@ def sklearn_fast_predict() -> None:
         pass
 
 
-def main(args: list[str] | None = None) -> int:
+def main(args: list[str] | None = None, stop: StopSignal | None = None) -> int:
     """Entry point (`ros2 run rcbht_introspection classifier_node`)."""
-    return run(ClassifierNode, "classifier_node", args)
+    return run(ClassifierNode, "classifier_node", args, stop or StopSignal.install())
 
 
 if __name__ == "__main__":

@@ -1,32 +1,31 @@
-"""What both nodes share: QoS from the config, parameter declaration, spinning with clean SIGINT."""
+"""What both nodes share: QoS, parameters, the managed (lifecycle) node, /diagnostics, run()."""
 
 from __future__ import annotations
 
 import contextlib
-import faulthandler
 import gc
-import signal
 import sys
 import threading
 import time
 from collections.abc import Callable
-from typing import Any, Protocol, TypeVar, runtime_checkable
+from typing import Any, TypeVar
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.callback_groups import CallbackGroup
-from rclpy.executors import (
-    ExternalShutdownException,
-    SingleThreadedExecutor,
-    TimeoutException,
-)
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerGuardCondition
-from rclpy.subscription import Subscription
+from rclpy.signals import SignalHandlerOptions
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.live.health import ERROR, Health
+from rcbht_introspection.nodes.conversions import diagnostic_array
+from rcbht_introspection.nodes.draining import spin_draining
+from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import config_from_parameters, defaults, descriptions
 
 T = TypeVar("T")
@@ -58,164 +57,177 @@ def phase_qos(reliability: str) -> QoSProfile:
     return qos
 
 
-def declare_config(node: Node, cls: type[T]) -> T:
-    """Declare one read-only parameter per config field and return the validated config."""
+def declare_parameters(node: Node, cls: type) -> None:
+    """Declare one parameter per config field (with its description); configure reads them."""
     texts = descriptions(cls)
-    values: dict[str, Any] = {}
     for name, default in defaults(cls).items():
-        descriptor = ParameterDescriptor(description=texts[name], read_only=True)
-        param = node.declare_parameter(name, default, descriptor)
-        values[name] = param.value
+        node.declare_parameter(name, default, ParameterDescriptor(description=texts[name]))
+
+
+def read_config(node: Node, cls: type[T]) -> T:
+    """The validated config from the node's current parameter values (InputError names one)."""
+    values = {name: node.get_parameter(name).value for name in defaults(cls)}
     return config_from_parameters(cls, values)
 
 
-HOUSEKEEPING_S = 0.02
-"""How often a draining node's other entities (parameter services, QoS events) are served."""
-HOUSEKEEPING_CALLBACKS = 16
-"""Most executor callbacks served per housekeeping round (the hot inputs must not wait long)."""
+DIAGNOSTICS_PERIOD_S = 1.0
+"""How often a node publishes its status on /diagnostics."""
 
 
-class DrainedGroup(CallbackGroup):
-    """Callback group of subscriptions that `spin_draining` takes itself; the executor skips them.
+class ManagedNode(LifecycleNode):
+    """A lifecycle node of ours: configure reads and validates the parameters of `config_class`.
 
-    Their QoS-event handlers (incompatible QoS, lost messages) still run through the executor.
+    Subclasses build their state and publishers in `configure`, subscribe in `activate`, stop
+    taking input in `deactivate` (which logs the statistics line) and drop everything in
+    `cleanup`. Parameters can change while the node is not active; they take effect at the next
+    configure (deactivate -> cleanup -> configure -> activate reloads a model file). The status
+    of `health()` goes to /diagnostics once a second in every state.
     """
 
-    def can_execute(self, entity: object) -> bool:
-        return not isinstance(entity, Subscription)
+    def __init__(self, name: str, config_class: type) -> None:
+        super().__init__(name)
+        self.config_class = config_class
+        declare_parameters(self, config_class)
+        autostart = self.declare_parameter(
+            "autostart",
+            True,
+            ParameterDescriptor(
+                description="configure and activate at start-up, without a manager"
+            ),
+        )
+        self.autostart = bool(autostart.value)
+        self.state_label = "unconfigured"
+        self.config_error = ""
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._diag_time = time.monotonic()
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
 
-    def beginning_execution(self, entity: object) -> bool:
-        return not isinstance(entity, Subscription)
+    # --- what a node implements -------------------------------------------------------------
+    def configure(self, cfg: Any) -> None:
+        """Build the state and the publishers from a validated config."""
 
-    def ending_execution(self, entity: object) -> None:
-        pass
+    def activate(self) -> None:
+        """Subscribe: input flows from now on."""
 
+    def deactivate(self) -> None:
+        """Stop taking input; log the statistics line."""
 
-@runtime_checkable
-class Draining(Protocol):
-    """A node whose high-rate inputs (subscriptions in a DrainedGroup) are taken by `drain`."""
+    def cleanup(self) -> None:
+        """Destroy the publishers, drop the state."""
 
-    def drain(self) -> None:
-        """Take and handle every message already delivered on the drained subscriptions."""
+    def health(self, period_s: float) -> list[Health]:
+        """Statuses for /diagnostics covering the last `period_s` seconds."""
+        return []
 
-
-def take(sub: Subscription) -> tuple[Any, Any] | None:
-    """The next delivered message of `sub` as (message, info), or None: what drain() loops on."""
-    with sub.handle:
-        return sub.handle.take_message(sub.msg_type, sub.raw)
-
-
-def serve_ready(executor: SingleThreadedExecutor, limit: int) -> None:
-    """Run up to `limit` callbacks the executor finds ready now, without blocking."""
-    for _ in range(limit):
+    # --- lifecycle ----------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
-            handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0)
-        except TimeoutException:
-            return
-        handler()
-        if handler.exception() is not None:
-            raise handler.exception()
+            cfg = read_config(self, self.config_class)
+            self.configure(cfg)
+        except InputError as exc:
+            self.config_error = str(exc)
+            self.get_logger().error(f"configure failed: {exc}")
+            return TransitionCallbackReturn.FAILURE
+        self.config_error = ""
+        self.state_label = "inactive"
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.activate()
+        self.state_label = "active"
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.deactivate()
+        self.state_label = "inactive"
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.cleanup()
+        self.state_label = "unconfigured"
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self.state_label == "active":
+            self.deactivate()
+        if self.state_label in ("active", "inactive"):
+            self.cleanup()
+        self.state_label = "finalized"
+        return TransitionCallbackReturn.SUCCESS
+
+    def finish(self) -> None:
+        """The process ends: shut down from whatever state the node is in (logs its statistics)."""
+        if self.state_label != "finalized":
+            self.trigger_shutdown()
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        if self.state_label == "active":
+            return SetParametersResult(
+                successful=False,
+                reason="parameters take effect at configure: deactivate and clean up first",
+            )
+        return SetParametersResult(successful=True)
+
+    def _publish_diagnostics(self) -> None:
+        now = time.monotonic()
+        period, self._diag_time = now - self._diag_time, now
+        statuses = self.health(period) if self.state_label in ("inactive", "active") else []
+        if self.config_error:
+            statuses.insert(0, Health(f"{self.get_name()}: configure", ERROR, self.config_error))
+        if not statuses:
+            statuses.append(Health(f"{self.get_name()}: lifecycle", 0, self.state_label))
+        self.diagnostics_pub.publish(diagnostic_array(statuses, self.get_clock().now().to_msg()))
 
 
-def spin_draining(executor: SingleThreadedExecutor, node: Node) -> None:
-    """Wait on the drained subscriptions and timers with one small wait set; drain on each wake-up.
+def run(
+    node_factory: Callable[[], ManagedNode], name: str, args: list[str] | None, stop: StopSignal
+) -> int:
+    """Create the node, bring it up (autostart), spin it until `stop`, shut it down in order.
 
-    rclpy's executor rebuilds a wait set over every entity of the node (parameter services,
-    QoS events, ...) on each wake-up: ~0.3 ms of CPU per 1 kHz sample. This loop is rclpy's own
-    `wait_for_message` pattern; timers and the rest still run through the executor, when a timer
-    is due and at least every HOUSEKEEPING_S.
+    rclpy's signal handlers are not installed: SIGINT/SIGTERM only set `stop` (lifetime.py),
+    so the context stays valid until the node has shut down and logged its last line.
     """
-    context = executor.context
-    if not isinstance(node, Draining):
-        raise TypeError(f"{type(node).__name__} has no drain()")
-    subs = [sub for sub in node.subscriptions if isinstance(sub.callback_group, DrainedGroup)]
-    timers = list(node.timers)
-    sigint = SignalHandlerGuardCondition(context)
-    wait_set = _rclpy.WaitSet(len(subs), 1, len(timers), 0, 0, 0, context.handle)
-    timeout_ns = int(HOUSEKEEPING_S * 1e9)
-    due = time.monotonic()
-    try:
-        with contextlib.ExitStack() as handles:
-            for entity in (*subs, *timers, sigint):
-                handles.enter_context(entity.handle)
-            while context.ok():
-                wait_set.clear_entities()
-                for sub in subs:
-                    wait_set.add_subscription(sub.handle)
-                for timer in timers:
-                    wait_set.add_timer(timer.handle)
-                wait_set.add_guard_condition(sigint.handle)
-                wait_set.wait(timeout_ns)
-                if not context.ok():
-                    break
-                node.drain()
-                now = time.monotonic()
-                if now >= due or wait_set.get_ready_entities("timer"):
-                    due = now + HOUSEKEEPING_S
-                    serve_ready(executor, HOUSEKEEPING_CALLBACKS)
-        raise ExternalShutdownException()
-    finally:
-        sigint.destroy()
-
-
-def _stop_quietly(signum: int, frame: object) -> None:
-    """Python's part of SIGINT: nothing. rclpy's handler shuts the context down and wakes the node."""
-
-
-def run(node_factory: Callable[[], Node], name: str, args: list[str] | None = None) -> int:
-    """Create the node, spin it until SIGINT/SIGTERM, shut down cleanly.
-
-    A `Draining` node is spun by `spin_draining`, any other by a SingleThreadedExecutor.
-    """
-    # rclpy chains SIGINT to Python's handler, whose KeyboardInterrupt can surface inside an
-    # executor callback and leave rclpy objects half released (a classifier segfaulted at exit
-    # once in ~30 replay runs); the node stops where its spin sees the context shut down instead
-    signal.signal(signal.SIGINT, _stop_quietly)
-    faulthandler.enable()  # a crash in native code leaves the Python stack in the node log
-    rclpy.init(args=args)
+    if stop.requested:  # stopped while the modules were imported: nothing was started
+        return 0
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     executor = None
-    code = 0
     try:
         node = node_factory()
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        if node.autostart and not stop.requested:
+            if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                # one line naming the parameter; the node never started
+                print(f"[{name}] error: {node.config_error}", file=sys.stderr, flush=True)
+                return 2
+            node.trigger_activate()
         # start-up objects (rclpy, NumPy, scikit-learn, the model) live until exit: keep them
         # out of the cyclic collector, whose full passes over them stall a 1 kHz callback
         gc.collect()
         gc.freeze()
-        if isinstance(node, Draining):
-            spin_draining(executor, node)
-        else:
-            executor.spin()
-    except InputError as exc:
-        # one line naming the parameter; the node never started
-        print(f"[{name}] error: {exc}", file=sys.stderr, flush=True)
-        code = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        spin_draining(executor, node, stop)
     finally:
+        if node is not None:
+            node.finish()
         if executor is not None:
             executor.shutdown(timeout_sec=0)  # releases what its last wait still holds
         if node is not None:
-            closer = getattr(node, "close", None)
-            if closer is not None:
-                closer()
             node.destroy_node()
         rclpy.try_shutdown()
-    return code
+        stop.exiting()
+    return 0
 
 
 class RosSession:
     """An rclpy context + node spun by a background SingleThreadedExecutor (for CLI tools).
 
-    Signal handlers stay Python's, so Ctrl-C raises KeyboardInterrupt in the caller.
+    rclpy installs no signal handler; the caller decides what SIGINT does (a StopSignal, or
+    Python's KeyboardInterrupt). `close` stops the spin thread before anything is destroyed.
     """
 
     def __init__(self, name: str, domain_id: int | None = None) -> None:
-        from rclpy.context import Context
-        from rclpy.signals import SignalHandlerOptions
-
         self.context = Context()
         kwargs: dict[str, Any] = {"context": self.context}
         if domain_id is not None:
@@ -224,18 +236,23 @@ class RosSession:
         self.node = Node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, daemon=True)
         self._thread.start()
 
     def _spin(self) -> None:
-        with contextlib.suppress(Exception):  # the context was shut down under it
-            self.executor.spin()
+        # a bounded wait, so the thread sees the stop request without the context going away
+        with contextlib.suppress(Exception):
+            while not self._stop.is_set() and self.context.ok():
+                self.executor.spin_once(timeout_sec=0.05)
 
     def close(self) -> None:
-        self.executor.shutdown(timeout_sec=2.0)
+        """Stop the spin thread, then destroy the node and shut the context down, in that order."""
+        self._stop.set()
+        self._thread.join()
+        self.executor.shutdown(timeout_sec=0)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
-        self._thread.join(timeout=2.0)
 
     def __enter__(self) -> RosSession:
         return self

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.msg import Belief as BeliefMsg
 from rcbht_interfaces.msg import Phase as PhaseMsg
@@ -12,6 +13,7 @@ from rcbht_interfaces.msg import Word as WordMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 
 from rcbht_introspection.live.belief import Belief
+from rcbht_introspection.live.health import Health
 from rcbht_introspection.live.segmenter import PhaseEvent
 from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
 
@@ -147,3 +149,20 @@ def belief_from_msg(msg: BeliefMsg) -> Belief:
         final=msg.final,
         n_words=int(msg.n_words),
     )
+
+
+def diagnostic_array(statuses: Sequence[Health], stamp: Time) -> DiagnosticArray:
+    """Health records -> one diagnostic_msgs/DiagnosticArray (hardware_id: this host's node)."""
+    msg = DiagnosticArray()
+    msg.header.stamp = stamp
+    msg.status = [
+        DiagnosticStatus(
+            level=bytes([h.level]),
+            name=h.name,
+            message=h.message,
+            hardware_id="rcbht_introspection",
+            values=[KeyValue(key=k, value=v) for k, v in h.values],
+        )
+        for h in statuses
+    ]
+    return msg

@@ -103,7 +103,7 @@ def write_params(path: Path, cls: type, values: dict[str, Any]) -> Path:
 
 
 class NodeProcess:
-    """One node as a child process (`python -m rcbht_introspection.nodes.<module>`)."""
+    """One node as a child process (`python -m rcbht_introspection.nodes <module>`)."""
 
     def __init__(self, module: str, params: Path, env: dict[str, str], log: Path) -> None:
         self.name = module
@@ -119,7 +119,8 @@ class NodeProcess:
             [
                 sys.executable,
                 "-m",
-                f"rcbht_introspection.nodes.{module}",
+                "rcbht_introspection.nodes",
+                module,
                 "--ros-args",
                 "--params-file",
                 str(params),

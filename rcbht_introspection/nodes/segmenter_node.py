@@ -17,20 +17,15 @@ from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from rclpy.event_handler import PublisherEventCallbacks
-from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
+from rcbht_introspection.live.health import ArmHealth, CounterWatch, Health, events_health
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
-from rcbht_introspection.nodes.common import (
-    DrainedGroup,
-    declare_config,
-    phase_qos,
-    qos_profile,
-    run,
-    take,
-)
+from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
+from rcbht_introspection.nodes.draining import DrainedGroup, take
+from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import SegmenterConfig, word_topics
 from rcbht_introspection.taxonomy.words import LEVELS
 
@@ -53,13 +48,14 @@ def wrench_of_cdr(raw: bytes) -> tuple[int, tuple[float, ...]]:
     return sec * 1_000_000_000 + nanosec, _CDR_WRENCH.unpack_from(raw, off)
 
 
-class SegmenterNode(Node):
+class SegmenterNode(ManagedNode):
     """Thin adapter: messages in -> SegmenterSession -> Words / Phase messages out."""
 
     def __init__(self) -> None:
-        super().__init__("segmenter_node")
-        self.cfg = declare_config(self, SegmenterConfig)
-        cfg = self.cfg
+        super().__init__("segmenter_node", SegmenterConfig)
+
+    def configure(self, cfg: SegmenterConfig) -> None:
+        self.cfg = cfg
         factory = arm_stream_factory(
             cfg.taxonomy_profile,
             cfg.taxonomy_config_file,
@@ -74,14 +70,16 @@ class SegmenterNode(Node):
             hold_s=cfg.event_hold_s,
             max_hold_s=cfg.event_max_hold_s,
         )
-        qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
+        self.arm_health = {arm: ArmHealth(arm) for arm in cfg.arms}
+        self.event_watch = CounterWatch()
+        self.qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         topics = word_topics(cfg.words_namespace, cfg.arms)
         # no default QoS-event handlers on the outputs: each is a waitable that the executor adds
         # to its wait set on every wake-up (1-2 kHz); the input subscriptions keep theirs
         quiet = PublisherEventCallbacks(use_default_callbacks=False)
         self.word_pubs = {
             (arm, level): self.create_publisher(
-                WordsMsg, topics[(arm, level.value + "s")], qos, event_callbacks=quiet
+                WordsMsg, topics[(arm, level.value + "s")], self.qos, event_callbacks=quiet
             )
             for arm in cfg.arms
             for level in LEVELS
@@ -89,32 +87,44 @@ class SegmenterNode(Node):
         self.phase_pub = self.create_publisher(
             PhaseMsg, cfg.applied_phase_topic, phase_qos(cfg.qos_reliability), event_callbacks=quiet
         )
-        # the inputs are taken by drain() (common.spin_draining), not by executor callbacks
+        self.cpu_at_start = time.process_time()
+
+    def activate(self) -> None:
+        cfg = self.cfg
+        # the inputs are taken by drain() (draining.spin_draining), not by executor callbacks
         drained = DrainedGroup()
         self.wrench_subs = [
             (
                 arm,
                 # raw CDR: decoding six doubles and a stamp beats building message objects
                 self.create_subscription(
-                    WrenchStamped,
-                    topic,
-                    partial(self.sample, arm),
-                    qos,
-                    raw=True,
+                    WrenchStamped, topic, partial(self.sample, arm), self.qos, raw=True,
                     callback_group=drained,
                 ),
             )
             for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True)
-        ]
+        ]  # fmt: skip
         self.phase_sub = self.create_subscription(
-            String, cfg.phase_topic, self.on_phase, qos, callback_group=drained
+            String, cfg.phase_topic, self.on_phase, self.qos, callback_group=drained
         )
-        self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
-        self.cpu_at_start = time.process_time()
+        self.flush_timer = self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
         self.get_logger().info(
             f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
             f"profile {cfg.taxonomy_profile}, stream {cfg.stream_profile}"
         )
+
+    def deactivate(self) -> None:
+        for _, sub in self.wrench_subs:
+            self.destroy_subscription(sub)
+        self.destroy_subscription(self.phase_sub)
+        self.destroy_timer(self.flush_timer)
+        self.wrench_subs = []
+        self.log_statistics()
+
+    def cleanup(self) -> None:
+        for pub in (*self.word_pubs.values(), self.phase_pub):
+            self.destroy_publisher(pub)
+        self.word_pubs = {}
 
     def take_phases(self) -> None:
         """Handle /task_phase events already delivered, before the next wrench sample.
@@ -178,8 +188,8 @@ class SegmenterNode(Node):
         if self.session.pending and idle:
             self.publish(self.session.flush(time.time_ns()))
 
-    def close(self) -> None:
-        """Log what the node did (samples, rejections, CPU time) when it shuts down."""
+    def log_statistics(self) -> None:
+        """Log what the node did (samples, rejections, CPU time): its last line when it stops."""
         counts = {arm: (c.accepted, c.rejected_total) for arm, c in self.session.counts.items()}
         self.get_logger().info(
             f"samples (accepted, rejected) per arm {counts}, unknown events "
@@ -191,6 +201,7 @@ class SegmenterNode(Node):
         """One Words message per batch and level with words (every level at stream end), then events."""
         for batch in out.batches:
             counts = self.session.counts[batch.arm]
+            self.arm_health[batch.arm].words(batch.stream_id, batch.words)
             per_level = {level: [w for w in batch.words if w.level == level] for level in LEVELS}
             levels = [lv for lv in LEVELS if per_level[lv] or batch.end_of_stream]
             for level in levels:
@@ -211,10 +222,35 @@ class SegmenterNode(Node):
         for event in out.phases:
             self.phase_pub.publish(phase_msg(event))
 
+    def health(self, period_s: float) -> list[Health]:
+        """Per arm intake (rate, accepted/rejected, gaps, finality backlog), then the events."""
+        out = []
+        for arm, health in self.arm_health.items():
+            st = self.session.state[arm]
+            counts = self.session.counts[arm]
+            intake = vars(st.stream.counters)  # type: ignore[attr-defined]
+            out.append(
+                health.report(
+                    period_s,
+                    counts.accepted,
+                    counts.rejected,
+                    intake,
+                    st.last_t,
+                    self.state_label == "active",
+                )
+            )
+        events = {
+            "unknown events": self.session.unknown_phases,
+            "late events": self.session.late_phases,
+            "pending events": len(self.session.pending),
+        }
+        out.append(events_health("segmenter_node", events, self.event_watch))
+        return out
 
-def main(args: list[str] | None = None) -> int:
+
+def main(args: list[str] | None = None, stop: StopSignal | None = None) -> int:
     """Entry point (`ros2 run rcbht_introspection segmenter_node`)."""
-    return run(SegmenterNode, "segmenter_node", args)
+    return run(SegmenterNode, "segmenter_node", args, stop or StopSignal.install())
 
 
 if __name__ == "__main__":

@@ -1,0 +1,32 @@
+"""`python -m rcbht_introspection.nodes NODE [--ros-args ...]`: start segmenter_node or classifier_node.
+
+The stop handlers go in before the node's modules are imported, so SIGINT/SIGTERM at any moment
+of start-up end the process cleanly (exit 0, no traceback).
+"""
+
+from __future__ import annotations
+
+import sys
+
+from rcbht_introspection.nodes.lifetime import StopSignal
+
+NODES = ("segmenter_node", "classifier_node")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the node named by the first argument; the rest are its (ROS) arguments."""
+    argv = sys.argv[1:] if argv is None else argv
+    stop = StopSignal.install()
+    if not argv or argv[0] not in NODES:
+        print(f"usage: python -m rcbht_introspection.nodes {{{','.join(NODES)}}} [--ros-args ...]")
+        return 2
+    name, args = argv[0], argv[1:]
+    if name == "segmenter_node":
+        from rcbht_introspection.nodes.segmenter_node import main as node_main
+    else:
+        from rcbht_introspection.nodes.classifier_node import main as node_main
+    return node_main(args, stop)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,123 @@
+"""The draining spin: the one place that uses rclpy's private API (checked against rclpy 7.1.6).
+
+rclpy's executor rebuilds a wait set over every entity of the node (parameter and lifecycle
+services, QoS events, ...) on each wake-up: ~0.3 ms of CPU per 1 kHz sample. `spin_draining`
+waits on the high-rate subscriptions (those in a DrainedGroup) and the timers with one small wait
+set, as rclpy's own `wait_for_message` does, and lets the node take whole bursts in `drain()`.
+Timers, services and QoS events still run through the executor, when a timer is due and at least
+every HOUSEKEEPING_S. test/test_draining.py pins the rclpy version this was verified with.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+from typing import Any, Protocol, runtime_checkable
+
+from rclpy.callback_groups import CallbackGroup
+from rclpy.executors import Executor, TimeoutException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
+
+from rcbht_introspection.nodes.lifetime import StopSignal
+
+VERIFIED_RCLPY = "7.1.6"
+"""The rclpy release whose private WaitSet / take_message API this module was verified with."""
+HOUSEKEEPING_S = 0.02
+"""How often a draining node's other entities (services, QoS events) are served; also the
+longest a stop request waits to be seen."""
+HOUSEKEEPING_CALLBACKS = 16
+"""Most executor callbacks served per housekeeping round (the hot inputs must not wait long)."""
+
+
+class DrainedGroup(CallbackGroup):
+    """Callback group of subscriptions that `spin_draining` takes itself; the executor skips them.
+
+    Their QoS-event handlers (incompatible QoS, lost messages) still run through the executor.
+    """
+
+    def can_execute(self, entity: object) -> bool:
+        return not isinstance(entity, Subscription)
+
+    def beginning_execution(self, entity: object) -> bool:
+        return not isinstance(entity, Subscription)
+
+    def ending_execution(self, entity: object) -> None:
+        pass
+
+
+@runtime_checkable
+class Draining(Protocol):
+    """A node whose high-rate inputs (subscriptions in a DrainedGroup) are taken by `drain`."""
+
+    def drain(self) -> None:
+        """Take and handle every message already delivered on the drained subscriptions."""
+
+
+def take(sub: Subscription) -> tuple[Any, Any] | None:
+    """The next delivered message of `sub` as (message, info), or None: what drain() loops on."""
+    with sub.handle:
+        return sub.handle.take_message(sub.msg_type, sub.raw)
+
+
+def serve_ready(executor: Executor, limit: int) -> None:
+    """Run up to `limit` callbacks the executor finds ready now, without blocking."""
+    for _ in range(limit):
+        try:
+            handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0)
+        except TimeoutException:
+            return
+        handler()
+        if handler.exception() is not None:
+            raise handler.exception()
+
+
+def _entities(node: Node) -> tuple[tuple[Subscription, ...], tuple[Timer, ...]]:
+    """The drained subscriptions and the timers of `node` now (lifecycle transitions change them)."""
+    subs = tuple(s for s in node.subscriptions if isinstance(s.callback_group, DrainedGroup))
+    return subs, tuple(node.timers)
+
+
+def spin_draining(executor: Executor, node: Node, stop: StopSignal) -> None:
+    """Spin `node` until `stop` is requested or the context shuts down; drain on each wake-up."""
+    context = executor.context
+    if not isinstance(node, Draining):
+        raise TypeError(f"{type(node).__name__} has no drain()")
+    timeout_ns = int(HOUSEKEEPING_S * 1e9)
+    due = time.monotonic()
+    entities: tuple[tuple[Subscription, ...], tuple[Timer, ...]] | None = None
+    with contextlib.ExitStack() as outer:
+        handles = outer.enter_context(contextlib.ExitStack())
+        wait_set = None
+        while context.ok() and not stop.requested:
+            now_entities = _entities(node)
+            if now_entities != entities:
+                # activate/deactivate created or destroyed subscriptions: a new wait set; the
+                # handles held so far are released (a destroyed entity goes away now)
+                handles.close()
+                entities = now_entities
+                subs, timers = entities
+                for entity in (*subs, *timers):
+                    handles.enter_context(entity.handle)
+                wait_set = _rclpy.WaitSet(len(subs), 0, len(timers), 0, 0, 0, context.handle)
+            assert wait_set is not None
+            subs, timers = entities
+            wait_set.clear_entities()
+            for sub in subs:
+                wait_set.add_subscription(sub.handle)
+            for timer in timers:
+                wait_set.add_timer(timer.handle)
+            if subs or timers:
+                wait_set.wait(timeout_ns)
+            else:  # rcl refuses an empty wait set
+                stop.wait(HOUSEKEEPING_S)
+            if stop.requested or not context.ok():
+                break
+            if subs:
+                node.drain()
+            now = time.monotonic()
+            if now >= due or (timers and wait_set.get_ready_entities("timer")):
+                due = now + HOUSEKEEPING_S
+                serve_ready(executor, HOUSEKEEPING_CALLBACKS)

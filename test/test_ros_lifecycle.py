@@ -1,0 +1,298 @@
+"""Managed nodes over real DDS: lifecycle transitions, model reload, /diagnostics, a restarted classifier."""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import pytest
+from ros_support import node_command, require_learn, require_ros, require_stream, ros_env, stop
+
+pytestmark = pytest.mark.ros
+BASE_NS = 1_700_000_000 * 10**9
+
+
+@pytest.fixture
+def env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
+    """Isolated ROS environment for the node processes and for this test process."""
+    require_ros()
+    values = ros_env(tmp_path)
+    for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR", "FASTRTPS_DEFAULT_PROFILES_FILE"):
+        monkeypatch.setenv(key, values[key])
+    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
+    return values
+
+
+def wait_for(condition, timeout: float = 20.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
+
+
+def start(module: str, params: dict[str, object], env: dict[str, str], log: Path):
+    import subprocess
+
+    with log.open("w") as out:
+        return subprocess.Popen(
+            node_command(module, params), env=env, stdout=out, stderr=subprocess.STDOUT
+        )
+
+
+class Lifecycle:
+    """A lifecycle manager for one node: change_state / get_state service calls."""
+
+    def __init__(self, ros, node: str) -> None:
+        from lifecycle_msgs.srv import ChangeState, GetState
+
+        self.ros = ros
+        self.change = ros.node.create_client(ChangeState, f"/{node}/change_state")
+        self.get = ros.node.create_client(GetState, f"/{node}/get_state")
+        assert self.change.wait_for_service(20.0) and self.get.wait_for_service(20.0)
+
+    def state(self) -> str:
+        from lifecycle_msgs.srv import GetState
+
+        future = self.get.call_async(GetState.Request())
+        assert wait_for(future.done, 10)
+        return future.result().current_state.label
+
+    def transition(self, label: str) -> bool:
+        from lifecycle_msgs.msg import Transition
+        from lifecycle_msgs.srv import ChangeState
+
+        ids = {
+            "configure": Transition.TRANSITION_CONFIGURE,
+            "activate": Transition.TRANSITION_ACTIVATE,
+            "deactivate": Transition.TRANSITION_DEACTIVATE,
+            "cleanup": Transition.TRANSITION_CLEANUP,
+        }
+        future = self.change.call_async(ChangeState.Request(transition=Transition(id=ids[label])))
+        assert wait_for(future.done, 20)
+        return bool(future.result().success)
+
+
+class DiagnosticsProbe:
+    """Keeps the newest /diagnostics status per status name."""
+
+    def __init__(self, ros) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        self.latest: dict[str, object] = {}
+        ros.node.create_subscription(DiagnosticArray, "/diagnostics", self._on, 50)
+
+    def _on(self, msg) -> None:
+        for status in msg.status:
+            self.latest[status.name] = status
+
+    def values(self, name: str) -> dict[str, str]:
+        status = self.latest[name]
+        return {kv.key: kv.value for kv in status.values}  # type: ignore[attr-defined]
+
+
+def toy_model(path: Path, classes: tuple[str, str]) -> Path:
+    """A small sub-task model trained on hand-made words (two classes)."""
+    from rcbht_introspection.grammar.split import SubtaskSample
+    from rcbht_introspection.learn.models import save_model, train_model
+    from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
+
+    samples = []
+    for i, (subtask, label) in enumerate([(classes[0], "bpos"), (classes[1], "cons")] * 3):
+        tw = TrialWords(name=f"t{i}")
+        tw.add(Word("Fz", Level.PRIMITIVE, label, 0.0, 1.0 + i, arm="R"))
+        samples.append(SubtaskSample(f"t{i}", subtask, 0.0, 1.0 + i, tw))
+    save_model(train_model(samples), path)
+    return path
+
+
+def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, str]) -> None:
+    """autostart:=false waits unconfigured; a new model file takes effect without a restart."""
+    require_learn()
+    from std_msgs.msg import String
+
+    from rcbht_introspection.live.health import file_sha256
+    from rcbht_introspection.nodes.common import RosSession
+
+    first = toy_model(tmp_path / "first.rcbht", ("approach", "mating"))
+    second = toy_model(tmp_path / "second.rcbht", ("approach", "rotation"))
+    log = tmp_path / "classifier.log"
+    params = {"model_file": str(first), "autostart": False, "publish_rate_hz": 20.0}
+    proc = start("classifier_node", params, env, log)
+    try:
+        with RosSession("manager", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+            states: list[str] = []
+            ros.node.create_subscription(String, "/task_state", lambda m: states.append(m.data), 10)
+            diag = DiagnosticsProbe(ros)
+            node = Lifecycle(ros, "classifier_node")
+            assert node.state() == "unconfigured"
+            time.sleep(0.3)
+            assert states == []  # nothing is published before activation
+            assert node.transition("configure") and node.state() == "inactive"
+            assert node.transition("activate") and node.state() == "active"
+            assert wait_for(lambda: len(states) >= 3), log.read_text()
+            assert wait_for(lambda: "classifier_node: belief" in diag.latest)
+            assert wait_for(
+                lambda: (
+                    diag.values("classifier_node: belief")["model sha256"]
+                    == file_sha256(str(first))
+                )
+            )
+            # parameters are refused while active, accepted once the node is cleaned up
+            from rclpy.parameter import Parameter
+            from rclpy.parameter_client import AsyncParameterClient
+
+            client = AsyncParameterClient(ros.node, "classifier_node")
+            assert client.wait_for_services(10)
+            refused = client.set_parameters([Parameter("model_file", value=str(second))])
+            assert wait_for(refused.done, 10)
+            assert not refused.result().results[0].successful
+            assert node.transition("deactivate") and node.state() == "inactive"
+            assert node.transition("cleanup") and node.state() == "unconfigured"
+            accepted = client.set_parameters([Parameter("model_file", value=str(second))])
+            assert wait_for(accepted.done, 10) and accepted.result().results[0].successful
+            assert node.transition("configure") and node.transition("activate")
+            assert wait_for(
+                lambda: (
+                    diag.values("classifier_node: belief")["model sha256"]
+                    == file_sha256(str(second))
+                )
+            ), log.read_text()
+            assert diag.values("classifier_node: belief")["model file"] == str(second)
+            assert proc.poll() is None  # the same process all along
+    finally:
+        code = stop(proc)
+    text = log.read_text()
+    assert code == 0, text
+    assert "classes ['approach', 'mating']" in text and "classes ['approach', 'rotation']" in text
+    assert "Traceback" not in text
+
+
+def test_segmenter_diagnostics_report_rate_and_rejections(
+    tmp_path: Path, env: dict[str, str]
+) -> None:
+    """/diagnostics: per-arm rate and counters; WARN with a one-line reason when samples are rejected."""
+    require_stream()
+    from geometry_msgs.msg import WrenchStamped
+
+    from rcbht_introspection.nodes.common import RosSession, qos_profile
+    from rcbht_introspection.nodes.conversions import to_time
+
+    log = tmp_path / "segmenter.log"
+    proc = start("segmenter_node", {}, env, log)
+    try:
+        with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+            diag = DiagnosticsProbe(ros)
+            wrench = ros.node.create_publisher(
+                WrenchStamped, "/wrench", qos_profile(1000, "reliable")
+            )
+            assert wait_for(lambda: wrench.get_subscription_count() > 0), log.read_text()
+            assert wait_for(lambda: "segmenter_node: arm R" in diag.latest), log.read_text()
+            warned = []
+
+            def sample(i: int, value: float) -> None:
+                msg = WrenchStamped()
+                msg.header.stamp = to_time(BASE_NS + i * 2_000_000)
+                msg.wrench.force.z = value
+                wrench.publish(msg)
+
+            for i in range(1500):  # ~3 s of 500 Hz
+                sample(i, float("nan") if i == 700 else math.sin(i / 50))
+                status = diag.latest.get("segmenter_node: arm R")
+                if status is not None and status.level == b"\x01":  # type: ignore[attr-defined]
+                    warned.append(status.message)  # type: ignore[attr-defined]
+                time.sleep(0.002)
+            assert wait_for(lambda: bool(warned) or _warned(diag, warned), 5), log.read_text()
+            assert "1 rejected non_finite" in warned[0]
+            values = diag.values("segmenter_node: arm R")
+            assert int(values["samples accepted"]) >= 1000
+            assert int(values["samples rejected non_finite"]) == 1
+            assert "finality backlog primitive (s)" in values
+            # once nothing moves any more, the arm is OK again
+            assert wait_for(lambda: diag.latest["segmenter_node: arm R"].level == b"\x00", 5)  # type: ignore[attr-defined]
+    finally:
+        code = stop(proc)
+    assert code == 0, log.read_text()
+
+
+def _warned(diag: DiagnosticsProbe, warned: list[str]) -> bool:
+    status = diag.latest.get("segmenter_node: arm R")
+    if status is not None and status.level == b"\x01":  # type: ignore[attr-defined]
+        warned.append(status.message)  # type: ignore[attr-defined]
+    return bool(warned)
+
+
+def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundary(
+    tmp_path: Path, env: dict[str, str]
+) -> None:
+    """Restarted mid-sub-task: that sub-task's verdict is 'unknown', the next one is judged."""
+    require_stream()
+    require_learn()
+    from rcbht_interfaces.msg import Belief
+    from std_msgs.msg import String
+
+    from rcbht_introspection.nodes.common import RosSession, qos_profile
+
+    model = toy_model(tmp_path / "model.rcbht", ("approach", "rotation"))
+    seg_log = tmp_path / "segmenter.log"
+    seg = start("segmenter_node", {"stream_profile": "causal"}, env, seg_log)
+    params = {"model_file": str(model)}
+    first_log, second_log = tmp_path / "classifier1.log", tmp_path / "classifier2.log"
+    first = start("classifier_node", params, env, first_log)
+    second = None
+    try:
+        with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+            from geometry_msgs.msg import WrenchStamped
+
+            from rcbht_introspection.nodes.conversions import to_time
+
+            qos = qos_profile(1000, "reliable")
+            finals: list[Belief] = []
+            ros.node.create_subscription(
+                Belief, "/rcbht/belief", lambda m: finals.append(m) if m.final else None, qos
+            )
+            diag = DiagnosticsProbe(ros)
+            wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
+            phase = ros.node.create_publisher(String, "/task_phase", qos)
+            assert wait_for(lambda: wrench.get_subscription_count() > 0), seg_log.read_text()
+            assert wait_for(lambda: phase.get_subscription_count() > 0), seg_log.read_text()
+            i = 0
+
+            def send(n: int) -> None:
+                nonlocal i
+                for _ in range(n):
+                    msg = WrenchStamped()
+                    msg.header.stamp = to_time(BASE_NS + i * 5_000_000)
+                    msg.wrench.force.z = 10 * math.sin(i / 30) + (i // 200) * 3
+                    msg.wrench.torque.x = math.cos(i / 45)
+                    wrench.publish(msg)
+                    i += 1
+                    time.sleep(0.001)
+
+            phase.publish(String(data="approach"))
+            send(600)
+            assert stop(first) == 0, first_log.read_text()
+            send(200)  # words the restarted classifier never sees
+            second = start("classifier_node", params, env, second_log)
+            assert wait_for(lambda: ros.node.count_publishers("/rcbht/belief") > 0, 30)
+            assert wait_for(lambda: ros.node.count_subscribers("/rcbht/primitives") > 0, 30), (
+                second_log.read_text()
+            )
+            send(300)
+            phase.publish(String(data="rotation"))
+            send(600)
+            phase.publish(String(data="done"))
+            assert wait_for(lambda: len(finals) >= 2, 30), second_log.read_text()
+            assert wait_for(lambda: "classifier_node: belief" in diag.latest, 5)
+            lost = int(diag.values("classifier_node: belief")["words lost"])
+        approach, rotation = finals[-2], finals[-1]
+        assert (approach.phase, approach.subtask) == ("approach", "unknown")
+        assert rotation.phase == "rotation" and rotation.subtask in ("approach", "rotation")
+        assert lost > 0
+    finally:
+        codes = [stop(p) for p in (seg, second) if p is not None]
+    text = second_log.read_text()
+    assert "words of this stream never arrived" in text
+    assert codes == [0, 0], text
