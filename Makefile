@@ -6,10 +6,10 @@ PIP_QUIET := 2>&1 | { grep -v '^WARNING: Location' || true; }
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
-PKG_SOURCES := $(shell find rcbht_introspection config resource scripts -type f -not -name '*.pyc' 2>/dev/null) setup.py setup.cfg package.xml
+PKG_SOURCES := $(shell find rcbht_introspection config launch resource scripts -type f -not -name '*.pyc' 2>/dev/null) setup.py setup.cfg package.xml
 MSG_SOURCES := $(wildcard msg_defs/msg/*.msg msg_defs/CMakeLists.txt msg_defs/package.xml)
 
-.PHONY: setup demo test bench lint clean
+.PHONY: setup demo test bench soak lint clean
 
 setup: $(VENV)/.pkg-stamp
 
@@ -43,9 +43,13 @@ test: lint
 bench: setup
 	$(PY) -m rcbht_introspection.bench --out bench_out
 
+# one hour of 2 x 1 kHz wrench through both nodes (RCBHT_SOAK_SECONDS shortens it): bench_out/soak.json
+soak: setup
+	$(PY) -m rcbht_introspection.bench --only soak --out bench_out
+
 lint: setup
-	$(VENV)/bin/ruff check rcbht_introspection test
-	$(VENV)/bin/ruff format --check rcbht_introspection test
+	$(VENV)/bin/ruff check rcbht_introspection test launch
+	$(VENV)/bin/ruff format --check rcbht_introspection test launch
 
 clean:
 	rm -rf $(VENV) build *.egg-info

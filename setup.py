@@ -14,6 +14,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
         (f"share/{package_name}", ["package.xml"]),
         (f"share/{package_name}/config", glob("config/*.yaml") + glob("config/*.xml")),
+        (f"share/{package_name}/launch", glob("launch/*.launch.py")),
         # `ros2 run rcbht_introspection <node>` looks for lib/<package>/<executable>; data_files
         # put them there under colcon and under plain pip alike (console_scripts go to bin/ with pip)
         (f"lib/{package_name}", ["scripts/segmenter_node", "scripts/classifier_node"]),

@@ -7,6 +7,7 @@ classifier node, simulator, ...); this module turns a YAML mapping into such an 
 from __future__ import annotations
 
 import dataclasses
+import sys
 import types
 import typing
 from pathlib import Path
@@ -23,13 +24,18 @@ REPO_CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
 
 def config_path(name: str) -> Path:
     """Path of config/<name>: the source tree's copy, else the installed share/ copy."""
-    candidates = [REPO_CONFIG_DIR / name]
-    try:  # installed layout: <prefix>/share/rcbht_introspection/config
-        import sys
+    # installed: <prefix>/lib/pythonX.Y/site-packages/rcbht_introspection/config.py beside
+    # <prefix>/share/rcbht_introspection/config (colcon, pip --prefix; in a venv <prefix> = sys.prefix)
+    share = Path("share", "rcbht_introspection", "config", name)
+    here = Path(__file__).resolve().parents
+    candidates = [REPO_CONFIG_DIR / name, *([here[4] / share] if len(here) > 4 else [])]
+    try:  # the ament index of a sourced ROS workspace (AMENT_PREFIX_PATH)
+        from ament_index_python.packages import get_package_share_directory
 
-        candidates.append(Path(sys.prefix) / "share" / "rcbht_introspection" / "config" / name)
-    except Exception:  # pragma: no cover - defensive
+        candidates.append(Path(get_package_share_directory("rcbht_introspection"), "config", name))
+    except Exception:  # no ament_index_python, no AMENT_PREFIX_PATH, or not indexed
         pass
+    candidates.append(Path(sys.prefix) / share)
     for path in candidates:
         if path.is_file():
             return path

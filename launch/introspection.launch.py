@@ -1,0 +1,89 @@
+"""Both introspection nodes with their parameter files; one or two arms as a launch argument.
+
+ros2 launch rcbht_introspection introspection.launch.py arms:=two model_file:=$HOME/model.rcbht
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from typing import Any
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchContext, LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+PACKAGE = "rcbht_introspection"
+ARM_SETS = {"one": ["R"], "two": ["L", "R"]}
+
+
+def parse_arms(value: str) -> list[str]:
+    """Arm names from 'one', 'two' or a list such as '[L, R]'; '' keeps the files' arms."""
+    value = value.strip()
+    if not value or value in ARM_SETS:
+        return list(ARM_SETS.get(value, []))
+    arms = [arm for arm in re.split(r"[\s,'\"]+", value[1:-1]) if arm]
+    if not (value[0] + value[-1] == "[]" and 0 < len(arms) == len(set(arms)) <= 2):
+        raise ValueError(f"arms: expected one, two or a list such as [L, R], got {value!r}")
+    return arms
+
+
+def arm_parameters(arms: list[str]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Segmenter and classifier parameters for `arms` (no arms: the files' values stand)."""
+    if not arms:
+        return {}, {}
+    topics = ["/wrench"] if len(arms) == 1 else [f"/{arm}/wrench" for arm in arms]
+    return {"arms": arms, "wrench_topics": topics}, {"arms": arms}
+
+
+def launch_nodes(context: LaunchContext) -> list[Node]:
+    """The two nodes, their parameters computed from the launch arguments."""
+    segmenter, classifier = arm_parameters(parse_arms(LaunchConfiguration("arms").perform(context)))
+    model_file = LaunchConfiguration("model_file").perform(context)
+    if model_file:
+        classifier["model_file"] = os.path.abspath(os.path.expanduser(model_file))
+    # Plain Node actions: the nodes are lifecycle nodes whose `autostart` parameter (default
+    # true) takes them to active by themselves; set autostart: false to drive the transitions.
+    nodes = []
+    for name, overrides in (("segmenter_node", segmenter), ("classifier_node", classifier)):
+        params_file = LaunchConfiguration(name.replace("_node", "_params")).perform(context)
+        parameters = [params_file, overrides] if overrides else [params_file]
+        nodes.append(
+            Node(
+                package=PACKAGE, executable=name, name=name, output="screen", parameters=parameters
+            )
+        )
+    return nodes
+
+
+def generate_launch_description() -> LaunchDescription:
+    """Launch arguments arms, model_file, segmenter_params, classifier_params; both nodes."""
+    config = os.path.join(get_package_share_directory(PACKAGE), "config")
+    return LaunchDescription(
+        [
+            DeclareLaunchArgument(
+                "arms",
+                default_value="",
+                description="one ([R]), two ([L, R]: /L/wrench, /R/wrench) or a list such as "
+                "[L, R]; empty: as in the parameter files",
+            ),
+            DeclareLaunchArgument(
+                "model_file",
+                default_value="",
+                description="model file written by `rcbht train` (empty: as in classifier_params)",
+            ),
+            DeclareLaunchArgument(
+                "segmenter_params",
+                default_value=os.path.join(config, "segmenter.yaml"),
+                description="segmenter_node ROS parameter file",
+            ),
+            DeclareLaunchArgument(
+                "classifier_params",
+                default_value=os.path.join(config, "classifier.yaml"),
+                description="classifier_node ROS parameter file",
+            ),
+            OpaqueFunction(function=launch_nodes),
+        ]
+    )
