@@ -47,8 +47,8 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"rcbht {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        return 130
+    except KeyboardInterrupt:  # Ctrl-C: the command's finally blocks have cleaned up
+        return 0
 
 
 if __name__ == "__main__":

@@ -122,47 +122,51 @@ def cmd_info(args: argparse.Namespace) -> int:
 def cmd_replay(args: argparse.Namespace) -> int:
     from rcbht_introspection.io.bags import TRIAL_INFO_TOPIC, bag_messages
     from rcbht_introspection.nodes.common import RosSession
+    from rcbht_introspection.nodes.lifetime import StopSignal
     from rcbht_introspection.nodes.player import BagPlayer
 
+    stop = StopSignal.install()  # Ctrl-C ends the playback between two messages
     messages = list(bag_messages(args.bag))
     with RosSession("rcbht_bag_player") as ros:
         player = BagPlayer(ros.node)
         player.prepare(messages)
         live = [t for t in player.publishers if t != TRIAL_INFO_TOPIC]  # metadata: no one waits
-        if args.wait > 0 and not player.wait_for_subscribers(live, args.wait):
+        if args.wait > 0 and not player.wait_for_subscribers(live, args.wait, stop):
             print("note: not every topic has a subscriber; playing anyway")
         t0 = time.perf_counter()
-        n = player.play(messages, rate=args.rate)
+        n = player.play(messages, rate=args.rate, stop=stop.event)
         print(f"published {n} messages in {time.perf_counter() - t0:.2f} s (rate {args.rate}x)")
-        time.sleep(0.2)  # let the last messages leave before the participant goes away
+        stop.wait(0.2)  # let the last messages leave before the participant goes away
+    stop.exiting()
     return 0
 
 
 def cmd_record(args: argparse.Namespace) -> int:
     from rcbht_introspection.nodes.common import RosSession
+    from rcbht_introspection.nodes.lifetime import StopSignal
     from rcbht_introspection.nodes.player import RawRecorder
 
+    # SIGINT/SIGTERM end the recording where this loop checks, never inside a bag write
+    stop = StopSignal.install()
     with RosSession("rcbht_bag_recorder") as ros:
         recorder = RawRecorder(ros.node, args.out)
-        try:
-            types = recorder.resolve(args.topics, args.wait)
-            missing = [t for t in args.topics if ("/" + t.lstrip("/")) not in types]
-            if missing:
-                recorder.bag.abort()
-                raise InputError(f"topic(s) not seen within {args.wait} s: {', '.join(missing)}")
-            for topic, msgtype in sorted(types.items()):
-                recorder.subscribe(topic, msgtype)
+        types = recorder.resolve(args.topics, args.wait, stop)
+        missing = [t for t in args.topics if ("/" + t.lstrip("/")) not in types]
+        if missing and not stop.requested:
+            recorder.bag.abort()
+            raise InputError(f"topic(s) not seen within {args.wait} s: {', '.join(missing)}")
+        for topic, msgtype in sorted(types.items()):
+            recorder.subscribe(topic, msgtype)
+        if not stop.requested:
             print(
                 f"recording {', '.join(sorted(types))} to {args.out} (Ctrl-C to stop)", flush=True
             )
-            deadline = time.monotonic() + args.duration if args.duration > 0 else None
-            while deadline is None or time.monotonic() < deadline:
-                time.sleep(0.05)
-        except KeyboardInterrupt:
+        deadline = time.monotonic() + args.duration if args.duration > 0 else None
+        while not stop.wait(0.05) and (deadline is None or time.monotonic() < deadline):
             pass
-        if args.out.exists() or recorder.counts:
-            recorder.close()
+        recorder.close()
     print(json.dumps(recorder.counts))
+    stop.exiting()
     return 0
 
 

@@ -13,6 +13,7 @@ from rclpy.qos import QoSProfile
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import BagMessage, BagWriter
+from rcbht_introspection.nodes.lifetime import StopSignal
 
 
 def message_class(msgtype: str) -> type:
@@ -24,11 +25,16 @@ def message_class(msgtype: str) -> type:
         raise InputError(f"message type {msgtype} is not installed") from None
 
 
-def wait_until(condition: Callable[[], bool], timeout: float, poll: float = 0.02) -> bool:
-    """Poll `condition` until true or `timeout` seconds passed."""
+def wait_until(
+    condition: Callable[[], bool],
+    timeout: float,
+    poll: float = 0.02,
+    stop: StopSignal | None = None,
+) -> bool:
+    """Poll `condition` until true, `timeout` seconds passed or `stop` was requested."""
     deadline = time.monotonic() + timeout
     while not condition():
-        if time.monotonic() > deadline:
+        if time.monotonic() > deadline or (stop is not None and stop.requested):
             return False
         time.sleep(poll)
     return True
@@ -54,10 +60,16 @@ class BagPlayer:
         for m in messages:
             self.publisher(m.topic, m.msgtype)
 
-    def wait_for_subscribers(self, topics: Sequence[str], timeout: float = 20.0) -> bool:
+    def wait_for_subscribers(
+        self, topics: Sequence[str], timeout: float = 20.0, stop: StopSignal | None = None
+    ) -> bool:
         """True once each of `topics` has a matched subscriber."""
         pubs = [self.publishers[t] for t in topics if t in self.publishers]
-        return wait_until(lambda: all(p.get_subscription_count() > 0 for p in pubs), timeout)  # type: ignore[attr-defined]
+        return wait_until(
+            lambda: all(p.get_subscription_count() > 0 for p in pubs),  # type: ignore[attr-defined]
+            timeout,
+            stop=stop,
+        )
 
     def play(
         self,
@@ -97,6 +109,7 @@ class RawRecorder:
         self.bag = BagWriter(out)
         self.qos = qos
         self.counts: dict[str, int] = {}
+        self.closed = False
         self._lock = threading.Lock()
 
     def subscribe(self, topic: str, msgtype: str) -> None:
@@ -108,12 +121,16 @@ class RawRecorder:
             # (receive order across subscriptions depends on the executor)
             t_ns = info.get("source_timestamp") or time.time_ns()
             with self._lock:
+                if self.closed:  # arrived while the recording stopped: not in the bag
+                    return
                 self.bag.write_raw(topic, msgtype, t_ns, raw)
                 self.counts[topic] += 1
 
         self.node.create_subscription(cls, topic, on_message, self.qos, raw=True)
 
-    def resolve(self, topics: Sequence[str], timeout: float) -> dict[str, str]:
+    def resolve(
+        self, topics: Sequence[str], timeout: float, stop: StopSignal | None = None
+    ) -> dict[str, str]:
         """Type of each topic, from the ROS graph (waits up to `timeout` for them to appear)."""
         wanted = {t if t.startswith("/") else "/" + t for t in topics}
         found: dict[str, str] = {}
@@ -124,9 +141,12 @@ class RawRecorder:
                     found[name] = types[0]
             return wanted <= set(found)
 
-        wait_until(seen, timeout, poll=0.1)
+        wait_until(seen, timeout, poll=0.1, stop=stop)
         return found
 
     def close(self) -> None:
+        """Finish the bag (readable from now on); later messages are not written."""
         with self._lock:
-            self.bag.close()
+            if not self.closed:
+                self.closed = True
+                self.bag.close()
