@@ -1,0 +1,128 @@
+"""The pure parts of node health: /diagnostics statuses from counters, word-loss accounting."""
+
+from __future__ import annotations
+
+import math
+
+from rcbht_introspection.live.belief import UNKNOWN, BeliefTracker
+from rcbht_introspection.live.health import (
+    ERROR,
+    OK,
+    WARN,
+    ArmHealth,
+    CounterWatch,
+    LatencyWindow,
+    classifier_health,
+)
+from rcbht_introspection.taxonomy.words import Level, Word
+
+
+def test_an_arm_warns_in_the_period_a_loss_counter_moves_then_is_ok_again() -> None:
+    arm = ArmHealth("R")
+    arm.words(0, [Word("Fz", Level.PRIMITIVE, "cons", 0.0, 0.8, arm="R", seq=1)])
+    first = arm.report(1.0, 1000, {"non_finite": 0}, {"gaps": 0}, 1.0, True)
+    assert first.level == OK and first.message == "arm R: 1000 samples/s"
+    values = dict(first.values)
+    assert values["input rate (Hz)"] == "1000.0"
+    assert math.isclose(float(values["finality backlog primitive (s)"]), 0.2)
+    assert values["finality backlog behavior (s)"] == "nan"  # nothing released on that level yet
+    moved = arm.report(1.0, 1500, {"non_finite": 2}, {"gaps": 1}, 1.5, True)
+    assert moved.level == WARN
+    assert moved.message == "arm R: 1 gaps, 2 rejected non_finite in the last period"
+    assert dict(moved.values)["input rate (Hz)"] == "500.0"
+    calm = arm.report(1.0, 1500, {"non_finite": 2}, {"gaps": 1}, 1.5, True)
+    assert calm.level == OK and calm.message == "arm R: waiting for wrench"
+
+
+def test_a_new_stream_restarts_the_finality_backlog() -> None:
+    arm = ArmHealth("R")
+    arm.words(0, [Word("Fz", Level.PRIMITIVE, "cons", 0.0, 30.0, arm="R", seq=1)])
+    arm.words(1, [Word("Fz", Level.PRIMITIVE, "cons", 0.0, 0.5, arm="R", seq=1)])
+    status = arm.report(1.0, 10, {}, {}, 1.0, True)
+    assert math.isclose(float(dict(status.values)["finality backlog primitive (s)"]), 0.5)
+
+
+def test_classifier_health_levels() -> None:
+    latency = LatencyWindow()
+    for ms in (1.0, 2.0, 3.0):
+        latency.add(ms)
+    kwargs = dict(
+        state="active",
+        model_file="m.rcbht",
+        model_sha256="ab",
+        prediction_error=None,
+        counts={"words lost": 0},
+    )
+    ok = classifier_health(model_problem="", latency=latency, watch=CounterWatch(), **kwargs)
+    assert ok.level == OK and dict(ok.values)["belief update latency p50 (ms)"] == "2.000"
+    assert dict(ok.values)["belief updates in period"] == "3"
+    assert latency.take()[0] == 0  # the period was taken
+    bad = classifier_health(
+        model_problem="no such file", latency=latency, watch=CounterWatch(), **kwargs
+    )
+    assert bad.level == ERROR and "no such file" in bad.message
+    watch = CounterWatch()
+    watch.moved({"words lost": 0})
+    lost = classifier_health(
+        model_problem="", latency=latency, watch=watch, **{**kwargs, "counts": {"words lost": 7}}
+    )
+    assert lost.level == WARN and lost.message == "7 words lost in the last period"
+
+
+class _Model:
+    """Always 'approach' (the tracker only needs classes_ and the two predict calls)."""
+
+    classes_ = ("approach", "rotation")
+
+    def predict_proba_samples(self, samples: list) -> list:
+        return [[0.9, 0.1] for _ in samples]
+
+    def predict_samples(self, samples: list) -> list:
+        return ["approach" for _ in samples]
+
+
+def _words(seqs: range, t0: float) -> list[Word]:
+    return [
+        Word("Fz", Level.PRIMITIVE, "cons", t0 + k, t0 + k + 1, arm="R", seq=s)
+        for k, s in enumerate(seqs)
+    ]
+
+
+def test_words_missing_from_the_numbering_blind_the_sub_task_under_way_only() -> None:
+    tracker = BeliefTracker(_Model())
+    tracker.phase("approach", 0.0)
+    tracker.add_words("R", _words(range(1, 4), 0.0), now=3.0)
+    assert tracker.account_losses() == 0
+    assert tracker.current().subtask == "approach"
+    tracker.add_words("R", _words(range(10, 12), 3.0), now=5.0)  # seq 4..9 never arrived
+    assert tracker.account_losses() == 6
+    assert tracker.account_losses() == 0  # counted once
+    blind = tracker.current()
+    assert blind.subtask == UNKNOWN and blind.blind
+    tracker.phase("rotation", 6.0)
+    tracker.add_words("R", _words(range(12, 15), 6.0), now=9.0)
+    tracker.phase("done", 9.0)
+    tracker.end_of_stream("R")
+    finals = tracker.take_finals()
+    assert [(b.phase, b.subtask, b.blind) for b in finals] == [
+        ("approach", UNKNOWN, True),
+        ("rotation", "approach", False),
+    ]
+    tracker.reset()  # a new stream starts with a clean slate
+    tracker.add_words("R", _words(range(1, 3), 0.0), now=2.0)
+    assert tracker.account_losses() == 0 and not tracker.current().blind
+
+
+def test_a_stream_numbers_its_words_without_gaps() -> None:
+    """The loss accounting rests on it: every word an arm releases, numbered 1, 2, 3, ..."""
+    from rcbht_introspection.bench.ros import synthetic_trial
+    from rcbht_introspection.taxonomy.stream import ArmStream
+
+    trial = synthetic_trial("numbering", 20.0, seed=3)
+    stream = ArmStream(arm="R")
+    words = []
+    for t, row in zip(trial.time, trial.wrench["R"], strict=True):
+        words += stream.push(float(t), tuple(row))
+    words += stream.finish()
+    assert len(words) > 100
+    assert sorted(w.seq for w in words) == list(range(1, len(words) + 1))
