@@ -102,6 +102,22 @@ def write_params(path: Path, cls: type, values: dict[str, Any]) -> Path:
     return path
 
 
+def segmenter_matches(node: Any) -> Callable[[], int]:
+    """A function giving the subscribers the segmenter's writers matched on every word topic."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    latest = [0]
+
+    def on_status(msg: Any) -> None:
+        for status in msg.status:
+            if status.name == "segmenter_node: outputs":
+                values = {kv.key: kv.value for kv in status.values}
+                latest[0] = int(values.get("word subscribers matched", 0))
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_status, 10)
+    return lambda: latest[0]
+
+
 class NodeProcess:
     """One node as a child process (`python -m rcbht_introspection.nodes <module>`)."""
 
@@ -372,11 +388,17 @@ def replay_eval(
                     "/" + seg.applied_phase_topic
                 ]
 
+                matched = segmenter_matches(ros.node)
+
                 def ready() -> bool:
+                    # the graph shows the classifier's readers before the segmenter's writers
+                    # have matched them; words published in between would be lost, so the
+                    # segmenter's own /diagnostics must count both readers (observer, classifier)
                     return (
                         all(player.publishers[t].get_subscription_count() > 0 for t in needed)
                         and all(s.get_publisher_count() > 0 for s in observer.subs)
                         and all(ros.node.count_subscribers(t) >= 2 for t in classifier_inputs)
+                        and matched() >= 2
                     )
 
                 _wait(ready, options.startup_timeout, procs, "the nodes to connect")

@@ -11,16 +11,18 @@ from __future__ import annotations
 import struct
 import sys
 import time
+from collections.abc import Iterable
 from functools import partial
 
 from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.publisher import Publisher
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
-from rcbht_introspection.live.health import ArmHealth, CounterWatch, Health, events_health
+from rcbht_introspection.live.health import OK, ArmHealth, CounterWatch, Health, events_health
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
@@ -245,7 +247,20 @@ class SegmenterNode(ManagedNode):
             "pending events": len(self.session.pending),
         }
         out.append(events_health("segmenter_node", events, self.event_watch))
+        out.append(outputs_health(self.word_pubs.values(), self.phase_pub))
         return out
+
+
+def outputs_health(word_pubs: Iterable[Publisher], phase_pub: Publisher) -> Health:
+    """Subscribers matched to the outputs: a harness waits for them before it plays a bag."""
+    matched = min(p.get_subscription_count() for p in word_pubs)
+    values = (
+        ("word subscribers matched", str(matched)),
+        ("phase subscribers matched", str(phase_pub.get_subscription_count())),
+    )
+    return Health(
+        "segmenter_node: outputs", OK, f"{matched} subscribers on every word topic", values
+    )
 
 
 def main(args: list[str] | None = None, stop: StopSignal | None = None) -> int:
