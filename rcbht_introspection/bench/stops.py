@@ -231,6 +231,63 @@ def stop_loop(
     return stops, sent
 
 
+def _first_message() -> None:
+    """Child of `match_gaps`: subscribe to /match_probe, print (subscribed ns, first stamp ns)."""
+    import rclpy
+    from rclpy.node import Node
+    from std_msgs.msg import String
+
+    rclpy.init()
+    node = Node("match_probe_reader")
+    first: list[int] = []
+    node.create_subscription(String, "/match_probe", lambda m: first.append(int(m.data)), 1000)
+    subscribed = time.time_ns()
+    while not first:
+        rclpy.spin_once(node, timeout_sec=0.1)
+    print(subscribed, first[0], flush=True)
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+def match_gaps(n: int, work: Path, seed: int = 0) -> list[float]:
+    """Seconds between a new subscriber's creation and the first message it gets (1 kHz topic).
+
+    With volatile durability, what the publisher sends in this gap never reaches the new
+    subscriber: the window in which a (re)started classifier misses words.
+    """
+    from std_msgs.msg import String
+
+    from rcbht_introspection.nodes.common import RosSession
+    from rcbht_introspection.nodes.replay_eval import ros_env
+
+    env = {**os.environ, **ros_env(random.Random(seed).randint(1, 101), work / "ros_log")}
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    gaps = []
+    with RosSession("match_probe_writer", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+        pub = ros.node.create_publisher(String, "/match_probe", 1000)
+        done = threading.Event()
+
+        def publish() -> None:
+            while not done.wait(0.001):
+                pub.publish(String(data=str(time.time_ns())))
+
+        thread = threading.Thread(target=publish, daemon=True)
+        thread.start()
+        code = "from rcbht_introspection.bench.stops import _first_message; _first_message()"
+        try:
+            for _ in range(n):
+                out = subprocess.run(
+                    [sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                    timeout=60, check=True,
+                )  # fmt: skip
+                subscribed, first = (int(v) for v in out.stdout.split())
+                gaps.append((first - subscribed) / 1e9)
+        finally:
+            done.set()
+            thread.join()
+    return gaps
+
+
 def summarise(stops: list[Stop]) -> dict[str, Any]:
     """Per kind: stops, clean stops, during start-up, slowest stop, the unclean ones."""
     out: dict[str, Any] = {}
@@ -258,6 +315,13 @@ def run(out_dir: Path) -> dict[str, Any]:
         t0 = time.monotonic()
         stops, sent = stop_loop(n_node, n_record, Path(tmp))
         figures = summarise(stops)
+        gaps = sorted(match_gaps(int(os.environ.get("RCBHT_STOPS_MATCH", "20")), Path(tmp)))
+    figures["new_subscriber_match_gap_s"] = {
+        "n": len(gaps),
+        "p50": round(gaps[len(gaps) // 2], 4),
+        "p90": round(gaps[int(len(gaps) * 0.9)], 4),
+        "max": round(gaps[-1], 4),
+    }
     figures["traffic"] = {**sent, "rate_hz": RATE_HZ}
     figures["seconds"] = round(time.monotonic() - t0, 1)
     return figures
