@@ -48,6 +48,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"rcbht {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:  # Ctrl-C: the command's finally blocks have cleaned up
+        print(f"rcbht {args.command}: interrupted", file=sys.stderr)
         return 0
 
 

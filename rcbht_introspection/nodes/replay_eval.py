@@ -155,6 +155,11 @@ class NodeProcess:
         except OSError:
             return ""
 
+    def interrupt(self) -> None:
+        """Send SIGINT (the node stops cleanly); `stop` waits for it."""
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGINT)
+
     def stop(self, timeout: float = 20.0) -> int | None:
         """SIGINT, then SIGKILL after `timeout`; returns the exit code (None if it was killed)."""
         code = self.proc.poll()
@@ -413,6 +418,8 @@ def replay_eval(
                         )
                     )
         finally:
+            for p in procs:  # both stop at once: a Ctrl-C of the harness ends within seconds
+                p.interrupt()
             for p in procs:
                 codes[p.name] = p.stop()
                 if codes[p.name] != 0:  # the node log is in a temporary folder: keep its end
