@@ -136,7 +136,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         n = player.play(messages, rate=args.rate, stop=stop.event)
         print(f"published {n} messages in {time.perf_counter() - t0:.2f} s (rate {args.rate}x)")
-        stop.wait(0.2)  # let the last messages leave before the participant goes away
+        if not stop.requested:  # reliable subscribers got everything before the player goes
+            player.wait_for_acks(5.0)
     stop.exiting()
     return 0
 
@@ -164,6 +165,7 @@ def cmd_record(args: argparse.Namespace) -> int:
         deadline = time.monotonic() + args.duration if args.duration > 0 else None
         while not stop.wait(0.05) and (deadline is None or time.monotonic() < deadline):
             pass
+        ros.settle()  # what was delivered before the stop still goes into the bag
         recorder.close()
     print(json.dumps(recorder.counts))
     stop.exiting()

@@ -24,7 +24,7 @@ from rclpy.signals import SignalHandlerOptions
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live.health import ERROR, Health
 from rcbht_introspection.nodes.conversions import diagnostic_array
-from rcbht_introspection.nodes.draining import spin_draining
+from rcbht_introspection.nodes.draining import serve_ready, spin_draining
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import config_from_parameters, defaults, descriptions
 
@@ -220,6 +220,10 @@ def run(
     return 0
 
 
+SETTLE_CALLBACKS = 1_000_000
+"""Most delivered callbacks `RosSession.settle` runs (a bound, never reached in practice)."""
+
+
 class RosSession:
     """An rclpy context + node spun by a background SingleThreadedExecutor (for CLI tools).
 
@@ -245,6 +249,12 @@ class RosSession:
         with contextlib.suppress(Exception):
             while not self._stop.is_set() and self.context.ok():
                 self.executor.spin_once(timeout_sec=0.05)
+
+    def settle(self) -> None:
+        """Stop the spin thread, then run every callback whose message was already delivered."""
+        self._stop.set()
+        self._thread.join()
+        serve_ready(self.executor, SETTLE_CALLBACKS)
 
     def close(self) -> None:
         """Stop the spin thread, then destroy the node and shut the context down, in that order."""

@@ -71,6 +71,15 @@ class BagPlayer:
             stop=stop,
         )
 
+    def wait_for_acks(self, timeout: float) -> bool:
+        """True once every reliable subscriber acknowledged everything published (or timeout)."""
+        from rclpy.duration import Duration
+
+        return all(
+            p.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9)))  # type: ignore[attr-defined]
+            for p in self.publishers.values()
+        )
+
     def play(
         self,
         messages: Sequence[BagMessage],
