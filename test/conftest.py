@@ -1,8 +1,10 @@
-"""Shared fixtures: where the HIRO data lives, and the CI rule that a skip is a failure."""
+"""Shared fixtures: where the HIRO data lives, a simulated data set made at test time, and the CI
+rule that a skip is a failure."""
 
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import pytest
@@ -10,6 +12,18 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 HIRO = Path(os.environ.get("RCBHT_HIRO_DATA", REPO.parent / "shared" / "data" / "hiro"))
 IN_CI = os.environ.get("CI", "").lower() == "true"
+REAL = "REAL_HIRO_ONE_SA_SUCCESS"
+
+SIM_SUCCESS = "SIM_MUJOCO_SUCCESS"
+"""Generated set of successful one-arm trials (four sub-tasks each), in the HIRO layout."""
+SIM_FAILURE = "SIM_MUJOCO_FAILURE"
+"""Generated set of one jammed trial (SIM_JAMMED), aborted after three sub-tasks: incomplete."""
+SIM_JAMMED = "SIM-ONE-F-01-jamming"
+SIM_TRIALS = 8
+SIM_SEED = 10
+SOURCES = (pytest.param("hiro", marks=pytest.mark.shared_data), "sim")
+"""Trial sources of a property test (parametrize values): the REAL HIRO successes from ../shared
+(marked shared_data) or the generated set."""
 
 _skipped: list[str] = []
 
@@ -28,6 +42,56 @@ def hiro_data() -> Path:
     """Root of the shared HIRO data (../shared/data/hiro or $RCBHT_HIRO_DATA)."""
     require((HIRO / "REAL_HIRO_ONE_SA_SUCCESS").is_dir(), f"HIRO data not found at {HIRO}")
     return HIRO
+
+
+@pytest.fixture(scope="session")
+def sim_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Root of a small data set made by the project's MuJoCo simulator (fixed seeds; 7-11 s once a
+    session on 2 shared cores): SIM_SUCCESS and SIM_FAILURE in the HIRO layout. Property tests run
+    on it everywhere, also without ../shared; nothing generated is kept in the repository."""
+    from rcbht_introspection.io.hiro import write_trial
+    from rcbht_introspection.sim import load_sim_config, simulate_trial, write_dataset
+
+    root = tmp_path_factory.mktemp("sim_data")
+    config = load_sim_config()
+    write_dataset(root / SIM_SUCCESS, SIM_TRIALS, seed=SIM_SEED, config=config)
+    jammed = simulate_trial(config, SIM_SEED * 1000 + 999, failure="jamming", name=SIM_JAMMED)
+    assert len(jammed.state_times) == 3, "a jammed trial is aborted after three sub-tasks"
+    write_trial(jammed, root / SIM_FAILURE / SIM_JAMMED)
+    return root
+
+
+def dataset_root(request: pytest.FixtureRequest, dataset: str) -> Path:
+    """Folder of a data set by name: a generated one (SIM_MUJOCO_*) or a shared HIRO one."""
+    if dataset in (SIM_SUCCESS, SIM_FAILURE):
+        return request.getfixturevalue("sim_data") / dataset
+    return request.getfixturevalue("hiro_data") / dataset
+
+
+def trial_folders(
+    request: pytest.FixtureRequest, source: str, hiro: Sequence[str], sim: Sequence[int]
+) -> list[Path]:
+    """Trial folders of a property test: the named REAL HIRO successes (source "hiro") or the
+    generated successful trials at the given indices (source "sim")."""
+    if source == "hiro":
+        return [dataset_root(request, REAL) / name for name in hiro]
+    if source != "sim":
+        raise ValueError(f"unknown trial source {source!r}")
+    trials = generated_trials(request)
+    return [trials[i] for i in sim]
+
+
+def generated_trials(request: pytest.FixtureRequest) -> list[Path]:
+    """All generated successful trial folders, in name order."""
+    from rcbht_introspection.io.hiro import find_trials
+
+    return find_trials([dataset_root(request, SIM_SUCCESS)])
+
+
+def golden_or_engine(source: str) -> str:
+    """Word source of a trial source: the original code's golden words for the HIRO trials, the
+    batch engine's words for generated trials (which have no golden files)."""
+    return "golden" if source == "hiro" else "engine"
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import require
+from conftest import SOURCES, require, trial_folders
 from ros_support import have
 
 from rcbht_introspection.cli import main
@@ -55,14 +55,17 @@ def test_round_trip_two_arms(tmp_path: Path, suffix: str) -> None:
     assert len(phases) == 5  # four sub-task starts and the end event
 
 
-@pytest.mark.shared_data
 @pytest.mark.parametrize("suffix", [".mcap", ".db3"])
-def test_hiro_trial_through_cli(hiro_data: Path, tmp_path: Path, suffix: str) -> None:
+@pytest.mark.parametrize("source", SOURCES)
+def test_hiro_trial_through_cli(
+    request: pytest.FixtureRequest, tmp_path: Path, source: str, suffix: str
+) -> None:
+    """A trial folder in the HIRO layout (REAL S-05 or a generated one) survives `bag from-hiro`."""
     from rcbht_introspection.io.bags import read_trial_bag
     from rcbht_introspection.io.hiro import read_trial
 
-    folder = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS" / "20121127-HIROSA-S-05"
-    out = tmp_path / f"s05{suffix}"
+    (folder,) = trial_folders(request, source, ["20121127-HIROSA-S-05"], [4])
+    out = tmp_path / f"trial{suffix}"
     assert main(["bag", "from-hiro", str(folder), str(out)]) == 0
     trial, back = read_trial(folder), read_trial_bag(out)
     assert back.name == trial.name
@@ -108,7 +111,6 @@ def test_record_a_replay_between_processes(tmp_path: Path) -> None:
     """`rcbht bag replay` and `rcbht bag record` as separate processes over real DDS."""
     import subprocess
     import sys
-    import time
 
     from ros_support import require_ros, ros_env, stop
 
@@ -127,14 +129,13 @@ def test_record_a_replay_between_processes(tmp_path: Path) -> None:
         env=env, stdout=rec_log, stderr=subprocess.STDOUT,
     )  # fmt: skip
     try:
-        time.sleep(1.0)
         play = subprocess.run(
             [*cli, "replay", str(tmp_path / "src.db3"), "--rate", "4", "--wait", "20"],
             env=env, capture_output=True, text=True, timeout=120,
         )  # fmt: skip
         assert play.returncode == 0, play.stderr
         assert "published 406 messages" in play.stdout  # 400 samples, 5 events, 1 info record
-        time.sleep(1.0)
+        # the player waited for the recorder's acknowledgments; the recorder settles at stop
     finally:
         code = stop(recorder)
     rec_log.close()
@@ -145,16 +146,15 @@ def test_record_a_replay_between_processes(tmp_path: Path) -> None:
     assert back.state_times == trial.state_times
 
 
-@pytest.mark.shared_data
-def test_train_accepts_bags(hiro_data: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("source", SOURCES)
+def test_train_accepts_bags(request: pytest.FixtureRequest, tmp_path: Path, source: str) -> None:
     from ros_support import require_learn
 
     require_learn()
     from rcbht_introspection.learn.models import load_model
 
-    real = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS"
-    for i in (1, 2, 3):
-        folder = real / f"20121127-HIROSA-S-{i:02d}"
+    names = [f"20121127-HIROSA-S-{i:02d}" for i in (1, 2, 3)]
+    for i, folder in enumerate(trial_folders(request, source, names, [0, 1, 2])):
         assert main(["bag", "from-hiro", str(folder), str(tmp_path / "bags" / f"{i}.db3")]) == 0
     model = tmp_path / "model.rcbht"
     assert main(["train", str(tmp_path / "bags"), "--out", str(model)]) == 0

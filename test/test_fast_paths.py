@@ -1,7 +1,8 @@
 """The fast feature, window and SVM paths equal their plain definitions bit for bit.
 
-On real words (golden sub-tasks and live windows of a streamed REAL trial) and on generated
-word sequences (unsorted, zero-length, aliased and unknown labels).
+On real words (golden sub-tasks and live windows of a streamed REAL trial), on the engine's words
+of simulated trials (made at test time) and on generated word sequences (unsorted, zero-length,
+aliased and unknown labels).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SOURCES, golden_or_engine, trial_folders
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -33,8 +35,18 @@ from rcbht_introspection.learn.models import svm_predict_proba, train_model
 from rcbht_introspection.live.replay import stream_trial
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
 
-REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 TRIALS = ("20121127-HIROSA-S-01", "20121127-HIROSA-S-45")
+
+
+def _trials(request: pytest.FixtureRequest, source: str) -> list[Path]:
+    """REAL S-01 and S-45, or the first two generated trials."""
+    return trial_folders(request, source, TRIALS, [0, 1])
+
+
+def _samples(request: pytest.FixtureRequest, source: str) -> list[SubtaskSample]:
+    """Sub-task samples of both trials: golden words (HIRO) or the batch engine's (generated)."""
+    trials = load_trials(_trials(request, source), golden_or_engine(source))
+    return [s for t in trials for s in t.samples]
 
 
 def _same(a: dict[str, float], b: dict[str, float]) -> bool:
@@ -42,11 +54,11 @@ def _same(a: dict[str, float], b: dict[str, float]) -> bool:
     return a.keys() == b.keys() and all(repr(a[k]) == repr(b[k]) for k in a)
 
 
-@pytest.mark.shared_data
-def test_fast_features_equal_reference_on_golden_subtasks(hiro_data: Path) -> None:
-    samples = [
-        s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples
-    ]
+@pytest.mark.parametrize("source", SOURCES)
+def test_fast_features_equal_reference_on_trial_subtasks(
+    request: pytest.FixtureRequest, source: str
+) -> None:
+    samples = _samples(request, source)
     assert len(samples) >= 8
     for sample in samples:
         assert _same(
@@ -54,11 +66,13 @@ def test_fast_features_equal_reference_on_golden_subtasks(hiro_data: Path) -> No
         )
 
 
-@pytest.mark.shared_data
-def test_fast_windows_and_features_equal_reference_on_live_words(hiro_data: Path) -> None:
+@pytest.mark.parametrize("source", SOURCES)
+def test_fast_windows_and_features_equal_reference_on_live_words(
+    request: pytest.FixtureRequest, source: str
+) -> None:
     """Live windows of a streamed trial: bisected window == scanned window, fast == plain features."""
     streamed = stream_trial(
-        read_trial(hiro_data / REAL / TRIALS[1]), stream_factory(LiveAugmentConfig())
+        read_trial(_trials(request, source)[1]), stream_factory(LiveAugmentConfig())
     )
     words = TrialWords(name=streamed.name)
     checked = 0
@@ -80,11 +94,13 @@ def test_fast_windows_and_features_equal_reference_on_live_words(hiro_data: Path
 _LABELS = st.sampled_from(["pos", "neg", "cons", "const", " const ", "a", "k", "weird"])
 
 
-@pytest.mark.shared_data
-def test_axis_memo_gives_the_fresh_features_of_every_running_window(hiro_data: Path) -> None:
+@pytest.mark.parametrize("source", SOURCES)
+def test_axis_memo_gives_the_fresh_features_of_every_running_window(
+    request: pytest.FixtureRequest, source: str
+) -> None:
     """Growing boundary windows and sliding 2 s windows of a streamed trial, after every word."""
     streamed = stream_trial(
-        read_trial(hiro_data / REAL / TRIALS[1]), stream_factory(LiveAugmentConfig())
+        read_trial(_trials(request, source)[1]), stream_factory(LiveAugmentConfig())
     )
     words = TrialWords(name=streamed.name)
     memos = {"boundary": AxisMemo(), "window": AxisMemo()}
@@ -175,12 +191,12 @@ def test_fast_features_equal_reference_on_generated_words(
     assert _same(compact_raw_features(sample, ["R"]), compact_raw_features_reference(sample, ["R"]))
 
 
-@pytest.mark.shared_data
-def test_svm_fast_probabilities_equal_checked_pipeline(hiro_data: Path) -> None:
+@pytest.mark.parametrize("source", SOURCES)
+def test_svm_fast_probabilities_equal_checked_pipeline(
+    request: pytest.FixtureRequest, source: str
+) -> None:
     """svm_predict_proba == Pipeline.predict_proba bit for bit; bad input still raises."""
-    samples = [
-        s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples
-    ]
+    samples = _samples(request, source)
     model = train_model(samples)
     X = model.features(samples)
     assert np.array_equal(svm_predict_proba(model.estimator, X), model.estimator.predict_proba(X))
@@ -218,12 +234,12 @@ def test_bisected_window_equals_scanned_window(
     assert window_sample(tw, start, end, ordered=True).words == window_sample(tw, start, end).words
 
 
-@pytest.mark.shared_data
-def test_both_axis_paths_equal_reference_on_golden_axes(hiro_data: Path) -> None:
-    """The NumPy and the short-sequence path each equal the plain definition on every golden axis."""
-    samples = [
-        s for t in load_trials([hiro_data / REAL / n for n in TRIALS], "golden") for s in t.samples
-    ]
+@pytest.mark.parametrize("source", SOURCES)
+def test_both_axis_paths_equal_reference_on_trial_axes(
+    request: pytest.FixtureRequest, source: str
+) -> None:
+    """The NumPy and the short-sequence path each equal the plain definition on every trial axis."""
+    samples = _samples(request, source)
     longest = 0
     for sample in samples:
         for level in LEVELS:

@@ -1,5 +1,5 @@
 """Encodings: spec-3 resampling on hand-checkable sequences, the paper's dimensions on the
-golden labels, and compact features fitted on training samples only."""
+golden labels and on generated trials, and compact features fitted on training samples only."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SIM_SUCCESS
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding import (
@@ -17,7 +18,7 @@ from rcbht_introspection.grammar.encoding import (
 )
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.learn.data import load_trials
-from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
+from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
 
 
 def _w(
@@ -59,6 +60,23 @@ def test_paper_dimensions_from_golden_labels(
     assert encoding.n_features == dims
     X = encoding.transform(samples[:8])
     assert X.shape == (8, dims) and X.min() >= -1 and X.max() <= 9
+
+
+def test_paper_dimensions_from_engine_words(sim_data: Path) -> None:
+    """On the engine's words of generated trials, n per level is the longest label sequence of
+    any sample and axis, and each vector holds 6 * sum(n) label indices (-1: no label)."""
+    samples = [s for t in load_trials([sim_data / SIM_SUCCESS], "engine") for s in t.samples]
+    encoding = PaperEncoding().fit(samples)
+    longest = {
+        level.value: max(
+            len(s.words.axis_words("R", level, axis)) for s in samples for axis in AXES
+        )
+        for level in LEVELS
+    }
+    assert encoding.n == longest and min(longest.values()) > 1
+    assert encoding.n_features == len(AXES) * sum(longest.values())
+    X = encoding.transform(samples)
+    assert X.shape == (len(samples), encoding.n_features) and X.min() >= -1 and X.max() <= 9
 
 
 def _sample(subtask: str, duration: float, labels: list[str]) -> SubtaskSample:

@@ -5,10 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from conftest import SIM_SUCCESS
 
-from rcbht_introspection.grammar.split import split_words, window_sample
-from rcbht_introspection.io.hiro import read_state
+from rcbht_introspection.grammar.split import SubtaskSample, split_words, window_sample
+from rcbht_introspection.io.hiro import find_trials, read_state, read_trial
 from rcbht_introspection.io.rcbht_format import read_trial_words
+from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
 
 
@@ -56,6 +58,17 @@ def test_window_keeps_overlapping_words_clipped_and_zero_length_window() -> None
     assert _spans(window_sample(tw, 2.0, 2.0)) == [("k", 2.0, 2.0)]
 
 
+def _assert_conserved(words: TrialWords, parts: list[SubtaskSample]) -> None:
+    """Every level/axis keeps its total time, and no word is lost (cut words count more)."""
+    for level in LEVELS:
+        for axis in AXES:
+            original = words.axis_words("R", level, axis)
+            pieces = [w for p in parts for w in p.words.axis_words("R", level, axis)]
+            assert len(pieces) >= len(original)
+            total = sum(w.end - w.start for w in original)
+            assert sum(w.end - w.start for w in pieces) == pytest.approx(total, abs=1e-9)
+
+
 @pytest.mark.shared_data
 def test_golden_split_conserves_duration_and_count(hiro_data: Path) -> None:
     """On a REAL trial with a 5 ms rotation, every level/axis keeps its total time, and the
@@ -66,11 +79,22 @@ def test_golden_split_conserves_duration_and_count(hiro_data: Path) -> None:
     end = max(w.end for w in words.axis_words("R", Level.BEHAVIOR, "Fx"))
     parts = split_words(words, state, end)
     assert len(parts) == 4 and parts[1].duration == pytest.approx(0.005)
+    _assert_conserved(words, parts)
     for level in LEVELS:
         for axis in AXES:
-            original = words.axis_words("R", level, axis)
-            pieces = [w for p in parts for w in p.words.axis_words("R", level, axis)]
-            assert len(pieces) >= len(original)
-            total = sum(w.end - w.start for w in original)
-            assert sum(w.end - w.start for w in pieces) == pytest.approx(total, abs=1e-9)
             assert parts[1].words.axis_words("R", level, axis), (level, axis)
+
+
+def test_engine_split_conserves_duration_and_count(sim_data: Path) -> None:
+    """On the engine's words of a simulated trial, split at its state times, every level/axis
+    keeps its total time, and the split covers the trial from the first mark to the end."""
+    from rcbht_introspection.taxonomy.batch import label_trial
+
+    trial = read_trial(find_trials([sim_data / SIM_SUCCESS])[0])
+    words = label_trial(trial)
+    parts = split_words(words, trial.state_times, trial.end_time)
+    assert [p.subtask for p in parts] == list(SUBTASKS)
+    assert [(p.start, p.end) for p in parts] == list(
+        zip(trial.state_times, [*trial.state_times[1:], trial.end_time], strict=True)
+    )
+    _assert_conserved(words, parts)

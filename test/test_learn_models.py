@@ -1,5 +1,6 @@
-"""Sub-task models on golden words: training, the safe model file (round trip, tampering,
-wrong version, wrong encoding), online updates, and the near-empty rotation sub-task."""
+"""Sub-task models on golden words of REAL trials and on the engine's words of generated trials:
+training, the safe model file (round trip, tampering, wrong version, wrong encoding), online
+updates, and the near-empty rotation sub-task (REAL only)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SIM_FAILURE, SIM_JAMMED, SIM_SUCCESS, SOURCES, dataset_root
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar.split import SubtaskSample
+from rcbht_introspection.io.hiro import find_trials
 from rcbht_introspection.learn.data import load_samples, load_trials
 from rcbht_introspection.learn.models import load_model, save_model, train_model
 
@@ -26,21 +30,38 @@ VALID = [
 ]
 
 
+Samples = tuple[list[SubtaskSample], list[SubtaskSample]]
+
+
 @pytest.fixture(scope="module")
-def samples(hiro_data: Path) -> tuple[list, list]:
+def hiro_samples(hiro_data: Path) -> Samples:
+    """Training and validation samples from the golden words of REAL trials."""
     root = hiro_data / REAL
     return load_samples([root / t for t in TRAIN], "golden"), load_samples(
         [root / t for t in VALID], "golden"
     )
 
 
-@pytest.mark.shared_data
+@pytest.fixture(scope="module")
+def sim_samples(sim_data: Path) -> Samples:
+    """Training (4 trials) and validation (2 trials) samples from the engine's words of
+    generated trials."""
+    trials = find_trials([sim_data / SIM_SUCCESS])
+    return load_samples(trials[:4], "engine"), load_samples(trials[4:6], "engine")
+
+
+@pytest.fixture(scope="module", params=SOURCES)
+def samples(request: pytest.FixtureRequest) -> Samples:
+    """The REAL golden samples or the generated ones: the property tests run on both."""
+    return request.getfixturevalue(f"{request.param}_samples")
+
+
 @pytest.mark.parametrize(
     ("classifier", "encoding"),
     [("svm", "compact"), ("mondrian", "compact"), ("svm", "paper"), ("svm-tuned", "compact")],
 )
 def test_model_round_trips_through_the_safe_file(
-    samples, tmp_path: Path, classifier: str, encoding: str
+    samples: Samples, tmp_path: Path, classifier: str, encoding: str
 ) -> None:
     train, valid = samples
     model = train_model(train, classifier, encoding, random_state=1)
@@ -59,8 +80,9 @@ def test_model_round_trips_through_the_safe_file(
 
 
 @pytest.mark.shared_data
-def test_near_empty_rotation_is_classified_right(samples) -> None:
-    train, valid = samples
+def test_near_empty_rotation_is_classified_right(hiro_samples: Samples) -> None:
+    """REAL S-22..S-46 have a 5 ms rotation: both classifiers still name it."""
+    train, valid = hiro_samples
     for classifier in ("svm", "mondrian"):
         model = train_model(train, classifier, "compact")
         short = [s for s in valid if s.duration < 0.05]
@@ -72,8 +94,7 @@ def test_near_empty_rotation_is_classified_right(samples) -> None:
         assert accuracy >= 0.75, (classifier, accuracy)
 
 
-@pytest.mark.shared_data
-def test_online_update_continues_from_a_loaded_forest(samples, tmp_path: Path) -> None:
+def test_online_update_continues_from_a_loaded_forest(samples: Samples, tmp_path: Path) -> None:
     train, valid = samples
     model = train_model(train[:8], "mondrian", "compact")
     loaded = load_model(save_model(model, tmp_path / "mf.npz"))
@@ -98,9 +119,10 @@ def _rewrite(path: Path, out: Path, edit) -> Path:
     return out
 
 
-@pytest.mark.shared_data
 @pytest.mark.parametrize("classifier", ["svm", "mondrian"])
-def test_bad_model_files_give_one_line_errors(samples, tmp_path: Path, classifier: str) -> None:
+def test_bad_model_files_give_one_line_errors(
+    samples: Samples, tmp_path: Path, classifier: str
+) -> None:
     train, _ = samples
     path = save_model(train_model(train, classifier, "compact"), tmp_path / "m.npz")
 
@@ -138,11 +160,21 @@ def test_bad_model_files_give_one_line_errors(samples, tmp_path: Path, classifie
         load_model(tmp_path / "missing.npz")
 
 
-@pytest.mark.shared_data
-def test_trials_with_missing_subtasks_are_marked_incomplete(hiro_data: Path) -> None:
-    trial = load_trials([hiro_data / "SIM_HIRO_ONE_SA_SUCCESS" / "20160911-2136-SideApproach-S"])[0]
-    assert trial.source == "golden" and not trial.complete
-    assert [s.subtask for s in trial.samples] == ["approach", "rotation"]
+@pytest.mark.parametrize(
+    ("dataset", "trial", "source", "subtasks"),
+    [  # a SIM trial of the shared set with golden words, and a generated jammed trial
+        pytest.param("SIM_HIRO_ONE_SA_SUCCESS", "20160911-2136-SideApproach-S", "golden",
+                     ["approach", "rotation"], marks=pytest.mark.shared_data, id="hiro"),
+        pytest.param(SIM_FAILURE, SIM_JAMMED, "engine", ["approach", "rotation", "insertion"],
+                     id="sim"),
+    ],
+)  # fmt: skip
+def test_trials_with_missing_subtasks_are_marked_incomplete(
+    request: pytest.FixtureRequest, dataset: str, trial: str, source: str, subtasks: list[str]
+) -> None:
+    loaded = load_trials([dataset_root(request, dataset) / trial])[0]
+    assert loaded.source == source and not loaded.complete
+    assert [s.subtask for s in loaded.samples] == subtasks
 
 
 def test_unknown_word_source_and_missing_input(tmp_path: Path) -> None:
@@ -169,8 +201,7 @@ def test_engine_words_give_the_same_samples_as_golden(hiro_data: Path) -> None:
         assert max(abs(a[k] - b[k]) for k in a) < 1e-4
 
 
-@pytest.mark.shared_data
-def test_prefix_augmentation_adds_the_prefixes_as_training_samples(samples) -> None:
+def test_prefix_augmentation_adds_the_prefixes_as_training_samples(samples: Samples) -> None:
     train, valid = samples
     model = train_model(train, "mondrian", "compact", augment_prefixes=(0.5,))
     assert len(model.estimator._y) == 2 * len(train)

@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
+from conftest import SOURCES, trial_folders
 from ros_support import require_learn, require_stream
 
 from rcbht_introspection.io.trial import Trial
@@ -16,8 +17,6 @@ from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
 
 if TYPE_CHECKING:
     from rcbht_introspection.live.segmenter import SegmenterSession
-
-REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 
 
 def words_of(trial: Trial) -> list[Word]:
@@ -30,24 +29,27 @@ def words_of(trial: Trial) -> list[Word]:
     return sorted(out, key=lambda w: (w.end, LEVELS.index(w.level)))
 
 
-@pytest.fixture(scope="module")
-def trained(hiro_data: Path, tmp_path_factory: pytest.TempPathFactory) -> object:
+@pytest.fixture(scope="module", params=SOURCES)
+def case(request: pytest.FixtureRequest) -> tuple[object, Path]:
+    """A model trained on 15 REAL trials (golden words) and held-out REAL S-43, or a model trained
+    on 5 generated trials (engine words) and a held-out generated trial."""
     require_learn()
     from rcbht_introspection.learn.data import load_samples
     from rcbht_introspection.learn.models import train_model
 
-    folders = [hiro_data / REAL / f"20121127-HIROSA-S-{i:02d}" for i in range(1, 16)]
-    return train_model(load_samples(folders, words="auto"))
+    names = [f"20121127-HIROSA-S-{i:02d}" for i in (*range(1, 16), 43)]
+    *folders, held_out = trial_folders(request, request.param, names, [0, 1, 2, 3, 4, 7])
+    return train_model(load_samples(folders, words="auto")), held_out
 
 
-@pytest.mark.shared_data
-def test_final_verdicts_equal_offline_classification(hiro_data: Path, trained: object) -> None:
+def test_final_verdicts_equal_offline_classification(case: tuple[object, Path]) -> None:
     """Fed words in time order, the tracker's verdicts equal predict() on the spec 2.7 split."""
     from rcbht_introspection.grammar.split import split_words
     from rcbht_introspection.io.hiro import read_trial
     from rcbht_introspection.live.offline import trial_words
 
-    trial = read_trial(hiro_data / REAL / "20121127-HIROSA-S-43")
+    trained, held_out = case
+    trial = read_trial(held_out)
     words = words_of(trial)
     tracker = BeliefTracker(trained)
     assert tracker.current().subtask == UNKNOWN  # before any evidence

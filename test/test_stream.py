@@ -1,4 +1,5 @@
-"""The streaming engine: streamed == batch on every shared trial, intake policies, bounded memory."""
+"""The streaming engine: streamed == batch on every shared and generated trial, intake policies,
+bounded memory."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SIM_FAILURE, SIM_SUCCESS, SOURCES, dataset_root, trial_folders
 
 from rcbht_introspection.cli import main
 from rcbht_introspection.commands.taxonomy import first_difference
@@ -23,7 +25,15 @@ from rcbht_introspection.taxonomy.stream import (
 )
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
 
-DATASETS = ["REAL_HIRO_ONE_SA_SUCCESS", "SIM_HIRO_ONE_SA_SUCCESS", "REAL_HIRO_ONE_SA_ERROR_CHARAC"]
+DATASETS = [
+    pytest.param(name, marks=pytest.mark.shared_data, id=name)
+    for name in (
+        "REAL_HIRO_ONE_SA_SUCCESS",
+        "SIM_HIRO_ONE_SA_SUCCESS",
+        "REAL_HIRO_ONE_SA_ERROR_CHARAC",
+    )
+] + [pytest.param(SIM_SUCCESS, id=SIM_SUCCESS), pytest.param(SIM_FAILURE, id=SIM_FAILURE)]
+"""The shared HIRO sets and the sets generated at test time."""
 
 
 def key(w: Word) -> tuple:
@@ -41,11 +51,12 @@ def assert_same(batch: TrialWords, streamed: TrialWords) -> None:
 # --------------------------------------------------------------------------- equivalence
 
 
-@pytest.mark.shared_data
 @pytest.mark.slow
 @pytest.mark.parametrize("dataset", DATASETS)
-def test_streamed_sample_by_sample_equals_batch(hiro_data: Path, dataset: str) -> None:
-    trials = find_trials([hiro_data / dataset])
+def test_streamed_sample_by_sample_equals_batch(
+    request: pytest.FixtureRequest, dataset: str
+) -> None:
+    trials = find_trials([dataset_root(request, dataset)])
     assert trials
     for folder in trials:
         trial = read_trial(folder)
@@ -57,17 +68,19 @@ def test_streamed_sample_by_sample_equals_batch(hiro_data: Path, dataset: str) -
         assert seqs == list(range(1, len(seqs) + 1))  # every word numbered once, increasing
 
 
-@pytest.mark.shared_data
 @pytest.mark.parametrize("dataset", DATASETS)
-def test_push_many_equals_batch(hiro_data: Path, dataset: str) -> None:
-    for folder in find_trials([hiro_data / dataset]):
+def test_push_many_equals_batch(request: pytest.FixtureRequest, dataset: str) -> None:
+    for folder in find_trials([dataset_root(request, dataset)]):
         trial = read_trial(folder)
         assert_same(label_trial(trial), label_trial_streamed(trial, many=True))
 
 
-@pytest.mark.shared_data
-def test_given_domains_release_moment_words_before_the_end(hiro_data: Path) -> None:
-    trial = read_trial(find_trials([hiro_data / "REAL_HIRO_ONE_SA_SUCCESS"])[0])
+@pytest.mark.parametrize("source", SOURCES)
+def test_given_domains_release_moment_words_before_the_end(
+    request: pytest.FixtureRequest, source: str
+) -> None:
+    (folder,) = trial_folders(request, source, ["20121127-HIROSA-S-01"], [0])
+    trial = read_trial(folder)
     config = default_config()
     wrench = trial.wrench["R"]
     domains = {ax: axis_domain(wrench[:, AXES.index(ax)], config) for ax in config.domain_axes}
@@ -95,6 +108,20 @@ def test_label_engine_stream_reproduces_golden(hiro_data: Path, tmp_path: Path) 
             ours = read_words(level_path(tmp_path / folder.name, level, axis), level, axis)
             golden = read_words(level_path(folder / "golden", level, axis), level, axis)
             assert first_difference(ours, golden) is None
+
+
+def test_label_engine_stream_writes_the_batch_files(sim_data: Path, tmp_path: Path) -> None:
+    """On a generated trial, `rcbht label --engine stream` writes the batch engine's files."""
+    folder = find_trials([sim_data / SIM_SUCCESS])[0]
+    for engine in ("batch", "stream"):
+        assert (
+            main(["label", str(folder), "--out", str(tmp_path / engine), "--engine", engine]) == 0
+        )
+    for level in LEVELS:
+        for axis in AXES:
+            batch = level_path(tmp_path / "batch" / folder.name, level, axis)
+            streamed = level_path(tmp_path / "stream" / folder.name, level, axis)
+            assert streamed.read_text() == batch.read_text(), (level.value, axis)
 
 
 def test_one_block_statistics_are_bit_identical_to_the_batch_ones() -> None:

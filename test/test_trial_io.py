@@ -6,15 +6,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SOURCES, trial_folders
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import read_trial, write_trial
 from rcbht_introspection.io.trial import Trial
 
 
-@pytest.mark.shared_data
-def test_real_trial_loads(hiro_data: Path) -> None:
-    trial = read_trial(hiro_data / "REAL_HIRO_ONE_SA_SUCCESS" / "20121127-HIROSA-S-01")
+@pytest.mark.parametrize("source", SOURCES)
+def test_recorded_trial_loads(request: pytest.FixtureRequest, source: str) -> None:
+    """A REAL HIRO trial and a generated one load alike: one arm, six columns, four sub-tasks."""
+    (folder,) = trial_folders(request, source, ["20121127-HIROSA-S-01"], [0])
+    trial = read_trial(folder)
     assert trial.arms == ("R",)
     assert trial.wrench["R"].shape[1] == 6 and len(trial.time) == len(trial.wrench["R"])
     assert np.all(np.diff(trial.time) > 0)
