@@ -5,8 +5,11 @@ from __future__ import annotations
 import importlib.util
 import os
 import random
+import time
+from collections.abc import Callable
 from pathlib import Path
 
+import pytest
 from conftest import require
 
 REPO = Path(__file__).resolve().parents[1]
@@ -78,3 +81,34 @@ def stop(proc: object, timeout: float = 15.0) -> int | None:
             proc.wait(5)  # type: ignore[attr-defined]
             return None
     return proc.returncode  # type: ignore[attr-defined]
+
+
+def wait_for(condition: Callable[[], object], timeout: float = 20.0) -> bool:
+    """Poll `condition` until true (False after `timeout` seconds)."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
+
+
+def start_node(module: str, params: dict[str, object], env: dict[str, str], log: Path):
+    """The node as a child process, its output in `log`."""
+    import subprocess
+
+    with log.open("w") as out:
+        return subprocess.Popen(
+            node_command(module, params), env=env, stdout=out, stderr=subprocess.STDOUT
+        )
+
+
+@pytest.fixture
+def env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
+    """Isolated ROS environment for the node processes and for this test process."""
+    require_ros()
+    values = ros_env(tmp_path)
+    for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR", "FASTRTPS_DEFAULT_PROFILES_FILE"):
+        monkeypatch.setenv(key, values[key])
+    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
+    return values

@@ -7,39 +7,13 @@ import time
 from pathlib import Path
 
 import pytest
-from ros_support import node_command, require_learn, require_ros, require_stream, ros_env, stop
+from ros_support import env, require_learn, require_stream, start_node, stop, wait_for
+
+from rcbht_introspection.bench.stops import toy_model
 
 pytestmark = pytest.mark.ros
+__all__ = ["env"]  # the isolated-ROS fixture, used by name
 BASE_NS = 1_700_000_000 * 10**9
-
-
-@pytest.fixture
-def env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
-    """Isolated ROS environment for the node processes and for this test process."""
-    require_ros()
-    values = ros_env(tmp_path)
-    for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR", "FASTRTPS_DEFAULT_PROFILES_FILE"):
-        monkeypatch.setenv(key, values[key])
-    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
-    return values
-
-
-def wait_for(condition, timeout: float = 20.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.02)
-    return True
-
-
-def start(module: str, params: dict[str, object], env: dict[str, str], log: Path):
-    import subprocess
-
-    with log.open("w") as out:
-        return subprocess.Popen(
-            node_command(module, params), env=env, stdout=out, stderr=subprocess.STDOUT
-        )
 
 
 class Lifecycle:
@@ -93,21 +67,6 @@ class DiagnosticsProbe:
         return {kv.key: kv.value for kv in status.values}  # type: ignore[attr-defined]
 
 
-def toy_model(path: Path, classes: tuple[str, str]) -> Path:
-    """A small sub-task model trained on hand-made words (two classes)."""
-    from rcbht_introspection.grammar.split import SubtaskSample
-    from rcbht_introspection.learn.models import save_model, train_model
-    from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
-
-    samples = []
-    for i, (subtask, label) in enumerate([(classes[0], "bpos"), (classes[1], "cons")] * 3):
-        tw = TrialWords(name=f"t{i}")
-        tw.add(Word("Fz", Level.PRIMITIVE, label, 0.0, 1.0 + i, arm="R"))
-        samples.append(SubtaskSample(f"t{i}", subtask, 0.0, 1.0 + i, tw))
-    save_model(train_model(samples), path)
-    return path
-
-
 def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, str]) -> None:
     """autostart:=false waits unconfigured; a new model file takes effect without a restart."""
     require_learn()
@@ -120,7 +79,7 @@ def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, st
     second = toy_model(tmp_path / "second.rcbht", ("approach", "rotation"))
     log = tmp_path / "classifier.log"
     params = {"model_file": str(first), "autostart": False, "publish_rate_hz": 20.0}
-    proc = start("classifier_node", params, env, log)
+    proc = start_node("classifier_node", params, env, log)
     try:
         with RosSession("manager", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
             states: list[str] = []
@@ -181,7 +140,7 @@ def test_segmenter_diagnostics_report_rate_and_rejections(
     from rcbht_introspection.nodes.conversions import to_time
 
     log = tmp_path / "segmenter.log"
-    proc = start("segmenter_node", {}, env, log)
+    proc = start_node("segmenter_node", {}, env, log)
     try:
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
             diag = DiagnosticsProbe(ros)
@@ -237,10 +196,10 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
 
     model = toy_model(tmp_path / "model.rcbht", ("approach", "rotation"))
     seg_log = tmp_path / "segmenter.log"
-    seg = start("segmenter_node", {"stream_profile": "causal"}, env, seg_log)
+    seg = start_node("segmenter_node", {"stream_profile": "causal"}, env, seg_log)
     params = {"model_file": str(model)}
     first_log, second_log = tmp_path / "classifier1.log", tmp_path / "classifier2.log"
-    first = start("classifier_node", params, env, first_log)
+    first = start_node("classifier_node", params, env, first_log)
     second = None
     try:
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
@@ -275,7 +234,7 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
             send(600)
             assert stop(first) == 0, first_log.read_text()
             send(200)  # words the restarted classifier never sees
-            second = start("classifier_node", params, env, second_log)
+            second = start_node("classifier_node", params, env, second_log)
             assert wait_for(lambda: ros.node.count_publishers("/rcbht/belief") > 0, 30)
             assert wait_for(lambda: ros.node.count_subscribers("/rcbht/primitives") > 0, 30), (
                 second_log.read_text()

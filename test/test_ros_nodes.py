@@ -10,37 +10,19 @@ import time
 from pathlib import Path
 
 import pytest
-from ros_support import node_command, require_learn, require_ros, require_stream, ros_env, stop
+from ros_support import (
+    env,
+    require_learn,
+    require_ros,
+    require_stream,
+    ros_env,
+    start_node,
+    stop,
+    wait_for,
+)
 
 pytestmark = pytest.mark.ros
-
-
-@pytest.fixture
-def env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
-    """Isolated ROS environment for the node processes and for this test process."""
-    require_ros()
-    values = ros_env(tmp_path)
-    for key in ("ROS_AUTOMATIC_DISCOVERY_RANGE", "ROS_LOG_DIR", "FASTRTPS_DEFAULT_PROFILES_FILE"):
-        monkeypatch.setenv(key, values[key])
-    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
-    return values
-
-
-def wait_for(condition, timeout: float = 20.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.05)
-    return True
-
-
-def start_node(module: str, params: dict[str, object], env: dict[str, str], log: Path):
-    """The node as a child process, its output in `log`."""
-    with log.open("w") as out:
-        return subprocess.Popen(
-            node_command(module, params), env=env, stdout=out, stderr=subprocess.STDOUT
-        )
+__all__ = ["env"]  # the isolated-ROS fixture, used by name
 
 
 def segmenter_inputs(ros, log: Path) -> tuple:

@@ -101,20 +101,20 @@ class WrenchTraffic:
         self._thread.join()
 
 
-def toy_model(path: Path) -> Path:
-    """A small sub-task model (hand-made words, four classes) for a classifier under test."""
+TOY_LABELS = ("bpos", "cons", "bneg", "pimp")
+
+
+def toy_model(
+    path: Path, classes: tuple[str, ...] = ("approach", "rotation", "insertion", "mating")
+) -> Path:
+    """A small sub-task model (one hand-made Fz word per sample) for a node under test."""
     from rcbht_introspection.grammar.split import SubtaskSample
     from rcbht_introspection.learn.models import save_model, train_model
     from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
 
     samples = []
-    for i in range(8):
-        subtask, label = [
-            ("approach", "bpos"),
-            ("rotation", "cons"),
-            ("insertion", "bneg"),
-            ("mating", "pimp"),
-        ][i % 4]
+    for i in range(2 * len(classes)):
+        subtask, label = classes[i % len(classes)], TOY_LABELS[i % len(classes)]
         tw = TrialWords(name=f"t{i}")
         tw.add(Word("Fz", Level.PRIMITIVE, label, 0.0, 1.0 + i, arm="R"))
         samples.append(SubtaskSample(f"t{i}", subtask, 0.0, 1.0 + i, tw))
@@ -189,45 +189,37 @@ def stop_loop(
 ) -> tuple[list[Stop], dict[str, int]]:
     """Stops of segmenter_node, classifier_node (fed by a running segmenter) and bag record."""
     from rcbht_introspection.nodes.common import RosSession
-    from rcbht_introspection.nodes.replay_eval import ros_env
+    from rcbht_introspection.nodes.replay_eval import environment, ros_env
 
     rng = random.Random(seed)
-    env = {**os.environ, **ros_env(rng.randint(1, 101), work / "ros_log")}
+    values = ros_env(rng.randint(1, 101), work / "ros_log")
+    env = {**os.environ, **values}
     env.pop("ROS_LOCALHOST_ONLY", None)
     toy_model(work / "model.rcbht")
     stops: list[Stop] = []
     sent = {}
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        with RosSession("stop_loop", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
-            traffic = WrenchTraffic(ros)
+    with environment(values), RosSession("stop_loop", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+        traffic = WrenchTraffic(ros)
+        try:
+            for i in range(n_node):
+                stops.append(stop_once("segmenter_node", work, env, rng, i))
+            feeder = subprocess.Popen(
+                _node_command("segmenter_node", work),
+                env=env,
+                stdout=(work / "feeder.log").open("w"),
+                stderr=subprocess.STDOUT,
+            )
             try:
                 for i in range(n_node):
-                    stops.append(stop_once("segmenter_node", work, env, rng, i))
-                feeder = subprocess.Popen(
-                    _node_command("segmenter_node", work),
-                    env=env,
-                    stdout=(work / "feeder.log").open("w"),
-                    stderr=subprocess.STDOUT,
-                )
-                try:
-                    for i in range(n_node):
-                        stops.append(stop_once("classifier_node", work, env, rng, i))
-                finally:
-                    feeder.send_signal(signal.SIGINT)
-                    feeder.wait(30)
-                for i in range(n_record):
-                    stops.append(stop_once("bag_record", work, env, rng, i))
+                    stops.append(stop_once("classifier_node", work, env, rng, i))
             finally:
-                traffic.close()
-            sent["wrench_published"] = traffic.sent
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+                feeder.send_signal(signal.SIGINT)
+                feeder.wait(30)
+            for i in range(n_record):
+                stops.append(stop_once("bag_record", work, env, rng, i))
+        finally:
+            traffic.close()
+        sent["wrench_published"] = traffic.sent
     return stops, sent
 
 
