@@ -4,7 +4,8 @@ rule that a skip is a failure."""
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+import sys
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import pytest
@@ -92,6 +93,15 @@ def golden_or_engine(source: str) -> str:
     """Word source of a trial source: the original code's golden words for the HIRO trials, the
     batch engine's words for generated trials (which have no golden files)."""
     return "golden" if source == "hiro" else "engine"
+
+
+@pytest.fixture(autouse=True)
+def _release_ros_domains() -> Iterator[None]:
+    """Give back the ROS domains a test leased (its node processes are stopped by then)."""
+    yield
+    replay_eval = sys.modules.get("rcbht_introspection.nodes.replay_eval")
+    if replay_eval is not None:
+        replay_eval.release_domain()
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import importlib.util
 import os
-import random
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -41,10 +40,15 @@ def require_learn() -> None:
 
 
 def ros_env(tmp_path: Path) -> dict[str, str]:
-    """Environment of an isolated ROS graph: random domain 1..101, loopback only, logs in tmp."""
+    """Environment of an isolated ROS graph: a domain of its own, loopback only, logs in tmp.
+
+    The domain is leased until the test ends (conftest releases it), so no two tests, nor a
+    test and a replay or benchmark running beside it, share one.
+    """
+    from rcbht_introspection.nodes.replay_eval import lease_domain
     from rcbht_introspection.nodes.replay_eval import ros_env as env
 
-    values = env(random.randint(1, 101), tmp_path / "ros_log")
+    values = env(lease_domain(), tmp_path / "ros_log")
     full = {**os.environ, **values}
     full.pop("ROS_LOCALHOST_ONLY", None)
     full["PYTHONPATH"] = os.pathsep.join(

@@ -126,3 +126,34 @@ def test_a_stream_numbers_its_words_without_gaps() -> None:
     words += stream.finish()
     assert len(words) > 100
     assert sorted(w.seq for w in words) == list(range(1, len(words) + 1))
+
+
+def test_ros_domains_leased_by_one_process_are_not_given_to_another() -> None:
+    """Concurrent tests, replays and benchmarks each get a DDS domain of their own."""
+    import json
+    import subprocess
+    import sys
+
+    from rcbht_introspection.nodes.replay_eval import DOMAIN_IDS, lease_domain, release_domain
+
+    mine = {lease_domain() for _ in range(5)}
+    assert len(mine) == 5 and mine <= set(DOMAIN_IDS)
+    child = (
+        "import json\n"
+        "from rcbht_introspection.errors import InputError\n"
+        "from rcbht_introspection.nodes.replay_eval import lease_domain\n"
+        "got = []\n"
+        "try:\n"
+        "    while True: got.append(lease_domain())\n"
+        "except InputError: print(json.dumps(got))\n"
+    )
+    try:
+        out = subprocess.run(
+            [sys.executable, "-c", child], capture_output=True, text=True, check=True
+        )
+        theirs = set(json.loads(out.stdout))
+        assert theirs and not theirs & mine
+    finally:
+        release_domain()
+    out = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, check=True)
+    assert mine <= set(json.loads(out.stdout))  # released: free for others again

@@ -27,7 +27,6 @@ from __future__ import annotations
 import functools
 import json
 import os
-import random
 import shutil
 import struct
 import threading
@@ -490,6 +489,7 @@ def run(out_dir: Path) -> dict[str, Any]:
     from rcbht_introspection.nodes.replay_eval import (
         NodeProcess,
         environment,
+        lease_domain,
         ros_env,
         write_params,
     )
@@ -508,7 +508,7 @@ def run(out_dir: Path) -> dict[str, Any]:
     model = Path(model_env) if model_env else ros._model(work)
     if model is not None and not model.is_file():
         raise InputError("no such model file", model)
-    domain_id = random.SystemRandom().randint(1, 101)
+    domain_id = lease_domain()  # held for the whole run
     env = ros_env(domain_id, work / "ros_log")
     seg_params = write_params(
         work / "segmenter.yaml",

@@ -189,10 +189,10 @@ def stop_loop(
 ) -> tuple[list[Stop], dict[str, int]]:
     """Stops of segmenter_node, classifier_node (fed by a running segmenter) and bag record."""
     from rcbht_introspection.nodes.common import RosSession
-    from rcbht_introspection.nodes.replay_eval import environment, ros_env
+    from rcbht_introspection.nodes.replay_eval import environment, lease_domain, ros_env
 
     rng = random.Random(seed)
-    values = ros_env(rng.randint(1, 101), work / "ros_log")
+    values = ros_env(lease_domain(), work / "ros_log")
     env = {**os.environ, **values}
     env.pop("ROS_LOCALHOST_ONLY", None)
     toy_model(work / "model.rcbht")
@@ -250,9 +250,9 @@ def match_gaps(n: int, work: Path, seed: int = 0) -> list[float]:
     from std_msgs.msg import String
 
     from rcbht_introspection.nodes.common import RosSession
-    from rcbht_introspection.nodes.replay_eval import ros_env
+    from rcbht_introspection.nodes.replay_eval import lease_domain, ros_env
 
-    env = {**os.environ, **ros_env(random.Random(seed).randint(1, 101), work / "ros_log")}
+    env = {**os.environ, **ros_env(lease_domain(), work / "ros_log")}
     env.pop("ROS_LOCALHOST_ONLY", None)
     gaps = []
     with RosSession("match_probe_writer", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:

@@ -69,6 +69,44 @@ class ReplayEvalOptions:
     """Also compute the offline references (words and verdicts)."""
 
 
+DOMAIN_IDS = range(1, 102)
+"""ROS_DOMAIN_IDs whose DDS ports stay below the Linux ephemeral range."""
+_LEASES: dict[int, Any] = {}
+
+
+def lease_domain() -> int:
+    """A ROS_DOMAIN_ID that no other process of this machine holds, held until released.
+
+    Each id is a lock file (flock) under the temp directory; the lock goes with the process,
+    so a crashed holder frees its id. Tests, replays and benchmarks that run at the same time
+    therefore never share a DDS domain.
+    """
+    import fcntl
+
+    folder = Path(tempfile.gettempdir()) / "rcbht-ros-domains"
+    folder.mkdir(exist_ok=True)
+    ids = [i for i in DOMAIN_IDS if i not in _LEASES]
+    random.SystemRandom().shuffle(ids)
+    for domain_id in ids:
+        handle = (folder / f"{domain_id}.lock").open("a")
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.close()
+            continue
+        _LEASES[domain_id] = handle
+        return domain_id
+    raise InputError(f"every ROS_DOMAIN_ID in {DOMAIN_IDS.start}..{DOMAIN_IDS.stop - 1} is in use")
+
+
+def release_domain(domain_id: int | None = None) -> None:
+    """Give back a leased domain (None: every domain this process holds)."""
+    for i in list(_LEASES) if domain_id is None else [domain_id]:
+        handle = _LEASES.pop(i, None)
+        if handle is not None:
+            handle.close()  # closing the file drops its lock
+
+
 def ros_env(domain_id: int, log_dir: Path) -> dict[str, str]:
     """Environment that isolates a ROS graph on this host: private domain, loopback only."""
     return {
@@ -334,7 +372,7 @@ def replay_eval(
     for b, t in zip(bags, trials, strict=True):
         if t.arms != arms:
             raise InputError(f"arms {list(t.arms)} differ from the first bag's {list(arms)}", b)
-    domain_id = options.domain_id or random.SystemRandom().randint(1, 101)
+    domain_id = options.domain_id or lease_domain()
     tmp = tempfile.TemporaryDirectory(prefix="rcbht-replay-")
     work = Path(options.log_dir) if options.log_dir else Path(tmp.name)
     work.mkdir(parents=True, exist_ok=True)
@@ -424,6 +462,8 @@ def replay_eval(
                 codes[p.name] = p.stop()
                 if codes[p.name] != 0:  # the node log is in a temporary folder: keep its end
                     result.setdefault("shutdown_logs", {})[p.name] = p.tail(40)
+            if not options.domain_id:
+                release_domain(domain_id)  # its nodes are gone
     result.update(_score(per_bag, trials, model_path, options, arms))
     result.update(
         {
