@@ -73,7 +73,11 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             raise
         print(f"== {short}", flush=True)
-        figures = module.run(args.out)
+        try:
+            figures = module.run(args.out)
+        except KeyboardInterrupt:  # Ctrl-C: the module's finally blocks stopped its processes
+            print(f"{short}: interrupted; nothing written", file=sys.stderr)
+            return 0
         print(json.dumps(figures, indent=2), flush=True)
         if optional:
             own = args.out / f"{short}.json"
