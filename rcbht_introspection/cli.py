@@ -41,14 +41,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `rcbht` console script."""
-    args = build_parser().parse_args(argv)
+    command = "rcbht"
     try:
+        args = build_parser().parse_args(argv)
+        command = f"rcbht {args.command}"
         return int(args.func(args) or 0)
     except InputError as exc:
-        print(f"rcbht {args.command}: error: {exc}", file=sys.stderr)
+        print(f"{command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:  # Ctrl-C: the command's finally blocks have cleaned up
-        print(f"rcbht {args.command}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt:  # Ctrl-C (also while starting): finally blocks have cleaned up
+        print(f"{command}: interrupted", file=sys.stderr)
         return 0
 
 

@@ -14,6 +14,7 @@ from rcbht_introspection.live.health import (
     LatencyWindow,
     classifier_health,
 )
+from rcbht_introspection.live.join import LatchedEvents, WordLedger
 from rcbht_introspection.taxonomy.words import Level, Word
 
 
@@ -81,28 +82,44 @@ class _Model:
         return ["approach" for _ in samples]
 
 
-def _words(seqs: range, t0: float) -> list[Word]:
+def _words(seqs: range, t0: float, level: Level = Level.PRIMITIVE) -> list[Word]:
+    """One Fz word per number, a second each from t0."""
     return [
-        Word("Fz", Level.PRIMITIVE, "cons", t0 + k, t0 + k + 1, arm="R", seq=s)
-        for k, s in enumerate(seqs)
+        Word("Fz", level, "cons", t0 + k, t0 + k + 1, arm="R", seq=s) for k, s in enumerate(seqs)
     ]
 
 
-def test_words_missing_from_the_numbering_blind_the_sub_task_under_way_only() -> None:
+def test_a_word_is_lost_only_once_every_level_delivered_a_later_one() -> None:
+    ledger = WordLedger()
+    ledger.add(_words(range(1, 3), 0.0), now=2.0)
+    ledger.add(_words(range(5, 6), 2.0), now=3.0)  # 3 and 4 may be in flight on other levels
+    assert ledger.settle() == 0 and ledger.has_gap
+    ledger.add(_words(range(3, 4), 0.0, Level.COMPOSITION), now=2.5)
+    ledger.add(_words(range(6, 7), 0.0, Level.BEHAVIOR), now=4.0)
+    assert ledger.settle() == 0 and ledger.has_gap  # the composition level has not passed 4
+    ledger.add(_words(range(7, 8), 0.0, Level.COMPOSITION), now=5.0)
+    assert ledger.settle() == 1  # 4 never came; words up to 5 may have reached time 3.0
+    assert ledger.blind_until == 3.0 and ledger.lost == 1 and not ledger.has_gap
+    ledger.end()
+    assert ledger.settle() == 0 and ledger.settled == 7
+
+
+def test_a_late_join_blinds_the_sub_task_under_way_and_holds_its_verdict() -> None:
     tracker = BeliefTracker(_Model())
     tracker.phase("approach", 0.0)
-    tracker.add_words("R", _words(range(1, 4), 0.0), now=3.0)
-    assert tracker.account_losses() == 0
-    assert tracker.current().subtask == "approach"
-    tracker.add_words("R", _words(range(10, 12), 3.0), now=5.0)  # seq 4..9 never arrived
-    assert tracker.account_losses() == 6
-    assert tracker.account_losses() == 0  # counted once
-    blind = tracker.current()
-    assert blind.subtask == UNKNOWN and blind.blind
+    # joined late: words 1..9 were published before this classifier matched
+    tracker.add_words("R", _words(range(10, 12), 3.0), now=5.0)
+    assert tracker.account_losses() == 0  # not proven while other levels may still deliver
     tracker.phase("rotation", 6.0)
-    tracker.add_words("R", _words(range(12, 15), 6.0), now=9.0)
+    assert tracker.take_finals() == []  # the approach verdict waits for the proof
+    tracker.add_words("R", _words(range(12, 14), 6.0, Level.COMPOSITION), now=7.0)
+    tracker.add_words("R", _words(range(14, 15), 6.0, Level.BEHAVIOR), now=8.0)
+    assert tracker.account_losses() == 9
+    assert tracker.account_losses() == 0  # counted once
+    tracker.add_words("R", _words(range(15, 18), 6.0), now=9.0)
     tracker.phase("done", 9.0)
     tracker.end_of_stream("R")
+    tracker.account_losses()
     finals = tracker.take_finals()
     assert [(b.phase, b.subtask, b.blind) for b in finals] == [
         ("approach", UNKNOWN, True),
@@ -111,6 +128,21 @@ def test_words_missing_from_the_numbering_blind_the_sub_task_under_way_only() ->
     tracker.reset()  # a new stream starts with a clean slate
     tracker.add_words("R", _words(range(1, 3), 0.0), now=2.0)
     assert tracker.account_losses() == 0 and not tracker.current().blind
+
+
+def test_latched_events_of_earlier_streams_are_dropped_and_the_running_ones_kept() -> None:
+    history: LatchedEvents[str] = LatchedEvents(since_ns=1000)
+    # replayed at the join, oldest first: two finished trials, then the running one
+    for stream, name in [("s1", "approach"), ("s1", "done"), ("s2", "approach"), ("s2", "done")]:
+        assert history.event(stream, name, published_ns=500, current=None) == []
+    assert history.event("s3", "approach", published_ns=900, current=None) == []
+    assert history.stream_started("s3") == ["approach"]  # the first live message of s3
+    assert history.stale == 4
+    assert history.event("s3", "rotation", published_ns=950, current="s3") == ["rotation"]
+    assert history.event("s2", "done", published_ns=600, current="s3") == []
+    assert history.stale == 5
+    # live events always apply, whatever their stream
+    assert history.event("s4", "approach", published_ns=2000, current="s3") == ["approach"]
 
 
 def test_a_stream_numbers_its_words_without_gaps() -> None:

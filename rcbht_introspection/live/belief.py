@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rcbht_introspection.io.trial import AXES, SUBTASKS
+from rcbht_introspection.live.join import WordLedger
 from rcbht_introspection.taxonomy.words import LEVELS, Level, TrialWords, Word
 
 if TYPE_CHECKING:  # the encodings pull in scikit-learn: imported when a model is used
@@ -90,9 +91,8 @@ class BeliefTracker:
         self._issued = 0
         self._added = 0
         self.last_final: Belief | None = None
-        self.seen: dict[str, tuple[int, int]] = {}
-        """Per arm, (highest word seq, words received): the stream numbers its words 1, 2, ..."""
-        self.lost = 0
+        self.ledgers: dict[str, WordLedger] = {}
+        """Per arm, which of the stream's numbered words arrived (live/join.py)."""
         self.blind_until = -np.inf
         """Windows starting before this stream time overlap lost words (a late join)."""
         self._ordered = True
@@ -104,9 +104,12 @@ class BeliefTracker:
     def add_words(self, arm: str, words: Iterable[Word], now: float | None = None) -> None:
         """Add final words of `arm`; `now` is the stream time of the sample that finalised them."""
         self.arms.add(arm)
-        top, count = self.seen.get(arm, (0, 0))
+        words = list(words)
+        ledger = self.ledgers.get(arm)
+        if ledger is None:
+            ledger = self.ledgers[arm] = WordLedger()
+        ledger.add(words, self.now if now is None else now)
         for w in words:
-            top, count = max(top, w.seq), count + 1
             seq = (
                 self.words.words.setdefault(w.arm, {})
                 .setdefault(w.level, {})
@@ -120,7 +123,6 @@ class BeliefTracker:
                 self.watermark[key] = w.end
             self.now = max(self.now, w.end)
             self._added += 1
-        self.seen[arm] = (top, count)
         if now is not None:
             self.now = max(self.now, now)
         if self.mode == "window" and self._added > 2000:
@@ -129,6 +131,8 @@ class BeliefTracker:
     def end_of_stream(self, arm: str, level: Level | None = None) -> None:
         """`arm`'s stream finished on `level` (None: on every level): its words there are final."""
         self.arms.add(arm)
+        if arm in self.ledgers:
+            self.ledgers[arm].end(level)
         for lv in LEVELS if level is None else (level,):
             self.ended_levels.add((arm, lv))
         if all((arm, lv) in self.ended_levels for lv in LEVELS):
@@ -151,19 +155,17 @@ class BeliefTracker:
         return True
 
     def account_losses(self) -> int:
-        """Words skipped in the streams' numbering since the last call (call once a batch is in).
+        """Words of the stream proven lost since the last call (live/join.py WordLedger).
 
         A classifier that joined a running stream (or lost messages) misses words; a window that
-        starts before the newest evidence at that moment is judged UNKNOWN (`Belief.blind`), so
-        the sub-task under way is unknown until the next boundary and no verdict rests on part
-        of its words.
+        starts before the stream time those words may reach is judged UNKNOWN (`Belief.blind`),
+        so the sub-task under way is unknown until the next boundary and no verdict rests on
+        part of its words.
         """
-        lost = sum(top - count for top, count in self.seen.values())
-        new = lost - self.lost
-        if new > 0:
-            self.lost = lost
-            self.blind_until = max(self.blind_until, self.now)
-        return max(new, 0)
+        new = sum(ledger.settle() for ledger in self.ledgers.values())
+        if new:
+            self.blind_until = max(ledger.blind_until for ledger in self.ledgers.values())
+        return new
 
     # --- output ------------------------------------------------------------------------------
     def classify(self, start: float, end: float, phase: str = "", final: bool = False) -> Belief:
@@ -259,8 +261,14 @@ class BeliefTracker:
         return True
 
     def take_finals(self) -> list[Belief]:
-        """Final verdicts of closed sub-tasks whose words are all final (each issued once)."""
+        """Final verdicts of closed sub-tasks whose words are all final (each issued once).
+
+        None while a word is missing that may still arrive or be proven lost (a verdict must
+        not rest on part of a sub-task's words; call `account_losses` first).
+        """
         out = []
+        if any(ledger.has_gap for ledger in self.ledgers.values()):
+            return out
         while self._issued < len(self.segments):
             seg = self.segments[self._issued]
             if seg.end is None or not self._complete(seg.end):

@@ -31,6 +31,7 @@ from rcbht_introspection.live.health import (
     classifier_health,
     file_sha256,
 )
+from rcbht_introspection.live.join import LatchedEvents
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import belief_msg, to_ns, words_from_msg
 from rcbht_introspection.nodes.draining import DrainedGroup, take
@@ -46,7 +47,11 @@ class ClassifierNode(ManagedNode):
         super().__init__("classifier_node", ClassifierConfig)
         # predictions on one sample at a time: skip sklearn's per-call input validation
         sklearn_fast_predict()
-        self.counts = {"words lost": 0, "sub-tasks judged unknown after a loss": 0}
+        self.counts = {
+            "words lost": 0,
+            "sub-tasks judged unknown after a loss": 0,
+            "latched events of earlier streams dropped": 0,
+        }
         self.watch = CounterWatch()
         self.latency = LatencyWindow()
 
@@ -72,6 +77,8 @@ class ClassifierNode(ManagedNode):
 
     def activate(self) -> None:
         cfg = self.cfg
+        # events the latched rcbht/phase replays were published before this moment
+        self.history: LatchedEvents[PhaseMsg] = LatchedEvents(time.time_ns())
         # the inputs are taken by drain() (draining.spin_draining), not by executor callbacks
         drained = DrainedGroup()
         self.word_subs = [
@@ -132,22 +139,24 @@ class ClassifierNode(ManagedNode):
             )
         ]
 
-    def _stream(self, origin_ns: int, stream_id: int) -> None:
-        """A message of a new stream (new time origin or stream id): start a new session."""
-        key = (origin_ns, stream_id)
-        if key != self.stream:
-            if self.stream is not None:
-                # the previous stream ended without all its end markers: issue what it has
-                for arm in tuple(self.tracker.arms):
-                    self.tracker.end_of_stream(arm)
-                for final in self.tracker.take_finals():
-                    self.publish_belief(final, 0)
-                self.tracker.reset()
-                self.state.new_stream()
-            self.stream = key
+    def _enter(self, key: tuple[int, int]) -> None:
+        """A live message of stream `key`: a new stream starts a new session (and its history)."""
+        if key == self.stream:
+            return
+        if self.stream is not None and self.tracker.arms:
+            # the previous stream ended without all its end markers: issue what it has
+            for arm in tuple(self.tracker.arms):
+                self.tracker.end_of_stream(arm)
+            for final in self.tracker.take_finals():
+                self.publish_belief(final, 0)
+        self.tracker.reset()
+        self.state.new_stream()
+        self.stream = key
+        for event in self.history.stream_started(key):  # its events the latched topic replayed
+            self._apply_phase(event)
 
     def ingest_words(self, arm: str, msg: WordsMsg) -> None:
-        self._stream(to_ns(msg.time_origin), msg.stream_id)
+        self._enter((to_ns(msg.time_origin), msg.stream_id))
         words, now = words_from_msg(msg)
         self.tracker.add_words(arm, words, now)
         if msg.end_of_stream:
@@ -158,8 +167,14 @@ class ClassifierNode(ManagedNode):
         self.batches[key] = (count + 1, msg.batch_size)
         self._trigger(stamp)
 
-    def ingest_phase(self, msg: PhaseMsg) -> None:
-        self._stream(to_ns(msg.time_origin), msg.stream_id)
+    def ingest_phase(self, msg: PhaseMsg, info: dict) -> None:
+        key = (to_ns(msg.time_origin), msg.stream_id)
+        for event in self.history.event(key, msg, info.get("source_timestamp"), self.stream):
+            self._enter(key)
+            self._apply_phase(event)
+        self.counts["latched events of earlier streams dropped"] = self.history.stale
+
+    def _apply_phase(self, msg: PhaseMsg) -> None:
         if not self.tracker.phase(msg.name, msg.time):
             self.get_logger().warning(f"ignored unknown sub-task event {msg.name!r}")
             return
@@ -183,7 +198,7 @@ class ClassifierNode(ManagedNode):
                     taken = True
             got = take(self.phase_sub)
             if got is not None:
-                self.ingest_phase(got[0])
+                self.ingest_phase(*got)
                 taken = True
             if not taken:
                 break

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import contextlib
 import gc
 import sys
 import threading
 import time
+import traceback
 from collections.abc import Callable
 from typing import Any, TypeVar
 
@@ -98,6 +98,8 @@ class ManagedNode(LifecycleNode):
         self.autostart = bool(autostart.value)
         self.state_label = "unconfigured"
         self.config_error = ""
+        self.stop: StopSignal | None = None
+        """The process's stop request (set by run()); a manager's shutdown transition sets it."""
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._diag_time = time.monotonic()
@@ -121,40 +123,75 @@ class ManagedNode(LifecycleNode):
         return []
 
     # --- lifecycle ----------------------------------------------------------------------------
-    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+    # rclpy turns an exception in a transition callback into a silent ERROR transition; each
+    # transition here therefore catches it, logs one line, removes the entities the failed step
+    # created and reports FAILURE (the node stays in the state it was in).
+    def _transition(
+        self, name: str, step: Callable[[], None], then: str
+    ) -> TransitionCallbackReturn:
+        before = self._entities()
         try:
-            cfg = read_config(self, self.config_class)
-            self.configure(cfg)
-        except InputError as exc:
-            self.config_error = str(exc)
-            self.get_logger().error(f"configure failed: {exc}")
+            step()
+        except Exception as exc:
+            self.config_error = (
+                f"{name} failed: {exc}" if not isinstance(exc, InputError) else str(exc)
+            )
+            self.get_logger().error(
+                f"{name} failed: {exc}"
+                if isinstance(exc, InputError)
+                else f"{name} failed: {type(exc).__name__}: {exc}\n{traceback.format_exc()}"
+            )
+            self._destroy_new(before)
             return TransitionCallbackReturn.FAILURE
         self.config_error = ""
-        self.state_label = "inactive"
+        self.state_label = then
         return TransitionCallbackReturn.SUCCESS
+
+    def _entities(self) -> set[int]:
+        return {id(e) for e in (*self.publishers, *self.subscriptions, *self.timers)}
+
+    def _destroy_new(self, before: set[int]) -> None:
+        """Destroy the publishers, subscriptions and timers created since `before`."""
+        for sub in [s for s in self.subscriptions if id(s) not in before]:
+            self.destroy_subscription(sub)
+        for timer in [t for t in self.timers if id(t) not in before]:
+            self.destroy_timer(timer)
+        for pub in [p for p in self.publishers if id(p) not in before]:
+            self.destroy_publisher(pub)
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        return self._transition(
+            "configure", lambda: self.configure(read_config(self, self.config_class)), "inactive"
+        )
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self.activate()
-        self.state_label = "active"
-        return super().on_activate(state)
+        result = self._transition("activate", self.activate, "active")
+        if result == TransitionCallbackReturn.SUCCESS:
+            return super().on_activate(state)
+        return result
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self.deactivate()
-        self.state_label = "inactive"
-        return super().on_deactivate(state)
+        result = self._transition("deactivate", self.deactivate, "inactive")
+        if result == TransitionCallbackReturn.SUCCESS:
+            return super().on_deactivate(state)
+        return result
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self.cleanup()
-        self.state_label = "unconfigured"
-        return TransitionCallbackReturn.SUCCESS
+        return self._transition("cleanup", self.cleanup, "unconfigured")
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         if self.state_label == "active":
-            self.deactivate()
-        if self.state_label in ("active", "inactive"):
-            self.cleanup()
+            self._transition("deactivate", self.deactivate, "inactive")
+        if self.state_label == "inactive":
+            self._transition("cleanup", self.cleanup, "unconfigured")
         self.state_label = "finalized"
+        if self.stop is not None:  # a manager shut the node down: the process ends too
+            self.stop.request()
         return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.get_logger().error(f"a lifecycle transition failed in state {self.state_label}")
+        return TransitionCallbackReturn.FAILURE
 
     def finish(self) -> None:
         """The process ends: shut down from whatever state the node is in (logs its statistics)."""
@@ -195,14 +232,15 @@ def run(
     executor = None
     try:
         node = node_factory()
+        node.stop = stop
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         if node.autostart and not stop.requested:
-            if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-                # one line naming the parameter; the node never started
-                print(f"[{name}] error: {node.config_error}", file=sys.stderr, flush=True)
-                return 2
-            node.trigger_activate()
+            for transition in (node.trigger_configure, node.trigger_activate):
+                if transition() != TransitionCallbackReturn.SUCCESS:
+                    # one line naming the parameter; the node never started
+                    print(f"[{name}] error: {node.config_error}", file=sys.stderr, flush=True)
+                    return 2
         # start-up objects (rclpy, NumPy, scikit-learn, the model) live until exit: keep them
         # out of the cyclic collector, whose full passes over them stall a 1 kHz callback
         gc.collect()
@@ -220,8 +258,8 @@ def run(
     return 0
 
 
-SETTLE_CALLBACKS = 1_000_000
-"""Most delivered callbacks `RosSession.settle` runs (a bound, never reached in practice)."""
+SETTLE_CALLBACKS = 10_000
+"""Most delivered callbacks `RosSession.settle` runs per round."""
 
 
 class RosSession:
@@ -246,15 +284,22 @@ class RosSession:
 
     def _spin(self) -> None:
         # a bounded wait, so the thread sees the stop request without the context going away
-        with contextlib.suppress(Exception):
-            while not self._stop.is_set() and self.context.ok():
+        reported = False
+        while not self._stop.is_set() and self.context.ok():
+            try:
                 self.executor.spin_once(timeout_sec=0.05)
+            except Exception as exc:
+                if not reported:  # said once, on one line; the session keeps serving
+                    print(f"error in a callback: {type(exc).__name__}: {exc}", file=sys.stderr)
+                    reported = True
 
-    def settle(self) -> None:
+    def settle(self, timeout: float = 2.0) -> None:
         """Stop the spin thread, then run every callback whose message was already delivered."""
         self._stop.set()
         self._thread.join()
-        serve_ready(self.executor, SETTLE_CALLBACKS)
+        deadline = time.monotonic() + timeout
+        while serve_ready(self.executor, SETTLE_CALLBACKS) and time.monotonic() < deadline:
+            pass
 
     def close(self) -> None:
         """Stop the spin thread, then destroy the node and shut the context down, in that order."""

@@ -62,16 +62,21 @@ def take(sub: Subscription) -> tuple[Any, Any] | None:
         return sub.handle.take_message(sub.msg_type, sub.raw)
 
 
-def serve_ready(executor: Executor, limit: int) -> None:
-    """Run up to `limit` callbacks the executor finds ready now, without blocking."""
-    for _ in range(limit):
+def serve_ready(executor: Executor, limit: int) -> int:
+    """Run up to `limit` callbacks the executor finds ready now, without blocking; how many ran.
+
+    One call serves at most one wake-up's worth (a message per subscription): call again while
+    it returns more than 0 to take a whole backlog.
+    """
+    for done in range(limit):
         try:
             handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0)
         except TimeoutException:
-            return
+            return done
         handler()
         if handler.exception() is not None:
             raise handler.exception()
+    return limit
 
 
 def _entities(node: Node) -> tuple[tuple[Subscription, ...], tuple[Timer, ...]]:

@@ -5,66 +5,93 @@ Python's default SIGINT handler would raise KeyboardInterrupt inside whatever im
 call runs, and rclpy's own handler shuts the context down under a running node (publishers
 then fail). With a StopSignal the process finishes its step, logs its last line and shuts down
 in order; a watchdog ends a stop that hangs, with the stack of every thread in the log.
+The handler only sets a flag and the interpreter's wake-up byte lands in a pipe: it takes no
+lock, so it cannot deadlock whatever the main thread was doing when the signal came.
 """
 
 from __future__ import annotations
 
+import contextlib
 import faulthandler
 import os
+import select
 import signal
 import sys
 import threading
+import time
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-_EXITING = threading.Event()
 WATCHDOG_S = 10.0
 """A process that has not exited this long after the stop request dumps its stacks and exits 3."""
 
 
 class StopSignal:
-    """SIGINT / SIGTERM set `requested`; the owner checks it (and may wait on it) and stops."""
+    """SIGINT / SIGTERM set `requested`; the owner checks it (or waits on it) and stops."""
 
     def __init__(self, watchdog_s: float = WATCHDOG_S) -> None:
-        self.event = threading.Event()
-        self.signum: int | None = None
         self.watchdog_s = watchdog_s
+        self.signum: int | None = None
+        self._requested = False
+        self._done = False
+        self._read, self._write = os.pipe()
+        for fd in (self._read, self._write):
+            os.set_blocking(fd, False)
 
     @classmethod
     def install(cls, watchdog_s: float = WATCHDOG_S) -> StopSignal:
         """Replace the SIGINT and SIGTERM handlers of this process (main thread only)."""
         stop = cls(watchdog_s)
+        signal.set_wakeup_fd(stop._write, warn_on_full_buffer=False)
         for signum in STOP_SIGNALS:
             signal.signal(signum, stop._handle)
         faulthandler.enable()  # a crash in native code leaves the Python stack in the log
+        if watchdog_s > 0:
+            threading.Thread(target=stop._watchdog, name="stop-watchdog", daemon=True).start()
         return stop
 
     @property
     def requested(self) -> bool:
-        return self.event.is_set()
+        return self._requested
+
+    def is_set(self) -> bool:
+        """Same as `requested` (lets a StopSignal stand where a threading.Event is checked)."""
+        return self._requested
 
     def request(self) -> None:
         """Ask for a stop as a signal would (tests, or a node that decides to end)."""
-        if not self.event.is_set():
-            self.event.set()
-            if self.watchdog_s > 0:
-                threading.Thread(target=self._watchdog, name="stop-watchdog", daemon=True).start()
+        self._requested = True
+        with contextlib.suppress(BlockingIOError):
+            os.write(self._write, b"\0")
 
     def wait(self, timeout: float | None = None) -> bool:
         """Block until a stop is requested or `timeout` passed; True if requested."""
-        return self.event.wait(timeout)
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while not self._requested:
+            left = None if deadline is None else deadline - time.monotonic()
+            if left is not None and left <= 0:
+                break
+            # a signal writes its wake-up byte to the pipe: select returns at once
+            select.select([self._read], [], [], left)
+            with contextlib.suppress(BlockingIOError):
+                os.read(self._read, 512)
+        return self._requested
 
-    @staticmethod
-    def exiting() -> None:
+    def exiting(self) -> None:
         """The process is done with its own shutdown (the watchdog stands down)."""
-        _EXITING.set()
+        self._done = True
 
     def _handle(self, signum: int, frame: object) -> None:
-        self.signum = self.signum or signum
-        self.request()
+        if self.signum is None:
+            self.signum = signum
+        self._requested = True
 
     def _watchdog(self) -> None:
-        # still running this long after the request: whatever holds it up is a bug to see
-        if not _EXITING.wait(self.watchdog_s):
+        while not self._requested:
+            time.sleep(0.1)
+        deadline = time.monotonic() + self.watchdog_s
+        while not self._done and time.monotonic() < deadline:
+            time.sleep(0.1)
+        if not self._done:  # still running this long after the request: a bug to see
             print(
                 f"stop did not complete within {self.watchdog_s:.0f} s; stacks follow",
                 file=sys.stderr,

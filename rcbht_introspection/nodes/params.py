@@ -9,6 +9,7 @@ parameter. config/segmenter.yaml and config/classifier.yaml are ROS parameter fi
 from __future__ import annotations
 
 import dataclasses
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
@@ -122,6 +123,18 @@ def word_topics(namespace: str, arms: tuple[str, ...]) -> dict[tuple[str, str], 
     return out
 
 
+TOPIC_NAME = re.compile(r"(~/|/)?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*")
+"""A ROS topic name (relative, absolute or private): tokens of letters, digits and _."""
+TOPIC_FIELDS = (
+    "wrench_topics",
+    "phase_topic",
+    "words_namespace",
+    "applied_phase_topic",
+    "state_topic",
+    "belief_topic",
+)
+
+
 def _check(cond: bool, field_name: str, message: str, path: Path | None) -> None:
     if not cond:
         raise InputError(message, path=path, field=field_name)
@@ -144,6 +157,15 @@ def validate(cfg: T, path: Path | None = None) -> T:
         f"expected one of {RELIABILITIES}, got {cfg.qos_reliability!r}",  # type: ignore[attr-defined]
         path,
     )
+    for name in TOPIC_FIELDS:
+        values = getattr(cfg, name, ())
+        for value in (values,) if isinstance(values, str) else values:
+            _check(
+                bool(TOPIC_NAME.fullmatch(value)),
+                name,
+                f"not a valid ROS topic name: {value!r}",
+                path,
+            )
     if isinstance(cfg, SegmenterConfig):
         _check(
             len(cfg.wrench_topics) == len(arms),

@@ -71,21 +71,27 @@ class BagPlayer:
             stop=stop,
         )
 
-    def wait_for_acks(self, timeout: float) -> bool:
-        """True once every reliable subscriber acknowledged everything published (or timeout)."""
+    def wait_for_acks(self, timeout: float, stop: StopSignal | None = None) -> bool:
+        """True once every reliable subscriber acknowledged everything published.
+
+        One deadline for all publishers, checked in short steps, so a stop request ends it.
+        """
         from rclpy.duration import Duration
 
-        return all(
-            p.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9)))  # type: ignore[attr-defined]
-            for p in self.publishers.values()
-        )
+        deadline = time.monotonic() + timeout
+        step = Duration(nanoseconds=50_000_000)
+        for pub in self.publishers.values():
+            while not pub.wait_for_all_acked(step):  # type: ignore[attr-defined]
+                if time.monotonic() > deadline or (stop is not None and stop.requested):
+                    return False
+        return True
 
     def play(
         self,
         messages: Sequence[BagMessage],
         rate: float = 1.0,
         on_publish: Callable[[BagMessage, int], None] | None = None,
-        stop: threading.Event | None = None,
+        stop: threading.Event | StopSignal | None = None,
     ) -> int:
         """Publish at the recorded spacing divided by `rate`; `on_publish(msg, wall_ns)` after each."""
         if rate <= 0:

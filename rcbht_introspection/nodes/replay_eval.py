@@ -413,12 +413,15 @@ def replay_eval(
         from rcbht_introspection.nodes.common import RosSession, qos_profile
         from rcbht_introspection.nodes.player import BagPlayer
 
-        procs = [
-            NodeProcess("segmenter_node", seg_params, env, work / "segmenter_node.log"),
-            NodeProcess("classifier_node", cls_params, env, work / "classifier_node.log"),
-        ]
+        procs: list[NodeProcess] = []
         codes: dict[str, int | None] = {}
         try:
+            procs.append(
+                NodeProcess("segmenter_node", seg_params, env, work / "segmenter_node.log")
+            )
+            procs.append(
+                NodeProcess("classifier_node", cls_params, env, work / "classifier_node.log")
+            )
             with RosSession("rcbht_replay_eval", domain_id=domain_id) as ros:
                 qos = qos_profile(seg.qos_depth, "reliable")
                 observer = Observer(ros.node, seg, cls_cfg, qos)
