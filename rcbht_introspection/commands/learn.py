@@ -27,7 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action=argparse.BooleanOptionalAction,
         default=None,
         help="also train on live-like windows (words final by t); default from "
-        "config/live.yaml (README, 'Live /task_state')",
+        "config/live.yaml (docs/live-belief.md)",
     )
     train.add_argument(
         "--live-config",
@@ -57,7 +57,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ev.add_argument(
         "--live-augment",
         action="store_true",
-        help="score live windows with a live head trained on live windows too (README, 'Live /task_state')",
+        help="score live windows with a live head trained on live windows too (docs/live-belief.md)",
     )
     ev.add_argument(
         "--live-score",

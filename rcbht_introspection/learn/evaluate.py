@@ -102,7 +102,7 @@ def evaluate(
     protocol: Protocol = Protocol(),
     progress: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
-    """Run the protocol; returns the JSON-ready result (keys documented in the README, "Action grammars and sub-task classifiers")."""
+    """Run the protocol; returns the JSON-ready result (keys documented in docs/learning.md)."""
     complete = [t for t in trials if t.complete]
     excluded = [t.trial for t in trials if not t.complete]
     two_arm = any(len(s.words.arms) > 1 for t in complete for s in t.samples[:1])

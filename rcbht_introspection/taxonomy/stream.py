@@ -7,7 +7,7 @@ the batch engine (pipeline.AxisPipeline), which releases MCs and LLBs once no la
 change them. `finish()` is the end of the trial. With the `reference` profile the words equal the
 batch output exactly; `causal` decides whole-trial quantities from the past only.
 
-Whole-trial inputs and how the stream gets them (README, "Streaming RCBHT"):
+Whole-trial inputs and how the stream gets them (docs/streaming.md):
 * moment-axis domain (4th largest/smallest sample of the trial): given in StreamConfig
   (`moment_domains`, e.g. from calibration), else moment-axis primitives wait until the running
   domain can no longer fall below the threshold, or until finish() (causal: running domain);
