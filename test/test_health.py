@@ -14,7 +14,7 @@ from rcbht_introspection.live.health import (
     LatencyWindow,
     classifier_health,
 )
-from rcbht_introspection.live.join import LatchedEvents, WordLedger
+from rcbht_introspection.live.join import LatchedEvents, Watermarks, WordLedger
 from rcbht_introspection.taxonomy.words import Level, Word
 
 
@@ -104,6 +104,37 @@ def test_a_word_is_lost_only_once_every_level_delivered_a_later_one() -> None:
     assert ledger.settle() == 0 and ledger.settled == 7
 
 
+def test_seq_end_proves_a_loss_as_soon_as_every_level_topic_passed_it() -> None:
+    """Words.seq_end (or an empty watermark message) moves a level on without a word of its own."""
+    ledger = WordLedger()
+    ledger.add(_words(range(5, 7), 2.0), now=3.0, level=Level.PRIMITIVE, seq_end=6)
+    assert ledger.settle() == 0 and ledger.has_gap  # 1..4 may be compositions in flight
+    ledger.add([], now=3.1, level=Level.COMPOSITION, seq_end=6)
+    ledger.add([], now=3.1, level=Level.BEHAVIOR, seq_end=6)
+    assert ledger.settle() == 4 and ledger.blind_until == 3.0 and not ledger.has_gap
+
+
+def test_watermarks_mark_idle_levels_of_the_running_stream_only() -> None:
+    marks = Watermarks(idle_s=0.1)
+    top = marks.batch("R", 0, _words(range(1, 4), 0.0))
+    assert top == 3
+    marks.published("R", 0, Level.PRIMITIVE, top, now=1.0)
+    assert marks.due(1.05) == [
+        ("R", 0, Level.COMPOSITION, 3),
+        ("R", 0, Level.BEHAVIOR, 3),
+    ]  # never published: due at once
+    for level in (Level.COMPOSITION, Level.BEHAVIOR):
+        marks.published("R", 0, level, 3, now=1.05)
+    assert marks.due(1.1) == []  # nothing new
+    marks.batch("R", 0, _words(range(4, 6), 1.0))
+    marks.published("R", 0, Level.PRIMITIVE, 5, now=1.2)
+    assert marks.due(1.12) == []  # idle for less than 0.1 s
+    assert [d[2] for d in marks.due(1.2)] == [Level.COMPOSITION, Level.BEHAVIOR]
+    marks.ended("R", 0)
+    assert marks.due(5.0) == []
+    assert marks.batch("R", 1, _words(range(1, 2), 0.0)) == 1  # a new stream numbers from 1
+
+
 def test_a_late_join_blinds_the_sub_task_under_way_and_holds_its_verdict() -> None:
     tracker = BeliefTracker(_Model())
     tracker.phase("approach", 0.0)
@@ -143,6 +174,9 @@ def test_latched_events_of_earlier_streams_are_dropped_and_the_running_ones_kept
     assert history.stale == 5
     # live events always apply, whatever their stream
     assert history.event("s4", "approach", published_ns=2000, current="s3") == ["approach"]
+    # re-activated: the latched topic replays what was applied already
+    history.rejoin(since_ns=3000)
+    assert history.event("s4", "approach", published_ns=2000, current="s4") == []
 
 
 def test_a_stream_numbers_its_words_without_gaps() -> None:

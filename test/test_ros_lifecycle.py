@@ -209,10 +209,12 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
             from rcbht_introspection.nodes.conversions import to_time
 
             qos = qos_profile(1000, "reliable")
-            finals: list[Belief] = []
-            ros.node.create_subscription(
-                Belief, "/rcbht/belief", lambda m: finals.append(m) if m.final else None, qos
-            )
+            beliefs: list[Belief] = []
+            ros.node.create_subscription(Belief, "/rcbht/belief", beliefs.append, qos)
+
+            def finals() -> list[Belief]:
+                return [b for b in list(beliefs) if b.final]
+
             diag = DiagnosticsProbe(ros)
             matched = segmenter_matches(ros.node)
             wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
@@ -236,18 +238,27 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
             send(600)
             assert stop(first) == 0, first_log.read_text()
             send(200)  # words the restarted classifier never sees
+            # the segmenter's diagnostics (1 Hz) report the first classifier gone, then the
+            # second one matched by its own writers (not just seen in the graph)
+            assert wait_for(lambda: matched() == 0, 30), seg_log.read_text()
             second = start_node("classifier_node", params, env, second_log)
-            # the segmenter's own writers matched the new classifier (not just the graph)
             assert wait_for(lambda: matched() >= 1, 30), second_log.read_text()
             send(300)
+            # the loss is proven live (empty watermark messages move idle levels on), and the
+            # sub-task under way is unknown before its boundary comes
+            belief = "classifier_node: belief"
+            assert wait_for(lambda: int(diag.values(belief).get("words lost", 0)) > 0, 10)
+            seen = len(beliefs)
+            send(100)
+            assert wait_for(lambda: len(beliefs) > seen, 10), second_log.read_text()
+            running = [b for b in list(beliefs)[seen:] if not b.final]
+            assert running and all(b.subtask == "unknown" for b in running), running[-1]
             phase.publish(String(data="rotation"))
             send(600)
             phase.publish(String(data="done"))
-            assert wait_for(lambda: len(finals) >= 2, 30), second_log.read_text()
-            belief = "classifier_node: belief"
-            assert wait_for(lambda: int(diag.values(belief).get("words lost", 0)) > 0, 10)
+            assert wait_for(lambda: len(finals()) >= 2, 30), second_log.read_text()
             lost = int(diag.values(belief)["words lost"])
-        approach, rotation = finals[-2], finals[-1]
+        approach, rotation = finals()[-2], finals()[-1]
         assert (approach.phase, approach.subtask) == ("approach", "unknown")
         assert rotation.phase == "rotation" and rotation.subtask in ("approach", "rotation")
         assert lost > 0

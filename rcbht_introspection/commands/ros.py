@@ -156,17 +156,20 @@ def cmd_record(args: argparse.Namespace) -> int:
         if missing and not stop.requested:
             recorder.bag.abort()
             raise InputError(f"topic(s) not seen within {args.wait} s: {', '.join(missing)}")
-        for topic, msgtype in sorted(types.items()):
-            recorder.subscribe(topic, msgtype)
-        if not stop.requested:
-            print(
-                f"recording {', '.join(sorted(types))} to {args.out} (Ctrl-C to stop)", flush=True
-            )
-        deadline = time.monotonic() + args.duration if args.duration > 0 else None
-        while not stop.wait(0.05) and (deadline is None or time.monotonic() < deadline):
-            pass
-        ros.settle()  # what was delivered before the stop still goes into the bag
-        recorder.close()
+        try:
+            for topic, msgtype in sorted(types.items()):
+                recorder.subscribe(topic, msgtype)
+            if not stop.requested:
+                print(
+                    f"recording {', '.join(sorted(types))} to {args.out} (Ctrl-C to stop)",
+                    flush=True,
+                )
+            deadline = time.monotonic() + args.duration if args.duration > 0 else None
+            while not stop.wait(0.05) and (deadline is None or time.monotonic() < deadline):
+                pass
+            ros.settle()  # what was delivered before the stop still goes into the bag
+        finally:
+            recorder.close()  # the bag is readable whatever happened
     print(json.dumps(recorder.counts))
     stop.exiting()
     return 0

@@ -101,14 +101,27 @@ class BeliefTracker:
         """The running window's per-axis compact features (grammar.encoding.AxisMemo)."""
 
     # --- input -------------------------------------------------------------------------------
-    def add_words(self, arm: str, words: Iterable[Word], now: float | None = None) -> None:
-        """Add final words of `arm`; `now` is the stream time of the sample that finalised them."""
-        self.arms.add(arm)
+    def add_words(
+        self,
+        arm: str,
+        words: Iterable[Word],
+        now: float | None = None,
+        level: Level | None = None,
+        seq_end: int = 0,
+    ) -> None:
+        """Add final words of `arm`; `now` is the stream time of the sample that finalised them.
+
+        `level` and `seq_end` (Words.seq_end) tell the word ledger how far that level's topic
+        has delivered; an empty list with them only moves the ledger on.
+        """
         words = list(words)
         ledger = self.ledgers.get(arm)
         if ledger is None:
             ledger = self.ledgers[arm] = WordLedger()
-        ledger.add(words, self.now if now is None else now)
+        ledger.add(words, self.now if now is None else now, level, seq_end)
+        if not words:
+            return
+        self.arms.add(arm)
         for w in words:
             seq = (
                 self.words.words.setdefault(w.arm, {})

@@ -29,7 +29,10 @@ class WordLedger:
 
     def __init__(self) -> None:
         self.upto: dict[Level, float] = dict.fromkeys(LEVELS, 0)
-        """Per level, the highest word number received on it (infinite after its end of stream)."""
+        """Per level, the number up to which its topic has delivered every word it carries
+        (a message's `seq_end`, infinite after the level's end of stream)."""
+        self.top = 0
+        """The highest number received."""
         self.open: dict[int, float] = {}
         """Received numbers above `settled` -> stream time at which they were released."""
         self.settled = 0
@@ -38,13 +41,22 @@ class WordLedger:
         self.blind_until = -math.inf
         """Stream time up to which lost words may reach (the release of the next word received)."""
 
-    def add(self, words: Iterable[Word], now: float) -> None:
-        """Words received in one message, released at stream time `now`."""
+    def add(
+        self, words: Iterable[Word], now: float, level: Level | None = None, seq_end: int = 0
+    ) -> None:
+        """Words received in one message of `level`, released at stream time `now`.
+
+        `seq_end` is the arm's highest number when the message was published (Words.seq_end):
+        every word of that level up to it has now arrived. Without it, each word's own number.
+        """
         for w in words:
             if w.seq > self.upto[w.level]:
                 self.upto[w.level] = w.seq
             if w.seq > self.settled:
                 self.open[w.seq] = now
+                self.top = max(self.top, w.seq)
+        if level is not None and seq_end > self.upto[level]:
+            self.upto[level] = seq_end
 
     def end(self, level: Level | None = None) -> None:
         """The stream ended on `level` (None: on every level)."""
@@ -54,13 +66,13 @@ class WordLedger:
     @property
     def has_gap(self) -> bool:
         """Some number below the highest received one has neither arrived nor been proven lost."""
-        return bool(self.open) and len(self.open) < max(self.open) - self.settled
+        return len(self.open) < self.top - self.settled
 
     def settle(self) -> int:
         """Prove what can be proven now; returns the number of words newly found lost."""
         bound = min(self.upto.values())
         if math.isinf(bound):
-            bound = max(self.open, default=self.settled)
+            bound = max(self.top, self.settled)
         if bound <= self.settled:
             return 0
         lost = 0
@@ -84,20 +96,40 @@ class LatchedEvents(Generic[E]):
     counted; history that comes before any live message waits for the first live stream.
     """
 
-    def __init__(self, since_ns: int) -> None:
+    def __init__(self, since_ns: int = 0) -> None:
         self.since_ns = since_ns
         self.held: dict[Hashable, list[E]] = {}
+        self.applied: set[tuple[Hashable, Hashable]] = set()
+        """(stream, event identity) already applied: a re-activated node gets them again."""
         self.stale = 0
         """Events of earlier streams that the latched topic replayed and that were dropped."""
 
+    def rejoin(self, since_ns: int) -> None:
+        """The subscriptions were (re)created at `since_ns`: what was published before is history."""
+        self.since_ns = since_ns
+
     def event(
-        self, stream: Hashable, event: E, published_ns: int | None, current: Hashable | None
+        self,
+        stream: Hashable,
+        event: E,
+        published_ns: int | None,
+        current: Hashable | None,
+        identity: Hashable = None,
     ) -> list[E]:
-        """The events to apply now for one received event of `stream`."""
+        """The events to apply now for one received event of `stream`.
+
+        `identity` (e.g. name and stream time) recognises an event applied before: the latched
+        topic replays the running stream's events to a node that was deactivated and activated.
+        """
+        key = (stream, event if identity is None else identity)
+        if key in self.applied:
+            return []
         if not published_ns or published_ns >= self.since_ns or stream == current:
+            self.applied.add(key)
             return [event]
         if current is None:
             self.held.setdefault(stream, []).append(event)
+            self.applied.add(key)  # it applies, if at all, through stream_started
         else:
             self.stale += 1
         return []
@@ -107,4 +139,51 @@ class LatchedEvents(Generic[E]):
         events = self.held.pop(stream, [])
         self.stale += sum(len(v) for v in self.held.values())
         self.held.clear()
+        self.applied = {k for k in self.applied if k[0] == stream}  # older streams are done
         return events
+
+
+class Watermarks:
+    """Publisher side of the word numbering: each message's `seq_end`, and idle levels to mark.
+
+    A level topic that had nothing to publish for `idle_s` while the arm's numbers moved on gets
+    an empty message carrying the new highest number, so a subscriber proves its losses within
+    about `idle_s` instead of at the next word of its slowest level (behaviours can take the
+    whole trial).
+    """
+
+    def __init__(self, idle_s: float = 0.1) -> None:
+        self.idle_s = idle_s
+        self.highest: dict[str, tuple[int, int]] = {}
+        """Per arm, (stream id, highest number released)."""
+        self.marked: dict[tuple[str, Level], tuple[int, int, float]] = {}
+        """Per (arm, level), (stream id, seq_end last published, when)."""
+
+    def batch(self, arm: str, stream_id: int, words: Iterable[Word]) -> int:
+        """The arm's highest number once this batch is out (its messages' seq_end)."""
+        stream, top = self.highest.get(arm, (stream_id, 0))
+        if stream != stream_id:
+            top = 0
+        top = max([top, *(w.seq for w in words)])
+        self.highest[arm] = (stream_id, top)
+        return top
+
+    def published(self, arm: str, stream_id: int, level: Level, seq_end: int, now: float) -> None:
+        """A message of `level` carrying `seq_end` went out at `now` (seconds, any clock)."""
+        self.marked[(arm, level)] = (stream_id, seq_end, now)
+
+    def ended(self, arm: str, stream_id: int) -> None:
+        """The arm's stream ended (its end-of-stream messages say all): nothing more to mark."""
+        self.highest[arm] = (stream_id, -1)
+
+    def due(self, now: float) -> list[tuple[str, int, Level, int]]:
+        """(arm, stream id, level, seq_end) of the empty messages to publish now."""
+        out = []
+        for arm, (stream_id, top) in self.highest.items():
+            for level in LEVELS:
+                stream, seq_end, when = self.marked.get((arm, level), (stream_id, 0, -math.inf))
+                if stream != stream_id:
+                    seq_end = 0
+                if top > seq_end and now - when >= self.idle_s:
+                    out.append((arm, stream_id, level, top))
+        return out

@@ -65,6 +65,7 @@ class ClassifierNode(ManagedNode):
             )
         self.tracker = BeliefTracker(model, cfg.mode, cfg.window_s, end_phases=cfg.end_phases)
         self.stream: tuple[int, int] | None = None
+        self.history: LatchedEvents[PhaseMsg] = LatchedEvents()
         self.state = StateFilter(cfg.state_hold_s)
         self.reported_error: str | None = None
         self.batches: dict[tuple[str, int], tuple[int, int]] = {}
@@ -78,7 +79,7 @@ class ClassifierNode(ManagedNode):
     def activate(self) -> None:
         cfg = self.cfg
         # events the latched rcbht/phase replays were published before this moment
-        self.history: LatchedEvents[PhaseMsg] = LatchedEvents(time.time_ns())
+        self.history.rejoin(time.time_ns())
         # the inputs are taken by drain() (draining.spin_draining), not by executor callbacks
         drained = DrainedGroup()
         self.word_subs = [
@@ -147,6 +148,7 @@ class ClassifierNode(ManagedNode):
             # the previous stream ended without all its end markers: issue what it has
             for arm in tuple(self.tracker.arms):
                 self.tracker.end_of_stream(arm)
+            self.count_losses()
             for final in self.tracker.take_finals():
                 self.publish_belief(final, 0)
         self.tracker.reset()
@@ -158,7 +160,9 @@ class ClassifierNode(ManagedNode):
     def ingest_words(self, arm: str, msg: WordsMsg) -> None:
         self._enter((to_ns(msg.time_origin), msg.stream_id))
         words, now = words_from_msg(msg)
-        self.tracker.add_words(arm, words, now)
+        self.tracker.add_words(arm, words, now, LEVELS[msg.level], msg.seq_end)
+        if msg.batch_size == 0:  # only the level's word numbering moved on: no new evidence
+            return
         if msg.end_of_stream:
             self.tracker.end_of_stream(arm, LEVELS[msg.level])
         stamp = to_ns(msg.header.stamp)
@@ -169,7 +173,9 @@ class ClassifierNode(ManagedNode):
 
     def ingest_phase(self, msg: PhaseMsg, info: dict) -> None:
         key = (to_ns(msg.time_origin), msg.stream_id)
-        for event in self.history.event(key, msg, info.get("source_timestamp"), self.stream):
+        published = info.get("source_timestamp")
+        identity = (msg.name, msg.time)
+        for event in self.history.event(key, msg, published, self.stream, identity):
             self._enter(key)
             self._apply_phase(event)
         self.counts["latched events of earlier streams dropped"] = self.history.stale
@@ -188,20 +194,26 @@ class ClassifierNode(ManagedNode):
 
         A belief is computed once all level messages of the newest sample's batch are in; its
         trigger is the earliest sample behind the new evidence (the conservative latency).
+        The burst is handled in publication order (DDS source timestamps of one publisher).
         """
+        taken: list[tuple[int, str | None, tuple]] = []
         for _ in range(10000):
-            taken = False
+            before = len(taken)
             for arm, sub in self.word_subs:
-                got = take(sub)
-                if got is not None:
-                    self.ingest_words(arm, got[0])
-                    taken = True
-            got = take(self.phase_sub)
-            if got is not None:
-                self.ingest_phase(*got)
-                taken = True
-            if not taken:
+                if (got := take(sub)) is not None:
+                    taken.append((got[1].get("source_timestamp", 0), arm, got))
+            if (got := take(self.phase_sub)) is not None:
+                taken.append((got[1].get("source_timestamp", 0), None, got))
+            if len(taken) == before:
                 break
+        # each topic delivers in order, but not the topics among themselves: handle the burst
+        # in publication order (a stream's last words before the next stream's first event)
+        taken.sort(key=lambda t: t[0])
+        for _, arm, (msg, info) in taken:
+            if arm is None:
+                self.ingest_phase(msg, info)
+            else:
+                self.ingest_words(arm, msg)
         newest = max((k[1] for k in self.batches), default=None)
         if any(n < size for (_, stamp), (n, size) in self.batches.items() if stamp == newest):
             return  # the other level messages of this sample are on their way
@@ -213,13 +225,7 @@ class ClassifierNode(ManagedNode):
     def update(self, trigger_ns: int) -> None:
         """Publish finished sub-task verdicts, then the current belief and a changed state."""
         t0 = time.perf_counter()
-        lost = self.tracker.account_losses()
-        if lost:
-            self.counts["words lost"] += lost
-            self.get_logger().warning(
-                f"{lost} words of this stream never arrived (joined late or lost): the sub-task "
-                f"under way is judged {UNKNOWN!r} until the next boundary"
-            )
+        self.count_losses()
         for final in self.tracker.take_finals():
             self.publish_belief(final, trigger_ns)
         belief = self.tracker.current()
@@ -231,6 +237,16 @@ class ClassifierNode(ManagedNode):
         if error and error != self.reported_error:
             self.reported_error = error
             self.get_logger().error(f"model prediction failed, publishing {UNKNOWN!r}: {error}")
+
+    def count_losses(self) -> None:
+        """Words proven lost since the last call: counted, and said once per loss."""
+        lost = self.tracker.account_losses()
+        if lost:
+            self.counts["words lost"] += lost
+            self.get_logger().warning(
+                f"{lost} words of this stream never arrived (joined late or lost): the sub-task "
+                f"under way is judged {UNKNOWN!r} until the next boundary"
+            )
 
     def publish_belief(self, belief: Belief, trigger_ns: int) -> None:
         if belief.final and belief.blind:

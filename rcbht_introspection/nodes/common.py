@@ -190,13 +190,21 @@ class ManagedNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        # only reachable when code outside _transition raised: rclpy finalizes the node
         self.get_logger().error(f"a lifecycle transition failed in state {self.state_label}")
+        self._destroy_new(set())
+        self.state_label = "finalized"
+        if self.stop is not None:
+            self.stop.request()
         return TransitionCallbackReturn.FAILURE
 
     def finish(self) -> None:
         """The process ends: shut down from whatever state the node is in (logs its statistics)."""
         if self.state_label != "finalized":
-            self.trigger_shutdown()
+            try:
+                self.trigger_shutdown()
+            except RuntimeError as exc:  # rclpy's state machine refused (RCLError)
+                self.get_logger().error(f"shutdown transition refused: {exc}")
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         if self.state_label == "active":
@@ -226,6 +234,7 @@ def run(
     so the context stays valid until the node has shut down and logged its last line.
     """
     if stop.requested:  # stopped while the modules were imported: nothing was started
+        stop.exiting()
         return 0
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
@@ -298,8 +307,12 @@ class RosSession:
         self._stop.set()
         self._thread.join()
         deadline = time.monotonic() + timeout
-        while serve_ready(self.executor, SETTLE_CALLBACKS) and time.monotonic() < deadline:
-            pass
+        while time.monotonic() < deadline:
+            try:
+                if not serve_ready(self.executor, SETTLE_CALLBACKS):
+                    return
+            except Exception as exc:
+                print(f"error in a callback: {type(exc).__name__}: {exc}", file=sys.stderr)
 
     def close(self) -> None:
         """Stop the spin thread, then destroy the node and shut the context down, in that order."""

@@ -81,6 +81,7 @@ def words_msg(
     end_of_stream: bool = False,
     accepted: int = 0,
     rejected: int = 0,
+    seq_end: int = 0,
     frame_id: str = "",
 ) -> WordsMsg:
     """A batch of words of one arm and level that became final at the sample `stamp_ns`."""
@@ -94,6 +95,7 @@ def words_msg(
         end_of_stream=end_of_stream,
         samples_accepted=int(accepted),
         samples_rejected=int(rejected),
+        seq_end=int(seq_end),
     )
     msg.header.stamp = to_time(stamp_ns)
     msg.header.frame_id = frame_id

@@ -77,13 +77,21 @@ class StopSignal:
         return self._requested
 
     def exiting(self) -> None:
-        """The process is done with its own shutdown (the watchdog stands down)."""
+        """The process is done with its own shutdown: the watchdog stands down, and further
+        SIGINT/SIGTERM are ignored (Python restores the default action of a signal it handled
+        while the interpreter finalizes, so a second Ctrl-C would end the process with -2)."""
         self._done = True
+        if threading.current_thread() is threading.main_thread():
+            for signum in STOP_SIGNALS:
+                signal.signal(signum, signal.SIG_IGN)
 
     def _handle(self, signum: int, frame: object) -> None:
         if self.signum is None:
             self.signum = signum
         self._requested = True
+        # our own wake-up byte too, in case a library replaced the interpreter's wake-up fd
+        with contextlib.suppress(OSError):
+            os.write(self._write, b"\0")
 
     def _watchdog(self) -> None:
         while not self._requested:

@@ -160,6 +160,8 @@ def validate(cfg: T, path: Path | None = None) -> T:
     for name in TOPIC_FIELDS:
         values = getattr(cfg, name, ())
         for value in (values,) if isinstance(values, str) else values:
+            if name == "words_namespace":  # a prefix: slashes around it do not matter
+                value = value.strip("/") or "rcbht"
             _check(
                 bool(TOPIC_NAME.fullmatch(value)),
                 name,

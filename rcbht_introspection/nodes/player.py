@@ -108,7 +108,10 @@ class BagPlayer:
             due = t0 + (m.t_ns - t0_bag) / 1e9 / rate
             delay = due - time.perf_counter()
             if delay > 0:
-                time.sleep(delay)
+                if stop is None:
+                    time.sleep(delay)
+                elif stop.wait(delay):  # a long pause in the bag still ends at once on a stop
+                    break
             self.publishers[m.topic].publish(m.raw)  # type: ignore[attr-defined]
             count += 1
             if on_publish is not None:

@@ -168,6 +168,7 @@ class NodeProcess:
             p for p in (pkg_root, os.environ.get("PYTHONPATH", "")) if p
         )
         full_env.pop("ROS_LOCALHOST_ONLY", None)
+        self.interrupted = False
         self._log_file = log.open("w")
         self.proc = subprocess.Popen(
             [
@@ -195,14 +196,15 @@ class NodeProcess:
 
     def interrupt(self) -> None:
         """Send SIGINT (the node stops cleanly); `stop` waits for it."""
-        if self.proc.poll() is None:
+        if self.proc.poll() is None and not self.interrupted:
             self.proc.send_signal(signal.SIGINT)
+            self.interrupted = True
 
     def stop(self, timeout: float = 20.0) -> int | None:
         """SIGINT, then SIGKILL after `timeout`; returns the exit code (None if it was killed)."""
         code = self.proc.poll()
         if code is None:
-            self.proc.send_signal(signal.SIGINT)
+            self.interrupt()  # once: a second SIGINT is not a harder stop
             try:
                 code = self.proc.wait(timeout)
             except subprocess.TimeoutExpired:

@@ -23,6 +23,7 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from rcbht_introspection.live.health import OK, ArmHealth, CounterWatch, Health, events_health
+from rcbht_introspection.live.join import Watermarks
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
@@ -73,6 +74,7 @@ class SegmenterNode(ManagedNode):
             max_hold_s=cfg.event_max_hold_s,
         )
         self.arm_health = {arm: ArmHealth(arm) for arm in cfg.arms}
+        self.marks = Watermarks()
         self.event_watch = CounterWatch()
         self.qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         topics = word_topics(cfg.words_namespace, cfg.arms)
@@ -189,6 +191,30 @@ class SegmenterNode(ManagedNode):
         idle = time.monotonic() - self.last_sample > self.cfg.event_hold_s
         if self.session.pending and idle:
             self.publish(self.session.flush(time.time_ns()))
+        self.publish_watermarks()
+
+    def publish_watermarks(self) -> None:
+        """Empty Words messages on levels that lag the arm's word numbers (live/join.Watermarks)."""
+        now = time.monotonic()
+        for arm, stream_id, level, seq_end in self.marks.due(now):
+            if stream_id != self.session.stream_id or self.session.origin_ns is None:
+                continue
+            counts = self.session.counts[arm]
+            self.word_pubs[(arm, level)].publish(
+                words_msg(
+                    arm,
+                    level,
+                    [],
+                    self.session.state[arm].last_ns,
+                    self.session.origin_ns,
+                    stream_id=stream_id,
+                    batch_size=0,
+                    accepted=counts.accepted,
+                    rejected=counts.rejected_total,
+                    seq_end=seq_end,
+                )
+            )
+            self.marks.published(arm, stream_id, level, seq_end, now)
 
     def log_statistics(self) -> None:
         """Log what the node did (samples, rejections, CPU time): its last line when it stops."""
@@ -201,12 +227,15 @@ class SegmenterNode(ManagedNode):
 
     def publish(self, out: Output) -> None:
         """One Words message per batch and level with words (every level at stream end), then events."""
+        now = time.monotonic()
         for batch in out.batches:
             counts = self.session.counts[batch.arm]
             self.arm_health[batch.arm].words(batch.stream_id, batch.words)
+            seq_end = self.marks.batch(batch.arm, batch.stream_id, batch.words)
             per_level = {level: [w for w in batch.words if w.level == level] for level in LEVELS}
             levels = [lv for lv in LEVELS if per_level[lv] or batch.end_of_stream]
             for level in levels:
+                self.marks.published(batch.arm, batch.stream_id, level, seq_end, now)
                 self.word_pubs[(batch.arm, level)].publish(
                     words_msg(
                         batch.arm,
@@ -219,8 +248,11 @@ class SegmenterNode(ManagedNode):
                         end_of_stream=batch.end_of_stream,
                         accepted=counts.accepted,
                         rejected=counts.rejected_total,
+                        seq_end=seq_end,
                     )
                 )
+            if batch.end_of_stream:
+                self.marks.ended(batch.arm, batch.stream_id)
         for event in out.phases:
             self.phase_pub.publish(phase_msg(event))
 
