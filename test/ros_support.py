@@ -116,3 +116,32 @@ def env(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
         monkeypatch.setenv(key, values[key])
     monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
     return values
+
+
+def segmenter_inputs(ros, log: Path) -> tuple:
+    """(/wrench, /task_phase) publishers of the probe, once the segmenter subscribes both."""
+    from geometry_msgs.msg import WrenchStamped
+    from std_msgs.msg import String
+
+    from rcbht_introspection.nodes.common import qos_profile
+
+    qos = qos_profile(1000, "reliable")
+    wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
+    phase = ros.node.create_publisher(String, "/task_phase", qos)
+    assert wait_for(
+        lambda: wrench.get_subscription_count() > 0 and phase.get_subscription_count() > 0
+    ), log.read_text()
+    return wrench, phase
+
+
+def wrench_msg(stamp_ns: int, fz: float, mx: float = 0.0):
+    """A WrenchStamped with force z and torque x."""
+    from geometry_msgs.msg import WrenchStamped
+
+    from rcbht_introspection.nodes.conversions import to_time
+
+    msg = WrenchStamped()
+    msg.header.stamp = to_time(stamp_ns)
+    msg.wrench.force.z = fz
+    msg.wrench.torque.x = mx
+    return msg

@@ -7,7 +7,16 @@ import time
 from pathlib import Path
 
 import pytest
-from ros_support import env, require_learn, require_stream, start_node, stop, wait_for
+from ros_support import (
+    env,
+    require_learn,
+    require_stream,
+    segmenter_inputs,
+    start_node,
+    stop,
+    wait_for,
+    wrench_msg,
+)
 
 from rcbht_introspection.bench.stops import toy_model
 
@@ -141,30 +150,18 @@ def test_segmenter_diagnostics_report_rate_and_rejections(
 ) -> None:
     """/diagnostics: per-arm rate and counters; WARN with a one-line reason when samples are rejected."""
     require_stream()
-    from geometry_msgs.msg import WrenchStamped
-
-    from rcbht_introspection.nodes.common import RosSession, qos_profile
-    from rcbht_introspection.nodes.conversions import to_time
+    from rcbht_introspection.nodes.common import RosSession
 
     log = tmp_path / "segmenter.log"
     proc = start_node("segmenter_node", {}, env, log)
     try:
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
             diag = DiagnosticsProbe(ros)
-            wrench = ros.node.create_publisher(
-                WrenchStamped, "/wrench", qos_profile(1000, "reliable")
-            )
-            assert wait_for(lambda: wrench.get_subscription_count() > 0), log.read_text()
+            wrench, _ = segmenter_inputs(ros, log)
             assert wait_for(lambda: "segmenter_node: arm R" in diag.latest), log.read_text()
-
-            def sample(i: int, value: float) -> None:
-                msg = WrenchStamped()
-                msg.header.stamp = to_time(BASE_NS + i * 2_000_000)
-                msg.wrench.force.z = value
-                wrench.publish(msg)
-
             for i in range(1500):  # ~3 s of 500 Hz
-                sample(i, float("nan") if i == 700 else math.sin(i / 50))
+                value = float("nan") if i == 700 else math.sin(i / 50)
+                wrench.publish(wrench_msg(BASE_NS + i * 2_000_000, value))
                 time.sleep(0.002)
             arm = "segmenter_node: arm R"
             assert wait_for(lambda: diag.values(arm).get("samples accepted") == "1499", 30), (
@@ -204,10 +201,6 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
     second = None
     try:
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
-            from geometry_msgs.msg import WrenchStamped
-
-            from rcbht_introspection.nodes.conversions import to_time
-
             qos = qos_profile(1000, "reliable")
             beliefs: list[Belief] = []
             ros.node.create_subscription(Belief, "/rcbht/belief", beliefs.append, qos)
@@ -217,20 +210,14 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
 
             diag = DiagnosticsProbe(ros)
             matched = segmenter_matches(ros.node)
-            wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
-            phase = ros.node.create_publisher(String, "/task_phase", qos)
-            assert wait_for(lambda: wrench.get_subscription_count() > 0), seg_log.read_text()
-            assert wait_for(lambda: phase.get_subscription_count() > 0), seg_log.read_text()
+            wrench, phase = segmenter_inputs(ros, seg_log)
             i = 0
 
             def send(n: int) -> None:
                 nonlocal i
                 for _ in range(n):
-                    msg = WrenchStamped()
-                    msg.header.stamp = to_time(BASE_NS + i * 5_000_000)
-                    msg.wrench.force.z = 10 * math.sin(i / 30) + (i // 200) * 3
-                    msg.wrench.torque.x = math.cos(i / 45)
-                    wrench.publish(msg)
+                    fz = 10 * math.sin(i / 30) + (i // 200) * 3
+                    wrench.publish(wrench_msg(BASE_NS + i * 5_000_000, fz, math.cos(i / 45)))
                     i += 1
                     time.sleep(0.001)
 

@@ -16,42 +16,15 @@ from ros_support import (
     require_ros,
     require_stream,
     ros_env,
+    segmenter_inputs,
     start_node,
     stop,
     wait_for,
+    wrench_msg,
 )
 
 pytestmark = pytest.mark.ros
 __all__ = ["env"]  # the isolated-ROS fixture, used by name
-
-
-def segmenter_inputs(ros, log: Path) -> tuple:
-    """(/wrench, /task_phase) publishers of the probe, once the segmenter subscribes both."""
-    from geometry_msgs.msg import WrenchStamped
-    from std_msgs.msg import String
-
-    from rcbht_introspection.nodes.common import qos_profile
-
-    qos = qos_profile(1000, "reliable")
-    wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
-    phase = ros.node.create_publisher(String, "/task_phase", qos)
-    assert wait_for(
-        lambda: wrench.get_subscription_count() > 0 and phase.get_subscription_count() > 0
-    ), log.read_text()
-    return wrench, phase
-
-
-def wrench_msg(stamp_ns: int, fz: float, mx: float = 0.0):
-    """A WrenchStamped with force z and torque x."""
-    from geometry_msgs.msg import WrenchStamped
-
-    from rcbht_introspection.nodes.conversions import to_time
-
-    msg = WrenchStamped()
-    msg.header.stamp = to_time(stamp_ns)
-    msg.wrench.force.z = fz
-    msg.wrench.torque.x = mx
-    return msg
 
 
 def test_ament_index_finds_the_executables(monkeypatch: pytest.MonkeyPatch) -> None:
