@@ -59,16 +59,16 @@ def ros_env(tmp_path: Path) -> dict[str, str]:
 
 def node_command(module: str, params: dict[str, object]) -> list[str]:
     """Command line of a node process with `-p name:=value` parameters."""
-    import sys
-
     import yaml
 
-    args = [sys.executable, "-m", "rcbht_introspection.nodes", module, "--ros-args"]
+    from rcbht_introspection.nodes.replay_eval import node_command as command
+
+    args = []
     for name, value in params.items():
         text = yaml.safe_dump(value, default_flow_style=True).strip()
         text = text.removesuffix("\n...").removesuffix("...").strip()
         args += ["-p", f"{name}:={text}"]
-    return args
+    return command(module, *args)
 
 
 def stop(proc: object, timeout: float = 15.0) -> int | None:

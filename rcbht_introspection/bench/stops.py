@@ -124,12 +124,11 @@ def toy_model(
 
 
 def _node_command(kind: str, work: Path) -> list[str]:
-    args = [sys.executable, "-m", "rcbht_introspection.nodes", kind, "--ros-args"]
+    from rcbht_introspection.nodes.replay_eval import node_command
+
     if kind == "classifier_node":
-        args += ["-p", f"model_file:={work / 'model.rcbht'}"]
-    else:
-        args += ["-p", "stream_profile:=causal"]
-    return args
+        return node_command(kind, "-p", f"model_file:={work / 'model.rcbht'}")
+    return node_command(kind, "-p", "stream_profile:=causal")
 
 
 def handles_sigterm(pid: int) -> bool:

@@ -156,6 +156,11 @@ def segmenter_matches(node: Any) -> Callable[[], int]:
     return lambda: latest[0]
 
 
+def node_command(module: str, *ros_args: str) -> list[str]:
+    """Command line that starts node `module` as its own process (`python -m ...nodes NODE`)."""
+    return [sys.executable, "-m", "rcbht_introspection.nodes", module, "--ros-args", *ros_args]
+
+
 class NodeProcess:
     """One node as a child process (`python -m rcbht_introspection.nodes <module>`)."""
 
@@ -171,15 +176,7 @@ class NodeProcess:
         self.interrupted = False
         self._log_file = log.open("w")
         self.proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "rcbht_introspection.nodes",
-                module,
-                "--ros-args",
-                "--params-file",
-                str(params),
-            ],
+            node_command(module, "--params-file", str(params)),
             env=full_env,
             stdout=self._log_file,
             stderr=subprocess.STDOUT,
