@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import math
+from random import Random
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from rcbht_introspection.live.belief import UNKNOWN, BeliefTracker
 from rcbht_introspection.live.health import (
@@ -14,7 +18,13 @@ from rcbht_introspection.live.health import (
     LatencyWindow,
     classifier_health,
 )
-from rcbht_introspection.live.join import LatchedEvents, Watermarks, WordLedger
+from rcbht_introspection.live.join import (
+    MAX_BATCH_MESSAGES,
+    LatchedEvents,
+    Watermarks,
+    WordLedger,
+    batch_messages,
+)
 from rcbht_introspection.taxonomy.words import Level, Word
 
 
@@ -223,3 +233,58 @@ def test_ros_domains_leased_by_one_process_are_not_given_to_another() -> None:
         release_domain()
     out = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, check=True)
     assert mine <= set(json.loads(out.stdout))  # released: free for others again
+
+
+def _numbered(levels: list[Level]) -> list[Word]:
+    """Words numbered 1, 2, ... in release order, one per entry of `levels`."""
+    return [Word("Fz", lv, "cons", k, k + 1, arm="R", seq=k + 1) for k, lv in enumerate(levels)]
+
+
+@given(
+    levels=st.lists(st.sampled_from(list(Level)), max_size=200),
+    max_words=st.integers(1, 40),
+    end=st.booleans(),
+    order=st.randoms(use_true_random=False),
+)
+@settings(max_examples=200, deadline=None)
+def test_batch_pieces_never_prove_a_word_of_a_later_piece_lost(
+    levels: list[Level], max_words: int, end: bool, order: Random
+) -> None:
+    """Level topics deliver their pieces in order but interleave freely; settling after every
+    message must count no loss, and every word arrives once, with one end per level at the end."""
+    words = _numbered(levels)
+    messages = batch_messages(words, len(words), end, max_words)
+    assert all(len(m.words) <= max_words for m in messages)
+    assert len(messages) <= MAX_BATCH_MESSAGES
+    queues = {lv: [m for m in messages if m.level == lv] for lv in Level}
+    ledger = WordLedger()
+    received: list[Word] = []
+    while any(queues.values()):
+        level = order.choice([lv for lv, q in queues.items() if q])
+        message = queues[level].pop(0)
+        received += message.words
+        ledger.add(message.words, 0.0, message.level, message.seq_end)
+        if message.end_of_stream:
+            ledger.end(message.level)
+        assert ledger.settle() == 0
+    assert sorted(w.seq for w in received) == list(range(1, len(words) + 1))
+    ends = [m.level for m in messages if m.end_of_stream]
+    assert ends == (list(Level) if end else [])
+
+
+def test_a_missing_piece_is_proven_lost() -> None:
+    words = _numbered([Level.PRIMITIVE] * 70 + [Level.COMPOSITION])
+    messages = batch_messages(words, 71, max_words=32)
+    assert [len(m.words) for m in messages] == [32, 32, 6, 1]
+    ledger = WordLedger()
+    for m in (messages[0], messages[2], messages[3]):  # the second primitive piece never came
+        ledger.add(m.words, 0.0, m.level, m.seq_end)
+    ledger.add([], 0.0, Level.BEHAVIOR, 71)  # the behaviour level's watermark
+    assert ledger.settle() == 32
+
+
+def test_a_huge_batch_keeps_within_the_uint8_batch_size() -> None:
+    words = _numbered([Level.PRIMITIVE] * 20000)
+    messages = batch_messages(words, 20000, max_words=32)
+    assert len(messages) <= MAX_BATCH_MESSAGES
+    assert sum(len(m.words) for m in messages) == 20000

@@ -9,12 +9,20 @@ sub-task nor re-judges finished trials.
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable, Iterable
+from collections.abc import Hashable, Iterable, Sequence
+from dataclasses import dataclass
 from typing import Generic, TypeVar
 
 from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
 
 E = TypeVar("E")
+
+MAX_WORDS_PER_MESSAGE = 32
+"""Most words in one Words message (~7 kB). Fast DDS keeps a publisher's and a subscriber's sample
+buffers at the largest size each has carried; occasional whole-trial messages (100 kB at a
+stream's end) made a node's memory grow for hours. Bounded messages keep it flat."""
+MAX_BATCH_MESSAGES = 255
+"""Words.batch_size is a uint8."""
 
 
 class WordLedger:
@@ -187,3 +195,47 @@ class Watermarks:
                 if top > seq_end and now - when >= self.idle_s:
                     out.append((arm, stream_id, level, top))
         return out
+
+
+@dataclass(frozen=True)
+class LevelMessage:
+    """One Words message of a batch: some words of one level and what they prove."""
+
+    level: Level
+    words: list[Word]
+    seq_end: int
+    """Every word of this level numbered up to this one is in this message or an earlier one."""
+    end_of_stream: bool
+    """The last message of this level's stream."""
+
+
+def batch_messages(
+    words: Sequence[Word],
+    top: int,
+    end_of_stream: bool = False,
+    max_words: int = MAX_WORDS_PER_MESSAGE,
+) -> list[LevelMessage]:
+    """The Words messages of one batch, level by level: at most `max_words` words each.
+
+    Levels without words get no message, except at the end of a stream (every level says it
+    ended). The last piece of a level carries the batch's `top` (Watermarks.batch); an earlier
+    piece carries only the numbers below the next piece's, so a subscriber that settles between
+    pieces never counts a word of a later piece as lost. `max_words` grows if the batch would
+    need more than MAX_BATCH_MESSAGES messages.
+    """
+    per_level = {level: [w for w in words if w.level == level] for level in LEVELS}
+    levels = [lv for lv in LEVELS if per_level[lv] or end_of_stream]
+    while sum(max(1, math.ceil(len(per_level[lv]) / max_words)) for lv in levels) > (
+        MAX_BATCH_MESSAGES
+    ):
+        max_words *= 2
+    out = []
+    for level in levels:
+        level_words = per_level[level]
+        pieces = [level_words[i : i + max_words] for i in range(0, len(level_words), max_words)]
+        pieces = pieces or [[]]
+        for i, piece in enumerate(pieces):
+            last = i == len(pieces) - 1
+            seq_end = top if last else min(w.seq for p in pieces[i + 1 :] for w in p) - 1
+            out.append(LevelMessage(level, piece, seq_end, end_of_stream and last))
+    return out

@@ -23,7 +23,7 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from rcbht_introspection.live.health import OK, ArmHealth, CounterWatch, Health, events_health
-from rcbht_introspection.live.join import Watermarks
+from rcbht_introspection.live.join import Watermarks, batch_messages
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
@@ -226,29 +226,28 @@ class SegmenterNode(ManagedNode):
         )
 
     def publish(self, out: Output) -> None:
-        """One Words message per batch and level with words (every level at stream end), then events."""
+        """The Words messages of each batch (live/join.batch_messages), then the applied events."""
         now = time.monotonic()
         for batch in out.batches:
             counts = self.session.counts[batch.arm]
             self.arm_health[batch.arm].words(batch.stream_id, batch.words)
-            seq_end = self.marks.batch(batch.arm, batch.stream_id, batch.words)
-            per_level = {level: [w for w in batch.words if w.level == level] for level in LEVELS}
-            levels = [lv for lv in LEVELS if per_level[lv] or batch.end_of_stream]
-            for level in levels:
-                self.marks.published(batch.arm, batch.stream_id, level, seq_end, now)
-                self.word_pubs[(batch.arm, level)].publish(
+            top = self.marks.batch(batch.arm, batch.stream_id, batch.words)
+            messages = batch_messages(batch.words, top, batch.end_of_stream)
+            for message in messages:
+                self.marks.published(batch.arm, batch.stream_id, message.level, top, now)
+                self.word_pubs[(batch.arm, message.level)].publish(
                     words_msg(
                         batch.arm,
-                        level,
-                        per_level[level],
+                        message.level,
+                        message.words,
                         batch.stamp_ns,
                         batch.origin_ns,
                         stream_id=batch.stream_id,
-                        batch_size=len(levels),
-                        end_of_stream=batch.end_of_stream,
+                        batch_size=len(messages),
+                        end_of_stream=message.end_of_stream,
                         accepted=counts.accepted,
                         rejected=counts.rejected_total,
-                        seq_end=seq_end,
+                        seq_end=message.seq_end,
                     )
                 )
             if batch.end_of_stream:
