@@ -15,7 +15,8 @@ from rcbht_introspection.commands.taxonomy import first_difference
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.rcbht_format import level_path, read_words
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.taxonomy.batch import default_config, label_trial
+from rcbht_introspection.taxonomy.batch import label_trial
+from rcbht_introspection.taxonomy.config import default_config
 from rcbht_introspection.taxonomy.primitives import axis_domain, block_stats, block_stats_one
 from rcbht_introspection.taxonomy.stream import (
     ArmStream,

@@ -10,7 +10,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from rcbht_introspection.taxonomy.batch import default_config, label_arm
+from rcbht_introspection.taxonomy.batch import label_arm
+from rcbht_introspection.taxonomy.config import default_config
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords
 
 DT = 0.005

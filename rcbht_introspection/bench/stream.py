@@ -154,7 +154,8 @@ def _labels_at(words: list, t: np.ndarray) -> np.ndarray:
 
 def run(out_dir: Path) -> dict:
     from rcbht_introspection.io.hiro import find_trials, read_trial
-    from rcbht_introspection.taxonomy.batch import default_config, label_trial
+    from rcbht_introspection.taxonomy.batch import label_trial
+    from rcbht_introspection.taxonomy.config import default_config
     from rcbht_introspection.taxonomy.primitives import axis_domain
     from rcbht_introspection.taxonomy.stream import (
         StreamConfig,

@@ -41,7 +41,8 @@ def _ms(seconds: float) -> float:
 def run(out_dir: Path) -> dict:
     from rcbht_introspection.commands.taxonomy import write_rcbht
     from rcbht_introspection.io.hiro import find_trials, read_trial
-    from rcbht_introspection.taxonomy.batch import default_config, label_trial
+    from rcbht_introspection.taxonomy.batch import label_trial
+    from rcbht_introspection.taxonomy.config import default_config
 
     dataset = hiro_root() / "REAL_HIRO_ONE_SA_SUCCESS"
     if not dataset.is_dir():

@@ -311,34 +311,6 @@ class BeliefTracker:
         self._added = 0
 
 
-def load_subtask_model(path: str, expected_profile: str = "") -> tuple[object | None, str]:
-    """(model, '') for a usable sub-task model file, else (None, why it cannot be used)."""
-    if not path:
-        return None, "no model file given (parameter model_file)"
-    try:
-        from rcbht_introspection.learn.models import load_model
-    except ImportError as exc:
-        return None, f"the learning module is missing ({exc.name}); it comes with the learn work"
-    from rcbht_introspection.errors import InputError
-
-    try:
-        model = load_model(path)
-    except InputError as exc:
-        return None, str(exc)
-    except OSError as exc:
-        return None, f"{path}: cannot read: {exc.strerror}"
-    classes = [str(c) for c in getattr(model, "classes_", [])]
-    if not classes or not set(classes) <= set(SUBTASKS):
-        return None, f"{path}: model classes {classes} are not sub-tasks {list(SUBTASKS)}"
-    profile = str(getattr(model, "taxonomy_profile", ""))
-    if expected_profile and profile != expected_profile:
-        return None, (
-            f"{path}: model was trained with taxonomy profile {profile!r}, "
-            f"the segmenter uses {expected_profile!r}"
-        )
-    return model, ""
-
-
 class StateFilter:
     """/task_state from successive beliefs: a new sub-task passes once it held `hold_s` seconds.
 

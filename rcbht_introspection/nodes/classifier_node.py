@@ -17,12 +17,12 @@ from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from std_msgs.msg import String
 
+from rcbht_introspection.learn.models import load_subtask_model
 from rcbht_introspection.live.belief import (
     UNKNOWN,
     Belief,
     BeliefTracker,
     StateFilter,
-    load_subtask_model,
 )
 from rcbht_introspection.live.health import (
     CounterWatch,

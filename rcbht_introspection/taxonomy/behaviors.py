@@ -32,6 +32,7 @@ from rcbht_introspection.taxonomy.compositions import I as MC_I
 from rcbht_introspection.taxonomy.compositions import K as MC_K
 from rcbht_introspection.taxonomy.compositions import N as MC_N
 from rcbht_introspection.taxonomy.compositions import Z as MC_Z
+from rcbht_introspection.taxonomy.words import BEHAVIOR_LABELS, COMPOSITION_LABELS, Level, Word
 
 FX, CT, PS, PL, AL, SH, U, N = range(1, 9)
 """LLB label integers."""
@@ -123,3 +124,17 @@ def merge_behaviors(rows: list, index: int, label: int | None) -> None:
         r[B_T1S] = r[B_T2S]
     r[B_TAVG] = (r[B_T1S] + r[B_T2E]) / 2
     rows[index + 1] = None
+
+
+def behavior_word(b: Behavior, axis: str, arm: str, seq: int = 0) -> Word:
+    """An LLB record as a Word with the llBehaviors keys (mc1/mc2 printed via the MC table)."""
+    return Word(
+        axis=axis, level=Level.BEHAVIOR, label=BEHAVIOR_LABELS[b[B_LBL] - 1],
+        start=b[B_T1S], end=b[B_T2E], arm=arm, seq=seq,
+        sublabels=(COMPOSITION_LABELS[b[B_MC1] - 1], COMPOSITION_LABELS[b[B_MC2] - 1]),
+        features={"averageVal1": b[B_AVG1], "averageVal2": b[B_AVG2], "AVG_MAG_VAL": b[B_MAG],
+                  "rmsVal1": b[B_RMS1], "rmsVal2": b[B_RMS2], "AVG_RMS_Val": b[B_RMS],
+                  "amplitudeVal1": b[B_AMP1], "amplitudeVal2": b[B_AMP2], "AVG_AMP_VAL": b[B_AMP],
+                  "t1Start": b[B_T1S], "t1End": b[B_T1E], "t2Start": b[B_T2S], "t2End": b[B_T2E],
+                  "tAvgIndex": b[B_TAVG]},
+    )  # fmt: skip

@@ -31,6 +31,7 @@ from rcbht_introspection.taxonomy.primitives import (
     ieee_div,
     running_sum,
 )
+from rcbht_introspection.taxonomy.words import COMPOSITION_LABELS, PRIMITIVE_LABELS, Level, Word
 
 A, I, D, K, PC, NC, C, U, N, Z = range(1, 11)  # noqa: E741  (the original's letters)
 """MC label integers."""
@@ -215,3 +216,15 @@ def _relabel_from(glabel: int) -> int | None:
 
 _ADJUST_PAIRS = frozenset({(A, I), (A, D), (I, A), (D, A)})
 _CONSTANT_PAIRS = frozenset({(I, K), (K, I), (D, K), (K, D), (D, I), (I, D)})
+
+
+def composition_word(m: Composition, axis: str, arm: str, seq: int = 0) -> Word:
+    """An MC record as a Word with the Composites keys."""
+    return Word(
+        axis=axis, level=Level.COMPOSITION, label=COMPOSITION_LABELS[m[LBL] - 1],
+        start=m[T1S], end=m[T2E], arm=arm, seq=seq,
+        sublabels=(PRIMITIVE_LABELS[m[GL1] - 1], PRIMITIVE_LABELS[m[GL2] - 1]),
+        features={"Average Val": m[AVGV], "RMS Val": m[RMS], "Amplitude Val": m[AMP],
+                  "t1Start": m[T1S], "t1End": m[T1E], "t2Start": m[T2S], "t2End": m[T2E],
+                  "tAvgIndex": m[TAVG]},
+    )  # fmt: skip

@@ -114,3 +114,14 @@ def load_taxonomy_config(
 def config_fields() -> tuple[str, ...]:
     """Names of every TaxonomyConfig field (for docs and tests)."""
     return tuple(f.name for f in dataclasses.fields(TaxonomyConfig))
+
+
+_DEFAULT: TaxonomyConfig | None = None
+
+
+def default_config() -> TaxonomyConfig:
+    """The `reference` profile from config/rcbht.yaml (loaded once)."""
+    global _DEFAULT
+    if _DEFAULT is None:
+        _DEFAULT = load_taxonomy_config("reference")
+    return _DEFAULT

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from rcbht_introspection.taxonomy.config import TaxonomyConfig
-from rcbht_introspection.taxonomy.words import AXES, PRIMITIVE_LABELS
+from rcbht_introspection.taxonomy.words import AXES, PRIMITIVE_LABELS, Level, Word
 
 AVG, MAX, MIN, START, FINISH, GRAD, LABEL = range(7)
 """Field indices of a primitive record (statData columns)."""
@@ -475,3 +475,13 @@ def calibrate(limits: dict[str, tuple[float, float]]) -> dict[str, tuple[float, 
 
 
 PRIMITIVE_NAMES = PRIMITIVE_LABELS
+
+
+def primitive_word(p: Primitive, axis: str, arm: str, seq: int = 0) -> Word:
+    """A primitive record as a Word with the Segments keys."""
+    return Word(
+        axis=axis, level=Level.PRIMITIVE, label=PRIMITIVE_LABELS[p[6] - 1],
+        start=p[3], end=p[4], arm=arm, seq=seq,
+        features={"Average": p[0], "Max Val": p[1], "Min Val": p[2], "Start": p[3],
+                  "Finish": p[4], "Gradient": p[5]},
+    )  # fmt: skip

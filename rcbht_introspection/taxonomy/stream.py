@@ -27,19 +27,16 @@ from typing import Literal
 
 import numpy as np
 
-from rcbht_introspection.taxonomy.batch import (
-    behavior_word,
-    composition_word,
-    default_config,
-    primitive_word,
-)
-from rcbht_introspection.taxonomy.config import TaxonomyConfig
+from rcbht_introspection.taxonomy.behaviors import behavior_word
+from rcbht_introspection.taxonomy.compositions import composition_word
+from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config
 from rcbht_introspection.taxonomy.pipeline import AxisPipeline, StreamContext
 from rcbht_introspection.taxonomy.primitives import (
     Segmenter,
     axis_thresholds,
     block_stats_one,
     classify_gradient,
+    primitive_word,
 )
 from rcbht_introspection.taxonomy.words import AXES, TrialWords, Word
 

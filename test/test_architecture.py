@@ -1,0 +1,119 @@
+"""The package's import graph: data flows one way, and the core never imports ROS or plotting.
+
+Every import statement counts, at module top or inside a function: a function-level import is
+still a dependency, it only hides it.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "rcbht_introspection"
+CORE = ("taxonomy", "grammar", "learn", "live", "sim", "io")
+"""Subpackages of the pure core (NumPy, SciPy, scikit-learn, MuJoCo; io/ also reads bags with the
+pure-Python rosbags)."""
+ROS_AND_PLOTTING = frozenset(
+    {"rclpy", "matplotlib", "geometry_msgs", "std_msgs", "rcbht_interfaces", "diagnostic_msgs"}
+)
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+        out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return out
+
+
+def _imports(path: Path) -> set[str]:
+    """Every module name imported by the file (absolute names)."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+            names.update(f"{node.module}.{alias.name}" for alias in node.names)
+        elif isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+    return names
+
+
+def _graph() -> dict[str, set[str]]:
+    """Module -> package modules it imports."""
+    modules = _modules()
+    return {
+        name: {
+            m for m in _imports(path) if m in modules and m != name and not name.startswith(m + ".")
+        }
+        for name, path in modules.items()
+    }
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one node (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def _subpackage(module: str) -> str:
+    return module.split(".")[1]
+
+
+def test_no_module_imports_itself_back() -> None:
+    assert _cycles(_graph()) == []
+
+
+def test_no_two_subpackages_import_each_other() -> None:
+    packages: dict[str, set[str]] = {}
+    for name, targets in _graph().items():
+        if len(name.split(".")) < 3:
+            continue  # top-level modules (cli, config, errors) are not subpackages
+        packages.setdefault(_subpackage(name), set()).update(
+            _subpackage(t) for t in targets if len(t.split(".")) >= 3
+        )
+    graph = {k: v - {k} for k, v in packages.items()}
+    assert _cycles(graph) == []
+
+
+@pytest.mark.parametrize("subpackage", CORE)
+def test_the_core_imports_no_ros_and_no_plotting(subpackage: str) -> None:
+    for name, path in _modules().items():
+        if name.startswith(f"rcbht_introspection.{subpackage}"):
+            roots = {m.split(".")[0] for m in _imports(path)}
+            forbidden = roots & ROS_AND_PLOTTING
+            assert not forbidden, f"{path.name} imports {sorted(forbidden)}"
+
+
+def test_the_cycle_finder_finds_a_cycle() -> None:
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
