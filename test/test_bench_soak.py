@@ -14,21 +14,26 @@ from ros_support import require_ros, require_stream
 pytestmark = [pytest.mark.ros]
 
 
-def test_wrench_cdr_is_what_rclpy_reads() -> None:
+def test_wrench_cdr_is_what_rclpy_reads_and_writes() -> None:
+    """io/bags encode_wrench / decode_wrench against rclpy's own (de)serialisation."""
     require_ros()
     from geometry_msgs.msg import WrenchStamped
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from rcbht_introspection.bench.soak import wrench_cdr
+    from rcbht_introspection.io.bags import decode_wrench, decode_wrench_sample, encode_wrench
 
     for frame in ("L", "R", "", "a_longer_frame"):
         msg = WrenchStamped()
         msg.header.stamp.sec, msg.header.stamp.nanosec = 1_700_000_001, 999_999_999
         msg.header.frame_id = frame
         msg.wrench.force.x, msg.wrench.force.z, msg.wrench.torque.y = 1.5, -20.25, 1e-9
-        raw = wrench_cdr(1_700_000_001_999_999_999, frame, [1.5, 0.0, -20.25, 0.0, 1e-9, 0.0])
+        values = (1.5, 0.0, -20.25, 0.0, 1e-9, 0.0)
+        raw = encode_wrench(1_700_000_001_999_999_999, frame, values)
         assert deserialize_message(raw, WrenchStamped) == msg
         assert len(raw) == len(serialize_message(msg))
+        rclpy_raw = serialize_message(msg)
+        assert decode_wrench(rclpy_raw) == (1_700_000_001_999_999_999, frame, values)
+        assert decode_wrench_sample(rclpy_raw) == (1_700_000_001_999_999_999, values)
 
 
 def test_playback_is_the_trial_bag_order(tmp_path: Path) -> None:

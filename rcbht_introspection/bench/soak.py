@@ -28,7 +28,6 @@ import functools
 import json
 import os
 import shutil
-import struct
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -52,7 +51,6 @@ STARTUP_TIMEOUT_S = 60.0
 DRAIN_TIMEOUT_S = 60.0
 LATE_MS = 10.0
 """A sample published this much after its due time counts as late (publisher, not nodes)."""
-_CDR_LE = b"\x00\x01\x00\x00"
 
 
 def env_float(name: str, default: float) -> float:
@@ -123,20 +121,6 @@ def trial_source() -> Source:
     )
 
 
-@functools.cache
-def _wrench_struct(frame_len: int) -> struct.Struct:
-    """CDR layout of a WrenchStamped whose frame_id (with its NUL) is `frame_len` bytes."""
-    pad = (-(12 + frame_len)) % 8  # the doubles align to 8 relative to the payload start
-    return struct.Struct(f"<4siII{frame_len}s{pad}x6d")
-
-
-def wrench_cdr(stamp_ns: int, frame_id: str, values: Sequence[float]) -> bytes:
-    """Little-endian CDR of a geometry_msgs/WrenchStamped (what rclpy publishes as raw bytes)."""
-    frame = frame_id.encode() + b"\x00"
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    return _wrench_struct(len(frame)).pack(_CDR_LE, sec, nanosec, len(frame), frame, *values)
-
-
 @dataclass
 class Playback:
     """One trial ready to publish: per sample its due offset (s), raw wrench per arm, events."""
@@ -152,7 +136,7 @@ class Playback:
 
 def playback(trial: Trial, base_ns: int, rate: float) -> Playback:
     """Trial re-stamped to start at `base_ns`; events placed as write_trial_bag places them."""
-    from rcbht_introspection.io.bags import trial_phase_events
+    from rcbht_introspection.io.bags import encode_wrench, trial_phase_events
 
     t_ns = np.rint((np.asarray(trial.time, dtype=np.float64) - trial.time[0]) * 1e9).astype(
         np.int64
@@ -160,7 +144,7 @@ def playback(trial: Trial, base_ns: int, rate: float) -> Playback:
     stamps = base_ns + t_ns
     wrench = [trial.wrench[arm].tolist() for arm in ARMS]
     raws = [
-        [wrench_cdr(int(s), arm, wrench[a][i]) for a, arm in enumerate(ARMS)]
+        [encode_wrench(int(s), arm, wrench[a][i]) for a, arm in enumerate(ARMS)]
         for i, s in enumerate(stamps.tolist())
     ]
     # an event follows the last sample before it (a sample at its exact time comes first)

@@ -11,12 +11,13 @@ rosbag2 directory (MCAP inside). Reading accepts storage files and rosbag2 direc
 from __future__ import annotations
 
 import contextlib
+import functools
 import json
 import shutil
 import struct
 import sys
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -253,18 +254,42 @@ def bag_messages(path: Path | str) -> Iterator[BagMessage]:
         yield m
 
 
+_CDR_LE = b"\x00\x01\x00\x00"
+_CDR_HEADER = struct.Struct("<2s2xiII")
 _WRENCH_TAIL = struct.Struct("<6d")
+
+
+@functools.cache
+def _wrench_struct(frame_len: int) -> struct.Struct:
+    """CDR layout of a WrenchStamped whose frame_id (with its NUL) is `frame_len` bytes."""
+    pad = (-(12 + frame_len)) % 8  # the doubles align to 8 relative to the payload start
+    return struct.Struct(f"<4siII{frame_len}s{pad}x6d")
+
+
+def encode_wrench(stamp: int, frame_id: str, values: Sequence[float]) -> bytes:
+    """Little-endian CDR of a geometry_msgs/WrenchStamped (what rclpy publishes as raw bytes)."""
+    frame = frame_id.encode() + b"\x00"
+    sec, nanosec = divmod(int(stamp), _NS)
+    return _wrench_struct(len(frame)).pack(_CDR_LE, sec, nanosec, len(frame), frame, *values)
+
+
+def decode_wrench_sample(raw: bytes) -> tuple[int, tuple[float, ...]]:
+    """(stamp ns, (Fx..Mz)) of a little-endian CDR WrenchStamped: the live per-sample path
+    (segmenter_node at 1 kHz per arm), which does not need the frame id."""
+    kind, sec, nanosec, n = _CDR_HEADER.unpack_from(raw)
+    if kind != b"\x00\x01":
+        raise ValueError("not little-endian CDR")
+    off = 16 + n
+    off += (-(off - 4)) % 8  # doubles align to 8 relative to the CDR payload start
+    return sec * _NS + nanosec, _WRENCH_TAIL.unpack_from(raw, off)
 
 
 def decode_wrench(raw: bytes) -> tuple[int, str, tuple[float, ...]]:
     """(stamp ns, frame_id, (Fx..Mz)) of a little-endian CDR WrenchStamped, without a typestore."""
-    if raw[:2] != b"\x00\x01":
-        raise ValueError("not little-endian CDR")
-    sec, nanosec, n = struct.unpack_from("<iII", raw, 4)
+    stamp, values = decode_wrench_sample(raw)
+    (n,) = struct.unpack_from("<I", raw, 12)
     frame = raw[16 : 16 + n - 1].decode() if n else ""
-    off = 16 + n
-    off += (-(off - 4)) % 8  # doubles align to 8 relative to the CDR payload start
-    return stamp_ns(sec, nanosec), frame, _WRENCH_TAIL.unpack_from(raw, off)
+    return stamp, frame, values
 
 
 def decode_string(raw: bytes) -> str:

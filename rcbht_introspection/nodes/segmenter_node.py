@@ -22,6 +22,7 @@ from rclpy.publisher import Publisher
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
+from rcbht_introspection.io.bags import decode_wrench_sample
 from rcbht_introspection.live.health import OK, ArmHealth, CounterWatch, Health, events_health
 from rcbht_introspection.live.join import Watermarks, batch_messages
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
@@ -34,21 +35,6 @@ from rcbht_introspection.taxonomy.words import LEVELS
 
 MAX_BURST = 1000
 """Most samples per arm taken in one executor wake-up."""
-_CDR_HEADER = struct.Struct("<2s2xiII")
-_CDR_WRENCH = struct.Struct("<6d")
-
-
-def wrench_of_cdr(raw: bytes) -> tuple[int, tuple[float, ...]]:
-    """(stamp ns, (Fx..Mz)) of a little-endian CDR WrenchStamped: decode_wrench without the frame.
-
-    The per-sample path at 1 kHz per arm; the frame id is not used here.
-    """
-    kind, sec, nanosec, n = _CDR_HEADER.unpack_from(raw)
-    if kind != b"\x00\x01":
-        raise ValueError("not little-endian CDR")
-    off = 16 + n
-    off += (-(off - 4)) % 8  # doubles align to 8 relative to the CDR payload start
-    return sec * 1_000_000_000 + nanosec, _CDR_WRENCH.unpack_from(raw, off)
 
 
 class SegmenterNode(ManagedNode):
@@ -160,7 +146,7 @@ class SegmenterNode(ManagedNode):
         self.last_sample = time.monotonic()
         self.take_phases()
         try:
-            stamp, wrench = wrench_of_cdr(raw)
+            stamp, wrench = decode_wrench_sample(raw)
         except (ValueError, struct.error):
             stamp, wrench = wrench_sample(deserialize_message(raw, WrenchStamped))
         out = self.session.push(arm, stamp, wrench, info.get("source_timestamp") or None)
