@@ -13,6 +13,7 @@ from rcbht_interfaces.msg import Word as WordMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 
 from rcbht_introspection.live.belief import Belief
+from rcbht_introspection.live.classifier import PhaseInput, WordsInput
 from rcbht_introspection.live.health import Health
 from rcbht_introspection.live.segmenter import PhaseEvent
 from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
@@ -106,6 +107,33 @@ def words_from_msg(msg: WordsMsg) -> tuple[list[Word], float]:
     """(words, stream time of the sample that finalised them)."""
     now = (to_ns(msg.header.stamp) - to_ns(msg.time_origin)) / 1e9
     return [msg_to_word(w) for w in msg.words], now
+
+
+def words_input(arm: str, msg: WordsMsg) -> WordsInput:
+    """A received Words message as the classifier session's input."""
+    words, now = words_from_msg(msg)
+    return WordsInput(
+        arm=arm,
+        level=LEVELS[msg.level],
+        words=words,
+        now=now,
+        stamp_ns=to_ns(msg.header.stamp),
+        stream=(to_ns(msg.time_origin), int(msg.stream_id)),
+        batch_size=int(msg.batch_size),
+        end_of_stream=bool(msg.end_of_stream),
+        seq_end=int(msg.seq_end),
+    )
+
+
+def phase_input(msg: PhaseMsg, published_ns: int | None) -> PhaseInput:
+    """A received Phase message as the classifier session's input."""
+    return PhaseInput(
+        name=msg.name,
+        time=float(msg.time),
+        stamp_ns=to_ns(msg.header.stamp),
+        stream=(to_ns(msg.time_origin), int(msg.stream_id)),
+        published_ns=published_ns,
+    )
 
 
 def phase_msg(event: PhaseEvent) -> PhaseMsg:

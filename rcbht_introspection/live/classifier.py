@@ -1,0 +1,186 @@
+"""Classifier session: classifier_node's state without ROS (words and events in, beliefs out).
+
+The node takes whatever DDS delivered (a burst) and hands it here in publication order; it
+publishes what comes back. Here live: stream switching (words of a new stream issue the previous
+stream's verdicts and start a new tracker session), the latched events of earlier streams
+(live/join.LatchedEvents), the Words messages of one wrench sample (a belief once all of them are
+in), proven word losses and /task_state (StateFilter).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+from rcbht_introspection.live.belief import Belief, BeliefTracker, StateFilter
+from rcbht_introspection.live.join import LatchedEvents
+from rcbht_introspection.taxonomy.words import Level, Word
+
+COUNTS = (
+    "words lost",
+    "sub-tasks judged unknown after a loss",
+    "latched events of earlier streams dropped",
+)
+"""What a session counts (the classifier's /diagnostics values)."""
+StreamKey = tuple[int, int]
+"""(time origin ns, stream id): one segmenter stream."""
+
+
+@dataclass(frozen=True)
+class WordsInput:
+    """One Words message as plain data."""
+
+    arm: str
+    level: Level
+    words: list[Word]
+    now: float
+    """Stream time of the wrench sample that finalised the words."""
+    stamp_ns: int
+    """That sample's stamp: the messages of one batch share it."""
+    stream: StreamKey
+    batch_size: int
+    """Messages of the batch (0: a watermark that only moves the level's numbering on)."""
+    end_of_stream: bool
+    seq_end: int
+
+
+@dataclass(frozen=True)
+class PhaseInput:
+    """One applied sub-task event (rcbht/phase) as plain data."""
+
+    name: str
+    time: float
+    stamp_ns: int
+    stream: StreamKey
+    published_ns: int | None = None
+    """DDS source timestamp: tells latched history from live events."""
+
+
+@dataclass
+class Step:
+    """What the node publishes after a call, in order."""
+
+    beliefs: list[tuple[Belief, int]] = field(default_factory=list)
+    """(belief, trigger stamp ns): verdicts on finished sub-tasks before the running belief."""
+    state: str | None = None
+    """The new /task_state when it changed."""
+    lost: int = 0
+    """Words newly proven lost (a late join or lost messages)."""
+    ignored_events: list[str] = field(default_factory=list)
+    """Sub-task event names the tracker does not know."""
+
+
+class ClassifierSession:
+    """One classifier over successive streams: `receive` a burst, then `classify` once."""
+
+    def __init__(
+        self, tracker: BeliefTracker, state: StateFilter, counts: dict[str, int] | None = None
+    ) -> None:
+        self.tracker = tracker
+        self.state = state
+        self.history: LatchedEvents[PhaseInput] = LatchedEvents()
+        self.stream: StreamKey | None = None
+        self.batches: dict[tuple[str, int], tuple[int, int]] = {}
+        """(arm, sample stamp) -> (messages received, batch size)."""
+        self.trigger_ns: int | None = None
+        """Earliest sample behind evidence not yet classified (the conservative latency)."""
+        self._stale = 0
+        self.counts = counts if counts is not None else {}
+        """Losses and drops (a node passes its own dict: the counts outlive a reconfigure)."""
+        for name in COUNTS:
+            self.counts.setdefault(name, 0)
+
+    def rejoin(self, now_ns: int) -> None:
+        """The subscriptions were (re)created at `now_ns`: latched events before it are history."""
+        self.history.rejoin(now_ns)
+
+    def receive(self, items: Iterable[WordsInput | PhaseInput]) -> Step:
+        """Take a burst in publication order (each topic is in order, the topics among
+        themselves are not: the node sorts by source timestamp)."""
+        step = Step()
+        for item in items:
+            if isinstance(item, PhaseInput):
+                self._phase(item, step)
+            else:
+                self._words(item, step)
+        self.counts["latched events of earlier streams dropped"] += self.history.stale - self._stale
+        self._stale = self.history.stale
+        return step
+
+    def classify(self) -> Step | None:
+        """Verdicts, belief and state once every message of the newest sample's batch is in
+        and there is new evidence; None otherwise."""
+        newest = max((stamp for _, stamp in self.batches), default=None)
+        if any(n < size for (_, stamp), (n, size) in self.batches.items() if stamp == newest):
+            return None  # the other messages of this sample are on their way
+        self.batches = {}
+        if self.trigger_ns is None:
+            return None
+        trigger, self.trigger_ns = self.trigger_ns, None
+        step = Step()
+        self._count_losses(step)
+        for final in self.tracker.take_finals():
+            self._emit(step, final, trigger)
+        belief = self.tracker.current()
+        self._emit(step, belief, trigger)
+        if self.state.update(self.tracker.now, belief.subtask):
+            step.state = self.state.state
+        return step
+
+    # --- input ---------------------------------------------------------------------------
+    def _words(self, item: WordsInput, step: Step) -> None:
+        self._enter(item.stream, step)
+        self.tracker.add_words(item.arm, item.words, item.now, item.level, item.seq_end)
+        if item.batch_size == 0:  # only the level's word numbering moved on: no new evidence
+            return
+        if item.end_of_stream:
+            self.tracker.end_of_stream(item.arm, item.level)
+        key = (item.arm, item.stamp_ns)
+        count, _ = self.batches.get(key, (0, item.batch_size))
+        self.batches[key] = (count + 1, item.batch_size)
+        self._trigger(item.stamp_ns)
+
+    def _phase(self, item: PhaseInput, step: Step) -> None:
+        identity = (item.name, item.time)
+        for event in self.history.event(
+            item.stream, item, item.published_ns, self.stream, identity
+        ):
+            self._enter(item.stream, step)
+            self._apply(event, step)
+
+    def _enter(self, key: StreamKey, step: Step) -> None:
+        """A live message of stream `key`: a new stream starts a new session (and its history)."""
+        if key == self.stream:
+            return
+        if self.stream is not None and self.tracker.arms:
+            # the previous stream ended without all its end markers: issue what it has
+            for arm in tuple(self.tracker.arms):
+                self.tracker.end_of_stream(arm)
+            self._count_losses(step)
+            for final in self.tracker.take_finals():
+                self._emit(step, final, 0)
+        self.tracker.reset()
+        self.state.new_stream()
+        self.stream = key
+        for event in self.history.stream_started(key):  # its events the latched topic replayed
+            self._apply(event, step)
+
+    def _apply(self, event: PhaseInput, step: Step) -> None:
+        if not self.tracker.phase(event.name, event.time):
+            step.ignored_events.append(event.name)
+            return
+        self._trigger(event.stamp_ns)
+
+    def _trigger(self, stamp: int) -> None:
+        self.trigger_ns = stamp if self.trigger_ns is None else min(self.trigger_ns, stamp)
+
+    # --- output --------------------------------------------------------------------------
+    def _count_losses(self, step: Step) -> None:
+        lost = self.tracker.account_losses()
+        self.counts["words lost"] += lost
+        step.lost += lost
+
+    def _emit(self, step: Step, belief: Belief, trigger_ns: int) -> None:
+        if belief.final and belief.blind:
+            self.counts["sub-tasks judged unknown after a loss"] += 1
+        step.beliefs.append((belief, trigger_ns))
