@@ -28,17 +28,6 @@ def require_ros() -> None:
     require(have("rcbht_interfaces"), "rcbht_interfaces not built (make setup builds msg_defs)")
 
 
-def require_stream() -> None:
-    """The streaming taxonomy engine (taxonomy work) must be present."""
-    require(have("rcbht_introspection.taxonomy.stream"), "taxonomy.stream (ArmStream) missing")
-
-
-def require_learn() -> None:
-    """Models and the sub-task split (learn work) must be present."""
-    require(have("rcbht_introspection.learn.models"), "learn.models missing")
-    require(have("rcbht_introspection.grammar.split"), "grammar.split missing")
-
-
 def ros_env(tmp_path: Path) -> dict[str, str]:
     """Environment of an isolated ROS graph: a domain of its own, loopback only, logs in tmp.
 

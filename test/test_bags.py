@@ -151,9 +151,6 @@ def test_record_a_replay_between_processes(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("source", SOURCES)
 def test_train_accepts_bags(request: pytest.FixtureRequest, tmp_path: Path, source: str) -> None:
-    from ros_support import require_learn
-
-    require_learn()
     from rcbht_introspection.learn.models import load_model
 
     names = [f"20121127-HIROSA-S-{i:02d}" for i in (1, 2, 3)]

@@ -5,14 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from ros_support import require_ros, require_stream
+from ros_support import require_ros
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 def test_ros_benchmark_short(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     require_ros()
-    require_stream()
     from rcbht_introspection.bench import ros
 
     monkeypatch.setenv("RCBHT_BENCH_ROS_SECONDS", "2")

@@ -9,7 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from ros_support import require_ros, require_stream
+from ros_support import require_ros
 
 pytestmark = [pytest.mark.ros]
 
@@ -81,7 +81,6 @@ def test_rss_growth_over_the_last_window() -> None:
 def test_soak_short(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """25 s of 2 x 1 kHz through both nodes with a classifier restart at a quarter of the run."""
     require_ros()
-    require_stream()
     from rcbht_introspection.bench import soak
 
     monkeypatch.setenv("RCBHT_SOAK_SECONDS", "25")

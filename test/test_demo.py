@@ -6,8 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
-from conftest import require
-from ros_support import have, require_learn, require_ros, require_stream
+from ros_support import require_ros
 
 from rcbht_introspection.cli import main
 
@@ -19,16 +18,13 @@ def test_demo_names_what_is_missing(
     assert main(["demo", "--out", str(tmp_path / "out"), "--data", "hiro"]) == 1
     out = capsys.readouterr().out
     assert "rcbht demo cannot run; missing:" in out
-    assert "neither the simulator" in out and "../shared HIRO data" in out
+    assert "REAL HIRO trials (../shared/data/hiro or $RCBHT_HIRO_DATA)" in out
 
 
 @pytest.mark.ros
 @pytest.mark.slow
 def test_demo_on_simulated_trials(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     require_ros()
-    require_stream()
-    require_learn()
-    require(have("rcbht_introspection.sim.dataset"), "simulator missing")
     out = tmp_path / "demo"
     assert main(["demo", "--out", str(out), "--trials", "5", "--held-out", "1"]) == 0
     text = capsys.readouterr().out

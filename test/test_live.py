@@ -9,7 +9,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pytest
 from conftest import SOURCES, trial_folders
-from ros_support import require_learn, require_stream
 
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live.belief import UNKNOWN, BeliefTracker, StateFilter
@@ -33,7 +32,6 @@ def words_of(trial: Trial) -> list[Word]:
 def case(request: pytest.FixtureRequest) -> tuple[object, Path]:
     """A model trained on 15 REAL trials (golden words) and held-out REAL S-43, or a model trained
     on 5 generated trials (engine words) and a held-out generated trial."""
-    require_learn()
     from rcbht_introspection.learn.data import load_samples
     from rcbht_introspection.learn.models import train_model
 
@@ -150,7 +148,6 @@ def _last_sample_before(events: list[tuple[float, str]], ns: np.ndarray) -> list
 
 def test_session_orders_events_by_source_time() -> None:
     """An event that arrives before samples published ahead of it still applies after them."""
-    require_stream()
     from rcbht_introspection.io.bags import END_PHASE
     from rcbht_introspection.live.offline import offline_stream_words, trial_events
 
@@ -179,7 +176,6 @@ def test_session_orders_events_by_source_time() -> None:
 
 
 def test_late_event_is_placed_at_the_sample_before_it() -> None:
-    require_stream()
     from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
 
     session = SegmenterSession(("R",), arm_stream_factory())
@@ -192,7 +188,6 @@ def test_late_event_is_placed_at_the_sample_before_it() -> None:
 
 
 def test_session_rejects_malformed_samples() -> None:
-    require_stream()
     from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
 
     session = SegmenterSession(("R",), arm_stream_factory())
@@ -210,7 +205,6 @@ def test_session_rejects_malformed_samples() -> None:
 
 def test_end_event_waits_for_samples_still_in_flight() -> None:
     """The end event is flushed early only when no sample published before it is missing."""
-    require_stream()
     from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
 
     ms = 1_000_000
@@ -229,7 +223,6 @@ def test_end_event_waits_for_samples_still_in_flight() -> None:
 
 def test_late_events_give_the_offline_words() -> None:
     """Events delivered after later-published samples still give the offline stream's words."""
-    require_stream()
     from rcbht_introspection.io.bags import END_PHASE
     from rcbht_introspection.live.offline import offline_stream_words, trial_events
 

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 import pytest
-from ros_support import require_learn, require_ros, require_stream
+from ros_support import require_ros
 
 from rcbht_introspection.cli import main
 
@@ -19,7 +19,6 @@ HELD_OUT = (41, 44)
 
 @pytest.fixture(scope="module")
 def model(hiro_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    require_learn()
     from rcbht_introspection.learn.data import load_samples
     from rcbht_introspection.learn.models import save_model, train_model
 
@@ -31,7 +30,6 @@ def model(hiro_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def test_replay_eval_of_held_out_trials(hiro_data: Path, model: Path, tmp_path: Path) -> None:
     require_ros()
-    require_stream()
     real = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS"
     bags = []
     for i in HELD_OUT:
@@ -60,7 +58,6 @@ def test_replay_eval_of_held_out_trials(hiro_data: Path, model: Path, tmp_path: 
 def test_two_arm_replay_matches_offline(hiro_data: Path, model: Path, tmp_path: Path) -> None:
     """Two arms (/L/wrench, /R/wrench at 2 x 1 kHz): per-arm words and verdicts as offline."""
     require_ros()
-    require_stream()
     from rcbht_introspection.bench.ros import two_arm_trial
     from rcbht_introspection.io.bags import write_trial_bag
     from rcbht_introspection.io.hiro import read_trial

@@ -9,8 +9,6 @@ from pathlib import Path
 import pytest
 from ros_support import (
     env,
-    require_learn,
-    require_stream,
     segmenter_inputs,
     start_node,
     stop,
@@ -85,7 +83,6 @@ class DiagnosticsProbe:
 
 def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, str]) -> None:
     """autostart:=false waits unconfigured; a new model file takes effect without a restart."""
-    require_learn()
     from std_msgs.msg import String
 
     from rcbht_introspection.live.health import file_sha256
@@ -149,7 +146,6 @@ def test_segmenter_diagnostics_report_rate_and_rejections(
     tmp_path: Path, env: dict[str, str]
 ) -> None:
     """/diagnostics: per-arm rate and counters; WARN with a one-line reason when samples are rejected."""
-    require_stream()
     from rcbht_introspection.nodes.common import RosSession
 
     log = tmp_path / "segmenter.log"
@@ -184,8 +180,6 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
     tmp_path: Path, env: dict[str, str]
 ) -> None:
     """Restarted mid-sub-task: that sub-task's verdict is 'unknown', the next one is judged."""
-    require_stream()
-    require_learn()
     from rcbht_interfaces.msg import Belief
     from std_msgs.msg import String
 
@@ -260,7 +254,6 @@ def test_a_failed_configure_leaves_the_node_unconfigured_and_says_why(
     tmp_path: Path, env: dict[str, str]
 ) -> None:
     """A bad parameter set by a manager: configure fails, ERROR on /diagnostics, then recovers."""
-    require_stream()
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient
 

@@ -12,9 +12,7 @@ from pathlib import Path
 import pytest
 from ros_support import (
     env,
-    require_learn,
     require_ros,
-    require_stream,
     ros_env,
     segmenter_inputs,
     start_node,
@@ -89,10 +87,8 @@ def test_classifier_without_usable_model_says_unknown(
     params: dict[str, object] = {"model_file": str(path), "publish_rate_hz": 20.0}
     expect = str(path)
     if model == "garbage":
-        require_learn()
         path.write_text("this is not a model\n")
     if model == "other_profile":
-        require_learn()
         from rcbht_introspection.grammar.split import SubtaskSample
         from rcbht_introspection.learn.models import save_model, train_model
         from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
@@ -122,7 +118,6 @@ def test_classifier_without_usable_model_says_unknown(
 
 
 def test_segmenter_survives_malformed_input_and_sigint(tmp_path: Path, env: dict[str, str]) -> None:
-    require_stream()
     from rcbht_interfaces.msg import Words
     from std_msgs.msg import String
 
@@ -179,7 +174,6 @@ def test_a_late_subscriber_still_gets_the_applied_sub_task_events(
     tmp_path: Path, env: dict[str, str]
 ) -> None:
     """rcbht/phase is latched: a classifier that matches after an event was applied still sees it."""
-    require_stream()
     from rcbht_interfaces.msg import Phase
     from std_msgs.msg import String
 
@@ -208,7 +202,6 @@ def test_a_draining_node_still_answers_parameter_requests(
     tmp_path: Path, env: dict[str, str]
 ) -> None:
     """spin_draining serves the parameter services through the executor between bursts."""
-    require_stream()
     from geometry_msgs.msg import WrenchStamped
     from rclpy.parameter_client import AsyncParameterClient
 

@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import require
 
 from rcbht_introspection.cli import main as cli_main
 from rcbht_introspection.sim import write_dataset
@@ -30,10 +28,6 @@ def test_real_golden_frequencies_are_distributions(hiro_data: Path) -> None:
 
 
 def test_sim_report_writes_tables_and_figures(hiro_data: Path, tmp_path: Path) -> None:
-    require(
-        importlib.util.find_spec("rcbht_introspection.taxonomy.batch") is not None,
-        "taxonomy batch engine (branch taxonomy) not merged yet",
-    )
     sim = tmp_path / "sim"
     write_dataset(sim, 4, seed=1)
     out = tmp_path / "report"

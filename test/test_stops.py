@@ -10,15 +10,13 @@ import json
 from pathlib import Path
 
 import pytest
-from ros_support import require_learn, require_ros, require_stream
+from ros_support import require_ros
 
 pytestmark = pytest.mark.ros
 
 
 def test_every_stop_is_clean(tmp_path: Path) -> None:
     require_ros()
-    require_stream()
-    require_learn()
     from rcbht_introspection.bench.stops import stop_loop, summarise
 
     stops, sent = stop_loop(n_node=4, n_record=3, work=tmp_path, seed=11)

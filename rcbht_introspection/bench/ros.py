@@ -73,12 +73,10 @@ def two_arm_trial(a: Trial, b: Trial) -> Trial:
 def _model(out_dir: Path) -> Path | None:
     """The model `rcbht train` writes by default (live head included) for HIRO trials 1-40."""
     hiro = _hiro()
-    try:
-        from rcbht_introspection.learn.data import load_trials
-        from rcbht_introspection.learn.live import live_training
-        from rcbht_introspection.learn.models import save_model
-    except ImportError:
-        return None
+    from rcbht_introspection.learn.data import load_trials
+    from rcbht_introspection.learn.live import live_training
+    from rcbht_introspection.learn.models import save_model
+
     if hiro is None:
         return None
     from rcbht_introspection.io.hiro import find_trials

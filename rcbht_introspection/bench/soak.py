@@ -80,7 +80,7 @@ class Source:
 
 
 def trial_source() -> Source:
-    """REAL HIRO trials when present, else the simulator's, else synthetic ones; all at 5x."""
+    """REAL HIRO trials when present, else the simulator's two-arm trials; both at 5x."""
     from rcbht_introspection.bench import ros
 
     hiro = ros._hiro()
@@ -98,17 +98,8 @@ def trial_source() -> Source:
         return Source(
             f"REAL HIRO trials at 5x ({hiro})", ros.TARGET_RATE_HZ / ros.SOURCE_RATE_HZ, real
         )
-    try:
-        from rcbht_introspection.sim import load_sim_config, simulate_trial
-    except ImportError:
-        base = [ros.synthetic_trial(f"synthetic-{i}", 30.0, i) for i in range(SIM_TRIALS)]
-        return Source(
-            "synthetic 200 Hz at 5x",
-            ros.TARGET_RATE_HZ / ros.SOURCE_RATE_HZ,
-            lambda i: ros.two_arm_trial(
-                base[i % SIM_TRIALS], base[(i + 1) % SIM_TRIALS]
-            ),  # arm L tiled from the next trial
-        )
+    from rcbht_introspection.sim import load_sim_config, simulate_trial
+
     config = load_sim_config()
     sims = [
         simulate_trial(config, 1000 + k, "two-arm", rate_hz=ros.SOURCE_RATE_HZ)

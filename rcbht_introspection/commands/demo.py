@@ -3,8 +3,8 @@
 Simulate trials (the project's own simulator), train a sub-task model on most of them, convert
 the held-out trials to bags, replay them through segmenter_node and classifier_node (separate
 processes, real DDS), then print the /task_state timeline against the truth, the accuracy, and
-save a plot. Without the simulator it uses ../shared HIRO data when present (train on REAL
-trials 1-40, replay 41-46). It names every missing part instead of failing obscurely.
+save a plot. With --data hiro it uses the ../shared HIRO data instead (train on REAL trials
+1-40, replay 41-46). It names every missing part instead of failing obscurely.
 """
 
 from __future__ import annotations
@@ -20,21 +20,8 @@ from rcbht_introspection.errors import InputError
 PARTS: dict[str, tuple[str, str]] = {
     "rclpy": ("ROS 2 Jazzy runtime (rclpy)", "make setup installs the pinned ROS wheels"),
     "rcbht_interfaces": ("rcbht_interfaces messages", "make setup builds msg_defs/ into the venv"),
-    "rcbht_introspection.taxonomy.stream": (
-        "streaming RCBHT engine (taxonomy.stream.ArmStream)",
-        "part of the taxonomy work",
-    ),
-    "rcbht_introspection.taxonomy.batch": ("batch RCBHT engine (taxonomy.batch)", "taxonomy work"),
-    "rcbht_introspection.learn.models": (
-        "sub-task models (learn.models)",
-        "part of the learn work",
-    ),
-    "rcbht_introspection.grammar.split": (
-        "sub-task split (grammar.split)",
-        "part of the learn work",
-    ),
 }
-SIM_MODULE = "rcbht_introspection.sim.dataset"
+"""The ROS parts a pip-only install may lack (the demo runs both nodes)."""
 
 
 def _have(module: str) -> bool:
@@ -62,7 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("demo", help="simulate, train, replay through the ROS nodes, score")
     p.add_argument("--out", type=Path, default=Path("demo_out"))
     p.add_argument("--data", choices=("auto", "sim", "hiro"), default="auto",
-                   help="auto: the simulator, else ../shared HIRO data when present")  # fmt: skip
+                   help="auto or sim: the project's simulator; hiro: ../shared REAL HIRO trials")  # fmt: skip
     p.add_argument("--trials", type=int, default=12, help="simulated trials (default 12)")
     p.add_argument("--held-out", type=int, default=3, help="simulated trials replayed (default 3)")
     p.add_argument("--rate", type=float, default=5.0, help="replay speed factor (default 5)")
@@ -76,15 +63,10 @@ def _step(text: str) -> None:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     missing = [f"{name} ({how})" for mod, (name, how) in PARTS.items() if not _have(mod)]
-    use_sim = args.data == "sim" or (args.data == "auto" and _have(SIM_MODULE))
+    use_sim = args.data in ("sim", "auto")
     hiro = shared_hiro()
-    if args.data == "sim" and not _have(SIM_MODULE):
-        missing.append("simulator (rcbht_introspection.sim.dataset; part of the sim work)")
     if not use_sim and hiro is None:
-        missing.append(
-            "trials: neither the simulator (rcbht_introspection.sim.dataset) nor ../shared HIRO "
-            "data (../shared/data/hiro or $RCBHT_HIRO_DATA) is available"
-        )
+        missing.append("REAL HIRO trials (../shared/data/hiro or $RCBHT_HIRO_DATA)")
     if missing:
         print("rcbht demo cannot run; missing:")
         for m in missing:
@@ -112,7 +94,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
         train, held = folders[: -args.held_out], folders[-args.held_out :]
         source = "simulator"
     else:
-        _step(f"1. no simulator: using the shared REAL HIRO trials in {hiro}")
+        _step(f"1. the shared REAL HIRO trials in {hiro}")
         assert hiro is not None
         folders = find_trials([hiro])
         train = [f for f in folders if int(f.name.rsplit("-", 1)[1]) <= 40]

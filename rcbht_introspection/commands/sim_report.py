@@ -3,7 +3,6 @@ simulated set with the real HIRO set. Plotting lives here, outside the pure sim 
 
 from __future__ import annotations
 
-import importlib
 import json
 import os
 from pathlib import Path
@@ -39,11 +38,8 @@ def default_real_dir() -> Path:
 
 def classifier_accuracy(sim_dir: Path, folds: int = 4) -> dict[str, object]:
     """Trial-grouped k-fold SVM (compact encoding) accuracy of the sub-task classifier, if present."""
-    try:
-        models = importlib.import_module("rcbht_introspection.learn.models")
-        data = importlib.import_module("rcbht_introspection.learn.data")
-    except ModuleNotFoundError as exc:
-        return {"available": False, "why": f"{exc.name} not installed"}
+    from rcbht_introspection.learn import data, models
+
     samples = data.load_samples([sim_dir], words="engine")
     trials = sorted({s.trial for s in samples})
     if len(trials) < folds:

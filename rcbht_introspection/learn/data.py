@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample, split_words
+from rcbht_introspection.io import bags
 from rcbht_introspection.io.hiro import ARMS, find_trials, read_state, read_trial
 from rcbht_introspection.io.rcbht_format import level_path, read_trial_words
-from rcbht_introspection.io.trial import SUBTASKS, Trial
+from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, TrialWords
 
 WORD_SOURCES = ("auto", "golden", "engine")
@@ -46,26 +47,6 @@ def _golden_arms(folder: Path) -> list[tuple[str, Path]]:
     return found
 
 
-def _bag_module():
-    try:
-        return importlib.import_module("rcbht_introspection.io.bags")
-    except ModuleNotFoundError as exc:
-        if exc.name == "rcbht_introspection.io.bags":
-            return None
-        raise
-
-
-def _engine_words(trial: Trial) -> TrialWords:
-    """Words from the batch RCBHT engine (imported lazily: it lives on the taxonomy branch)."""
-    try:
-        batch = importlib.import_module("rcbht_introspection.taxonomy.batch")
-    except ModuleNotFoundError as exc:
-        raise InputError(
-            "words='engine' needs rcbht_introspection.taxonomy.batch, which is not installed"
-        ) from exc
-    return batch.label_trial(trial)
-
-
 def _end_time(folder: Path) -> float:
     """Last time stamp of the trial's torque file (the end of its last sub-task)."""
     for arm in ARMS:
@@ -90,12 +71,11 @@ def load_trial_samples(path: Path, words: str = "auto") -> TrialSamples:
     if words not in WORD_SOURCES:
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
     path = Path(path)
-    bags = _bag_module()
-    if path.is_file() and bags is not None and bags.is_bag(path):
+    if path.is_file() and bags.is_bag(path):
         if words == "golden":
             raise InputError("a bag has no golden label files; use words='engine'", path)
         trial = bags.read_trial_bag(path)
-        trial_words = _engine_words(trial)
+        trial_words = label_trial(trial)
         samples = split_words(trial_words, trial.state_times, trial.end_time)
         return TrialSamples(trial.name, path, "engine", samples)
     golden = _golden_arms(path)
@@ -110,18 +90,17 @@ def load_trial_samples(path: Path, words: str = "auto") -> TrialSamples:
         samples = split_words(trial_words, state, _end_time(path))
         return TrialSamples(path.name, path, "golden", samples)
     trial = read_trial(path)
-    samples = split_words(_engine_words(trial), trial.state_times, trial.end_time)
+    samples = split_words(label_trial(trial), trial.state_times, trial.end_time)
     return TrialSamples(trial.name, path, "engine", samples)
 
 
 def find_inputs(paths: Iterable[Path | str]) -> list[Path]:
     """Trial folders and bag files among `paths` (dataset folders are expanded, sorted)."""
-    bags = _bag_module()
     found: list[Path] = []
     for p in map(Path, paths):
-        if p.is_file() and bags is not None and bags.is_bag(p):
+        if p.is_file() and bags.is_bag(p):
             found.append(p)
-        elif p.is_dir() and bags is not None and not find_trials_safe(p):
+        elif p.is_dir() and not find_trials_safe(p):
             found.extend(sorted(c for c in p.iterdir() if c.is_file() and bags.is_bag(c)))
         else:
             found.extend(find_trials([p]))

@@ -21,6 +21,7 @@ import numpy as np
 from rcbht_introspection.config import config_path, load_yaml, to_mapping
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
+from rcbht_introspection.io import bags
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
 
@@ -118,10 +119,8 @@ def stream_factory(config: LiveAugmentConfig) -> Any:
 def read_any_trial(path: Path) -> Trial:
     """A trial folder or a bag as a Trial."""
     from rcbht_introspection.io.hiro import read_trial
-    from rcbht_introspection.learn.data import _bag_module
 
-    bags = _bag_module()
-    if Path(path).is_file() and bags is not None and bags.is_bag(path):
+    if Path(path).is_file() and bags.is_bag(path):
         return bags.read_trial_bag(path)
     return read_trial(path)
 

@@ -19,8 +19,9 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.taxonomy.config import load_taxonomy_config
+from rcbht_introspection.taxonomy.stream import ArmStream, load_stream_config
 from rcbht_introspection.taxonomy.words import Word
 
 RECENT_SAMPLES = 2000
@@ -95,7 +96,7 @@ class _Pending:
 class _Arm:
     """Per-arm stream state."""
 
-    def __init__(self, stream: object) -> None:
+    def __init__(self, stream: ArmStream) -> None:
         self.stream = stream
         self.last_ns = 0
         self.last_t: float | None = None
@@ -114,7 +115,7 @@ class SegmenterSession:
     def __init__(
         self,
         arms: Sequence[str],
-        stream_factory: Callable[[str], object],
+        stream_factory: Callable[[str], ArmStream],
         end_phases: Sequence[str] = ("done",),
         subtasks: Sequence[str] = SUBTASKS,
         hold_s: float = 0.2,
@@ -185,7 +186,7 @@ class SegmenterSession:
         if st.first_t is None:
             st.first_t = t
         counts.accepted += 1
-        words = st.stream.push(t, wrench)  # type: ignore[attr-defined]
+        words = st.stream.push(t, wrench)
         if words:
             out.batches.append(
                 WordBatch(arm, list(words), stamp_ns, self.origin_ns, self.stream_id)
@@ -294,7 +295,7 @@ class SegmenterSession:
             p.time = at_t if at_t is not None else 0.0
             p.stamp_ns = at_ns or self.origin_ns
         if p.end:
-            words = st.stream.finish()  # type: ignore[attr-defined]
+            words = st.stream.finish()
             st.finished = True
             out.batches.append(
                 WordBatch(
@@ -303,7 +304,7 @@ class SegmenterSession:
             )
         elif at_t is not None:
             # every sub-task start is marked (the stream reads rotation/mating starts by order)
-            words = st.stream.mark_boundary(at_t, p.name)  # type: ignore[attr-defined]
+            words = st.stream.mark_boundary(at_t, p.name)
             if words:
                 out.batches.append(
                     WordBatch(arm, list(words), st.last_ns, self.origin_ns, self.stream_id)
@@ -315,28 +316,12 @@ def arm_stream_factory(
     taxonomy_file: str = "",
     stream_file: str = "",
     stream_profile: str = "reference",
-) -> Callable[[str], object]:
+) -> Callable[[str], ArmStream]:
     """`arm -> ArmStream`: taxonomy thresholds (profile or file) and stream profile (or file)."""
-    try:
-        from rcbht_introspection.taxonomy.config import load_taxonomy_config
-        from rcbht_introspection.taxonomy.stream import ArmStream
-    except ImportError as exc:
-        raise InputError(
-            f"the streaming taxonomy engine is missing ({exc.name}); it comes with the taxonomy work"
-        ) from None
     config = load_taxonomy_config(profile, taxonomy_file or None)
-    stream_config = None
-    try:
-        from rcbht_introspection.taxonomy.stream import load_stream_config
+    stream_config = load_stream_config(stream_profile, stream_file or None)
 
-        stream_config = load_stream_config(stream_profile, stream_file or None)
-    except ImportError:
-        if stream_file:
-            raise InputError(
-                "this taxonomy engine has no stream configuration", stream_file
-            ) from None
-
-    def make(arm: str) -> object:
+    def make(arm: str) -> ArmStream:
         return ArmStream(config=config, stream_config=stream_config, arm=arm)
 
     return make

@@ -1,7 +1,8 @@
 """`python -m rcbht_introspection.nodes NODE [--ros-args ...]`: start segmenter_node or classifier_node.
 
 The stop handlers go in before the node's modules are imported, so SIGINT/SIGTERM at any moment
-of start-up end the process cleanly (exit 0, no traceback).
+of start-up end the process at once and cleanly (exit 0, no traceback); once the node is up, a
+stop shuts it down in order.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ NODES = ("segmenter_node", "classifier_node")
 def main(argv: list[str] | None = None) -> int:
     """Run the node named by the first argument; the rest are its (ROS) arguments."""
     argv = sys.argv[1:] if argv is None else argv
-    stop = StopSignal.install()
+    stop = StopSignal.install(until_up=True)
     if not argv or argv[0] not in NODES:
         print(f"usage: python -m rcbht_introspection.nodes {{{','.join(NODES)}}} [--ros-args ...]")
         return 2

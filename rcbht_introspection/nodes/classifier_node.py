@@ -208,7 +208,7 @@ def sklearn_fast_predict() -> None:
 
 def main(args: list[str] | None = None, stop: StopSignal | None = None) -> int:
     """Entry point (`ros2 run rcbht_introspection classifier_node`)."""
-    return run(ClassifierNode, "classifier_node", args, stop or StopSignal.install())
+    return run(ClassifierNode, "classifier_node", args, stop or StopSignal.install(until_up=True))
 
 
 if __name__ == "__main__":

@@ -7,6 +7,9 @@ then fail). With a StopSignal the process finishes its step, logs its last line 
 in order; a watchdog ends a stop that hangs, with the stack of every thread in the log.
 The handler only sets a flag and the interpreter's wake-up byte lands in a pipe: it takes no
 lock, so it cannot deadlock whatever the main thread was doing when the signal came.
+A node process installs it with `until_up=True`: a stop during start-up (imports, configure,
+model loading: seconds on a loaded machine) ends the process at once with exit 0, since nothing
+needs an orderly shutdown before the node is up; `up()` switches to the flag.
 """
 
 from __future__ import annotations
@@ -28,8 +31,10 @@ WATCHDOG_S = 10.0
 class StopSignal:
     """SIGINT / SIGTERM set `requested`; the owner checks it (or waits on it) and stops."""
 
-    def __init__(self, watchdog_s: float = WATCHDOG_S) -> None:
+    def __init__(self, watchdog_s: float = WATCHDOG_S, until_up: bool = False) -> None:
         self.watchdog_s = watchdog_s
+        self._exit_now = until_up
+        """A stop ends the process at once (start-up): until `up()`."""
         self.signum: int | None = None
         self._requested = False
         self._done = False
@@ -38,9 +43,10 @@ class StopSignal:
             os.set_blocking(fd, False)
 
     @classmethod
-    def install(cls, watchdog_s: float = WATCHDOG_S) -> StopSignal:
-        """Replace the SIGINT and SIGTERM handlers of this process (main thread only)."""
-        stop = cls(watchdog_s)
+    def install(cls, watchdog_s: float = WATCHDOG_S, until_up: bool = False) -> StopSignal:
+        """Replace the SIGINT and SIGTERM handlers of this process (main thread only);
+        `until_up`: a stop before `up()` exits at once (exit 0)."""
+        stop = cls(watchdog_s, until_up)
         signal.set_wakeup_fd(stop._write, warn_on_full_buffer=False)
         for signum in STOP_SIGNALS:
             signal.signal(signum, stop._handle)
@@ -48,6 +54,10 @@ class StopSignal:
         if watchdog_s > 0:
             threading.Thread(target=stop._watchdog, name="stop-watchdog", daemon=True).start()
         return stop
+
+    def up(self) -> None:
+        """Start-up is over: from now on a stop only sets the flag (orderly shutdown)."""
+        self._exit_now = False
 
     @property
     def requested(self) -> bool:
@@ -86,6 +96,11 @@ class StopSignal:
                 signal.signal(signum, signal.SIG_IGN)
 
     def _handle(self, signum: int, frame: object) -> None:
+        if self._exit_now:  # start-up: nothing to shut down in order yet
+            with contextlib.suppress(Exception):  # a write the signal interrupted may refuse
+                sys.stdout.flush()
+                sys.stderr.flush()
+            os._exit(0)
         if self.signum is None:
             self.signum = signum
         self._requested = True

@@ -282,7 +282,7 @@ def outputs_health(word_pubs: Iterable[Publisher], phase_pub: Publisher) -> Heal
 
 def main(args: list[str] | None = None, stop: StopSignal | None = None) -> int:
     """Entry point (`ros2 run rcbht_introspection segmenter_node`)."""
-    return run(SegmenterNode, "segmenter_node", args, stop or StopSignal.install())
+    return run(SegmenterNode, "segmenter_node", args, stop or StopSignal.install(until_up=True))
 
 
 if __name__ == "__main__":

@@ -7,15 +7,13 @@ outcome and variation; each HIRO trial folder also gets outcome.txt and meta.jso
 
 from __future__ import annotations
 
-import importlib
 import json
 import shutil
-from collections.abc import Callable
 from pathlib import Path
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import write_trial
-from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim.config import SimConfig, load_sim_config
 from rcbht_introspection.sim.scenario import get_scenario
 from rcbht_introspection.sim.simulate import simulate_trial
@@ -40,19 +38,6 @@ def trial_name(scenario: str, index: int, failure: str | None) -> str:
     if failure is None:
         return f"SIM-{arms}-S-{index + 1:02d}"
     return f"SIM-{arms}-F-{index + 1:02d}-{failure}"
-
-
-def _bag_writer() -> Callable[[Trial, Path], None]:
-    """The rosbag2 writer of io.bags, imported only when a bag is asked for."""
-    try:
-        module = importlib.import_module("rcbht_introspection.io.bags")
-    except ModuleNotFoundError as exc:
-        raise InputError(
-            "--format bag needs rcbht_introspection.io.bags (the rosbag2 writer of the ROS "
-            f"branch), which is not installed here ({exc.name} missing); use --format hiro",
-            field="format",
-        ) from None
-    return module.write_trial_bag
 
 
 def _clear_previous_set(out: Path) -> None:
@@ -112,7 +97,7 @@ def write_dataset(
         raise InputError(f"need at least one trial, got {n_trials}", field="trials")
     get_scenario(scenario)
     config = config or load_sim_config()
-    write_bag = _bag_writer() if fmt == "bag" else None
+    write_bag = write_trial_bag if fmt == "bag" else None
     out = Path(out_dir)
     _clear_previous_set(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -8,7 +8,6 @@ Real words come from the trials' golden/ files; simulated words from the batch t
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +17,7 @@ import numpy as np
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.trial import SUBTASKS, Trial
+from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.words import AXES, BEHAVIOR_LABELS, Level, TrialWords
 
 WordSource = Callable[[Path, Trial], TrialWords]
@@ -106,14 +106,7 @@ def golden_words(folder: Path, trial: Trial) -> TrialWords:
 
 def engine_words(folder: Path, trial: Trial) -> TrialWords:
     """Words of a (simulated) trial from the batch taxonomy engine."""
-    try:
-        batch = importlib.import_module("rcbht_introspection.taxonomy.batch")
-    except ModuleNotFoundError as exc:
-        raise InputError(
-            "the taxonomy batch engine (rcbht_introspection.taxonomy.batch) is not installed; "
-            f"it is needed to label simulated trials ({exc.name} missing)",
-        ) from None
-    return batch.label_trial(trial)
+    return label_trial(trial)
 
 
 def set_stats(
