@@ -245,13 +245,13 @@ def run(
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         if node.autostart and not stop.requested:
-            for transition in (node.trigger_configure, node.trigger_activate):
-                if transition == node.trigger_activate:
-                    stop.up()  # configured: a stop from here shuts the node down in order
-                if transition() != TransitionCallbackReturn.SUCCESS:
-                    # one line naming the parameter; the node never started
-                    print(f"[{name}] error: {node.config_error}", file=sys.stderr, flush=True)
-                    return 2
+            configured = node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+            if configured:
+                stop.up()  # a stop from here shuts the node down in order (statistics line)
+            if not configured or node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+                # one line naming the parameter; the node never started
+                print(f"[{name}] error: {node.config_error}", file=sys.stderr, flush=True)
+                return 2
         stop.up()
         # start-up objects (rclpy, NumPy, scikit-learn, the model) live until exit: keep them
         # out of the cyclic collector, whose full passes over them stall a 1 kHz callback
