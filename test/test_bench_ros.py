@@ -23,4 +23,4 @@ def test_ros_benchmark_short(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) ->
         assert 0 <= r["wrench_dropped"] <= r["wrench_published"]
         assert r["achieved_rate_hz_per_arm"] > 500
         assert r["latency_ms"]["n"] > 0 and r["word_latency_ms"]["n"] > 0
-        assert r["clean_shutdown"]
+        assert r["clean_shutdown"], (r["exit_codes"], r["shutdown_logs"])

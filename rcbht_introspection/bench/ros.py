@@ -128,6 +128,8 @@ def run(out_dir: Path) -> dict[str, Any]:
             "latency_received_ms": r["latency_received_ms"],
             "word_latency_ms": r["word_latency_ms"],
             "clean_shutdown": r["clean_shutdown"],
+            "exit_codes": r["exit_codes"],
+            "shutdown_logs": r.get("shutdown_logs", {}),
             "domain_id": r["domain_id"],
             "wall_s": round(time.monotonic() - t0, 1),
             "load_avg_before": [round(x, 2) for x in load_before],
