@@ -39,8 +39,8 @@ def _ms(seconds: float) -> float:
 
 
 def run(out_dir: Path) -> dict:
-    from rcbht_introspection.commands.taxonomy import write_rcbht
     from rcbht_introspection.io.hiro import find_trials, read_trial
+    from rcbht_introspection.io.rcbht_format import write_trial_words
     from rcbht_introspection.taxonomy.batch import label_trial
     from rcbht_introspection.taxonomy.config import default_config
 
@@ -72,7 +72,7 @@ def run(out_dir: Path) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         for folder in folders:
             w, c = time.perf_counter(), time.process_time()
-            write_rcbht(label_trial(read_trial(folder), config), Path(tmp) / folder.name)
+            write_trial_words(label_trial(read_trial(folder), config), Path(tmp) / folder.name)
             pipe.append(time.perf_counter() - w)
             pipe_cpu.append(time.process_time() - c)
 

@@ -184,3 +184,16 @@ def write_words(path: Path, level: Level, words: Iterable[Word]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     text = "\n".join(format_record(level, i, w) for i, w in enumerate(words, start=1))
     path.write_text(text + ("\n" if text else ""))
+
+
+def write_trial_words(words: TrialWords, folder: Path) -> None:
+    """A trial in the original layout: Segments/Composites/llBehaviors per axis (one sub-folder
+    per arm when there are two), diffable against golden/ files."""
+    arms = words.arms
+    for arm in arms:
+        root = folder if len(arms) == 1 else folder / arm
+        for level in (Level.PRIMITIVE, Level.COMPOSITION, Level.BEHAVIOR):
+            for axis in AXES:
+                write_words(
+                    level_path(root, level, axis), level, words.axis_words(arm, level, axis)
+                )
