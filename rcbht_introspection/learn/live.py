@@ -68,9 +68,9 @@ def load_live_config(path: Path | str | None = None) -> LiveAugmentConfig:
 def sample_times(start: float, end: float, config: LiveAugmentConfig) -> list[float]:
     """Times t in (start, end] at which a live sample of the sub-task [start, end] is taken."""
     span = end - start
-    times = set(np.round(start + config.step_s * np.arange(1, int(span / config.step_s) + 1), 9))
-    times |= {round(start + f * span, 9) for f in config.fractions}
-    times = sorted(t for t in times if start < t <= end)
+    grid = set(np.round(start + config.step_s * np.arange(1, int(span / config.step_s) + 1), 9))
+    grid |= {round(start + f * span, 9) for f in config.fractions}
+    times = sorted(t for t in grid if start < t <= end)
     if len(times) > config.max_per_subtask:
         pick = np.linspace(0, len(times) - 1, config.max_per_subtask).round().astype(int)
         times = [times[i] for i in sorted(set(pick))]

@@ -21,6 +21,7 @@ from rcbht_introspection.io.trial import SUBTASKS, Trial
 from rcbht_introspection.live import offline
 from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker, StateFilter
 from rcbht_introspection.live.segmenter import PhaseEvent, SegmenterSession, WordBatch
+from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import TrialWords, Word
 
 STAMP_ORIGIN_NS = 1_000_000_000
@@ -62,7 +63,7 @@ class StreamedTrial:
 
 
 def stream_trial(
-    trial: Trial, stream_factory: Callable[[str], object], end_phase: str = "done"
+    trial: Trial, stream_factory: Callable[[str], ArmStream], end_phase: str = "done"
 ) -> StreamedTrial:
     """Feed `trial` to a SegmenterSession as segmenter_node is fed by its trial bag."""
     arms = trial.arms
@@ -151,7 +152,7 @@ def replay_beliefs(
 def live_replay(
     trial: Trial,
     model: object | None,
-    stream_factory: Callable[[str], object],
+    stream_factory: Callable[[str], ArmStream],
     mode: str = "boundary",
     window_s: float = 2.0,
 ) -> LiveReplay:

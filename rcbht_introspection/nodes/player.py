@@ -144,7 +144,9 @@ class RawRecorder:
                 self.bag.write_raw(topic, msgtype, t_ns, raw)
                 self.counts[topic] += 1
 
-        self.node.create_subscription(cls, topic, on_message, self.qos, raw=True)
+        # rclpy passes (msg, MessageInfo) to a two-argument callback; its annotation names only
+        # the one-argument form
+        self.node.create_subscription(cls, topic, on_message, self.qos, raw=True)  # type: ignore[arg-type]
 
     def resolve(
         self, topics: Sequence[str], timeout: float, stop: StopSignal | None = None

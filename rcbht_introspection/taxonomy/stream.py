@@ -374,8 +374,8 @@ class ArmStream:
             if self._finished:
                 self.counters.malformed_samples += 1
                 return out
-            for ts, ys in self._intake(t, values):
-                self._feed(ts, ys, out)
+            for t_in, y_in in self._intake(t, values):
+                self._feed(t_in, y_in, out)
         except Exception:  # a bug, never bad input: counted, the stream goes on
             self.counters.internal_errors += 1
         return out
