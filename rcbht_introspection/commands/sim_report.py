@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import Any
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.evaluate import trial_kfold_accuracy
@@ -33,8 +34,8 @@ def default_real_dir() -> Path:
     return candidates[0] / "REAL_HIRO_ONE_SA_SUCCESS"
 
 
-def _markdown(result: dict[str, object], accuracy: dict[str, object]) -> str:
-    subtasks: dict[str, dict] = result["subtasks"]  # type: ignore[assignment]
+def _markdown(result: dict[str, Any], accuracy: dict[str, Any]) -> str:
+    subtasks: dict[str, dict] = result["subtasks"]
     lines = [
         f"Real: {result['real']} ({result['n_real']} trials, golden LLB files); "
         f"simulated: {result['sim']} ({result['n_sim']} trials, batch engine).",

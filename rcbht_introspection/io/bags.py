@@ -20,7 +20,7 @@ import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -141,9 +141,9 @@ class BagWriter:
         """Write already-serialised CDR bytes."""
         self._writer.write(self.connection(topic, msgtype), int(t_ns), raw)
 
-    def write(self, topic: str, msg: object, t_ns: int) -> None:
-        """Serialise a rosbags message dataclass and write it."""
-        msgtype = msg.__msgtype__  # type: ignore[attr-defined]
+    def write(self, topic: str, msg: Any, t_ns: int) -> None:
+        """Serialise a rosbags message dataclass (each class names its `__msgtype__`), write it."""
+        msgtype: str = msg.__msgtype__
         self.write_raw(topic, msgtype, t_ns, self.store.serialize_cdr(msg, msgtype))
 
     def close(self) -> None:

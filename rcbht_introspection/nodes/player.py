@@ -9,6 +9,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 
 from rcbht_introspection.errors import InputError
@@ -46,9 +47,9 @@ class BagPlayer:
     def __init__(self, node: Node, qos: QoSProfile | int = 1000) -> None:
         self.node = node
         self.qos = qos
-        self.publishers: dict[str, object] = {}
+        self.publishers: dict[str, Publisher] = {}
 
-    def publisher(self, topic: str, msgtype: str) -> object:
+    def publisher(self, topic: str, msgtype: str) -> Publisher:
         pub = self.publishers.get(topic)
         if pub is None:
             pub = self.node.create_publisher(message_class(msgtype), topic, self.qos)
@@ -66,7 +67,7 @@ class BagPlayer:
         """True once each of `topics` has a matched subscriber."""
         pubs = [self.publishers[t] for t in topics if t in self.publishers]
         return wait_until(
-            lambda: all(p.get_subscription_count() > 0 for p in pubs),  # type: ignore[attr-defined]
+            lambda: all(p.get_subscription_count() > 0 for p in pubs),
             timeout,
             stop=stop,
         )
@@ -81,7 +82,7 @@ class BagPlayer:
         deadline = time.monotonic() + timeout
         step = Duration(nanoseconds=50_000_000)
         for pub in self.publishers.values():
-            while not pub.wait_for_all_acked(step):  # type: ignore[attr-defined]
+            while not pub.wait_for_all_acked(step):
                 if time.monotonic() > deadline or (stop is not None and stop.requested):
                     return False
         return True
@@ -112,7 +113,7 @@ class BagPlayer:
                     time.sleep(delay)
                 elif stop.wait(delay):  # a long pause in the bag still ends at once on a stop
                     break
-            self.publishers[m.topic].publish(m.raw)  # type: ignore[attr-defined]
+            self.publishers[m.topic].publish(m.raw)
             count += 1
             if on_publish is not None:
                 on_publish(m, time.time_ns())

@@ -253,7 +253,7 @@ class SegmenterNode(ManagedNode):
         for arm, health in self.arm_health.items():
             st = self.session.state[arm]
             counts = self.session.counts[arm]
-            intake = vars(st.stream.counters)  # type: ignore[attr-defined]
+            intake = vars(st.stream.counters)
             out.append(
                 health.report(
                     period_s,

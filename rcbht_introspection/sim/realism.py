@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -129,9 +130,9 @@ def total_variation(p: np.ndarray, q: np.ndarray) -> float:
     return float(0.5 * np.abs(p - q).sum())
 
 
-def compare(real: SetStats, sim: SetStats, subtasks: Iterable[str] = SUBTASKS) -> dict[str, object]:
+def compare(real: SetStats, sim: SetStats, subtasks: Iterable[str] = SUBTASKS) -> dict[str, Any]:
     """Side-by-side numbers: frequencies, distances, variability, per sub-task and axis."""
-    out: dict[str, object] = {
+    out: dict[str, Any] = {
         "real": real.name,
         "sim": sim.name,
         "n_real": len(real.trials),
@@ -167,6 +168,6 @@ def compare(real: SetStats, sim: SetStats, subtasks: Iterable[str] = SUBTASKS) -
                 "distinct_sim": round(sim.distinct_fraction(subtask, axis), 4),
             }
         entry["axes"] = axes
-        out["subtasks"][subtask] = entry  # type: ignore[index]
+        out["subtasks"][subtask] = entry
     out["mean_tv_distance"] = round(float(np.mean(tvs)), 4)
     return out
