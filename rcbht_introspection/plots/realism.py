@@ -4,6 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib
+
+matplotlib.use("Agg")  # files only, never a window: set before pyplot is imported
+
+import matplotlib.pyplot as plt
 import numpy as np
 
 from rcbht_introspection.io.hiro import find_trials, read_trial
@@ -20,10 +25,6 @@ LABEL_COLORS: dict[str, str] = {
 
 def plot_label_frequencies(real: SetStats, sim: SetStats, path: Path) -> None:
     """Stacked LLB label frequencies per sub-task and axis, real beside simulated."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, len(SUBTASKS), figsize=(16, 4.2), sharey=True)
     for ax, subtask in zip(axes, SUBTASKS, strict=True):
@@ -55,10 +56,6 @@ def plot_label_frequencies(real: SetStats, sim: SetStats, path: Path) -> None:
 
 def plot_variability(real: SetStats, sim: SetStats, path: Path) -> None:
     """Box plots of sub-task durations, |Fz| and Fz word counts: the spread of both sets."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(16, 4.2))
     positions = np.arange(len(SUBTASKS)) * 3.0
@@ -93,10 +90,6 @@ def plot_variability(real: SetStats, sim: SetStats, path: Path) -> None:
 
 def plot_example_trials(real_dir: Path, sim_dir: Path, path: Path) -> None:
     """The wrench of the first real and the first simulated trial, sub-task starts dashed."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 2, figsize=(16, 6), sharex="col")
     for col, folder in enumerate((find_trials([real_dir])[0], find_trials([sim_dir])[0])):

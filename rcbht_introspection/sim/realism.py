@@ -17,6 +17,7 @@ import numpy as np
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import find_trials, read_trial
+from rcbht_introspection.io.rcbht_format import read_trial_words
 from rcbht_introspection.io.trial import SUBTASKS, Trial
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.words import AXES, BEHAVIOR_LABELS, Level, TrialWords
@@ -97,7 +98,6 @@ def trial_stats(trial: Trial, words: TrialWords, arm: str = "R") -> TrialStats:
 
 def golden_words(folder: Path, trial: Trial) -> TrialWords:
     """Words of a real trial from its golden/ folder (the original MATLAB output)."""
-    from rcbht_introspection.io.rcbht_format import read_trial_words
 
     golden = folder / "golden"
     if not golden.is_dir():
