@@ -14,9 +14,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TypeVar
 
-import yaml
-
-from rcbht_introspection.config import config_path, from_mapping
+from rcbht_introspection.config_files import (
+    config_from_document,
+    config_path,
+    from_mapping,
+    read_yaml,
+)
 from rcbht_introspection.errors import InputError
 
 T = TypeVar("T")
@@ -231,19 +234,16 @@ CONFIG_FILES = {SegmenterConfig: "segmenter.yaml", ClassifierConfig: "classifier
 
 
 def load_node_config(cls: type[T], path: Path | str | None = None) -> T:
-    """Config of a node from a ROS parameter file (default: config/<node>.yaml)."""
+    """Config of a node from a ROS parameter file (default: config/<node>.yaml).
+
+    The parameters are `<node>: ros__parameters: {...}` (or under the wildcard `/**`), the layout
+    `--params-file` takes; errors name the file, line and parameter.
+    """
     path = Path(path) if path is not None else config_path(CONFIG_FILES[cls])
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise InputError(
-            "not valid YAML", path=path, line=None if mark is None else mark.line + 1
-        ) from None
+    document = read_yaml(path)
     node = NODE_NAMES[cls]
-    section = data.get(node, data.get("/**")) if isinstance(data, dict) else None
-    if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
-        raise InputError(f"expected {node}: ros__parameters: {{...}}", path=path)
-    return config_from_parameters(cls, section["ros__parameters"], path)
+    if isinstance(document, dict) and node not in document and "/**" in document:
+        node = "/**"
+    return config_from_document(
+        cls, document, path=path, section=(node, "ros__parameters"), check=validate
+    )

@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rcbht_introspection.config import config_path, load_yaml
+from rcbht_introspection.config_files import config_path, load_config
 
 Range = tuple[float, float]
 
@@ -206,4 +206,4 @@ class SimConfig:
 
 def load_sim_config(path: Path | str | None = None) -> SimConfig:
     """Load config/sim.yaml (or `path`); unknown keys and wrong types give one-line errors."""
-    return load_yaml(SimConfig, path if path is not None else config_path("sim.yaml"))
+    return load_config(SimConfig, path if path is not None else config_path("sim.yaml"))

@@ -63,25 +63,11 @@ class StreamConfig:
 
 
 def load_stream_config(profile: str = "reference", path: Path | str | None = None) -> StreamConfig:
-    """One profile of config/stream.yaml."""
-    import yaml
-
-    from rcbht_introspection.config import config_path, from_mapping
-    from rcbht_introspection.errors import InputError
+    """One profile of config/stream.yaml (or of `path`)."""
+    from rcbht_introspection.config_files import config_path, load_profile
 
     file = Path(path) if path is not None else config_path(STREAM_CONFIG_FILE)
-    try:
-        data = yaml.safe_load(file.read_text()) or {}
-    except (OSError, yaml.YAMLError):
-        raise InputError("cannot read stream configuration", path=file) from None
-    profiles = data.get("profiles", {}) if isinstance(data, dict) else {}
-    if profile not in profiles:
-        raise InputError(
-            f"unknown stream profile {profile!r} (known: {', '.join(profiles)})", path=file
-        )
-    return from_mapping(
-        StreamConfig, dict(profiles[profile] or {}), path=file, prefix=f"profiles.{profile}."
-    )
+    return load_profile(StreamConfig, file, profile, kind="stream")
 
 
 @dataclass
