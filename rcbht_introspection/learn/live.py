@@ -24,6 +24,7 @@ from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io import bags
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
+from rcbht_introspection.taxonomy.stream import StreamProfile
 
 LIVE_CONFIG_FILE = "live.yaml"
 
@@ -44,7 +45,7 @@ class LiveAugmentConfig:
     """> 0: also the classifier's window mode: words of [t - window_s, t] final by t, labelled
     with the sub-task at t (0: boundary-mode windows only)."""
     taxonomy_profile: str = "reference"
-    stream_profile: str = "reference"
+    stream_profile: StreamProfile = "reference"
     """Must match the segmenter node's stream_profile: it decides when words become final."""
 
 

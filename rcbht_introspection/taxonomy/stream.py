@@ -42,19 +42,25 @@ from rcbht_introspection.taxonomy.words import AXES, TrialWords, Word
 
 STREAM_CONFIG_FILE = "stream.yaml"
 
+StreamProfile = Literal["reference", "causal"]
+"""reference: the words equal the batch engine's (whole-trial quantities are waited for);
+causal: past samples only."""
+NonfinitePolicy = Literal["hold_last", "drop"]
+GapPolicy = Literal["count", "interpolate"]
+
 
 @dataclass(frozen=True)
 class StreamConfig:
     """Streaming profile and the intake policies for bad samples (config/stream.yaml)."""
 
-    profile: Literal["reference", "causal"] = "reference"
+    profile: StreamProfile = "reference"
     moment_domains: dict[str, float] | None = None
     """Explicit moment-axis domains (calibration); None = wait for the trial's own (reference)."""
-    nonfinite: Literal["hold_last", "drop"] = "hold_last"
+    nonfinite: NonfinitePolicy = "hold_last"
     """NaN/Inf components: repeat the axis's last finite value, or drop the sample."""
     max_gap_periods: float = 5.0
     """A time step longer than this many nominal periods is a gap."""
-    gap_policy: Literal["count", "interpolate"] = "count"
+    gap_policy: GapPolicy = "count"
     """Gaps: count and go on (the fits are in seconds), or fill at the nominal period."""
     rate_window: int = 20
     """Intervals used to estimate the nominal sample period."""
