@@ -21,8 +21,10 @@ import numpy as np
 from sklearn.ensemble import RandomForestClassifier
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar import Encoding
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.learn import ClassifierKind
 from rcbht_introspection.learn.data import TrialSamples, load_samples
 from rcbht_introspection.learn.models import train_model
 
@@ -38,8 +40,8 @@ NEAR_EMPTY_SECONDS = 0.05
 class Protocol:
     """Settings of one evaluation run."""
 
-    classifier: str = "svm"
-    encoding: str = "compact"
+    classifier: ClassifierKind = "svm"
+    encoding: Encoding = "compact"
     permutations: int = 20
     n_validation: int | None = None
     start_trials: int | None = None

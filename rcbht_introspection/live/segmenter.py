@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.taxonomy.config import load_taxonomy_config
-from rcbht_introspection.taxonomy.stream import ArmStream, load_stream_config
+from rcbht_introspection.taxonomy.stream import ArmStream, StreamProfile, load_stream_config
 from rcbht_introspection.taxonomy.words import Word
 
 RECENT_SAMPLES = 2000
@@ -314,7 +314,7 @@ def arm_stream_factory(
     profile: str = "reference",
     taxonomy_file: str = "",
     stream_file: str = "",
-    stream_profile: str = "reference",
+    stream_profile: StreamProfile = "reference",
 ) -> Callable[[str], ArmStream]:
     """`arm -> ArmStream`: taxonomy thresholds (profile or file) and stream profile (or file)."""
     config = load_taxonomy_config(profile, taxonomy_file or None)

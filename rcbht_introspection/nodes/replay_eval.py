@@ -29,7 +29,7 @@ import numpy as np
 import yaml
 
 import rcbht_introspection
-from rcbht_introspection.config import config_path
+from rcbht_introspection.config_files import config_path
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import (
     END_PHASE,
