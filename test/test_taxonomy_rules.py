@@ -375,10 +375,10 @@ def test_step5_small_contacts_become_increase_or_decrease() -> None:
 @pytest.mark.parametrize(("l1", "l2"), [("a", "i"), ("a", "d"), ("i", "a"), ("d", "a")])
 def test_step6_adjustment_pairs(l1: str, l2: str) -> None:
     rows = [comp(l1, 0, 1, amp=1.0, avg=1.0), comp(l2, 1, 2, amp=1.3, avg=1.2)]
-    (out,) = pair_pass(mc._ADJUST_PAIRS, (0.5, 0.5), M["a"], rows)
+    (out,) = pair_pass(mc.ADJUST_PAIRS, (0.5, 0.5), M["a"], rows)
     assert out[mc.LBL] == M["a"] and out[mc.AMP] == 1.3
     rows = [comp(l1, 0, 1, amp=1.0), comp(l2, 1, 2, amp=2.5)]
-    assert len(pair_pass(mc._ADJUST_PAIRS, (0.5, 0.5), M["a"], rows)) == 2
+    assert len(pair_pass(mc.ADJUST_PAIRS, (0.5, 0.5), M["a"], rows)) == 2
 
 
 @pytest.mark.parametrize(
@@ -386,7 +386,7 @@ def test_step6_adjustment_pairs(l1: str, l2: str) -> None:
 )
 def test_step7_constant_pairs(l1: str, l2: str) -> None:
     rows = [comp(l1, 0, 1, amp=1.0, avg=1.0), comp(l2, 1, 2, amp=2.0, avg=1.9)]
-    (out,) = pair_pass(mc._CONSTANT_PAIRS, (1.5, 1.0), M["k"], rows)
+    (out,) = pair_pass(mc.CONSTANT_PAIRS, (1.5, 1.0), M["k"], rows)
     assert out[mc.LBL] == M["k"]
 
 

@@ -99,9 +99,9 @@ def match_compositions(
 # --------------------------------------------------------------------------- refinement
 
 
-def merge_behaviors(rows: list, index: int, label: int | None) -> None:
-    """MergeLowLevelBehaviors(index): row index+1 into row index (only its first branch runs)."""
-    r, m = rows[index], rows[index + 1]
+def merge_behaviors(r: Behavior, m: Behavior, label: int | None) -> Behavior:
+    """MergeLowLevelBehaviors: the next LLB `m` into `r`, which it returns (only the original's
+    first branch ever runs); label = `label` unless None."""
     if label is not None:
         r[B_LBL] = label
     r[B_AVG2] = m[B_AVG2]
@@ -123,7 +123,7 @@ def merge_behaviors(rows: list, index: int, label: int | None) -> None:
     if r[B_T2E] < m[B_T1S]:
         r[B_T1S] = r[B_T2S]
     r[B_TAVG] = (r[B_T1S] + r[B_T2E]) / 2
-    rows[index + 1] = None
+    return r
 
 
 def behavior_word(b: Behavior, axis: str, arm: str, seq: int = 0) -> Word:

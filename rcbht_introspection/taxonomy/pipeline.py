@@ -335,19 +335,11 @@ class AdjustmentChains(Op):
                     self._merge(i - (self.ctr - 1), self.ctr)
 
     def _merge(self, fi: int, ctr: int) -> None:
+        """Merge the chain of rows fi..fi+ctr into row fi and drop the others."""
         cfg = self.ctx.config
         li = fi + ctr
         run = [self._row(x) for x in range(fi, li + 1)]
-        k = ctr + 1
-        r = run[0]
-        r[mc.LBL] = mc.A
-        r[mc.AVGV] = pr.running_sum(x[mc.AVGV] for x in run) / k
-        r[mc.RMS] = pr.running_sum(x[mc.RMS] for x in run) / k
-        r[mc.AMP] = max(x[mc.AMP] for x in run)
-        r[mc.T1E] = (run[-1][mc.T2E] + r[mc.T1S]) / 2 - cfg.adjustment_time_offset
-        r[mc.T2S] = r[mc.T1E] + cfg.adjustment_time_step
-        r[mc.T2E] = run[-1][mc.T2E]
-        r[mc.TAVG] = (r[mc.T1S] + r[mc.T2E]) / 2
+        mc.merge_adjustment_chain(run, cfg.adjustment_time_offset, cfg.adjustment_time_step)
         for x in range(fi + 1, li + 1):
             self.rows[x - self.base] = None
         self.repeat = False
@@ -404,14 +396,7 @@ class RepeatedCompositions(Op):
         r, last, k = self.first, self.last, self.count
         assert last is not None
         if k >= 2:
-            r[mc.AVGV] = self.sum_avg / 2 if k == 2 else self.sum_avg / k
-            r[mc.RMS] = self.max_rms
-            if k == 2:
-                r[mc.GL2] = last[mc.GL2]
-            r[mc.T2E] = last[mc.T2E]
-            r[mc.T2S] = last[mc.T1S]
-            r[mc.T1E] = r[mc.T2E]
-            r[mc.TAVG] = (r[mc.T1S] + last[mc.T2E]) / 2
+            mc.merge_compositions(r, last, k, self.sum_avg, self.max_rms, None, None)
         self.first = self.last = None
         return [r]
 
@@ -436,10 +421,6 @@ class RepeatedCompositions(Op):
 
     def retained(self) -> int:
         return 1 if self.first is not None else 0
-
-
-def _relabel(glabel: int) -> int | None:
-    return mc._relabel_from(glabel)
 
 
 class PrimitiveDurations(Op):
@@ -472,7 +453,7 @@ class PrimitiveDurations(Op):
         glabel = r[mc.GL1] if ratio > cfg.duration_ratio else (
             r[mc.GL2] if ratio < 1 / cfg.duration_ratio else None)  # fmt: skip
         if glabel is not None:
-            new = _relabel(glabel)
+            new = mc.relabel_from(glabel)
             if new is not None:
                 r[mc.LBL] = new
         if r[mc.AMP] > self.cycle.max_amp:
@@ -549,11 +530,11 @@ class CompositionDurations(Op):
             return self._advance(row, [r])
         ratio = c1 / c2
         if ratio > cfg.duration_ratio:
-            mc._merge([r, row], 0, lbl if lbl in (mc.A, mc.I, mc.D, mc.K) else None, False, 1)
+            mc.merge_next(r, row, lbl if lbl in (mc.A, mc.I, mc.D, mc.K) else None, False)
             # the emptied row's turn never changes anything; the next pair starts after it
             return [r]
         if ratio < 1 / cfg.duration_ratio:
-            mc._merge([r, row], 1, None, False, 0)
+            mc.merge_previous(row, r, None, False)
             return self._advance(row, [])  # the merged row is compared with the next one
         return self._advance(row, [r])
 
@@ -618,8 +599,7 @@ def similar_pairs(pairs: frozenset, widths: tuple[float, float], label: int) -> 
             and mc.similar(r[mc.AMP], m[mc.AMP], wa)
             and mc.similar(r[mc.AVGV], m[mc.AVGV], wm)
         ):
-            rows = [r, m]
-            mc._merge(rows, 0, label, True, 1)
+            mc.merge_next(r, m, label, True)
             return r
         return None
 
@@ -701,9 +681,10 @@ class BehaviorDurations(BufferedOp):
                     p1, p2 = r[bh.B_T2E] - r[bh.B_T1S], m[bh.B_T1E] - m[bh.B_T1S]
                 d = pr.ieee_div(p1, p2)
                 if d > cfg.behavior_duration_ratio or d < 1 / cfg.behavior_duration_ratio:
-                    pair = [r, m] if d > cfg.behavior_duration_ratio else [m, r]
-                    bh.merge_behaviors(pair, 0, None)
-                    out.append(pair[0])
+                    if d > cfg.behavior_duration_ratio:
+                        out.append(bh.merge_behaviors(r, m, None))
+                    else:
+                        out.append(bh.merge_behaviors(m, r, None))
                     del self.rows[:2]
                     self.skip = 1  # idx += 2 then += 1: the row after the pair is not examined
                     continue
@@ -718,9 +699,7 @@ def behavior_pairs(test: Callable[[Row, Row], bool], label: int | None) -> Calla
 
     def decide(r: Row, m: Row) -> Row | None:
         if test(r, m):
-            pair = [r, m]
-            bh.merge_behaviors(pair, 0, label)
-            return r
+            return bh.merge_behaviors(r, m, label)
         return None
 
     return decide
@@ -737,17 +716,12 @@ class RepeatedBehaviors(Op):
         self.blocks: list[Row | None] = []  # blocks[k]: a merged block of 2**k rows
         self.label: int | None = None
 
-    def _merge(self, a: Row, b: Row) -> Row:
-        pair = [a, b]
-        bh.merge_behaviors(pair, 0, None)
-        return a
-
     def _flush(self) -> list[Row]:
         carry: Row | None = None
         for block in self.blocks:  # low to high = right to left
             if block is None:
                 continue
-            carry = block if carry is None else self._merge(block, carry)
+            carry = block if carry is None else bh.merge_behaviors(block, carry, None)
         self.blocks = []
         self.label = None
         return [carry] if carry is not None else []
@@ -759,7 +733,7 @@ class RepeatedBehaviors(Op):
         self.label = row[bh.B_LBL]
         carry, k = row, 0
         while k < len(self.blocks) and self.blocks[k] is not None:
-            carry = self._merge(self.blocks[k], carry)  # type: ignore[arg-type]
+            carry = bh.merge_behaviors(self.blocks[k], carry, None)  # type: ignore[arg-type]
             self.blocks[k] = None
             k += 1
         if k == len(self.blocks):
@@ -858,8 +832,8 @@ def composition_cycle(ctx: StreamContext) -> list[Op]:
     """One cleanUp.m call as seven operators sharing its startIndex and largest amplitude."""
     cfg = ctx.config
     cycle = CycleState()
-    adjust = similar_pairs(mc._ADJUST_PAIRS, cfg.adjustment_merge_similarity, mc.A)
-    constant = similar_pairs(mc._CONSTANT_PAIRS, cfg.constant_merge_similarity, mc.K)
+    adjust = similar_pairs(mc.ADJUST_PAIRS, cfg.adjustment_merge_similarity, mc.A)
+    constant = similar_pairs(mc.CONSTANT_PAIRS, cfg.constant_merge_similarity, mc.K)
     return [
         AdjustmentChains(ctx, cycle),
         RepeatedCompositions(),
