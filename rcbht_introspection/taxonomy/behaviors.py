@@ -4,7 +4,7 @@ An LLB record is a list in the original `llbehStruc` layout: [label, avgVal1, av
 rms1, rms2, AVG_RMS, amp1, amp2, AVG_AMP, mc1, mc2, t1Start, t1End, t2Start, t2End, tAvg], labels
 as integers (FX CT PS PL AL SH U N = 1..8; mc1/mc2 are MC integers a..z = 1..10, or after a merge
 the LLB integer [bug], which the files print through the MC table). Here: the LLB record of an MC
-(pair), the motCompsMatchEval rules and MergeLowLevelBehaviors; the passes are pipeline.py's.
+(pair), the motCompsMatchEval rules and MergeLowLevelBehaviors; the passes are behavior_ops.py's.
 """
 
 from __future__ import annotations

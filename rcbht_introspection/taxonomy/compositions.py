@@ -3,8 +3,9 @@
 An MC record is a list in the original `motComps` layout: [label, avgVal, rmsVal, amplitude,
 glabel1, glabel2, t1Start, t1End, t2Start, t2End, tAvg], labels as 1-based integers
 (a i d k pc nc c u n z = 1..10; glabels are primitive integers). Here: the rule table, the MC
-record of a primitive pair, similarity, MergeCompositions and the sub-task limits; the passes
-that apply them in the original order are the operators of pipeline.py.
+record of a primitive pair, similarity, the merges (MergeCompositions, the 'a'-chain merge), the
+relabelling and the label pairs of the filter steps, and the sub-task limits; the passes that
+apply them in the original order are the operators of composition_ops.py.
 """
 
 from __future__ import annotations
