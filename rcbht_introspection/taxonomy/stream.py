@@ -474,7 +474,7 @@ class ArmStream:
             if self._ts:
                 self._block(out, final=True)
             else:
-                self.segmenter._finish(None, 0)
+                self.segmenter.finish()
                 self._closed(out)
         for a in list(self._waiting):
             tr = self._trackers.get(a)
