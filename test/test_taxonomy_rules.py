@@ -12,9 +12,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from rcbht_introspection.taxonomy import behavior_ops as bops
 from rcbht_introspection.taxonomy import behaviors as bh
+from rcbht_introspection.taxonomy import composition_ops as cops
 from rcbht_introspection.taxonomy import compositions as mc
-from rcbht_introspection.taxonomy import pipeline as pl
+from rcbht_introspection.taxonomy import ops
+from rcbht_introspection.taxonomy import primitive_ops as pops
 from rcbht_introspection.taxonomy import primitives as pr
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
 from rcbht_introspection.taxonomy.words import BEHAVIOR_LABELS, COMPOSITION_LABELS, PRIMITIVE_LABELS
@@ -50,24 +53,24 @@ def beh(label: str, t1s: float, t2e: float, amp: float = 1.0, mag: float = 1.0,
 
 def cycle_op(kind: type, config: TaxonomyConfig = CFG, limit: float = 10.0, max_amp: float = 0.0):
     """One MC filter operator of a cleanUp call that starts at row 0 (with a given 'a' limit)."""
-    ctx = pl.StreamContext(config, boundaries=[0.0, -1.0, 0.0, limit + 0.002], ended=True)
-    cycle = pl.CycleState(start=0, start_known=True, max_amp=max_amp, max_amp_final=True)
+    ctx = ops.StreamContext(config, boundaries=[0.0, -1.0, 0.0, limit + 0.002], ended=True)
+    cycle = cops.CycleState(start=0, start_known=True, max_amp=max_amp, max_amp_final=True)
     return kind(ctx, cycle), cycle
 
 
 def run_cycle_op(kind: type, rows: list, **kw: object) -> list:
     op, _ = cycle_op(kind, **kw)  # type: ignore[arg-type]
-    return pl.run_ops([op], [list(r) for r in rows])
+    return ops.run_ops([op], [list(r) for r in rows])
 
 
 def pair_pass(pairs: frozenset, widths: tuple[float, float], label: int, rows: list) -> list:
-    cycle = pl.CycleState(start=0, start_known=True)
-    op = pl.PairPass(pl.similar_pairs(pairs, widths, label), cycle.before_start)
-    return pl.run_ops([op], [list(r) for r in rows])
+    cycle = cops.CycleState(start=0, start_known=True)
+    op = ops.PairPass(cops.similar_pairs(pairs, widths, label), cycle.before_start)
+    return ops.run_ops([op], [list(r) for r in rows])
 
 
 def durations(rows: list) -> list:
-    return pl.run_ops([pl.PairPass(lambda a, b: pr.duration_pair(a, b, CFG))], rows)
+    return ops.run_ops([ops.PairPass(lambda a, b: pr.duration_pair(a, b, CFG))], rows)
 
 
 # --------------------------------------------------------------------------- config
@@ -179,9 +182,9 @@ def test_merge_repeated_primitives_pair_means_and_run_divides_by_k_minus_1() -> 
     a = prim("cons", 0, 1, 2, 0, avg=1, grad=0.2)
     b = prim("cons", 1, 2, 3, 1, avg=2, grad=0.4)
     c = prim("cons", 2, 3, 5, 2, avg=3, grad=0.6)
-    (pair,) = pl.run_ops([pl.RepeatedPrimitives()], [a, b])
+    (pair,) = ops.run_ops([pops.RepeatedPrimitives()], [a, b])
     assert pair == [1.5, 3, 0, 0, 2, pytest.approx(0.3), P["cons"]]
-    (run,) = pl.run_ops([pl.RepeatedPrimitives()], [a, b, c])
+    (run,) = ops.run_ops([pops.RepeatedPrimitives()], [a, b, c])
     assert run[pr.AVG] == pytest.approx(6 / 2)  # [bug] sum / (k - 1)
     assert run[pr.GRAD] == pytest.approx(1.2 / 2)
     assert (run[pr.MAX], run[pr.MIN], run[pr.START], run[pr.FINISH]) == (5, 0, 0, 3)
@@ -295,7 +298,7 @@ def test_mc_ratio_gate_makes_a_single_mc(l1: str, l2: str, gate: str) -> None:
 
 def test_mc_scan_consumes_pairs_and_the_last_primitive_pairs_with_itself() -> None:
     prims = [prim("cons", 0, 0.1), prim("cons", 0.1, 0.2), prim("spos", 0.2, 0.3)]
-    out = pl.compose(prims, CFG)
+    out = cops.compose(prims, CFG)
     assert [COMPOSITION_LABELS[m[0] - 1] for m in out] == ["k", "i"]
     assert out[1][mc.T1S : mc.TAVG] == [0.2, 0.3, 0.2, 0.3]
 
@@ -313,27 +316,27 @@ def test_similarity_uses_the_signed_max() -> None:
 def test_step1_repeated_adjustments_merge_before_mating() -> None:
     rows = [comp("a", 0, 1, avg=1.0, amp=1), comp("a", 1, 2, avg=1.2, amp=3),
             comp("k", 2, 3), comp("k", 3, 4)]  # fmt: skip
-    out = run_cycle_op(pl.AdjustmentChains, rows)
+    out = run_cycle_op(cops.AdjustmentChains, rows)
     assert len(out) == 3
     a = out[0]
     assert a[mc.LBL] == M["a"] and a[mc.AVGV] == pytest.approx(1.1) and a[mc.AMP] == 3
     assert a[mc.T1E] == pytest.approx(1.0 - 0.002) and a[mc.T2S] == pytest.approx(0.999)
     assert a[mc.T2E] == 2
     # the mating guard: the next MC must end before the limit
-    assert len(run_cycle_op(pl.AdjustmentChains, rows, limit=1.5)) == 4
+    assert len(run_cycle_op(cops.AdjustmentChains, rows, limit=1.5)) == 4
     head = replace(CFG, adjustment_mating_guard=False)
-    assert len(run_cycle_op(pl.AdjustmentChains, rows, limit=1.5, config=head)) == 3
+    assert len(run_cycle_op(cops.AdjustmentChains, rows, limit=1.5, config=head)) == 3
 
 
 def test_step1_needs_two_mcs_after_the_chain() -> None:
     rows = [comp("a", 0, 1), comp("a", 1, 2), comp("k", 2, 3)]
-    assert len(run_cycle_op(pl.AdjustmentChains, rows)) == 3
+    assert len(run_cycle_op(cops.AdjustmentChains, rows)) == 3
 
 
 def test_step2_repeated_labels_merge_runs_but_not_adjustments() -> None:
     rows = [comp("i", 0, 1, avg=1, rms=1, amp=5), comp("i", 1, 2, avg=2, rms=4, amp=1),
             comp("i", 2, 3, avg=3, rms=2, amp=1), comp("a", 3, 4), comp("a", 4, 5)]  # fmt: skip
-    out = pl.run_ops([pl.RepeatedCompositions()], [list(r) for r in rows])
+    out = ops.run_ops([cops.RepeatedCompositions()], [list(r) for r in rows])
     assert [r[mc.LBL] for r in out] == [M["i"], M["a"], M["a"]]
     i = out[0]
     assert i[mc.AVGV] == pytest.approx(2.0) and i[mc.RMS] == 4 and i[mc.AMP] == 5
@@ -343,42 +346,42 @@ def test_step2_repeated_labels_merge_runs_but_not_adjustments() -> None:
 def test_step3_primitive_duration_relabels_and_the_amplitude_gate_stops_the_pass() -> None:
     rows = [comp("a", 0, 0.7, g1="spos", g2="sneg", t1e=0.6, t2s=0.6, amp=1.0),
             comp("a", 0.7, 1.4, g1="sneg", g2="spos", t1e=0.8, t2s=0.8, amp=1.0)]  # fmt: skip
-    op, cycle = cycle_op(pl.PrimitiveDurations)
-    out = pl.run_ops([op], [list(r) for r in rows])
+    op, cycle = cycle_op(cops.PrimitiveDurations)
+    out = ops.run_ops([op], [list(r) for r in rows])
     assert [r[mc.LBL] for r in out] == [M["i"], M["a"]]  # the last MC is never examined
     assert cycle.max_amp == 1.0
     rows2 = [comp("k", 0, 1, amp=1.0), comp("a", 1, 2, amp=6.0, g1="spos", t1e=1.9, t2s=1.9),
              comp("k", 2, 3, amp=6.0)]  # fmt: skip
-    out = run_cycle_op(pl.PrimitiveDurations, rows2)
+    out = run_cycle_op(cops.PrimitiveDurations, rows2)
     assert out[1][mc.LBL] == M["a"]  # ratio 6 > 5 at the first pair: pass stopped (a1ca1d1)
     head = replace(CFG, duration_gate_breaks=False)
-    out = run_cycle_op(pl.PrimitiveDurations, rows2, config=head)
+    out = run_cycle_op(cops.PrimitiveDurations, rows2, config=head)
     assert out[1][mc.LBL] == M["i"]  # HEAD skips the pair instead
 
 
 def test_step4_composition_duration_absorbs_the_short_neighbour() -> None:
     rows = [comp("k", 0, 1.2), comp("i", 1.2, 1.4)]
-    (out,) = run_cycle_op(pl.CompositionDurations, rows)
+    (out,) = run_cycle_op(cops.CompositionDurations, rows)
     assert out[mc.LBL] == M["k"] and out[mc.T2E] == 1.4
     rows = [comp("i", 0, 0.1), comp("k", 0.1, 1.3)]
-    (out,) = run_cycle_op(pl.CompositionDurations, rows)
+    (out,) = run_cycle_op(cops.CompositionDurations, rows)
     assert out[mc.LBL] == M["k"] and out[mc.T1S] == 0 and out[mc.T2E] == 1.3
     assert out[mc.T1E] == 0.1  # T1E = the first's T2E when merging onto the second
 
 
 def test_step5_small_contacts_become_increase_or_decrease() -> None:
     rows = [comp("pc", 0, 1, amp=0.5), comp("nc", 1, 2, amp=0.5), comp("pc", 2, 3, amp=2.0)]
-    out = run_cycle_op(pl.ContactAmplitudes, rows, max_amp=10.0)
+    out = run_cycle_op(cops.ContactAmplitudes, rows, max_amp=10.0)
     assert [COMPOSITION_LABELS[r[0] - 1] for r in out] == ["i", "d", "pc"]
 
 
 @pytest.mark.parametrize(("l1", "l2"), [("a", "i"), ("a", "d"), ("i", "a"), ("d", "a")])
 def test_step6_adjustment_pairs(l1: str, l2: str) -> None:
     rows = [comp(l1, 0, 1, amp=1.0, avg=1.0), comp(l2, 1, 2, amp=1.3, avg=1.2)]
-    (out,) = pair_pass(mc._ADJUST_PAIRS, (0.5, 0.5), M["a"], rows)
+    (out,) = pair_pass(mc.ADJUST_PAIRS, (0.5, 0.5), M["a"], rows)
     assert out[mc.LBL] == M["a"] and out[mc.AMP] == 1.3
     rows = [comp(l1, 0, 1, amp=1.0), comp(l2, 1, 2, amp=2.5)]
-    assert len(pair_pass(mc._ADJUST_PAIRS, (0.5, 0.5), M["a"], rows)) == 2
+    assert len(pair_pass(mc.ADJUST_PAIRS, (0.5, 0.5), M["a"], rows)) == 2
 
 
 @pytest.mark.parametrize(
@@ -386,7 +389,7 @@ def test_step6_adjustment_pairs(l1: str, l2: str) -> None:
 )
 def test_step7_constant_pairs(l1: str, l2: str) -> None:
     rows = [comp(l1, 0, 1, amp=1.0, avg=1.0), comp(l2, 1, 2, amp=2.0, avg=1.9)]
-    (out,) = pair_pass(mc._CONSTANT_PAIRS, (1.5, 1.0), M["k"], rows)
+    (out,) = pair_pass(mc.CONSTANT_PAIRS, (1.5, 1.0), M["k"], rows)
     assert out[mc.LBL] == M["k"]
 
 
@@ -394,8 +397,8 @@ def test_filter_steps_from_start_index_skip_mcs_before_rotation() -> None:
     rows = [comp("a", 0, 1, amp=1.0), comp("i", 1, 2, amp=1.0), comp("k", 2, 3), comp("k", 3, 4)]
     s2, limit = mc.state_limits((0.0, 2.5, 3.0, 3.5), 4.0)
     assert (s2, limit) == (2.5, pytest.approx(3.498))
-    ctx = pl.whole_context(CFG, (0.0, 2.5, 3.0, 3.5), 4.0)
-    out = pl.run_ops(pl.composition_cycle(ctx), [list(r) for r in rows])
+    ctx = ops.whole_context(CFG, (0.0, 2.5, 3.0, 3.5), 4.0)
+    out = ops.run_ops(cops.composition_cycle(ctx), [list(r) for r in rows])
     assert [COMPOSITION_LABELS[r[0] - 1] for r in out][:2] == ["a", "i"]
 
 
@@ -404,7 +407,7 @@ def test_filter_steps_from_start_index_skip_mcs_before_rotation() -> None:
 
 def llbs(rows: list[list]) -> list[tuple[str, str, str]]:
     return [(BEHAVIOR_LABELS[b[0] - 1], COMPOSITION_LABELS[b[bh.B_MC1] - 1],
-             COMPOSITION_LABELS[b[bh.B_MC2] - 1]) for b in pl.compose_behaviors(rows, CFG)]  # fmt: skip
+             COMPOSITION_LABELS[b[bh.B_MC2] - 1]) for b in bops.compose_behaviors(rows, CFG)]  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -434,7 +437,7 @@ def test_llb_time_flag_turns_noise_into_singles_and_is_never_reset() -> None:
 def test_llb_adjustments_align_or_shift_and_skip_one_mc_when_short() -> None:
     rows = [comp("a", 0, 0.05, amp=2.0), comp("k", 0.05, 0.1), comp("a", 0.1, 0.15, amp=1.0),
             comp("a", 0.15, 0.2, amp=3.0), comp("a", 0.2, 0.25, amp=4.0), comp("k", 0.25, 0.3)]  # fmt: skip
-    out = pl.compose_behaviors(rows, CFG)
+    out = bops.compose_behaviors(rows, CFG)
     assert [BEHAVIOR_LABELS[b[0] - 1] for b in out] == ["AL", "SH", "FX"]  # last k: itself
     assert out[0][bh.B_T2S] == 0.1  # paired with the second MC; the k between is dropped
     long = [comp("a", 0, 0.2, amp=2.0), comp("k", 0.2, 0.25), comp("a", 0.25, 0.3, amp=1.0)]
@@ -444,12 +447,12 @@ def test_llb_adjustments_align_or_shift_and_skip_one_mc_when_short() -> None:
 def test_llb_pair_and_single_records() -> None:
     m1 = comp("k", 0.0, 0.2, amp=1.0, avg=2.0, rms=3.0)
     m2 = comp("k", 0.2, 0.3, amp=4.0, avg=1.0, rms=1.0)
-    (pair,) = pl.compose_behaviors([m1, m2], CFG)
+    (pair,) = bops.compose_behaviors([m1, m2], CFG)
     assert pair[1:10] == [2.0, 1.0, 1.5, 3.0, 1.0, 3.0, 1.0, 4.0, 4.0]
     assert pair[bh.B_T1S :] == [0.0, 0.2, 0.2, 0.3, pytest.approx((0.1 + 0.25) / 2)]
-    single = pl.compose_behaviors([comp("pc", 0, 0.1, t1e=0.0, t2s=0.1), comp("k", 0.1, 0.2)], CFG)[
-        0
-    ]
+    single = bops.compose_behaviors(
+        [comp("pc", 0, 0.1, t1e=0.0, t2s=0.1), comp("k", 0.1, 0.2)], CFG
+    )[0]
     assert single[bh.B_T1S :] == [0.0, 0.0, 0.1, 0.1, 0.05]
 
 
@@ -459,7 +462,7 @@ def test_llb_pair_and_single_records() -> None:
 def test_refinement_duration_context_merges_a_prefix_then_stops() -> None:
     rows = [beh("FX", 0, 6, mc2="k"), beh("PS", 6, 7, mc2="i"),
             beh("PL", 7, 8, mc2="d"), beh("FX", 8, 30, mc2="k"), beh("FX", 30, 31, mc2="k")]  # fmt: skip
-    out = pl.run_ops([pl.BehaviorDurations(CFG)], [list(r) for r in rows])
+    out = ops.run_ops([bops.BehaviorDurations(CFG)], [list(r) for r in rows])
     assert [BEHAVIOR_LABELS[r[0] - 1] for r in out] == ["FX", "PL", "FX", "FX"]
     assert out[0][bh.B_T2E] == 7
     assert COMPOSITION_LABELS[out[0][bh.B_MC1] - 1] == "a"  # FX = 1 printed through the MC table
@@ -467,14 +470,14 @@ def test_refinement_duration_context_merges_a_prefix_then_stops() -> None:
 
 def test_refinement_duration_context_skips_singles_and_stops_on_large_amplitude() -> None:
     rows = [beh("FX", 0, 6, mc2="z"), beh("PS", 6, 7), beh("PL", 7, 8)]
-    assert len(pl.run_ops([pl.BehaviorDurations(CFG)], [list(r) for r in rows])) == 3
+    assert len(ops.run_ops([bops.BehaviorDurations(CFG)], [list(r) for r in rows])) == 3
     rows = [beh("FX", 0, 6, amp=1.0), beh("PS", 6, 7, amp=6.0), beh("PL", 7, 8)]
-    assert len(pl.run_ops([pl.BehaviorDurations(CFG)], [list(r) for r in rows])) == 3
+    assert len(ops.run_ops([bops.BehaviorDurations(CFG)], [list(r) for r in rows])) == 3
 
 
 def test_refinement_merge_onto_the_longer_second_keeps_its_label() -> None:
     rows = [beh("PS", 0, 1), beh("FX", 1, 7), beh("PL", 7, 8)]
-    out = pl.run_ops([pl.BehaviorDurations(CFG)], [list(r) for r in rows])
+    out = ops.run_ops([bops.BehaviorDurations(CFG)], [list(r) for r in rows])
     assert BEHAVIOR_LABELS[out[0][0] - 1] == "FX"
     assert (out[0][bh.B_T1S], out[0][bh.B_T2E]) == (0, 7)
 
@@ -499,7 +502,7 @@ def test_refinement_amplitude_context_merges(pair: tuple[str, str], expected: st
         beh(pair[0], 0, 1, amp=1.0, mag=1.0, mc2="z"),
         beh(pair[1], 1, 2, amp=0.9, mag=1.0, mc2="z"),
     ]
-    (out,) = pl.run_ops(pl.refinement_cycle(CFG), [list(r) for r in rows])
+    (out,) = ops.run_ops(bops.refinement_cycle(CFG), [list(r) for r in rows])
     assert BEHAVIOR_LABELS[out[0] - 1] == expected
     assert (out[bh.B_T1S], out[bh.B_T2E]) == (0, 2)
 
@@ -509,7 +512,7 @@ def test_refinement_amplitude_context_merges(pair: tuple[str, str], expected: st
 )
 def test_refinement_leaves_other_pairs(first: str, second: str) -> None:
     rows = [beh(first, 0, 1, amp=1.0, mc2="z"), beh(second, 1, 2, amp=1.5, mc2="z")]
-    assert len(pl.run_ops(pl.refinement_cycle(CFG), [list(r) for r in rows])) == 2
+    assert len(ops.run_ops(bops.refinement_cycle(CFG), [list(r) for r in rows])) == 2
 
 
 def test_ieee_division() -> None:

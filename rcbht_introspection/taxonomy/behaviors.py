@@ -4,7 +4,7 @@ An LLB record is a list in the original `llbehStruc` layout: [label, avgVal1, av
 rms1, rms2, AVG_RMS, amp1, amp2, AVG_AMP, mc1, mc2, t1Start, t1End, t2Start, t2End, tAvg], labels
 as integers (FX CT PS PL AL SH U N = 1..8; mc1/mc2 are MC integers a..z = 1..10, or after a merge
 the LLB integer [bug], which the files print through the MC table). Here: the LLB record of an MC
-(pair), the motCompsMatchEval rules and MergeLowLevelBehaviors; the passes are pipeline.py's.
+(pair), the motCompsMatchEval rules and MergeLowLevelBehaviors; the passes are behavior_ops.py's.
 """
 
 from __future__ import annotations
@@ -99,9 +99,9 @@ def match_compositions(
 # --------------------------------------------------------------------------- refinement
 
 
-def merge_behaviors(rows: list, index: int, label: int | None) -> None:
-    """MergeLowLevelBehaviors(index): row index+1 into row index (only its first branch runs)."""
-    r, m = rows[index], rows[index + 1]
+def merge_behaviors(r: Behavior, m: Behavior, label: int | None) -> Behavior:
+    """MergeLowLevelBehaviors: the next LLB `m` into `r`, which it returns (only the original's
+    first branch ever runs); label = `label` unless None."""
     if label is not None:
         r[B_LBL] = label
     r[B_AVG2] = m[B_AVG2]
@@ -123,7 +123,7 @@ def merge_behaviors(rows: list, index: int, label: int | None) -> None:
     if r[B_T2E] < m[B_T1S]:
         r[B_T1S] = r[B_T2S]
     r[B_TAVG] = (r[B_T1S] + r[B_T2E]) / 2
-    rows[index + 1] = None
+    return r
 
 
 def behavior_word(b: Behavior, axis: str, arm: str, seq: int = 0) -> Word:

@@ -3,8 +3,9 @@
 An MC record is a list in the original `motComps` layout: [label, avgVal, rmsVal, amplitude,
 glabel1, glabel2, t1Start, t1End, t2Start, t2End, tAvg], labels as 1-based integers
 (a i d k pc nc c u n z = 1..10; glabels are primitive integers). Here: the rule table, the MC
-record of a primitive pair, similarity, MergeCompositions and the sub-task limits; the passes
-that apply them in the original order are the operators of pipeline.py.
+record of a primitive pair, similarity, the merges (MergeCompositions, the 'a'-chain merge), the
+relabelling and the label pairs of the filter steps, and the sub-task limits; the passes that
+apply them in the original order are the operators of composition_ops.py.
 """
 
 from __future__ import annotations
@@ -161,46 +162,80 @@ def state_limits(state_times: Sequence[float], end_time: float) -> tuple[float |
     return s2, limit
 
 
-def _merge(rows: list, index: int, label: int | None, amplitude: bool, what: int) -> None:
-    """MergeCompositions(index, ..., whatComposition): what=1 merges index+1 into index, 0 merges
-    index-1 into index, >= 2 merges the run index..index+what into index."""
-    r = rows[index]
-    if what < 2:
-        m = rows[index + 1] if what == 1 else rows[index - 1]
-        if label is not None:
-            r[LBL] = label
-        r[AVGV] = (r[AVGV] + m[AVGV]) / 2
-        r[RMS] = max(r[RMS], m[RMS])
-        if amplitude:
-            r[AMP] = max(r[AMP], m[AMP])
-        if what == 1:
-            r[GL2] = m[GL2]
-            r[T2E] = m[T2E]
-            r[T2S] = m[T1S]
-            r[T1E] = r[T2E]
-        else:
-            r[GL1] = m[GL1]
-            r[T2S] = r[T1S]
-            r[T1E] = m[T2E]
-            r[T1S] = m[T1S]
-        r[TAVG] = (r[T1S] + r[T2E]) / 2
-        rows[index + 1 if what == 1 else index - 1] = None
-        return
-    run = rows[index : index + what + 1]
-    r[AVGV] = running_sum(x[AVGV] for x in run) / len(run)
-    r[RMS] = max(x[RMS] for x in run)
-    if amplitude:
-        r[AMP] = max(x[AMP] for x in run)
-    last = run[-1]
+def merge_span(
+    r: Composition,
+    last: Composition,
+    count: int,
+    avg_sum: float,
+    rms: float,
+    amplitude: float | None,
+    label: int | None,
+) -> None:
+    """Make `r` span the `count` MCs up to `last`: mean avgVal, the given rms/amplitude/label
+    (None: kept) and `last`'s t2 half with t1End = t2End. Every MC merge is this plus its quirks."""
+    if label is not None:
+        r[LBL] = label
+    r[AVGV] = avg_sum / count
+    r[RMS] = rms
+    if amplitude is not None:
+        r[AMP] = amplitude
     r[T2E] = last[T2E]
     r[T2S] = last[T1S]
     r[T1E] = r[T2E]
-    r[TAVG] = (r[T1S] + last[T2E]) / 2
-    for j in range(index + 1, index + what + 1):
-        rows[j] = None
+    r[TAVG] = (r[T1S] + r[T2E]) / 2
 
 
-def _relabel_from(glabel: int) -> int | None:
+def merge_compositions(
+    r: Composition,
+    last: Composition,
+    count: int,
+    avg_sum: float,
+    rms_max: float,
+    amp_max: float | None,
+    label: int | None,
+) -> None:
+    """MergeCompositions(whatComposition = count - 1 >= 1) from the run's avgVal sum and maxima, so
+    a run merges as it streams by; the pair form (count 2) also takes `last`'s glabel2."""
+    merge_span(r, last, count, avg_sum, rms_max, amp_max, label)
+    if count == 2:
+        r[GL2] = last[GL2]
+
+
+def merge_next(r: Composition, m: Composition, label: int | None, amplitude: bool) -> None:
+    """MergeCompositions(whatComposition = 1): the next MC `m` into `r` (amplitude max if asked)."""
+    amp = max(r[AMP], m[AMP]) if amplitude else None
+    merge_compositions(r, m, 2, r[AVGV] + m[AVGV], max(r[RMS], m[RMS]), amp, label)
+
+
+def merge_previous(r: Composition, m: Composition, label: int | None, amplitude: bool) -> None:
+    """MergeCompositions(whatComposition = 0): the previous MC `m` into `r` (r's t2 half stays)."""
+    if label is not None:
+        r[LBL] = label
+    r[AVGV] = (r[AVGV] + m[AVGV]) / 2
+    r[RMS] = max(r[RMS], m[RMS])
+    if amplitude:
+        r[AMP] = max(r[AMP], m[AMP])
+    r[GL1] = m[GL1]
+    r[T2S] = r[T1S]
+    r[T1E] = m[T2E]
+    r[T1S] = m[T1S]
+    r[TAVG] = (r[T1S] + r[T2E]) / 2
+
+
+def merge_adjustment_chain(run: Sequence[Composition], offset: float, step: float) -> Composition:
+    """cleanUp step 1: a chain of similar 'a' into its first MC (returned); unlike MergeCompositions
+    rmsVal is the mean, glabels stay and the halves split at the middle (- offset, + step)."""
+    r, last, k = run[0], run[-1], len(run)
+    avg_sum = running_sum(x[AVGV] for x in run)
+    rms = running_sum(x[RMS] for x in run) / k
+    merge_span(r, last, k, avg_sum, rms, max(x[AMP] for x in run), A)
+    r[T1E] = (last[T2E] + r[T1S]) / 2 - offset
+    r[T2S] = r[T1E] + step
+    return r
+
+
+def relabel_from(glabel: int) -> int | None:
+    """Step 3's MC label for a primitive label: pos i, neg d, pimp pc, nimp nc, cons k, else None."""
     if glabel in POSITIVE:
         return I
     if glabel in NEGATIVE:
@@ -214,8 +249,10 @@ def _relabel_from(glabel: int) -> int | None:
     return None
 
 
-_ADJUST_PAIRS = frozenset({(A, I), (A, D), (I, A), (D, A)})
-_CONSTANT_PAIRS = frozenset({(I, K), (K, I), (D, K), (K, D), (D, I), (I, D)})
+ADJUST_PAIRS = frozenset({(A, I), (A, D), (I, A), (D, A)})
+"""Step 6: the label pairs that merge into 'a' when similar."""
+CONSTANT_PAIRS = frozenset({(I, K), (K, I), (D, K), (K, D), (D, I), (I, D)})
+"""Step 7: the label pairs that merge into 'k' when similar."""
 
 
 def composition_word(m: Composition, axis: str, arm: str, seq: int = 0) -> Word:

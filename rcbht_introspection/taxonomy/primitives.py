@@ -343,11 +343,12 @@ class Segmenter:
             self.last_t = blt[n_full - 1]
             self.last_y = [col[n_full - 1] for col in bly]
         if final:
-            self._finish(stats if count > n_full and m else None, count - 1)
+            self.finish(stats if count > n_full and m else None, count - 1)
         return closed
 
-    def _finish(self, stats: tuple[Any, ...] | None, j: int) -> None:
-        """The last pass: wStart..N fitted once; raw max/min; never split (spec 2.1 step 2)."""
+    def finish(self, stats: tuple[Any, ...] | None = None, j: int = 0) -> None:
+        """The last pass (with block j of `stats`, the partial last window, if any): wStart..N
+        fitted once; raw max/min; never split (spec 2.1 step 2). Public: the stream ends with it."""
         self.finished = True
         if self.samples < 2:
             return
@@ -393,7 +394,7 @@ def segment_arrays(time: np.ndarray, wrench: np.ndarray, config: TaxonomyConfig)
         )
         seg.feed_blocks(stats, 1, final=True)
     else:
-        seg._finish(None, 0)
+        seg.finish()
     return seg
 
 

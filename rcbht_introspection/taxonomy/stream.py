@@ -13,7 +13,7 @@ Whole-trial inputs and how the stream gets them (docs/streaming.md):
   domain can no longer fall below the threshold, or until finish() (causal: running domain);
 * rotation start (startIndex) and mating start (the 'a'-chain limit): `mark_boundary` events,
   marked when they happen (not later than the samples after them);
-* step 3's largest amplitude: known once that pass stops (pipeline.ContactAmplitudes).
+* step 3's largest amplitude: known once that pass stops (composition_ops.ContactAmplitudes).
 Bad input never raises out of push(): each case has a counted policy (`counters`).
 """
 
@@ -30,7 +30,8 @@ import numpy as np
 from rcbht_introspection.taxonomy.behaviors import behavior_word
 from rcbht_introspection.taxonomy.compositions import composition_word
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config
-from rcbht_introspection.taxonomy.pipeline import AxisPipeline, StreamContext
+from rcbht_introspection.taxonomy.ops import StreamContext
+from rcbht_introspection.taxonomy.pipeline import AxisPipeline
 from rcbht_introspection.taxonomy.primitives import (
     Segmenter,
     axis_thresholds,
@@ -465,7 +466,7 @@ class ArmStream:
             if self._ts:
                 self._block(out, final=True)
             else:
-                self.segmenter._finish(None, 0)
+                self.segmenter.finish()
                 self._closed(out)
         for a in list(self._waiting):
             tr = self._trackers.get(a)
