@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from rcbht_introspection.live.belief import MODES, BeliefMode
+
 HIRO = Path(
     os.environ.get(
         "RCBHT_HIRO_DATA", Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hiro"
@@ -25,7 +27,7 @@ REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 TEST_TRIALS = ("20121127-HIROSA-S-45", "20121127-HIROSA-S-46")
 
 
-def timed_updates(streamed: Any, model: object, mode: str) -> tuple[list[float], list[str]]:
+def timed_updates(streamed: Any, model: object, mode: BeliefMode) -> tuple[list[float], list[str]]:
     """(seconds per update, belief sub-task per update) of replay_beliefs' loop on `streamed`."""
     from rcbht_introspection.live.belief import BeliefTracker
 
@@ -74,7 +76,7 @@ def run(out_dir: Path) -> dict[str, Any]:
         "trials": list(TEST_TRIALS),
         "model": "svm/compact with live head (rcbht train default), REAL 1-40",
     }
-    for mode in ("boundary", "window"):
+    for mode in MODES:
         times: list[float] = []
         for s in streamed:
             times += timed_updates(s, model, mode)[0]

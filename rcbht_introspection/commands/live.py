@@ -12,7 +12,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS
 from rcbht_introspection.learn.data import WORD_SOURCES
-from rcbht_introspection.live.belief import MODES
+from rcbht_introspection.live.belief import MODES, BeliefMode
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -76,7 +76,7 @@ def run_live_eval(args: argparse.Namespace) -> int:
         print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{len(live)} live")
     held = [read_any_trial(p) for p in held_paths]
     streamed = [stream_trial(t, factory) for t in held]
-    modes = MODES if args.mode == "both" else (args.mode,)
+    modes: tuple[BeliefMode, ...] = MODES if args.mode == "both" else (args.mode,)
     result: dict[str, Any] = {
         "train": [p.name for p in train_paths],
         "held_out": [p.name for p in held_paths],

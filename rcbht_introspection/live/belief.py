@@ -25,7 +25,7 @@ if TYPE_CHECKING:  # the encodings pull in scikit-learn: imported when a model i
 UNKNOWN = "unknown"
 BeliefMode = Literal["boundary", "window"]
 """boundary: the words since the last sub-task event; window: the last `window_s` seconds."""
-MODES: tuple[str, ...] = get_args(BeliefMode)
+MODES: tuple[BeliefMode, ...] = get_args(BeliefMode)
 
 
 @dataclass(frozen=True)

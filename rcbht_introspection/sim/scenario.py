@@ -19,7 +19,7 @@ class Scenario:
     arms: tuple[str, ...]
 
 
-SCENARIOS: dict[ScenarioName, Scenario] = {
+SCENARIOS: dict[str, Scenario] = {  # keyed by ScenarioName; looked up by any user string
     "one-arm": Scenario("one-arm", two_arm=False, arms=("R",)),
     "two-arm": Scenario("two-arm", two_arm=True, arms=("L", "R")),
 }

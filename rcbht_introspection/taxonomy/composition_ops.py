@@ -85,6 +85,12 @@ class AdjustmentChains(Op):
         """The buffered row at input position `pos` (None once merged into an earlier row)."""
         return self.rows[pos - self.base]
 
+    def _live(self, pos: int) -> Row:
+        """The buffered row at `pos`, which the original's loop reads as unmerged."""
+        row = self.rows[pos - self.base]
+        assert row is not None, f"row {pos} was merged away"
+        return row
+
     def _available(self) -> int:
         """The input position after the last buffered row."""
         return self.base + len(self.rows)
@@ -115,9 +121,10 @@ class AdjustmentChains(Op):
             return i < n - 1
         if i + 1 >= n:
             return False
-        r, m = self._row(i), self._row(i + 1)
+        r = self._row(i)
         if r is None:
             return True
+        m = self._live(i + 1)
         cfg = self.ctx.config
         if cfg.adjustment_mating_guard:
             limit = self.ctx.limit()
@@ -137,9 +144,10 @@ class AdjustmentChains(Op):
         """The step at position i (the original's loop body): count, extend or merge a chain."""
         cfg = self.ctx.config
         n = self._available() if self.ended else math.inf
-        r, m = self._row(i), self._row(i + 1)
+        r = self._row(i)
         if r is None:
             return
+        m = self._live(i + 1)
         if cfg.adjustment_mating_guard:
             limit = self.ctx.limit()
             if limit is None:
@@ -153,7 +161,7 @@ class AdjustmentChains(Op):
                 self.ctr += 1
             j = i + 1
             if self.repeat and self.ctr > 0 and j + 1 < n - 1:
-                nxt, nxt2 = self._row(j + 1), self._row(j + 2)
+                nxt, nxt2 = self._live(j + 1), self._live(j + 2)
                 if nxt[mc.LBL] != mc.A or not mc.similar(nxt[mc.AVGV], nxt2[mc.AVGV], w):
                     self._merge(i - (self.ctr - 1), self.ctr)
 
@@ -161,7 +169,7 @@ class AdjustmentChains(Op):
         """Merge the chain of rows fi..fi+ctr into row fi and drop the others."""
         cfg = self.ctx.config
         li = fi + ctr
-        run = [self._row(x) for x in range(fi, li + 1)]
+        run = [self._live(x) for x in range(fi, li + 1)]
         mc.merge_adjustment_chain(run, cfg.adjustment_time_offset, cfg.adjustment_time_step)
         for x in range(fi + 1, li + 1):
             self.rows[x - self.base] = None

@@ -43,9 +43,10 @@ class AxisPipeline:
     def push(self, prim: Row) -> tuple[list[Row], list[Row]]:
         """A final labelled primitive in; the MCs and LLBs that became final out."""
         if not self.ctx.config.final_segment:
-            prim, self.held_last = self.held_last, prim
-            if prim is None:
+            held, self.held_last = self.held_last, prim
+            if held is None:
                 return [], []
+            return self._flow(self.compositions.push(held))
         return self._flow(self.compositions.push(prim))
 
     def push_rows(self, prims: list[Row]) -> tuple[list[Row], list[Row]]:
