@@ -20,16 +20,16 @@ import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
+from rosbags.interfaces import Connection
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import AXES, SUBTASKS, Trial
-
-if TYPE_CHECKING:  # rosbags is imported where it is used: `rcbht --help` stays fast
-    from rosbags.interfaces import Connection
-    from rosbags.typesys.store import Typestore
 
 WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
 STRING_TYPE = "std_msgs/msg/String"
@@ -58,8 +58,6 @@ def arm_of_topic(topic: str, frame_id: str) -> str:
 
 def _typestore() -> Typestore:
     """The Jazzy typestore plus rcbht_interfaces (when its .msg files can be found)."""
-    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
-
     store = get_typestore(Stores.ROS2_JAZZY)
     msg_dir = interface_msg_dir()
     if msg_dir is not None:
@@ -100,9 +98,7 @@ def stamp_ns(sec: int, nanosec: int) -> int:
     return int(sec) * _NS + int(nanosec)
 
 
-def _storage_plugin(suffix: str):
-    from rosbags.rosbag2 import StoragePlugin
-
+def _storage_plugin(suffix: str) -> StoragePlugin:
     return StoragePlugin.SQLITE3 if suffix == ".db3" else StoragePlugin.MCAP
 
 
@@ -110,8 +106,6 @@ class BagWriter:
     """A rosbag2 writer that ends as one storage file (x.mcap / x.db3) or a bag directory."""
 
     def __init__(self, path: Path | str) -> None:
-        from rosbags.rosbag2 import Writer
-
         self.path = Path(path)
         if self.path.exists():
             raise InputError("exists already, not overwriting", self.path)
@@ -238,8 +232,6 @@ class BagMessage:
 
 def bag_messages(path: Path | str) -> Iterator[BagMessage]:
     """All messages of a bag in log-time order (ties keep the written order)."""
-    from rosbags.rosbag2 import Reader
-
     path = Path(path)
     if not is_bag(path):
         raise InputError("not a rosbag2 bag (.mcap, .db3 or a bag directory)", path)

@@ -27,6 +27,7 @@ from typing import Literal
 
 import numpy as np
 
+from rcbht_introspection.config_files import config_path, load_profile
 from rcbht_introspection.taxonomy.behaviors import behavior_word
 from rcbht_introspection.taxonomy.compositions import composition_word
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config
@@ -35,6 +36,7 @@ from rcbht_introspection.taxonomy.pipeline import AxisPipeline
 from rcbht_introspection.taxonomy.primitives import (
     Segmenter,
     axis_thresholds,
+    block_stats,
     block_stats_one,
     classify_gradient,
     primitive_word,
@@ -71,8 +73,6 @@ class StreamConfig:
 
 def load_stream_config(profile: str = "reference", path: Path | str | None = None) -> StreamConfig:
     """One profile of config/stream.yaml (or of `path`)."""
-    from rcbht_introspection.config_files import config_path, load_profile
-
     file = Path(path) if path is not None else config_path(STREAM_CONFIG_FILE)
     return load_profile(StreamConfig, file, profile, kind="stream")
 
@@ -403,8 +403,6 @@ class ArmStream:
 
     def _push_clean(self, t: np.ndarray, wrench: np.ndarray) -> list[Word]:
         """Validated samples with an empty block: all whole blocks go to the segmenter at once."""
-        from rcbht_introspection.taxonomy.primitives import block_stats
-
         out: list[Word] = []
         w, n, sc = self.window, len(t), self.stream_config
         period = self._period
