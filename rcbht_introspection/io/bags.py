@@ -20,16 +20,20 @@ import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from rosbags.interfaces import Connection
-from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import AXES, SUBTASKS, Trial
+
+# rosbags.rosbag2 (readers, writers, storage plugins: ~150 ms) is imported where a bag is opened,
+# so that `rcbht --help`, which reaches this module through learn/data.py, does not pay for it
+if TYPE_CHECKING:
+    from rosbags.rosbag2 import StoragePlugin
 
 WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
 STRING_TYPE = "std_msgs/msg/String"
@@ -99,6 +103,8 @@ def stamp_ns(sec: int, nanosec: int) -> int:
 
 
 def _storage_plugin(suffix: str) -> StoragePlugin:
+    from rosbags.rosbag2 import StoragePlugin
+
     return StoragePlugin.SQLITE3 if suffix == ".db3" else StoragePlugin.MCAP
 
 
@@ -106,6 +112,8 @@ class BagWriter:
     """A rosbag2 writer that ends as one storage file (x.mcap / x.db3) or a bag directory."""
 
     def __init__(self, path: Path | str) -> None:
+        from rosbags.rosbag2 import Writer
+
         self.path = Path(path)
         if self.path.exists():
             raise InputError("exists already, not overwriting", self.path)
@@ -232,6 +240,8 @@ class BagMessage:
 
 def bag_messages(path: Path | str) -> Iterator[BagMessage]:
     """All messages of a bag in log-time order (ties keep the written order)."""
+    from rosbags.rosbag2 import Reader
+
     path = Path(path)
     if not is_bag(path):
         raise InputError("not a rosbag2 bag (.mcap, .db3 or a bag directory)", path)
