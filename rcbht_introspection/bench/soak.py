@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
 from rcbht_introspection.io.trial import Trial
 
 ARMS: tuple[str, ...] = ("L", "R")
@@ -83,10 +84,8 @@ def trial_source() -> Source:
     """REAL HIRO trials when present, else the simulator's two-arm trials; both at 5x."""
     from rcbht_introspection.bench import ros
 
-    hiro = ros._hiro()
+    hiro = shared_hiro()
     if hiro is not None:
-        from rcbht_introspection.io.hiro import find_trials, read_trial
-
         folders = find_trials([hiro])
         order = [folders[(40 + i) % len(folders)] for i in range(len(folders))]  # held out first
         read = functools.lru_cache(maxsize=len(order))(lambda k: read_trial(order[k]))

@@ -6,6 +6,7 @@ Malformed input raises InputError naming file, line and field (the CLI prints it
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -146,3 +147,13 @@ def find_trials(paths: list[Path] | list[str]) -> list[Path]:
         else:
             raise InputError("no such trial or dataset folder", p)
     return found
+
+
+def shared_hiro() -> Path | None:
+    """../shared/data/hiro/REAL_HIRO_ONE_SA_SUCCESS beside the repository, or under $RCBHT_HIRO_DATA.
+
+    The REAL HIRO trials that `rcbht demo --data hiro` and the ROS benchmarks use when present.
+    """
+    default = Path(__file__).resolve().parents[3] / "shared" / "data" / "hiro"
+    real = Path(os.environ.get("RCBHT_HIRO_DATA", default)) / "REAL_HIRO_ONE_SA_SUCCESS"
+    return real if real.is_dir() else None
