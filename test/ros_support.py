@@ -34,8 +34,8 @@ def ros_env(tmp_path: Path) -> dict[str, str]:
     The domain is leased until the test ends (conftest releases it), so no two tests, nor a
     test and a replay or benchmark running beside it, share one.
     """
-    from rcbht_introspection.nodes.replay_eval import lease_domain
-    from rcbht_introspection.nodes.replay_eval import ros_env as env
+    from rcbht_introspection.replay.supervision import lease_domain
+    from rcbht_introspection.replay.supervision import ros_env as env
 
     values = env(lease_domain(), tmp_path / "ros_log")
     full = {**os.environ, **values}
@@ -50,7 +50,7 @@ def node_command(module: str, params: dict[str, object]) -> list[str]:
     """Command line of a node process with `-p name:=value` parameters."""
     import yaml
 
-    from rcbht_introspection.nodes.replay_eval import node_command as command
+    from rcbht_introspection.replay.supervision import node_command as command
 
     args = []
     for name, value in params.items():

@@ -184,7 +184,7 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
     from std_msgs.msg import String
 
     from rcbht_introspection.nodes.common import RosSession, qos_profile
-    from rcbht_introspection.nodes.replay_eval import segmenter_matches
+    from rcbht_introspection.replay.observer import segmenter_matches
 
     model = toy_model(tmp_path / "model.rcbht", ("approach", "rotation"))
     seg_log = tmp_path / "segmenter.log"

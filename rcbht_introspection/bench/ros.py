@@ -80,7 +80,7 @@ def _model(out_dir: Path) -> Path | None:
 def run(out_dir: Path) -> dict[str, Any]:
     """Both scenarios; figures per scenario plus the load average around them."""
     from rcbht_introspection.io.bags import write_trial_bag
-    from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval
+    from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
 
     seconds = float(os.environ.get("RCBHT_BENCH_ROS_SECONDS", "60"))
     rate = TARGET_RATE_HZ / SOURCE_RATE_HZ

@@ -288,7 +288,7 @@ class SoakObserver:
         from rcbht_interfaces.msg import Words as WordsMsg
 
         from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, word_topics
-        from rcbht_introspection.nodes.replay_eval import segmenter_matches
+        from rcbht_introspection.replay.observer import segmenter_matches
 
         seg, cls_cfg = SegmenterConfig(), ClassifierConfig()
         self.lock = threading.Lock()
@@ -460,7 +460,7 @@ def run(out_dir: Path) -> dict[str, Any]:
     from rcbht_introspection.bench import ros
     from rcbht_introspection.bench.__main__ import machine
     from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
-    from rcbht_introspection.nodes.replay_eval import (
+    from rcbht_introspection.replay.supervision import (
         NodeProcess,
         environment,
         lease_domain,

@@ -124,7 +124,7 @@ def toy_model(
 
 
 def _node_command(kind: str, work: Path) -> list[str]:
-    from rcbht_introspection.nodes.replay_eval import node_command
+    from rcbht_introspection.replay.supervision import node_command
 
     if kind == "classifier_node":
         return node_command(kind, "-p", f"model_file:={work / 'model.rcbht'}")
@@ -210,7 +210,7 @@ def stop_loop(
 ) -> tuple[list[Stop], dict[str, int]]:
     """Stops of segmenter_node, classifier_node (fed by a running segmenter) and bag record."""
     from rcbht_introspection.nodes.common import RosSession
-    from rcbht_introspection.nodes.replay_eval import environment, lease_domain, ros_env
+    from rcbht_introspection.replay.supervision import environment, lease_domain, ros_env
 
     rng = random.Random(seed)
     values = ros_env(lease_domain(), work / "ros_log")
@@ -271,7 +271,7 @@ def match_gaps(n: int, work: Path, seed: int = 0) -> list[float]:
     from std_msgs.msg import String
 
     from rcbht_introspection.nodes.common import RosSession
-    from rcbht_introspection.nodes.replay_eval import lease_domain, ros_env
+    from rcbht_introspection.replay.supervision import lease_domain, ros_env
 
     env = {**os.environ, **ros_env(lease_domain(), work / "ros_log")}
     env.pop("ROS_LOCALHOST_ONLY", None)

@@ -66,8 +66,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.live import live_training
     from rcbht_introspection.learn.models import save_model
-    from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval, summary
     from rcbht_introspection.plots.timeline import plot_timelines
+    from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
+    from rcbht_introspection.replay.scoring import summary
 
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
