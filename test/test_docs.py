@@ -53,3 +53,16 @@ def test_parameter_tables_match_the_config_dataclasses(cls: type, heading: str) 
 def test_the_autostart_row_is_the_nodes_own_description() -> None:
     source = (DOCS.parents[1] / "rcbht_introspection" / "nodes" / "common.py").read_text()
     assert f'description="{AUTOSTART[2]}"' in source
+
+
+def test_every_relative_link_of_readme_and_docs_resolves() -> None:
+    """A moved or renamed page or module breaks the link here, not for a reader."""
+    root = DOCS.parents[1]
+    broken = []
+    for page in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
+        for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", page.read_text()):
+            if "://" in target:
+                continue
+            if not (page.parent / target).exists():
+                broken.append(f"{page.relative_to(root)}: {target}")
+    assert not broken, broken

@@ -11,7 +11,7 @@ import pytest
 from conftest import SIM_FAILURE, SIM_SUCCESS, SOURCES, dataset_root, trial_folders
 
 from rcbht_introspection.cli import main
-from rcbht_introspection.commands.taxonomy import first_difference
+from rcbht_introspection.io.conformance import first_difference
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.rcbht_format import level_path, read_words
 from rcbht_introspection.io.trial import Trial

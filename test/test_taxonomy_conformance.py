@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from rcbht_introspection.cli import main
-from rcbht_introspection.commands.taxonomy import compare_trial, first_difference
+from rcbht_introspection.io.conformance import compare_trial, first_difference
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.rcbht_format import level_path, read_records, read_words
 from rcbht_introspection.taxonomy.batch import label_trial

@@ -8,16 +8,17 @@ import time
 from pathlib import Path
 
 from rcbht_introspection.sim import load_sim_config, simulate_trial, write_dataset
+from rcbht_introspection.sim.config import SimConfig
 
 DEMO_TRIALS = 12
 """The demo's data set: 12 one-arm trials at 200 Hz (what `make demo` generates)."""
 
 
-def _per_trial(config: object, scenario: str, rate_hz: float, seeds: range) -> dict[str, float]:
+def _per_trial(config: SimConfig, scenario: str, rate_hz: float, seeds: range) -> dict[str, float]:
     times, sim_seconds = [], []
     for seed in seeds:
         start = time.perf_counter()
-        trial = simulate_trial(config, seed, scenario, rate_hz=rate_hz)  # type: ignore[arg-type]
+        trial = simulate_trial(config, seed, scenario, rate_hz=rate_hz)
         times.append(time.perf_counter() - start)
         sim_seconds.append(trial.end_time)
     return {

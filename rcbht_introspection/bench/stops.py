@@ -246,7 +246,11 @@ def _first_message() -> None:
     rclpy.init()
     node = Node("match_probe_reader")
     first: list[int] = []
-    node.create_subscription(String, "/match_probe", lambda m: first.append(int(m.data)), 1000)
+
+    def on_probe(msg: String) -> None:
+        first.append(int(msg.data))
+
+    node.create_subscription(String, "/match_probe", on_probe, 1000)
     subscribed = time.time_ns()
     while not first:
         rclpy.spin_once(node, timeout_sec=0.1)

@@ -11,11 +11,23 @@ from __future__ import annotations
 import os
 import statistics
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from rcbht_introspection.bench.taxonomy import hiro_root
+from rcbht_introspection.io.hiro import find_trials, read_trial
+from rcbht_introspection.taxonomy.batch import label_trial
+from rcbht_introspection.taxonomy.config import default_config
+from rcbht_introspection.taxonomy.primitives import axis_domain
+from rcbht_introspection.taxonomy.stream import (
+    ArmStream,
+    StreamConfig,
+    label_trial_streamed,
+    load_stream_config,
+)
+from rcbht_introspection.taxonomy.words import AXES, Level
 
 THROUGHPUT_TRIALS = 10
 
@@ -24,13 +36,12 @@ def _ms(seconds: float) -> float:
     return round(seconds * 1000, 3)
 
 
-def _percentile(values: list[float], q: float) -> float:
+def _percentile(values: Sequence[float], q: float) -> float:
     return float(np.percentile(np.asarray(values), q)) if values else float("nan")
 
 
 def push_throughput(trials: list, stream_config, config) -> dict:
     """Samples per second of ArmStream.push() one sample at a time (including finish())."""
-    from rcbht_introspection.taxonomy.stream import ArmStream
 
     samples, cpu, wall = 0, 0.0, 0.0
     for trial in trials:
@@ -64,8 +75,6 @@ def push_throughput(trials: list, stream_config, config) -> dict:
 
 def finality_delays(trials: list, stream_config, config) -> dict:
     """Per level: how many samples (and seconds) after a word's last sample it is emitted."""
-    from rcbht_introspection.taxonomy.stream import ArmStream
-    from rcbht_introspection.taxonomy.words import Level
 
     delays: dict[Level, list[int]] = {level: [] for level in Level}
     seconds: dict[Level, list[float]] = {level: [] for level in Level}
@@ -109,9 +118,6 @@ def finality_delays(trials: list, stream_config, config) -> dict:
 
 def agreement(trials: list, causal_config, config) -> dict:
     """Causal vs reference per level: identical word sequences and share of time with equal labels."""
-    from rcbht_introspection.taxonomy.batch import label_trial
-    from rcbht_introspection.taxonomy.stream import label_trial_streamed
-    from rcbht_introspection.taxonomy.words import AXES, Level
 
     same = {level: 0 for level in Level}
     total = {level: 0 for level in Level}
@@ -153,16 +159,6 @@ def _labels_at(words: list, t: np.ndarray) -> np.ndarray:
 
 
 def run(out_dir: Path) -> dict:
-    from rcbht_introspection.io.hiro import find_trials, read_trial
-    from rcbht_introspection.taxonomy.batch import label_trial
-    from rcbht_introspection.taxonomy.config import default_config
-    from rcbht_introspection.taxonomy.primitives import axis_domain
-    from rcbht_introspection.taxonomy.stream import (
-        StreamConfig,
-        label_trial_streamed,
-        load_stream_config,
-    )
-    from rcbht_introspection.taxonomy.words import AXES
 
     root = hiro_root()
     real_dir, sim_dir = root / "REAL_HIRO_ONE_SA_SUCCESS", root / "SIM_HIRO_ONE_SA_SUCCESS"

@@ -8,12 +8,18 @@ because the machine is shared.
 from __future__ import annotations
 
 import os
+import resource
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from rcbht_introspection.io.hiro import find_trials, read_trial
+from rcbht_introspection.io.rcbht_format import write_trial_words
+from rcbht_introspection.taxonomy.batch import label_trial
+from rcbht_introspection.taxonomy.config import default_config
 
 REPEATS = 3
 
@@ -28,7 +34,6 @@ def hiro_root() -> Path:
 
 def _children_cpu() -> float:
     """CPU seconds (user + system) used by finished child processes."""
-    import resource
 
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
     return usage.ru_utime + usage.ru_stime
@@ -39,10 +44,6 @@ def _ms(seconds: float) -> float:
 
 
 def run(out_dir: Path) -> dict:
-    from rcbht_introspection.commands.taxonomy import write_rcbht
-    from rcbht_introspection.io.hiro import find_trials, read_trial
-    from rcbht_introspection.taxonomy.batch import label_trial
-    from rcbht_introspection.taxonomy.config import default_config
 
     dataset = hiro_root() / "REAL_HIRO_ONE_SA_SUCCESS"
     if not dataset.is_dir():
@@ -72,7 +73,7 @@ def run(out_dir: Path) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         for folder in folders:
             w, c = time.perf_counter(), time.process_time()
-            write_rcbht(label_trial(read_trial(folder), config), Path(tmp) / folder.name)
+            write_trial_words(label_trial(read_trial(folder), config), Path(tmp) / folder.name)
             pipe.append(time.perf_counter() - w)
             pipe_cpu.append(time.process_time() - c)
 

@@ -12,6 +12,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS
 from rcbht_introspection.learn.data import WORD_SOURCES
+from rcbht_introspection.live.belief import MODES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -30,7 +31,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--classifier", choices=CLASSIFIERS, default="svm")
     p.add_argument("--encoding", choices=ENCODINGS, default="compact")
     p.add_argument("--words", choices=WORD_SOURCES, default="auto")
-    p.add_argument("--mode", choices=("boundary", "window", "both"), default="both")
+    p.add_argument("--mode", choices=(*MODES, "both"), default="both")
     p.add_argument("--window-s", type=float, default=2.0)
     p.add_argument(
         "--state-hold-s",
@@ -75,7 +76,7 @@ def run_live_eval(args: argparse.Namespace) -> int:
         print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{len(live)} live")
     held = [read_any_trial(p) for p in held_paths]
     streamed = [stream_trial(t, factory) for t in held]
-    modes = ("boundary", "window") if args.mode == "both" else (args.mode,)
+    modes = MODES if args.mode == "both" else (args.mode,)
     result: dict[str, Any] = {
         "train": [p.name for p in train_paths],
         "held_out": [p.name for p in held_paths],

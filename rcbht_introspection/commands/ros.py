@@ -6,8 +6,11 @@ import argparse
 import json
 import time
 from pathlib import Path
+from typing import get_args
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.live.belief import BeliefMode
+from rcbht_introspection.taxonomy.stream import StreamProfile
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -52,11 +55,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--model", type=Path, required=True, help="model file from `rcbht train`")
     p.add_argument("--rate", type=float, default=1.0, help="playback speed factor")
     p.add_argument("--json", type=Path, default=None, help="write the scores here")
-    p.add_argument("--mode", choices=("boundary", "window"), default="boundary")
+    p.add_argument("--mode", choices=get_args(BeliefMode), default="boundary")
     p.add_argument("--profile", default="reference", help="taxonomy profile of the segmenter")
     p.add_argument(
         "--stream-profile",
-        choices=("reference", "causal"),
+        choices=get_args(StreamProfile),
         default="reference",
         help="stream profile of the segmenter (causal: moment-axis words without waiting)",
     )

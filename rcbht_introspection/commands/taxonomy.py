@@ -7,18 +7,17 @@
 from __future__ import annotations
 
 import argparse
-import json
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from pathlib import Path
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.taxonomy.words import AXES, Level, TrialWords, Word
+from rcbht_introspection.io.conformance import CONFORMANCE_LEVELS, compare_trial
+from rcbht_introspection.io.rcbht_format import write_trial_words
+from rcbht_introspection.io.words_jsonl import write_jsonl
+from rcbht_introspection.taxonomy.words import Level
 
 ENGINES = ("batch", "stream")
 FORMATS = ("rcbht", "jsonl")
-TIME_KEYS = ("t1Start", "t1End", "t2Start", "t2End")
-CONFORMANCE_LEVELS = (Level.COMPOSITION, Level.BEHAVIOR)
-TOLERANCE = 1e-4
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -65,47 +64,6 @@ def labeller(engine: str, profile: str) -> Callable:
 # --------------------------------------------------------------------------- label
 
 
-def write_rcbht(words: TrialWords, folder: Path) -> None:
-    """The original layout: Segments/Composites/llBehaviors per axis (arm sub-folders if two arms)."""
-    from rcbht_introspection.io.rcbht_format import level_path, write_words
-
-    arms = words.arms
-    for arm in arms:
-        root = folder if len(arms) == 1 else folder / arm
-        for level in (Level.PRIMITIVE, Level.COMPOSITION, Level.BEHAVIOR):
-            for axis in AXES:
-                write_words(
-                    level_path(root, level, axis), level, words.axis_words(arm, level, axis)
-                )
-
-
-def word_record(trial: str, word: Word) -> dict[str, object]:
-    """One JSON-lines record."""
-    return {
-        "trial": trial,
-        "arm": word.arm,
-        "axis": word.axis,
-        "level": word.level.value,
-        "label": word.label,
-        "start": word.start,
-        "end": word.end,
-        "sublabels": list(word.sublabels),
-        "features": word.features,
-        "seq": word.seq,
-    }
-
-
-def write_jsonl(words: TrialWords, path: Path) -> None:
-    """All words, level by level and axis by axis, one JSON object per line."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w") as fh:
-        for arm in words.arms:
-            for level in (Level.PRIMITIVE, Level.COMPOSITION, Level.BEHAVIOR):
-                for axis in AXES:
-                    for word in words.axis_words(arm, level, axis):
-                        fh.write(json.dumps(word_record(words.name, word)) + "\n")
-
-
 def run_label(args: argparse.Namespace) -> int:
     from rcbht_introspection.io.hiro import find_trials, read_trial
 
@@ -116,7 +74,7 @@ def run_label(args: argparse.Namespace) -> int:
     for folder in trials:
         words = label(read_trial(folder))
         if args.format == "rcbht":
-            write_rcbht(words, args.out / folder.name)
+            write_trial_words(words, args.out / folder.name)
         else:
             write_jsonl(words, args.out / folder.name / "words.jsonl")
     print(f"labelled {len(trials)} trial(s) into {args.out}")
@@ -124,36 +82,6 @@ def run_label(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------- conformance
-
-
-def first_difference(ours: list[Word], golden: list[Word]) -> str | None:
-    """Where two record lists first differ in label or any of the four MC/LLB times."""
-    for i, (a, b) in enumerate(zip(ours, golden, strict=False)):
-        if a.label != b.label:
-            return f"record {i + 1}: label {a.label!r} != golden {b.label!r}"
-        for key in TIME_KEYS:
-            x, y = a.features.get(key, float("nan")), b.features.get(key, float("nan"))
-            if not abs(x - y) <= TOLERANCE:
-                return f"record {i + 1} ({a.label}): {key} {x:.5f} != golden {y:.5f}"
-    if len(ours) != len(golden):
-        return f"{len(ours)} records != golden {len(golden)}"
-    return None
-
-
-def compare_trial(folder: Path, words: TrialWords) -> Iterable[tuple[Level, str, str | None]]:
-    """(level, axis, first difference or None) for each golden Composites/llBehaviors file."""
-    from rcbht_introspection.io.rcbht_format import level_path, read_words
-
-    arm = words.arms[0] if words.arms else "R"
-    for level in CONFORMANCE_LEVELS:
-        for axis in AXES:
-            path = level_path(folder / "golden", level, axis)
-            try:
-                golden = read_words(path, level, axis, arm)
-            except InputError as exc:
-                yield level, axis, f"golden file unreadable: {exc}"
-                continue
-            yield level, axis, first_difference(words.axis_words(arm, level, axis), golden)
 
 
 def run_conformance(args: argparse.Namespace) -> int:

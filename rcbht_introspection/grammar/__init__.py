@@ -1,4 +1,7 @@
 """From words to sub-task samples: state split and encodings."""
 
-ENCODINGS: tuple[str, ...] = ("compact", "paper")
+from typing import Literal, get_args
+
+Encoding = Literal["compact", "paper"]
 """Encoding names; here (not in encoding.py) so the CLI lists them without importing scikit-learn."""
+ENCODINGS: tuple[str, ...] = get_args(Encoding)

@@ -20,11 +20,16 @@ import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import AXES, SUBTASKS, Trial
+
+if TYPE_CHECKING:  # rosbags is imported where it is used: `rcbht --help` stays fast
+    from rosbags.interfaces import Connection
+    from rosbags.typesys.store import Typestore
 
 WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
 STRING_TYPE = "std_msgs/msg/String"
@@ -51,7 +56,7 @@ def arm_of_topic(topic: str, frame_id: str) -> str:
     return frame_id if frame_id in ("L", "R") else "R"
 
 
-def _typestore():
+def _typestore() -> Typestore:
     """The Jazzy typestore plus rcbht_interfaces (when its .msg files can be found)."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
@@ -112,20 +117,19 @@ class BagWriter:
             raise InputError("exists already, not overwriting", self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.single_file = self.path.suffix in BAG_SUFFIXES
+        self._tmp: Path | None = None
+        self._dir = self.path
         if self.single_file:
-            self._tmp = Path(tempfile.mkdtemp(prefix=".bag-", dir=self.path.parent))
-            self._dir = self._tmp / self.path.stem
-        else:
-            self._tmp = None
-            self._dir = self.path
+            tmp = Path(tempfile.mkdtemp(prefix=".bag-", dir=self.path.parent))
+            self._tmp, self._dir = tmp, tmp / self.path.stem
         self.store = _typestore()
         self._writer = Writer(
             self._dir, version=9, storage_plugin=_storage_plugin(self.path.suffix or ".mcap")
         )
         self._writer.open()
-        self._connections: dict[str, object] = {}
+        self._connections: dict[str, Connection] = {}
 
-    def connection(self, topic: str, msgtype: str) -> object:
+    def connection(self, topic: str, msgtype: str) -> Connection:
         """The connection of `topic` (created on first use)."""
         conn = self._connections.get(topic)
         if conn is None:
@@ -133,13 +137,13 @@ class BagWriter:
             self._connections[topic] = conn
         return conn
 
-    def write_raw(self, topic: str, msgtype: str, t_ns: int, raw: bytes) -> None:
+    def write_raw(self, topic: str, msgtype: str, t_ns: int, raw: bytes | memoryview) -> None:
         """Write already-serialised CDR bytes."""
         self._writer.write(self.connection(topic, msgtype), int(t_ns), raw)
 
-    def write(self, topic: str, msg: object, t_ns: int) -> None:
-        """Serialise a rosbags message dataclass and write it."""
-        msgtype = msg.__msgtype__  # type: ignore[attr-defined]
+    def write(self, topic: str, msg: Any, t_ns: int) -> None:
+        """Serialise a rosbags message dataclass (each class names its `__msgtype__`), write it."""
+        msgtype: str = msg.__msgtype__
         self.write_raw(topic, msgtype, t_ns, self.store.serialize_cdr(msg, msgtype))
 
     def close(self) -> None:

@@ -5,8 +5,10 @@ Malformed input raises InputError naming file, line and field (the CLI prints it
 
 from __future__ import annotations
 
+import io
 import math
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +31,6 @@ def read_table(path: Path, columns: tuple[str, ...] = COLUMNS) -> np.ndarray:
     except OSError as exc:
         raise InputError(f"cannot read: {exc.strerror}", path=path) from None
     try:
-        import io
-        import warnings
-
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             fast = np.loadtxt(io.StringIO(text), dtype=np.float64, comments=None, ndmin=2)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.taxonomy.words import AXES, Level, TrialWords, Word
@@ -133,20 +134,21 @@ def read_trial_words(
     return result
 
 
-_TEMPLATES: dict[Level, tuple[str, tuple[tuple[str, object], ...]]] = {}
+_TEMPLATES: dict[Level, tuple[str, tuple[tuple[str, Any], ...]]] = {}
 _NAN = float("nan")
 
 
-def _template(level: Level) -> tuple[str, tuple[tuple[str, object], ...]]:
+def _template(level: Level) -> tuple[str, tuple[tuple[str, Any], ...]]:
     """The record layout of a level as one str.format template and what fills each field."""
     cached = _TEMPLATES.get(level)
     if cached is not None:
         return cached
     fmt = FORMATS[level]
     parts: list[str] = []
-    fills: list[tuple[str, object]] = []
+    fills: list[tuple[str, Any]] = []  # (kind, argument): a feature key or sub-label index
     for key in fmt.keys:
         pad = key if level is Level.PRIMITIVE and key == "Grad Label" else f"{key:<{fmt.key_width}}"
+        fill: tuple[str, Any]
         if key == "Iteration":
             spec, fill = "{}", ("iteration", None)
         elif key == fmt.label_key:
@@ -168,9 +170,9 @@ def format_record(level: Level, iteration: int, word: Word) -> str:
     values: list[object] = []
     for kind, arg in fills:
         if kind == "feature":
-            values.append(features.get(arg, _NAN))  # type: ignore[arg-type]
+            values.append(features.get(arg, _NAN))
         elif kind == "sub":
-            values.append(sub[arg] if arg < len(sub) else _NAN)  # type: ignore[operator]
+            values.append(sub[arg] if arg < len(sub) else _NAN)
         elif kind == "label":
             values.append(word.label)
         else:
@@ -184,3 +186,16 @@ def write_words(path: Path, level: Level, words: Iterable[Word]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     text = "\n".join(format_record(level, i, w) for i, w in enumerate(words, start=1))
     path.write_text(text + ("\n" if text else ""))
+
+
+def write_trial_words(words: TrialWords, folder: Path) -> None:
+    """A trial in the original layout: Segments/Composites/llBehaviors per axis (one sub-folder
+    per arm when there are two), diffable against golden/ files."""
+    arms = words.arms
+    for arm in arms:
+        root = folder if len(arms) == 1 else folder / arm
+        for level in (Level.PRIMITIVE, Level.COMPOSITION, Level.BEHAVIOR):
+            for axis in AXES:
+                write_words(
+                    level_path(root, level, axis), level, words.axis_words(arm, level, axis)
+                )

@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal, get_args
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample, split_words
@@ -15,7 +16,10 @@ from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, TrialWords
 
-WORD_SOURCES = ("auto", "golden", "engine")
+WordSource = Literal["auto", "golden", "engine"]
+"""Where sub-task words come from: golden label files if present (auto), only golden, or the
+batch engine."""
+WORD_SOURCES: tuple[str, ...] = get_args(WordSource)
 
 
 @dataclass
@@ -66,7 +70,7 @@ def _end_time(folder: Path) -> float:
     raise InputError("no R_Torques.dat or L_Torques.dat", folder)
 
 
-def load_trial_samples(path: Path, words: str = "auto") -> TrialSamples:
+def load_trial_samples(path: Path, words: WordSource = "auto") -> TrialSamples:
     """Samples of one trial folder or bag; `words` picks golden files or the batch engine."""
     if words not in WORD_SOURCES:
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
@@ -117,13 +121,13 @@ def find_trials_safe(path: Path) -> list[Path]:
         return []
 
 
-def load_trials(paths: Iterable[Path | str], words: str = "auto") -> list[TrialSamples]:
+def load_trials(paths: Iterable[Path | str], words: WordSource = "auto") -> list[TrialSamples]:
     """Per-trial samples of every trial under `paths`."""
     if words not in WORD_SOURCES:
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
     return [load_trial_samples(p, words) for p in find_inputs(paths)]
 
 
-def load_samples(paths: Iterable[Path | str], words: str = "auto") -> list[SubtaskSample]:
+def load_samples(paths: Iterable[Path | str], words: WordSource = "auto") -> list[SubtaskSample]:
     """All sub-task samples of the trials under `paths` (dataset dirs, trial dirs or bags)."""
     return [s for trial in load_trials(paths, words) for s in trial.samples]

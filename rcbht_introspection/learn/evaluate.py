@@ -14,15 +14,18 @@ import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from sklearn.ensemble import RandomForestClassifier
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar import Encoding
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
-from rcbht_introspection.learn.data import TrialSamples
+from rcbht_introspection.learn import ClassifierKind
+from rcbht_introspection.learn.data import TrialSamples, load_samples
 from rcbht_introspection.learn.models import train_model
 
 VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
@@ -37,8 +40,8 @@ NEAR_EMPTY_SECONDS = 0.05
 class Protocol:
     """Settings of one evaluation run."""
 
-    classifier: str = "svm"
-    encoding: str = "compact"
+    classifier: ClassifierKind = "svm"
+    encoding: Encoding = "compact"
     permutations: int = 20
     n_validation: int | None = None
     start_trials: int | None = None
@@ -271,3 +274,22 @@ def total_steps(trials: Sequence[TrialSamples], protocol: Protocol) -> int:
     n_val = protocol.n_validation or default_validation(len(complete), two_arm)
     start = protocol.start_trials or START_TRIALS[protocol.classifier]
     return max(0, len(complete) - n_val - start + 1) * protocol.permutations
+
+
+def trial_kfold_accuracy(dataset: Path, folds: int = 4) -> dict[str, object]:
+    """Trial-grouped k-fold SVM (compact encoding) accuracy on one dataset folder: a quick check
+    that the words of a (simulated) set carry the sub-task."""
+    samples = load_samples([dataset], words="engine")
+    trials = sorted({s.trial for s in samples})
+    if len(trials) < folds:
+        return {"available": False, "why": f"only {len(trials)} trials"}
+    correct = total = 0
+    for k in range(folds):
+        test = set(trials[k::folds])
+        train = [s for s in samples if s.trial not in test]
+        held = [s for s in samples if s.trial in test]
+        model = train_model(train, classifier="svm", encoding="compact", random_state=0)
+        predicted = model.predict_samples(held)
+        correct += sum(p == s.subtask for p, s in zip(predicted, held, strict=True))
+        total += len(held)
+    return {"available": True, "folds": folds, "samples": total, "accuracy": correct / total}

@@ -18,12 +18,13 @@ from typing import Any
 
 import numpy as np
 
-from rcbht_introspection.config import config_path, load_yaml, to_mapping
+from rcbht_introspection.config_files import config_path, load_config, to_mapping
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io import bags
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
+from rcbht_introspection.taxonomy.stream import StreamProfile
 
 LIVE_CONFIG_FILE = "live.yaml"
 
@@ -44,33 +45,35 @@ class LiveAugmentConfig:
     """> 0: also the classifier's window mode: words of [t - window_s, t] final by t, labelled
     with the sub-task at t (0: boundary-mode windows only)."""
     taxonomy_profile: str = "reference"
-    stream_profile: str = "reference"
+    stream_profile: StreamProfile = "reference"
     """Must match the segmenter node's stream_profile: it decides when words become final."""
+
+
+def _check(cfg: LiveAugmentConfig) -> None:
+    """Ranges beyond the field types (the loader adds file and line to the error)."""
+    if cfg.step_s <= 0:
+        raise InputError(f"must be > 0, got {cfg.step_s}", field="step_s")
+    if cfg.window_s < 0:
+        raise InputError(f"must be >= 0, got {cfg.window_s}", field="window_s")
+    if cfg.max_per_subtask < 1:
+        raise InputError(f"must be >= 1, got {cfg.max_per_subtask}", field="max_per_subtask")
+    for i, f in enumerate(cfg.fractions):
+        if not 0 < f <= 1:
+            raise InputError(f"must be in (0, 1], got {f}", field=f"fractions[{i}]")
 
 
 def load_live_config(path: Path | str | None = None) -> LiveAugmentConfig:
     """The live_augment section of config/live.yaml (or of `path`)."""
     file = Path(path) if path is not None else config_path(LIVE_CONFIG_FILE)
-    cfg = load_yaml(LiveAugmentConfig, file, section="live_augment")
-    if (
-        cfg.step_s <= 0
-        or cfg.window_s < 0
-        or cfg.max_per_subtask < 1
-        or any(not 0 < f <= 1 for f in cfg.fractions)
-    ):
-        raise InputError(
-            "step_s > 0, window_s >= 0, max_per_subtask >= 1, fractions in (0, 1] required",
-            path=file,
-        )
-    return cfg
+    return load_config(LiveAugmentConfig, file, section=("live_augment",), check=_check)
 
 
 def sample_times(start: float, end: float, config: LiveAugmentConfig) -> list[float]:
     """Times t in (start, end] at which a live sample of the sub-task [start, end] is taken."""
     span = end - start
-    times = set(np.round(start + config.step_s * np.arange(1, int(span / config.step_s) + 1), 9))
-    times |= {round(start + f * span, 9) for f in config.fractions}
-    times = sorted(t for t in times if start < t <= end)
+    grid = set(np.round(start + config.step_s * np.arange(1, int(span / config.step_s) + 1), 9))
+    grid |= {round(start + f * span, 9) for f in config.fractions}
+    times = sorted(t for t in grid if start < t <= end)
     if len(times) > config.max_per_subtask:
         pick = np.linspace(0, len(times) - 1, config.max_per_subtask).round().astype(int)
         times = [times[i] for i in sorted(set(pick))]

@@ -169,7 +169,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self, counts: np.ndarray, n_points: int, lower: np.ndarray, upper: np.ndarray
     ) -> bool:
         """A block pauses when its labels are all equal, it has < 2 points or zero volume."""
-        return np.count_nonzero(counts) <= 1 or n_points < 2 or not np.any(upper > lower)
+        return bool(np.count_nonzero(counts) <= 1 or n_points < 2 or not np.any(upper > lower))
 
     def _grow(self, points: np.ndarray, parent: int, tau_parent: float) -> int:
         """Sample a Mondrian block on `points` below `parent` (batch growth); return its node."""

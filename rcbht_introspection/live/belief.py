@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal, get_args
 
 import numpy as np
 
@@ -23,7 +23,9 @@ if TYPE_CHECKING:  # the encodings pull in scikit-learn: imported when a model i
     from rcbht_introspection.grammar.encoding import AxisMemo
 
 UNKNOWN = "unknown"
-MODES: tuple[str, ...] = ("boundary", "window")
+BeliefMode = Literal["boundary", "window"]
+"""boundary: the words since the last sub-task event; window: the last `window_s` seconds."""
+MODES: tuple[str, ...] = get_args(BeliefMode)
 
 
 @dataclass(frozen=True)
@@ -35,7 +37,7 @@ class Belief:
     probabilities: tuple[float, ...]
     start: float
     end: float
-    mode: str
+    mode: BeliefMode
     phase: str = ""
     final: bool = False
     n_words: int = 0
@@ -58,7 +60,7 @@ class BeliefTracker:
     def __init__(
         self,
         model: object | None,
-        mode: str = "boundary",
+        mode: BeliefMode = "boundary",
         window_s: float = 2.0,
         subtasks: Sequence[str] = SUBTASKS,
         end_phases: Sequence[str] = ("done",),

@@ -113,13 +113,13 @@ class ArmHealth:
         moved = self.watch.moved(losses)
         values = [("input rate (Hz)", f"{rate:.1f}"), ("samples accepted", str(accepted))]
         values += [(f"samples {k}", str(v)) for k, v in losses.items()]
-        for level in LEVELS:
+        for word_level in LEVELS:
             backlog = (
-                last_t - self.released[level]
-                if last_t is not None and level in self.released
+                last_t - self.released[word_level]
+                if last_t is not None and word_level in self.released
                 else float("nan")
             )
-            values.append((f"finality backlog {level.value} (s)", f"{backlog:.3f}"))
+            values.append((f"finality backlog {word_level.value} (s)", f"{backlog:.3f}"))
         if moved:
             level, message = WARN, f"arm {self.arm}: {_moved_text(moved)} in the last period"
         elif active and rate == 0:

@@ -19,8 +19,15 @@ import numpy as np
 
 from rcbht_introspection.io.trial import SUBTASKS, Trial
 from rcbht_introspection.live import offline
-from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker, StateFilter
+from rcbht_introspection.live.belief import (
+    UNKNOWN,
+    Belief,
+    BeliefMode,
+    BeliefTracker,
+    StateFilter,
+)
 from rcbht_introspection.live.segmenter import PhaseEvent, SegmenterSession, WordBatch
+from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import TrialWords, Word
 
 STAMP_ORIGIN_NS = 1_000_000_000
@@ -62,7 +69,7 @@ class StreamedTrial:
 
 
 def stream_trial(
-    trial: Trial, stream_factory: Callable[[str], object], end_phase: str = "done"
+    trial: Trial, stream_factory: Callable[[str], ArmStream], end_phase: str = "done"
 ) -> StreamedTrial:
     """Feed `trial` to a SegmenterSession as segmenter_node is fed by its trial bag."""
     arms = trial.arms
@@ -101,7 +108,7 @@ class LiveReplay:
     """The /task_state timeline and verdicts the classifier node produces for one trial."""
 
     name: str
-    mode: str
+    mode: BeliefMode
     changes: list[tuple[float, str]]
     finals: list[Belief]
     initial: str = UNKNOWN
@@ -117,7 +124,7 @@ class LiveReplay:
 def replay_beliefs(
     streamed: StreamedTrial,
     model: object | None,
-    mode: str = "boundary",
+    mode: BeliefMode = "boundary",
     window_s: float = 2.0,
     end_phase: str = "done",
     trial: Trial | None = None,
@@ -151,8 +158,8 @@ def replay_beliefs(
 def live_replay(
     trial: Trial,
     model: object | None,
-    stream_factory: Callable[[str], object],
-    mode: str = "boundary",
+    stream_factory: Callable[[str], ArmStream],
+    mode: BeliefMode = "boundary",
     window_s: float = 2.0,
 ) -> LiveReplay:
     """stream_trial + replay_beliefs for one trial."""

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.taxonomy.config import load_taxonomy_config
-from rcbht_introspection.taxonomy.stream import ArmStream, load_stream_config
+from rcbht_introspection.taxonomy.stream import ArmStream, StreamProfile, load_stream_config
 from rcbht_introspection.taxonomy.words import Word
 
 RECENT_SAMPLES = 2000
@@ -170,10 +170,11 @@ class SegmenterSession:
             counts.rejected[reason] += 1
             out.rejected = reason
             return out
-        first_of_stream = self.origin_ns is None
-        if first_of_stream:
-            self.origin_ns = stamp_ns
-        t = (stamp_ns - self.origin_ns) / 1e9  # stream_time, inlined on the per-sample path
+        origin_ns = self.origin_ns
+        first_of_stream = origin_ns is None
+        if origin_ns is None:
+            origin_ns = self.origin_ns = stamp_ns
+        t = (stamp_ns - origin_ns) / 1e9  # stream_time, inlined on the per-sample path
         st.last_ns, st.last_t = stamp_ns, t
         if source_ns is not None and st.last_source is not None and source_ns > st.last_source:
             gap = source_ns - st.last_source
@@ -188,9 +189,7 @@ class SegmenterSession:
         counts.accepted += 1
         words = st.stream.push(t, wrench)
         if words:
-            out.batches.append(
-                WordBatch(arm, list(words), stamp_ns, self.origin_ns, self.stream_id)
-            )
+            out.batches.append(WordBatch(arm, list(words), stamp_ns, origin_ns, self.stream_id))
         if first_of_stream:
             # events that came before any sample of the stream apply at its first sample
             self._apply_due(
@@ -315,7 +314,7 @@ def arm_stream_factory(
     profile: str = "reference",
     taxonomy_file: str = "",
     stream_file: str = "",
-    stream_profile: str = "reference",
+    stream_profile: StreamProfile = "reference",
 ) -> Callable[[str], ArmStream]:
     """`arm -> ArmStream`: taxonomy thresholds (profile or file) and stream profile (or file)."""
     config = load_taxonomy_config(profile, taxonomy_file or None)

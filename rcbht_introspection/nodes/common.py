@@ -26,12 +26,17 @@ from rcbht_introspection.live.health import ERROR, Health
 from rcbht_introspection.nodes.conversions import diagnostic_array
 from rcbht_introspection.nodes.draining import serve_ready, spin_draining
 from rcbht_introspection.nodes.lifetime import StopSignal
-from rcbht_introspection.nodes.params import config_from_parameters, defaults, descriptions
+from rcbht_introspection.nodes.params import (
+    Reliability,
+    config_from_parameters,
+    defaults,
+    descriptions,
+)
 
 T = TypeVar("T")
 
 
-def qos_profile(depth: int, reliability: str) -> QoSProfile:
+def qos_profile(depth: int, reliability: Reliability) -> QoSProfile:
     """Keep-last QoS of `depth`, reliable or best effort."""
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
@@ -46,7 +51,7 @@ PHASE_HISTORY = 16
 """Applied sub-task events a late-joining subscriber still receives (one task has five)."""
 
 
-def phase_qos(reliability: str) -> QoSProfile:
+def phase_qos(reliability: Reliability) -> QoSProfile:
     """QoS of the applied sub-task events (rcbht/phase): latched, like a static transform.
 
     A classifier that starts (or matches) after a sub-task event still gets the current task's

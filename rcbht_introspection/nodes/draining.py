@@ -104,8 +104,10 @@ def spin_draining(executor: Executor, node: Node, stop: StopSignal) -> None:
                 handles.close()
                 entities = now_entities
                 subs, timers = entities
-                for entity in (*subs, *timers):
-                    handles.enter_context(entity.handle)
+                for sub in subs:
+                    handles.enter_context(sub.handle)
+                for timer in timers:
+                    handles.enter_context(timer.handle)
                 wait_set = _rclpy.WaitSet(len(subs), 0, len(timers), 0, 0, 0, context.handle)
             assert wait_set is not None
             subs, timers = entities

@@ -12,15 +12,21 @@ import dataclasses
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, TypeVar
 
-import yaml
-
-from rcbht_introspection.config import config_path, from_mapping
+from rcbht_introspection.config_files import (
+    config_from_document,
+    config_path,
+    from_mapping,
+    read_yaml,
+)
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.live.belief import BeliefMode
+from rcbht_introspection.taxonomy.stream import StreamProfile
 
 T = TypeVar("T")
-RELIABILITIES: tuple[str, ...] = ("reliable", "best_effort")
+Reliability = Literal["reliable", "best_effort"]
+"""QoS reliability of every subscription and publisher of a node."""
 LEVEL_TOPICS: tuple[str, ...] = ("primitives", "compositions", "behaviors")
 
 
@@ -59,7 +65,7 @@ class SegmenterConfig:
     )
     taxonomy_profile: str = _f("reference", "taxonomy threshold profile of config/rcbht.yaml")
     taxonomy_config_file: str = _f("", "optional YAML file overriding the taxonomy thresholds")
-    stream_profile: str = _f(
+    stream_profile: StreamProfile = _f(
         "reference",
         "reference (words equal the batch engine's; whole-trial quantities are waited for) or "
         "causal (past samples only: moment-axis words without waiting)",
@@ -68,7 +74,7 @@ class SegmenterConfig:
     qos_depth: int = _f(
         10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
     )
-    qos_reliability: str = _f("reliable", "reliable or best_effort")
+    qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
 
 
 @dataclass(frozen=True)
@@ -76,7 +82,7 @@ class ClassifierConfig:
     """classifier_node: words (+ applied sub-task events) -> belief and /task_state."""
 
     model_file: str = _f("", "model file written by `rcbht train` (empty: publish 'unknown')")
-    mode: str = _f("boundary", "boundary (words since the last sub-task event) or window")
+    mode: BeliefMode = _f("boundary", "boundary (words since the last sub-task event) or window")
     window_s: float = _f(2.0, "window mode: seconds of words the belief covers")
     publish_rate_hz: float = _f(
         10.0, "/task_state is also republished at this rate (0: only on change)"
@@ -96,7 +102,7 @@ class ClassifierConfig:
     qos_depth: int = _f(
         10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
     )
-    qos_reliability: str = _f("reliable", "reliable or best_effort")
+    qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
 
 
 def descriptions(cls: type) -> dict[str, str]:
@@ -141,7 +147,8 @@ def _check(cond: bool, field_name: str, message: str, path: Path | None) -> None
 
 
 def validate(cfg: T, path: Path | None = None) -> T:
-    """Cross-field checks beyond types; InputError names the parameter."""
+    """Checks beyond the field types (from_mapping checks those, Literal choices included);
+    InputError names the parameter."""
     arms = cfg.arms  # type: ignore[attr-defined]
     _check(1 <= len(arms) <= 2, "arms", f"expected one or two arms, got {list(arms)}", path)
     _check(
@@ -151,12 +158,6 @@ def validate(cfg: T, path: Path | None = None) -> T:
         path,
     )
     _check(cfg.qos_depth >= 1, "qos_depth", f"must be >= 1, got {cfg.qos_depth}", path)  # type: ignore[attr-defined]
-    _check(
-        cfg.qos_reliability in RELIABILITIES,  # type: ignore[attr-defined]
-        "qos_reliability",
-        f"expected one of {RELIABILITIES}, got {cfg.qos_reliability!r}",  # type: ignore[attr-defined]
-        path,
-    )
     for name in TOPIC_FIELDS:
         values = getattr(cfg, name, ())
         for value in (values,) if isinstance(values, str) else values:
@@ -188,22 +189,10 @@ def validate(cfg: T, path: Path | None = None) -> T:
             f"must be in [event_hold_s, 600], got {cfg.event_max_hold_s}",
             path,
         )
-        _check(
-            cfg.stream_profile in ("reference", "causal"),
-            "stream_profile",
-            f"expected reference or causal, got {cfg.stream_profile!r}",
-            path,
-        )
         for name in ("taxonomy_config_file", "stream_config_file"):
             value = getattr(cfg, name)
             _check(not value or Path(value).is_file(), name, f"no such file: {value}", path)
     if isinstance(cfg, ClassifierConfig):
-        _check(
-            cfg.mode in ("boundary", "window"),
-            "mode",
-            f"expected boundary or window, got {cfg.mode!r}",
-            path,
-        )
         _check(cfg.window_s > 0, "window_s", f"must be > 0, got {cfg.window_s}", path)
         _check(
             cfg.publish_rate_hz >= 0,
@@ -231,19 +220,16 @@ CONFIG_FILES = {SegmenterConfig: "segmenter.yaml", ClassifierConfig: "classifier
 
 
 def load_node_config(cls: type[T], path: Path | str | None = None) -> T:
-    """Config of a node from a ROS parameter file (default: config/<node>.yaml)."""
+    """Config of a node from a ROS parameter file (default: config/<node>.yaml).
+
+    The parameters are `<node>: ros__parameters: {...}` (or under the wildcard `/**`), the layout
+    `--params-file` takes; errors name the file, line and parameter.
+    """
     path = Path(path) if path is not None else config_path(CONFIG_FILES[cls])
-    try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise InputError(
-            "not valid YAML", path=path, line=None if mark is None else mark.line + 1
-        ) from None
+    document = read_yaml(path)
     node = NODE_NAMES[cls]
-    section = data.get(node, data.get("/**")) if isinstance(data, dict) else None
-    if not isinstance(section, dict) or not isinstance(section.get("ros__parameters"), dict):
-        raise InputError(f"expected {node}: ros__parameters: {{...}}", path=path)
-    return config_from_parameters(cls, section["ros__parameters"], path)
+    if isinstance(document, dict) and node not in document and "/**" in document:
+        node = "/**"
+    return config_from_document(
+        cls, document, path=path, section=(node, "ros__parameters"), check=validate
+    )

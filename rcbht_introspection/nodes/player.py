@@ -9,6 +9,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 
 from rcbht_introspection.errors import InputError
@@ -32,9 +33,9 @@ class BagPlayer:
     def __init__(self, node: Node, qos: QoSProfile | int = 1000) -> None:
         self.node = node
         self.qos = qos
-        self.publishers: dict[str, object] = {}
+        self.publishers: dict[str, Publisher] = {}
 
-    def publisher(self, topic: str, msgtype: str) -> object:
+    def publisher(self, topic: str, msgtype: str) -> Publisher:
         pub = self.publishers.get(topic)
         if pub is None:
             pub = self.node.create_publisher(message_class(msgtype), topic, self.qos)
@@ -52,7 +53,7 @@ class BagPlayer:
         """True once each of `topics` has a matched subscriber."""
         pubs = [self.publishers[t] for t in topics if t in self.publishers]
         return wait_until(
-            lambda: all(p.get_subscription_count() > 0 for p in pubs),  # type: ignore[attr-defined]
+            lambda: all(p.get_subscription_count() > 0 for p in pubs),
             timeout,
             stop=stop,
         )
@@ -67,7 +68,7 @@ class BagPlayer:
         deadline = time.monotonic() + timeout
         step = Duration(nanoseconds=50_000_000)
         for pub in self.publishers.values():
-            while not pub.wait_for_all_acked(step):  # type: ignore[attr-defined]
+            while not pub.wait_for_all_acked(step):
                 if time.monotonic() > deadline or (stop is not None and stop.requested):
                     return False
         return True
@@ -98,7 +99,7 @@ class BagPlayer:
                     time.sleep(delay)
                 elif stop.wait(delay):  # a long pause in the bag still ends at once on a stop
                     break
-            self.publishers[m.topic].publish(m.raw)  # type: ignore[attr-defined]
+            self.publishers[m.topic].publish(m.raw)
             count += 1
             if on_publish is not None:
                 on_publish(m, time.time_ns())
@@ -130,7 +131,9 @@ class RawRecorder:
                 self.bag.write_raw(topic, msgtype, t_ns, raw)
                 self.counts[topic] += 1
 
-        self.node.create_subscription(cls, topic, on_message, self.qos, raw=True)
+        # rclpy passes (msg, MessageInfo) to a two-argument callback; its annotation names only
+        # the one-argument form
+        self.node.create_subscription(cls, topic, on_message, self.qos, raw=True)  # type: ignore[arg-type]
 
     def resolve(
         self, topics: Sequence[str], timeout: float, stop: StopSignal | None = None

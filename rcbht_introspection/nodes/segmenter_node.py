@@ -94,8 +94,14 @@ class SegmenterNode(ManagedNode):
             )
             for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True)
         ]  # fmt: skip
+        # on_phase takes (msg, MessageInfo), which rclpy passes to two-argument callbacks; its
+        # annotation names only the one-argument form
         self.phase_sub = self.create_subscription(
-            String, cfg.phase_topic, self.on_phase, self.qos, callback_group=drained
+            String,
+            cfg.phase_topic,
+            self.on_phase,  # type: ignore[arg-type]
+            self.qos,
+            callback_group=drained,
         )
         self.flush_timer = self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
         self.get_logger().info(
@@ -247,7 +253,7 @@ class SegmenterNode(ManagedNode):
         for arm, health in self.arm_health.items():
             st = self.session.state[arm]
             counts = self.session.counts[arm]
-            intake = vars(st.stream.counters)  # type: ignore[attr-defined]
+            intake = vars(st.stream.counters)
             out.append(
                 health.report(
                     period_s,

@@ -7,6 +7,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib
+
+matplotlib.use("Agg")  # files only, never a window: set before pyplot is imported
+
+import matplotlib.pyplot as plt
+
 from rcbht_introspection.taxonomy.words import AXES, Level, TrialWords
 
 BAND_LEVELS: tuple[Level, ...] = (Level.PRIMITIVE, Level.COMPOSITION, Level.BEHAVIOR)
@@ -15,18 +21,12 @@ BAND_NAMES = {Level.PRIMITIVE: "prim", Level.COMPOSITION: "MC", Level.BEHAVIOR: 
 
 def _colours(labels: tuple[str, ...]) -> dict[str, tuple[float, float, float, float]]:
     """One stable colour per label of a vocabulary."""
-    import matplotlib
-
     cmap = matplotlib.colormaps["tab10"]
     return {label: cmap(i % 10) for i, label in enumerate(labels)}
 
 
 def plot_trial(trial, words: TrialWords, out: Path, arm: str | None = None) -> Path:
     """Draw six axes (signal + three label bands each) with sub-task boundaries into `out`."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     arm = arm or (trial.arms[0] if trial.arms else "R")
     wrench = trial.wrench[arm]

@@ -5,14 +5,16 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import matplotlib
+
+matplotlib.use("Agg")  # files only, never a window: set before pyplot is imported
+
+import matplotlib.pyplot as plt
+
 
 def plot_learning_curve(results: list[dict[str, Any]], out: Path | str, title: str = "") -> Path:
     """Accuracy vs number of training trials (mean +- std over permutations) per result,
     with the duration-only reference as a dashed curve."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
     for result in results:

@@ -5,6 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import matplotlib
+
+matplotlib.use("Agg")  # files only, never a window: set before pyplot is imported
+
+import matplotlib.pyplot as plt
+from matplotlib.patches import Patch
+
 from rcbht_introspection.io.trial import SUBTASKS
 
 COLORS = {
@@ -30,11 +37,6 @@ def _spans(
 
 def plot_timelines(result: dict[str, Any], path: Path, durations: dict[str, float]) -> Path:
     """One row pair (truth, /task_state) per trial; writes `path` (PNG)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.patches import Patch
 
     bags = result["per_bag"]
     fig, ax = plt.subplots(figsize=(11, 0.9 + 0.75 * len(bags)))

@@ -5,10 +5,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Literal
 
-from rcbht_introspection.config import config_path, load_yaml
+from rcbht_introspection.config_files import config_path, load_config
 
 Range = tuple[float, float]
+FailureType = Literal["misalignment", "jamming", "missed_snap"]
+"""The failures the simulator can produce (each by its offset range in FailureConfig)."""
 
 
 @dataclass(frozen=True)
@@ -161,7 +164,7 @@ class VariationConfig:
 class FailureConfig:
     """Offsets that produce each failure type (sampled uniformly in the ranges)."""
 
-    types: tuple[str, ...] = ("misalignment", "jamming", "missed_snap")
+    types: tuple[FailureType, ...] = ("misalignment", "jamming", "missed_snap")
     misalignment_xy: Range = (0.004, 0.007)
     """Lateral offset (m) beyond the chamfer's capture range: the male lands on the housing top."""
     jamming_yaw: Range = (0.12, 0.2)
@@ -206,4 +209,4 @@ class SimConfig:
 
 def load_sim_config(path: Path | str | None = None) -> SimConfig:
     """Load config/sim.yaml (or `path`); unknown keys and wrong types give one-line errors."""
-    return load_yaml(SimConfig, path if path is not None else config_path("sim.yaml"))
+    return load_config(SimConfig, path if path is not None else config_path("sim.yaml"))

@@ -10,29 +10,32 @@ from __future__ import annotations
 import json
 import shutil
 from pathlib import Path
+from typing import Literal, get_args
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import write_trial
-from rcbht_introspection.sim.config import SimConfig, load_sim_config
-from rcbht_introspection.sim.scenario import get_scenario
+from rcbht_introspection.sim.config import FailureType, SimConfig, load_sim_config
+from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
 from rcbht_introspection.sim.simulate import simulate_trial
 
-FORMATS: tuple[str, ...] = ("hiro", "bag")
+DatasetFormat = Literal["hiro", "bag"]
+"""A data set is HIRO trial folders or one rosbag2 per trial."""
+FORMATS: tuple[str, ...] = get_args(DatasetFormat)
 
 
 def trial_plan(
-    n_trials: int, seed: int, failures: bool, types: tuple[str, ...]
-) -> list[tuple[int, str | None]]:
+    n_trials: int, seed: int, failures: bool, types: tuple[FailureType, ...]
+) -> list[tuple[int, FailureType | None]]:
     """(trial seed, failure type or None) for each trial of a set."""
-    plan: list[tuple[int, str | None]] = []
+    plan: list[tuple[int, FailureType | None]] = []
     for i in range(n_trials):
         failure = types[(i // 2) % len(types)] if failures and i % 2 == 1 else None
         plan.append((seed * 1000 + i, failure))
     return plan
 
 
-def trial_name(scenario: str, index: int, failure: str | None) -> str:
+def trial_name(scenario: ScenarioName, index: int, failure: FailureType | None) -> str:
     """Folder name in the HIRO style: SIM-<ONE|TWO>-S-<nn> or SIM-<..>-F-<nn>-<type>."""
     arms = "ONE" if scenario == "one-arm" else "TWO"
     if failure is None:
@@ -82,11 +85,11 @@ def write_dataset(
     out_dir: Path | str,
     n_trials: int,
     *,
-    scenario: str = "one-arm",
+    scenario: ScenarioName = "one-arm",
     seed: int = 0,
     failures: bool = False,
     rate_hz: float = 200.0,
-    fmt: str = "hiro",
+    fmt: DatasetFormat = "hiro",
     progress: bool = False,
     config: SimConfig | None = None,
 ) -> list[Path]:

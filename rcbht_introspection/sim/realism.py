@@ -11,11 +11,13 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import find_trials, read_trial
+from rcbht_introspection.io.rcbht_format import read_trial_words
 from rcbht_introspection.io.trial import SUBTASKS, Trial
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.words import AXES, BEHAVIOR_LABELS, Level, TrialWords
@@ -96,7 +98,6 @@ def trial_stats(trial: Trial, words: TrialWords, arm: str = "R") -> TrialStats:
 
 def golden_words(folder: Path, trial: Trial) -> TrialWords:
     """Words of a real trial from its golden/ folder (the original MATLAB output)."""
-    from rcbht_introspection.io.rcbht_format import read_trial_words
 
     golden = folder / "golden"
     if not golden.is_dir():
@@ -129,9 +130,9 @@ def total_variation(p: np.ndarray, q: np.ndarray) -> float:
     return float(0.5 * np.abs(p - q).sum())
 
 
-def compare(real: SetStats, sim: SetStats, subtasks: Iterable[str] = SUBTASKS) -> dict[str, object]:
+def compare(real: SetStats, sim: SetStats, subtasks: Iterable[str] = SUBTASKS) -> dict[str, Any]:
     """Side-by-side numbers: frequencies, distances, variability, per sub-task and axis."""
-    out: dict[str, object] = {
+    out: dict[str, Any] = {
         "real": real.name,
         "sim": sim.name,
         "n_real": len(real.trials),
@@ -167,6 +168,6 @@ def compare(real: SetStats, sim: SetStats, subtasks: Iterable[str] = SUBTASKS) -
                 "distinct_sim": round(sim.distinct_fraction(subtask, axis), 4),
             }
         entry["axes"] = axes
-        out["subtasks"][subtask] = entry  # type: ignore[index]
+        out["subtasks"][subtask] = entry
     out["mean_tv_distance"] = round(float(np.mean(tvs)), 4)
     return out

@@ -3,20 +3,23 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 from rcbht_introspection.errors import InputError
+
+ScenarioName = Literal["one-arm", "two-arm"]
 
 
 @dataclass(frozen=True)
 class Scenario:
     """A scenario: its name, whether a second (left) arm holds the housing, the arms recorded."""
 
-    name: str
+    name: ScenarioName
     two_arm: bool
     arms: tuple[str, ...]
 
 
-SCENARIOS: dict[str, Scenario] = {
+SCENARIOS: dict[ScenarioName, Scenario] = {
     "one-arm": Scenario("one-arm", two_arm=False, arms=("R",)),
     "two-arm": Scenario("two-arm", two_arm=True, arms=("L", "R")),
 }

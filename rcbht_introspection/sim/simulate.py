@@ -15,7 +15,7 @@ import numpy as np
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.sim.config import SimConfig
+from rcbht_introspection.sim.config import FailureType, SimConfig
 from rcbht_introspection.sim.controller import (
     ControllerState,
     ControlPlan,
@@ -23,7 +23,7 @@ from rcbht_introspection.sim.controller import (
     SnapController,
 )
 from rcbht_introspection.sim.model import ARM_JOINTS, TrialPhysics, build_model
-from rcbht_introspection.sim.scenario import get_scenario
+from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
 from rcbht_introspection.sim.sensor import SensorDraw, decimation, measure, resample
 
 SETTLE_TIME = 0.3
@@ -46,7 +46,7 @@ def _uniform(rng: np.random.Generator, r: tuple[float, float]) -> float:
 
 
 def draw_trial(
-    config: SimConfig, rng: np.random.Generator, failure: str | None
+    config: SimConfig, rng: np.random.Generator, failure: FailureType | None
 ) -> tuple[TrialPhysics, ControlPlan, SensorDraw]:
     """Sample one trial's physical variation, controller set-points and sensor errors."""
     g, var, fc, cc = config.geometry, config.variation, config.failures, config.controller
@@ -177,8 +177,8 @@ def _latched(config: SimConfig, model: mujoco.MjModel, data: mujoco.MjData) -> b
 def simulate_trial(
     config: SimConfig,
     seed: int,
-    scenario: str = "one-arm",
-    failure: str | None = None,
+    scenario: ScenarioName = "one-arm",
+    failure: FailureType | None = None,
     rate_hz: float = 200.0,
     name: str | None = None,
 ) -> Trial:

@@ -9,7 +9,6 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from rcbht_introspection.errors import InputError
 
@@ -84,31 +83,25 @@ class TaxonomyConfig:
         return self.gradient_thresholds
 
 
+def _check(config: TaxonomyConfig) -> None:
+    """Checks beyond the field types (the loader adds file, line and profile to the error)."""
+    if len(config.gradient_thresholds) != 8:
+        raise InputError(
+            f"expected 8 values, got {len(config.gradient_thresholds)}",
+            field="gradient_thresholds",
+        )
+
+
 def load_taxonomy_config(
     profile: str = "reference", path: Path | str | None = None
 ) -> TaxonomyConfig:
     """Load one profile of config/rcbht.yaml (`profiles: {name: {field: value}}`) over the defaults."""
-    import yaml
-
-    from rcbht_introspection.config import config_path, from_mapping
+    from rcbht_introspection.config_files import config_path, load_profile
 
     file = Path(path) if path is not None else config_path(CONFIG_FILE)
-    try:
-        data: Any = yaml.safe_load(file.read_text()) or {}
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=file) from None
-    except yaml.YAMLError:
-        raise InputError("not valid YAML", path=file) from None
-    profiles = data.get("profiles") if isinstance(data, dict) else None
-    if not isinstance(profiles, dict) or profile not in profiles:
-        known = ", ".join(sorted(profiles)) if isinstance(profiles, dict) else "none"
-        raise InputError(f"unknown taxonomy profile {profile!r} (known: {known})", path=file)
-    values = dict(profiles[profile] or {})
-    values["profile"] = profile
-    config = from_mapping(TaxonomyConfig, values, path=file, prefix=f"profiles.{profile}.")
-    if len(config.gradient_thresholds) != 8:
-        raise InputError("expected 8 values", path=file, field="gradient_thresholds")
-    return config
+    return load_profile(
+        TaxonomyConfig, file, profile, kind="taxonomy", fixed={"profile": profile}, check=_check
+    )
 
 
 def config_fields() -> tuple[str, ...]:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -249,7 +250,7 @@ class Segmenter:
             [1.0, self.first_t, v, 0.0, 0.0, 0.0, v, v, self.first_t] for v in self.first_y
         ]
 
-    def feed_blocks(self, stats: tuple[list, ...], count: int, final: bool = False) -> list[int]:
+    def feed_blocks(self, stats: tuple[Any, ...], count: int, final: bool = False) -> list[int]:
         """Advance every axis over `count` blocks (block_stats output); returns axes that closed.
 
         With `final`, the last of the blocks is the partial last pass (possibly empty: count may
@@ -345,7 +346,7 @@ class Segmenter:
             self._finish(stats if count > n_full and m else None, count - 1)
         return closed
 
-    def _finish(self, stats: tuple[list, ...] | None, j: int) -> None:
+    def _finish(self, stats: tuple[Any, ...] | None, j: int) -> None:
         """The last pass: wStart..N fitted once; raw max/min; never split (spec 2.1 step 2)."""
         self.finished = True
         if self.samples < 2:

@@ -42,19 +42,25 @@ from rcbht_introspection.taxonomy.words import AXES, TrialWords, Word
 
 STREAM_CONFIG_FILE = "stream.yaml"
 
+StreamProfile = Literal["reference", "causal"]
+"""reference: the words equal the batch engine's (whole-trial quantities are waited for);
+causal: past samples only."""
+NonfinitePolicy = Literal["hold_last", "drop"]
+GapPolicy = Literal["count", "interpolate"]
+
 
 @dataclass(frozen=True)
 class StreamConfig:
     """Streaming profile and the intake policies for bad samples (config/stream.yaml)."""
 
-    profile: Literal["reference", "causal"] = "reference"
+    profile: StreamProfile = "reference"
     moment_domains: dict[str, float] | None = None
     """Explicit moment-axis domains (calibration); None = wait for the trial's own (reference)."""
-    nonfinite: Literal["hold_last", "drop"] = "hold_last"
+    nonfinite: NonfinitePolicy = "hold_last"
     """NaN/Inf components: repeat the axis's last finite value, or drop the sample."""
     max_gap_periods: float = 5.0
     """A time step longer than this many nominal periods is a gap."""
-    gap_policy: Literal["count", "interpolate"] = "count"
+    gap_policy: GapPolicy = "count"
     """Gaps: count and go on (the fits are in seconds), or fill at the nominal period."""
     rate_window: int = 20
     """Intervals used to estimate the nominal sample period."""
@@ -63,25 +69,11 @@ class StreamConfig:
 
 
 def load_stream_config(profile: str = "reference", path: Path | str | None = None) -> StreamConfig:
-    """One profile of config/stream.yaml."""
-    import yaml
-
-    from rcbht_introspection.config import config_path, from_mapping
-    from rcbht_introspection.errors import InputError
+    """One profile of config/stream.yaml (or of `path`)."""
+    from rcbht_introspection.config_files import config_path, load_profile
 
     file = Path(path) if path is not None else config_path(STREAM_CONFIG_FILE)
-    try:
-        data = yaml.safe_load(file.read_text()) or {}
-    except (OSError, yaml.YAMLError):
-        raise InputError("cannot read stream configuration", path=file) from None
-    profiles = data.get("profiles", {}) if isinstance(data, dict) else {}
-    if profile not in profiles:
-        raise InputError(
-            f"unknown stream profile {profile!r} (known: {', '.join(profiles)})", path=file
-        )
-    return from_mapping(
-        StreamConfig, dict(profiles[profile] or {}), path=file, prefix=f"profiles.{profile}."
-    )
+    return load_profile(StreamConfig, file, profile, kind="stream")
 
 
 @dataclass
@@ -374,8 +366,8 @@ class ArmStream:
             if self._finished:
                 self.counters.malformed_samples += 1
                 return out
-            for ts, ys in self._intake(t, values):
-                self._feed(ts, ys, out)
+            for t_in, y_in in self._intake(t, values):
+                self._feed(t_in, y_in, out)
         except Exception:  # a bug, never bad input: counted, the stream goes on
             self.counters.internal_errors += 1
         return out

@@ -1,0 +1,207 @@
+"""The one YAML loader (config_files.py): shipped files load as before, bad ones give one line
+naming file, line and field."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Literal
+
+import pytest
+
+from rcbht_introspection.config_files import (
+    REPO_CONFIG_DIR,
+    choices_text,
+    from_mapping,
+    load_config,
+    read_yaml,
+)
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.learn.live import LiveAugmentConfig, load_live_config
+from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, load_node_config
+from rcbht_introspection.sim.config import SimConfig, load_sim_config
+from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
+from rcbht_introspection.taxonomy.stream import StreamConfig, load_stream_config
+
+TAXONOMY = TaxonomyConfig()
+SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
+    "rcbht.yaml": [
+        (lambda p: load_taxonomy_config("reference", p), replace(TAXONOMY, profile="reference")),
+        (
+            lambda p: load_taxonomy_config("head", p),
+            replace(
+                TAXONOMY, profile="head", adjustment_mating_guard=False, duration_gate_breaks=False
+            ),
+        ),
+        (
+            lambda p: load_taxonomy_config("error_charac", p),
+            replace(
+                TAXONOMY,
+                profile="error_charac",
+                primitive_cleanup=False,
+                final_segment=False,
+                adjustment_mating_guard=False,
+            ),
+        ),
+    ],
+    "stream.yaml": [
+        (lambda p: load_stream_config("reference", p), StreamConfig()),
+        (lambda p: load_stream_config("causal", p), StreamConfig(profile="causal")),
+    ],
+    "sim.yaml": [(load_sim_config, SimConfig())],
+    "live.yaml": [(load_live_config, LiveAugmentConfig())],
+    "segmenter.yaml": [(lambda p: load_node_config(SegmenterConfig, p), SegmenterConfig())],
+    "classifier.yaml": [(lambda p: load_node_config(ClassifierConfig, p), ClassifierConfig())],
+}
+"""Every shipped YAML file, how it is loaded and what it must load to (the values before the
+loader was unified)."""
+
+
+def test_every_shipped_yaml_file_is_covered() -> None:
+    assert {p.name for p in REPO_CONFIG_DIR.glob("*.yaml")} == set(SHIPPED)
+
+
+@pytest.mark.parametrize("name", sorted(SHIPPED))
+def test_shipped_files_load_to_the_same_objects(name: str) -> None:
+    for load, expected in SHIPPED[name]:
+        assert load(REPO_CONFIG_DIR / name) == expected
+
+
+def _error(load: Callable[[Path], Any], path: Path, text: str) -> str:
+    """The one-line message of loading `text` from `path`."""
+    path.write_text(text)
+    with pytest.raises(InputError) as info:
+        load(path)
+    message = str(info.value)
+    assert "\n" not in message
+    return message
+
+
+def test_wrong_type(tmp_path: Path) -> None:
+    f = tmp_path / "sim.yaml"
+    text = "geometry:\n  clearance: 0.0004\nphysics:\n  timestep: 0.001\n  friction: abc\n"
+    assert _error(load_sim_config, f, text) == (
+        f"{f}, line 5, field physics.friction: expected a number, got 'abc'"
+    )
+
+
+def test_yaml_1_1_exponent_without_a_point_gets_a_hint(tmp_path: Path) -> None:
+    f = tmp_path / "sim.yaml"
+    assert _error(load_sim_config, f, "physics:\n  beam_armature: 1e-5\n") == (
+        f"{f}, line 2, field physics.beam_armature: expected a number, got '1e-5' "
+        "(YAML reads it as text; write 1.0e-5)"
+    )
+
+
+def test_unknown_key(tmp_path: Path) -> None:
+    f = tmp_path / "sim.yaml"
+    message = _error(load_sim_config, f, "physics:\n  timestep: 0.001\n  stifness: 3\n")
+    assert message.startswith(f"{f}, line 3, field physics.stifness: unknown key (known: ")
+    message = _error(load_sim_config, f, "physics: {}\nsensors: {}\n")
+    assert message.startswith(f"{f}, line 2, field sensors: unknown key")
+
+
+def test_missing_section_and_missing_required_key(tmp_path: Path) -> None:
+    f = tmp_path / "live.yaml"
+    assert _error(load_live_config, f, "# nothing\nlive:\n  step_s: 1.0\n") == (
+        f"{f}, line 2, field live_augment: missing required key"
+    )
+
+    @dataclass(frozen=True)
+    class Needs:
+        name: str
+        size: int = 1
+
+    f.write_text("\n\nsize: 2\n")
+    with pytest.raises(InputError) as info:
+        load_config(Needs, f)
+    assert str(info.value) == f"{f}, line 3, field name: missing required key"
+
+
+def test_yaml_syntax_errors_name_the_line(tmp_path: Path) -> None:
+    f = tmp_path / "sim.yaml"
+    message = _error(load_sim_config, f, "physics:\n  friction: 0.3\n gravity: 9.81\n")
+    assert message.startswith(f"{f}, line 3: not valid YAML: ")
+    message = _error(load_sim_config, f, "physics:\n  contact_solref: [0.008,\n    1.0\n")
+    assert message.startswith(f"{f}, line 4: not valid YAML: ")
+    assert message.endswith("(while parsing a flow sequence from line 2)")
+    assert _error(load_sim_config, f, "physics:\n  friction: 0.3\n  friction: 0.4\n") == (
+        f"{f}, line 3: not valid YAML: duplicate key 'friction'"
+    )
+
+
+def test_tuples_lists_and_literals(tmp_path: Path) -> None:
+    f = tmp_path / "sim.yaml"
+    assert _error(load_sim_config, f, "physics:\n  contact_solref: [0.008, 1.0, 2.0]\n") == (
+        f"{f}, line 2, field physics.contact_solref: expected 2 items, got 3"
+    )
+    assert _error(load_sim_config, f, "controller:\n  tilt:\n    - 0.1\n    - wide\n") == (
+        f"{f}, line 4, field controller.tilt[1]: expected a number, got 'wide'"
+    )
+    s = tmp_path / "stream.yaml"
+    text = "profiles:\n  reference:\n    nonfinite: hold\n"
+    assert _error(lambda p: load_stream_config("reference", p), s, text) == (
+        f"{s}, line 3, field profiles.reference.nonfinite: expected hold_last or drop, got 'hold'"
+    )
+
+
+def test_unknown_profile(tmp_path: Path) -> None:
+    f = tmp_path / "stream.yaml"
+    text = "# streams\nprofiles:\n  fast: {profile: causal}\n"
+    assert _error(lambda p: load_stream_config("slow", p), f, text) == (
+        f"{f}, line 2, field profiles: unknown stream profile 'slow' (known: fast)"
+    )
+    assert load_stream_config("fast", f) == StreamConfig(profile="causal")
+
+
+def test_a_config_class_own_checks_carry_file_and_line(tmp_path: Path) -> None:
+    f = tmp_path / "live.yaml"
+    text = "live_augment:\n  step_s: 0.5\n  fractions:\n    - 0.5\n    - 1.5\n"
+    assert _error(load_live_config, f, text) == (
+        f"{f}, line 5, field live_augment.fractions[1]: must be in (0, 1], got 1.5"
+    )
+    t = tmp_path / "rcbht.yaml"
+    text = "profiles:\n  reference:\n    window: 5\n    gradient_thresholds: [1.0, 2.0]\n"
+    assert _error(lambda p: load_taxonomy_config("reference", p), t, text) == (
+        f"{t}, line 4, field profiles.reference.gradient_thresholds: expected 8 values, got 2"
+    )
+    n = tmp_path / "seg.yaml"
+    text = "segmenter_node:\n  ros__parameters:\n    arms: [R]\n    qos_depth: 0\n"
+    assert _error(lambda p: load_node_config(SegmenterConfig, p), n, text) == (
+        f"{n}, line 4, field segmenter_node.ros__parameters.qos_depth: must be >= 1, got 0"
+    )
+
+
+def test_unreadable_file(tmp_path: Path) -> None:
+    missing = tmp_path / "none.yaml"
+    with pytest.raises(InputError, match="cannot read"):
+        read_yaml(missing)
+    bad = tmp_path / "bin.yaml"
+    bad.write_bytes(b"\xff\xfe\x00")
+    with pytest.raises(InputError, match="not UTF-8"):
+        read_yaml(bad)
+
+
+def test_an_empty_file_is_the_defaults(tmp_path: Path) -> None:
+    f = tmp_path / "sim.yaml"
+    f.write_text("# all defaults\n")
+    assert load_sim_config(f) == SimConfig()
+
+
+def test_plain_mappings_without_lines_still_check_types() -> None:
+    @dataclass(frozen=True)
+    class Choice:
+        mode: Literal["boundary", "window"] = "boundary"
+        sizes: tuple[int, ...] = ()
+
+    assert from_mapping(Choice, {"mode": "window", "sizes": [1, 2]}) == Choice("window", (1, 2))
+    with pytest.raises(InputError) as info:
+        from_mapping(Choice, {"mode": "psychic"})
+    assert str(info.value) == "field mode: expected boundary or window, got 'psychic'"
+
+
+def test_choices_text() -> None:
+    assert choices_text(("a",)) == "a"
+    assert choices_text(("a", "b")) == "a or b"
+    assert choices_text(("a", "b", "c")) == "a, b or c"
