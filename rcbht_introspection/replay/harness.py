@@ -13,7 +13,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import (
@@ -24,7 +24,10 @@ from rcbht_introspection.io.bags import (
     wrench_topic,
 )
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.live.belief import BeliefMode
+from rcbht_introspection.nodes.common import RosSession, qos_profile
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
+from rcbht_introspection.nodes.player import BagPlayer
 from rcbht_introspection.replay.observer import Observer, segmenter_matches
 from rcbht_introspection.replay.scoring import (
     BagRecord,
@@ -42,9 +45,7 @@ from rcbht_introspection.replay.supervision import (
     wait_for_nodes,
     write_params,
 )
-
-if TYPE_CHECKING:
-    from rcbht_introspection.nodes.player import BagPlayer
+from rcbht_introspection.taxonomy.stream import StreamProfile
 
 
 @dataclass(frozen=True)
@@ -52,9 +53,9 @@ class ReplayEvalOptions:
     """How to run a replay evaluation."""
 
     rate: float = 1.0
-    mode: str = "boundary"
+    mode: BeliefMode = "boundary"
     profile: str = "reference"
-    stream_profile: str = "reference"
+    stream_profile: StreamProfile = "reference"
     state_hold_s: float = 0.0
     """classifier_node's state_hold_s (how long a new /task_state must hold)."""
     startup_timeout: float = 60.0
@@ -128,9 +129,6 @@ def replay_eval(
     started = time.monotonic()
     result: dict[str, Any] = {}
     with environment(env):
-        from rcbht_introspection.nodes.common import RosSession, qos_profile
-        from rcbht_introspection.nodes.player import BagPlayer
-
         procs: list[NodeProcess] = []
         codes: dict[str, int | None] = {}
         try:

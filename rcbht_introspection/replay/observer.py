@@ -12,6 +12,16 @@ from collections.abc import Callable
 from functools import partial
 from typing import Any
 
+from diagnostic_msgs.msg import DiagnosticArray
+from rcbht_interfaces.msg import Belief as BeliefMsg
+from rcbht_interfaces.msg import Phase as PhaseMsg
+from rcbht_interfaces.msg import Words as WordsMsg
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+from std_msgs.msg import String
+
+from rcbht_introspection.nodes.conversions import belief_from_msg, msg_to_word, to_ns
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, word_topics
 from rcbht_introspection.replay.scoring import (
     AppliedPhase,
@@ -20,10 +30,8 @@ from rcbht_introspection.replay.scoring import (
 )
 
 
-def segmenter_matches(node: Any) -> Callable[[], int]:
+def segmenter_matches(node: Node) -> Callable[[], int]:
     """A function giving the subscribers the segmenter's writers matched on every word topic."""
-    from diagnostic_msgs.msg import DiagnosticArray
-
     latest = [0]
 
     def on_status(msg: Any) -> None:
@@ -40,13 +48,8 @@ class Observer:
     """Subscribes the nodes' outputs (state, beliefs, applied events, words) in this process."""
 
     def __init__(
-        self, node: Any, seg: SegmenterConfig, cls_cfg: ClassifierConfig, qos: Any
+        self, node: Node, seg: SegmenterConfig, cls_cfg: ClassifierConfig, qos: QoSProfile
     ) -> None:
-        from rcbht_interfaces.msg import Belief as BeliefMsg
-        from rcbht_interfaces.msg import Phase as PhaseMsg
-        from rcbht_interfaces.msg import Words as WordsMsg
-        from std_msgs.msg import String
-
         self.obs = Observations()
         self.lock = threading.Lock()
         self.received: list[tuple[int, str, tuple[str, str], bytes]] = []
@@ -78,10 +81,6 @@ class Observer:
 
     def convert(self) -> None:
         """Decode what arrived since the last call into the observations."""
-        from rclpy.serialization import deserialize_message
-
-        from rcbht_introspection.nodes.conversions import belief_from_msg, msg_to_word, to_ns
-
         with self.lock:
             received, self.received = self.received, []
         for wall, kind, (arm, level), raw in received:

@@ -17,9 +17,12 @@ import numpy as np
 
 from rcbht_introspection.io.bags import END_PHASE, WRENCH_TYPE, BagMessage, decode_wrench
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.learn.models import load_model
 from rcbht_introspection.live import offline
-from rcbht_introspection.live.belief import Belief
+from rcbht_introspection.live.belief import Belief, BeliefMode
+from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.nodes.params import LEVEL_TOPICS
+from rcbht_introspection.taxonomy.stream import StreamProfile
 from rcbht_introspection.taxonomy.words import LEVELS, Word
 
 
@@ -170,11 +173,8 @@ class Reference:
     stream_factory: Callable[[str], object]
 
 
-def load_reference(model_path: Path, profile: str, stream_profile: str) -> Reference:
+def load_reference(model_path: Path, profile: str, stream_profile: StreamProfile) -> Reference:
     """The model file and the stream factory that the nodes use."""
-    from rcbht_introspection.learn.models import load_model
-    from rcbht_introspection.live.segmenter import arm_stream_factory
-
     factory = arm_stream_factory(profile, stream_profile=stream_profile)
     return Reference(load_model(model_path), factory)
 
@@ -254,7 +254,7 @@ def score(
     records: Sequence[BagRecord],
     trials: Sequence[Trial],
     arms: Sequence[str],
-    mode: str,
+    mode: BeliefMode,
     reference: Reference | None = None,
 ) -> dict[str, Any]:
     """Scores over all bags plus a per-bag record (without a reference: no offline figures)."""

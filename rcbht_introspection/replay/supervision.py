@@ -8,6 +8,7 @@ ROS_LOG_DIR of its own. No rclpy here: the children run the nodes, this module o
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import random
 import signal
@@ -39,8 +40,6 @@ def lease_domain() -> int:
     so a crashed holder frees its id. Tests, replays and benchmarks that run at the same time
     therefore never share a DDS domain.
     """
-    import fcntl
-
     folder = Path(tempfile.gettempdir()) / "rcbht-ros-domains"
     folder.mkdir(exist_ok=True)
     ids = [i for i in DOMAIN_IDS if i not in _LEASES]
