@@ -99,9 +99,9 @@ def golden_or_engine(source: str) -> str:
 def _release_ros_domains() -> Iterator[None]:
     """Give back the ROS domains a test leased (its node processes are stopped by then)."""
     yield
-    replay_eval = sys.modules.get("rcbht_introspection.nodes.replay_eval")
-    if replay_eval is not None:
-        replay_eval.release_domain()
+    supervision = sys.modules.get("rcbht_introspection.replay.supervision")
+    if supervision is not None:
+        supervision.release_domain()
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:

@@ -1,11 +1,12 @@
-"""Test support for the ROS parts: availability checks and an isolated DDS environment."""
+"""Test support for the ROS parts: availability checks, an isolated DDS environment, node processes.
+
+Waiting and stopping use the package's own helpers (rcbht_introspection.waiting.wait_until,
+rcbht_introspection.replay.supervision.stop_process), as the harness and benchmarks do."""
 
 from __future__ import annotations
 
 import importlib.util
 import os
-import time
-from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -34,8 +35,8 @@ def ros_env(tmp_path: Path) -> dict[str, str]:
     The domain is leased until the test ends (conftest releases it), so no two tests, nor a
     test and a replay or benchmark running beside it, share one.
     """
-    from rcbht_introspection.nodes.replay_eval import lease_domain
-    from rcbht_introspection.nodes.replay_eval import ros_env as env
+    from rcbht_introspection.replay.supervision import lease_domain
+    from rcbht_introspection.replay.supervision import ros_env as env
 
     values = env(lease_domain(), tmp_path / "ros_log")
     full = {**os.environ, **values}
@@ -50,7 +51,7 @@ def node_command(module: str, params: dict[str, object]) -> list[str]:
     """Command line of a node process with `-p name:=value` parameters."""
     import yaml
 
-    from rcbht_introspection.nodes.replay_eval import node_command as command
+    from rcbht_introspection.replay.supervision import node_command as command
 
     args = []
     for name, value in params.items():
@@ -58,32 +59,6 @@ def node_command(module: str, params: dict[str, object]) -> list[str]:
         text = text.removesuffix("\n...").removesuffix("...").strip()
         args += ["-p", f"{name}:={text}"]
     return command(module, *args)
-
-
-def stop(proc: object, timeout: float = 15.0) -> int | None:
-    """SIGINT a process and wait; None (after killing it) if it did not exit in time."""
-    import signal
-    import subprocess
-
-    if proc.poll() is None:  # type: ignore[attr-defined]
-        proc.send_signal(signal.SIGINT)  # type: ignore[attr-defined]
-        try:
-            return proc.wait(timeout)  # type: ignore[attr-defined]
-        except subprocess.TimeoutExpired:
-            proc.kill()  # type: ignore[attr-defined]
-            proc.wait(5)  # type: ignore[attr-defined]
-            return None
-    return proc.returncode  # type: ignore[attr-defined]
-
-
-def wait_for(condition: Callable[[], object], timeout: float = 20.0) -> bool:
-    """Poll `condition` until true (False after `timeout` seconds)."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.02)
-    return True
 
 
 def start_node(module: str, params: dict[str, object], env: dict[str, str], log: Path):
@@ -113,11 +88,12 @@ def segmenter_inputs(ros, log: Path) -> tuple:
     from std_msgs.msg import String
 
     from rcbht_introspection.nodes.common import qos_profile
+    from rcbht_introspection.waiting import wait_until
 
     qos = qos_profile(1000, "reliable")
     wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
     phase = ros.node.create_publisher(String, "/task_phase", qos)
-    assert wait_for(
+    assert wait_until(
         lambda: wrench.get_subscription_count() > 0 and phase.get_subscription_count() > 0
     ), log.read_text()
     return wrench, phase

@@ -18,6 +18,10 @@ pure-Python rosbags)."""
 ROS_AND_PLOTTING = frozenset(
     {"rclpy", "matplotlib", "geometry_msgs", "std_msgs", "rcbht_interfaces", "diagnostic_msgs"}
 )
+ROS_FREE = ("waiting", "replay.scoring", "replay.supervision")
+"""Modules outside the core that must work without ROS, with all they import: the one polling
+loop (every layer waits with it), the replay's scores (unit-tested without ROS) and the process
+supervision (the node processes import rclpy, their supervisor does not)."""
 
 
 def _modules() -> dict[str, Path]:
@@ -113,6 +117,21 @@ def test_the_core_imports_no_ros_and_no_plotting(subpackage: str) -> None:
             roots = {m.split(".")[0] for m in _imports(path)}
             forbidden = roots & ROS_AND_PLOTTING
             assert not forbidden, f"{path.name} imports {sorted(forbidden)}"
+
+
+@pytest.mark.parametrize("module", ROS_FREE)
+def test_ros_free_modules_reach_no_ros_and_no_plotting(module: str) -> None:
+    graph, modules = _graph(), _modules()
+    start = f"rcbht_introspection.{module}"
+    assert start in modules
+    reached, todo = {start}, [start]
+    while todo:
+        for target in graph[todo.pop()] - reached:
+            reached.add(target)
+            todo.append(target)
+    for name in sorted(reached):
+        forbidden = {m.split(".")[0] for m in _imports(modules[name])} & ROS_AND_PLOTTING
+        assert not forbidden, f"{start} imports {name}, which imports {sorted(forbidden)}"
 
 
 def test_the_cycle_finder_finds_a_cycle() -> None:

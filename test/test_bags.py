@@ -115,9 +115,10 @@ def test_record_a_replay_between_processes(tmp_path: Path) -> None:
     import subprocess
     import sys
 
-    from ros_support import require_ros, ros_env, stop
+    from ros_support import require_ros, ros_env
 
     from rcbht_introspection.io.bags import read_trial_bag, write_trial_bag
+    from rcbht_introspection.replay.supervision import stop_process
 
     require_ros()
     env = ros_env(tmp_path)
@@ -140,7 +141,7 @@ def test_record_a_replay_between_processes(tmp_path: Path) -> None:
         assert "published 406 messages" in play.stdout  # 400 samples, 5 events, 1 info record
         # the player waited for the recorder's acknowledgments; the recorder settles at stop
     finally:
-        code = stop(recorder)
+        code = stop_process(recorder)
     rec_log.close()
     assert code == 0, (tmp_path / "record.log").read_text()
     back = read_trial_bag(tmp_path / "rec.mcap")

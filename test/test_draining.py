@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 from ros_support import require_ros, ros_env
+
+from rcbht_introspection.waiting import wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -74,20 +77,20 @@ def test_spin_draining_follows_subscriptions_made_and_destroyed_while_it_spins(
     spinner = threading.Thread(target=spin_draining, args=(executor, node, stop))
     spinner.start()
     try:
-        deadline = time.monotonic() + 20
-        while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        deadline = time.monotonic() + 20  # for all the waits below
+
+        def wait(condition: Callable[[], object]) -> None:
+            wait_until(condition, deadline - time.monotonic(), poll=0.01)
+
+        wait(lambda: pub.get_subscription_count() > 0)
         for i in range(20):
             pub.publish(String(data=str(i)))
-        while len(node.got) < 20 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait(lambda: len(node.got) >= 20)
         assert node.got == [str(i) for i in range(20)]
-        while node.subs and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait(lambda: not node.subs)
         assert not node.subs  # destroyed while the spin held its handle; the spin goes on
         ticks = node.ticks
-        while node.ticks < ticks + 5 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait(lambda: node.ticks >= ticks + 5)
         assert node.ticks >= ticks + 5
         stop.request()
         spinner.join(5)

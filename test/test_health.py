@@ -210,14 +210,14 @@ def test_ros_domains_leased_by_one_process_are_not_given_to_another() -> None:
     import subprocess
     import sys
 
-    from rcbht_introspection.nodes.replay_eval import DOMAIN_IDS, lease_domain, release_domain
+    from rcbht_introspection.replay.supervision import DOMAIN_IDS, lease_domain, release_domain
 
     mine = {lease_domain() for _ in range(5)}
     assert len(mine) == 5 and mine <= set(DOMAIN_IDS)
     child = (
         "import json\n"
         "from rcbht_introspection.errors import InputError\n"
-        "from rcbht_introspection.nodes.replay_eval import lease_domain\n"
+        "from rcbht_introspection.replay.supervision import lease_domain\n"
         "got = []\n"
         "try:\n"
         "    while True: got.append(lease_domain())\n"

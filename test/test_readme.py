@@ -18,7 +18,10 @@ import sys
 from pathlib import Path
 
 import pytest
-from ros_support import REPO, require_ros, ros_env, stop, wait_for
+from ros_support import REPO, require_ros, ros_env
+
+from rcbht_introspection.replay.supervision import stop_process
+from rcbht_introspection.waiting import wait_until
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -121,7 +124,7 @@ def test_quick_start_runs_as_written(tmp_path: Path) -> None:
                 )
             )
     try:
-        assert wait_for(
+        assert wait_until(
             lambda: all(
                 "mode " in log.read_text()
                 or "arms " in log.read_text()
@@ -132,7 +135,7 @@ def test_quick_start_runs_as_written(tmp_path: Path) -> None:
         ), [log.read_text()[-500:] for log in logs]
         run(foreground[0], work, env)
     finally:
-        codes = [stop(proc, timeout=30) for proc in procs]
+        codes = [stop_process(proc, timeout=30) for proc in procs]
     assert codes == [0, 0, 0], [log.read_text()[-1500:] for log in logs]
     info = run("rcbht bag info states.mcap", work, env)
     count = re.search(r"/task_state\D+(\d+)", info)

@@ -61,7 +61,7 @@ def test_two_arm_replay_matches_offline(hiro_data: Path, model: Path, tmp_path: 
     from rcbht_introspection.bench.ros import two_arm_trial
     from rcbht_introspection.io.bags import write_trial_bag
     from rcbht_introspection.io.hiro import read_trial
-    from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval
+    from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
 
     real = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS"
     trial = two_arm_trial(

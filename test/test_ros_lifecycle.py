@@ -11,12 +11,12 @@ from ros_support import (
     env,
     segmenter_inputs,
     start_node,
-    stop,
-    wait_for,
     wrench_msg,
 )
 
 from rcbht_introspection.bench.stops import toy_model
+from rcbht_introspection.replay.supervision import stop_process
+from rcbht_introspection.waiting import wait_until
 
 pytestmark = pytest.mark.ros
 __all__ = ["env"]  # the isolated-ROS fixture, used by name
@@ -38,7 +38,7 @@ class Lifecycle:
         from lifecycle_msgs.srv import GetState
 
         future = self.get.call_async(GetState.Request())
-        assert wait_for(future.done, 10)
+        assert wait_until(future.done, 10)
         return future.result().current_state.label
 
     def transition(self, label: str) -> bool:
@@ -52,7 +52,7 @@ class Lifecycle:
             "cleanup": Transition.TRANSITION_CLEANUP,
         }
         future = self.change.call_async(ChangeState.Request(transition=Transition(id=ids[label])))
-        assert wait_for(future.done, 20)
+        assert wait_until(future.done, 20)
         return bool(future.result().success)
 
 
@@ -104,9 +104,9 @@ def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, st
             assert states == []  # nothing is published before activation
             assert node.transition("configure") and node.state() == "inactive"
             assert node.transition("activate") and node.state() == "active"
-            assert wait_for(lambda: len(states) >= 3), log.read_text()
-            assert wait_for(lambda: "classifier_node: belief" in diag.latest)
-            assert wait_for(
+            assert wait_until(lambda: len(states) >= 3), log.read_text()
+            assert wait_until(lambda: "classifier_node: belief" in diag.latest)
+            assert wait_until(
                 lambda: (
                     diag.values("classifier_node: belief").get("model sha256")
                     == file_sha256(str(first))
@@ -119,14 +119,14 @@ def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, st
             client = AsyncParameterClient(ros.node, "classifier_node")
             assert client.wait_for_services(10)
             refused = client.set_parameters([Parameter("model_file", value=str(second))])
-            assert wait_for(refused.done, 10)
+            assert wait_until(refused.done, 10)
             assert not refused.result().results[0].successful
             assert node.transition("deactivate") and node.state() == "inactive"
             assert node.transition("cleanup") and node.state() == "unconfigured"
             accepted = client.set_parameters([Parameter("model_file", value=str(second))])
-            assert wait_for(accepted.done, 10) and accepted.result().results[0].successful
+            assert wait_until(accepted.done, 10) and accepted.result().results[0].successful
             assert node.transition("configure") and node.transition("activate")
-            assert wait_for(
+            assert wait_until(
                 lambda: (
                     diag.values("classifier_node: belief").get("model sha256")
                     == file_sha256(str(second))
@@ -135,7 +135,7 @@ def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, st
             assert diag.values("classifier_node: belief")["model file"] == str(second)
             assert proc.poll() is None  # the same process all along
     finally:
-        code = stop(proc)
+        code = stop_process(proc)
     text = log.read_text()
     assert code == 0, text
     assert "classes ['approach', 'mating']" in text and "classes ['approach', 'rotation']" in text
@@ -154,13 +154,13 @@ def test_segmenter_diagnostics_report_rate_and_rejections(
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
             diag = DiagnosticsProbe(ros)
             wrench, _ = segmenter_inputs(ros, log)
-            assert wait_for(lambda: "segmenter_node: arm R" in diag.latest), log.read_text()
+            assert wait_until(lambda: "segmenter_node: arm R" in diag.latest), log.read_text()
             for i in range(1500):  # ~3 s of 500 Hz
                 value = float("nan") if i == 700 else math.sin(i / 50)
                 wrench.publish(wrench_msg(BASE_NS + i * 2_000_000, value))
                 time.sleep(0.002)
             arm = "segmenter_node: arm R"
-            assert wait_for(lambda: diag.values(arm).get("samples accepted") == "1499", 30), (
+            assert wait_until(lambda: diag.values(arm).get("samples accepted") == "1499", 30), (
                 diag.values(arm),
                 log.read_text(),
             )
@@ -170,9 +170,9 @@ def test_segmenter_diagnostics_report_rate_and_rejections(
             assert values["samples rejected non_finite"] == "1"
             assert float(values["finality backlog primitive (s)"]) >= 0
             # once nothing moves any more, the arm is OK again
-            assert wait_for(lambda: diag.latest[arm].level == b"\x00", 5)  # type: ignore[attr-defined]
+            assert wait_until(lambda: diag.latest[arm].level == b"\x00", 5)  # type: ignore[attr-defined]
     finally:
-        code = stop(proc)
+        code = stop_process(proc)
     assert code == 0, log.read_text()
 
 
@@ -184,7 +184,7 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
     from std_msgs.msg import String
 
     from rcbht_introspection.nodes.common import RosSession, qos_profile
-    from rcbht_introspection.nodes.replay_eval import segmenter_matches
+    from rcbht_introspection.replay.observer import segmenter_matches
 
     model = toy_model(tmp_path / "model.rcbht", ("approach", "rotation"))
     seg_log = tmp_path / "segmenter.log"
@@ -217,34 +217,34 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
 
             phase.publish(String(data="approach"))
             send(600)
-            assert stop(first) == 0, first_log.read_text()
+            assert stop_process(first) == 0, first_log.read_text()
             send(200)  # words the restarted classifier never sees
             # the segmenter's diagnostics (1 Hz) report the first classifier gone, then the
             # second one matched by its own writers (not just seen in the graph)
-            assert wait_for(lambda: matched() == 0, 30), seg_log.read_text()
+            assert wait_until(lambda: matched() == 0, 30), seg_log.read_text()
             second = start_node("classifier_node", params, env, second_log)
-            assert wait_for(lambda: matched() >= 1, 30), second_log.read_text()
+            assert wait_until(lambda: matched() >= 1, 30), second_log.read_text()
             send(300)
             # the loss is proven live (empty watermark messages move idle levels on), and the
             # sub-task under way is unknown before its boundary comes
             belief = "classifier_node: belief"
-            assert wait_for(lambda: int(diag.values(belief).get("words lost", 0)) > 0, 10)
+            assert wait_until(lambda: int(diag.values(belief).get("words lost", 0)) > 0, 10)
             seen = len(beliefs)
             send(100)
-            assert wait_for(lambda: len(beliefs) > seen, 10), second_log.read_text()
+            assert wait_until(lambda: len(beliefs) > seen, 10), second_log.read_text()
             running = [b for b in list(beliefs)[seen:] if not b.final]
             assert running and all(b.subtask == "unknown" for b in running), running[-1]
             phase.publish(String(data="rotation"))
             send(600)
             phase.publish(String(data="done"))
-            assert wait_for(lambda: len(finals()) >= 2, 30), second_log.read_text()
+            assert wait_until(lambda: len(finals()) >= 2, 30), second_log.read_text()
             lost = int(diag.values(belief)["words lost"])
         approach, rotation = finals()[-2], finals()[-1]
         assert (approach.phase, approach.subtask) == ("approach", "unknown")
         assert rotation.phase == "rotation" and rotation.subtask in ("approach", "rotation")
         assert lost > 0
     finally:
-        codes = [stop(p) for p in (seg, second) if p is not None]
+        codes = [stop_process(p) for p in (seg, second) if p is not None]
     text = second_log.read_text()
     assert "words of this stream never arrived" in text
     assert codes == [0, 0], text
@@ -269,12 +269,12 @@ def test_a_failed_configure_leaves_the_node_unconfigured_and_says_why(
             assert client.wait_for_services(10)
             for value in ("bad topic", "/wrench_ok"):
                 done = client.set_parameters([Parameter("wrench_topics", value=[value])])
-                assert wait_for(done.done, 10) and done.result().results[0].successful
+                assert wait_until(done.done, 10) and done.result().results[0].successful
                 if value == "bad topic":
                     assert not node.transition("configure")
                     assert node.state() == "unconfigured"
                     name = "segmenter_node: configure"
-                    assert wait_for(lambda n=name: bool(diag.messages(n, b"\x02")), 5)
+                    assert wait_until(lambda n=name: bool(diag.messages(n, b"\x02")), 5)
                     assert (
                         "not a valid ROS topic name: 'bad topic'" in diag.messages(name, b"\x02")[0]
                     )
@@ -282,7 +282,7 @@ def test_a_failed_configure_leaves_the_node_unconfigured_and_says_why(
                     assert node.transition("configure") and node.transition("activate")
                     assert node.state() == "active"
     finally:
-        code = stop(proc)
+        code = stop_process(proc)
     text = log.read_text()
     assert code == 0, text
     assert "configure failed: field wrench_topics: not a valid ROS topic name" in text

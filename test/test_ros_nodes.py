@@ -16,10 +16,11 @@ from ros_support import (
     ros_env,
     segmenter_inputs,
     start_node,
-    stop,
-    wait_for,
     wrench_msg,
 )
+
+from rcbht_introspection.replay.supervision import stop_process
+from rcbht_introspection.waiting import wait_until
 
 pytestmark = pytest.mark.ros
 __all__ = ["env"]  # the isolated-ROS fixture, used by name
@@ -107,11 +108,11 @@ def test_classifier_without_usable_model_says_unknown(
     try:
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
             ros.node.create_subscription(String, "/task_state", lambda m: states.append(m.data), 10)
-            assert wait_for(lambda: len(states) >= 3), log.read_text()
+            assert wait_until(lambda: len(states) >= 3), log.read_text()
         assert set(states) == {"unknown"}
         assert proc.poll() is None
     finally:
-        code = stop(proc)
+        code = stop_process(proc)
     text = log.read_text()
     assert "no usable model" in text and expect in text
     assert code == 0, text
@@ -157,13 +158,13 @@ def test_segmenter_survives_malformed_input_and_sigint(tmp_path: Path, env: dict
                 if i == 400:
                     phase.publish(String(data="rotation"))
             phase.publish(String(data="done"))
-            assert wait_for(lambda: bool(ends), 30), log.read_text()
+            assert wait_until(lambda: bool(ends), 30), log.read_text()
         assert ends[0].samples_accepted == n
         assert ends[0].samples_rejected == 3
         assert words > 0
         assert proc.poll() is None  # still running after the bad input
     finally:
-        code = stop(proc)
+        code = stop_process(proc)
     text = log.read_text()
     assert "ignored unknown /task_phase name 'pirouette'" in text
     assert "dropped a wrench sample" in text
@@ -193,9 +194,9 @@ def test_a_late_subscriber_still_gets_the_applied_sub_task_events(
             ros.node.create_subscription(
                 Phase, "/rcbht/phase", lambda m: got.append(m.name), phase_qos("reliable")
             )
-            assert wait_for(lambda: got == ["approach"], 10), (got, log.read_text())
+            assert wait_until(lambda: got == ["approach"], 10), (got, log.read_text())
     finally:
-        assert stop(proc) == 0, log.read_text()
+        assert stop_process(proc) == 0, log.read_text()
 
 
 def test_a_draining_node_still_answers_parameter_requests(
@@ -217,16 +218,16 @@ def test_a_draining_node_still_answers_parameter_requests(
             wrench = ros.node.create_publisher(
                 WrenchStamped, "/wrench", qos_profile(1000, "reliable")
             )
-            assert wait_for(lambda: wrench.get_subscription_count() > 0), log.read_text()
+            assert wait_until(lambda: wrench.get_subscription_count() > 0), log.read_text()
             for i in range(400):  # keep the node busy draining while the requests come
                 wrench.publish(wrench_msg(1_700_000_000 * 10**9 + i * 1_000_000, math.sin(i / 20)))
                 if i % 100 == 50:
                     values = client.get_parameters(["event_hold_s"])
                     described = client.describe_parameters(["event_hold_s"])
-                    assert wait_for(lambda v=values, d=described: v.done() and d.done(), 10)
+                    assert wait_until(lambda v=values, d=described: v.done() and d.done(), 10)
                     assert values.result().values[0].double_value == 0.3
                     text = described.result().descriptors[0].description
                     assert text == descriptions(SegmenterConfig)["event_hold_s"]
                 time.sleep(0.001)
     finally:
-        assert stop(proc) == 0, log.read_text()
+        assert stop_process(proc) == 0, log.read_text()

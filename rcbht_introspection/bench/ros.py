@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
 from rcbht_introspection.io.trial import Trial
 
 SOURCE_RATE_HZ = 200.0
@@ -37,17 +38,9 @@ def synthetic_trial(name: str, seconds: float, seed: int) -> Trial:
     return Trial(name, t, {"R": wrench}, state_times=marks)
 
 
-def _hiro() -> Path | None:
-    from rcbht_introspection.commands.demo import shared_hiro
-
-    return shared_hiro()
-
-
 def _sources(seconds_of_data: float) -> list[Trial]:
     """Trials (200 Hz) totalling at least `seconds_of_data`."""
-    from rcbht_introspection.io.hiro import find_trials, read_trial
-
-    hiro = _hiro()
+    hiro = shared_hiro()
     trials: list[Trial] = []
     total = 0.0
     folders = find_trials([hiro]) if hiro is not None else []
@@ -72,15 +65,13 @@ def two_arm_trial(a: Trial, b: Trial) -> Trial:
 
 def _model(out_dir: Path) -> Path | None:
     """The model `rcbht train` writes by default (live head included) for HIRO trials 1-40."""
-    hiro = _hiro()
+    hiro = shared_hiro()
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.live import live_training
     from rcbht_introspection.learn.models import save_model
 
     if hiro is None:
         return None
-    from rcbht_introspection.io.hiro import find_trials
-
     train = [f for f in find_trials([hiro]) if int(f.name.rsplit("-", 1)[1]) <= 40]
     model, _ = live_training(load_trials(train, "auto"))
     return save_model(model, out_dir / "bench_model.rcbht")
@@ -89,7 +80,7 @@ def _model(out_dir: Path) -> Path | None:
 def run(out_dir: Path) -> dict[str, Any]:
     """Both scenarios; figures per scenario plus the load average around them."""
     from rcbht_introspection.io.bags import write_trial_bag
-    from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval
+    from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
 
     seconds = float(os.environ.get("RCBHT_BENCH_ROS_SECONDS", "60"))
     rate = TARGET_RATE_HZ / SOURCE_RATE_HZ
@@ -100,7 +91,7 @@ def run(out_dir: Path) -> dict[str, Any]:
     sources = _sources(seconds * rate)
     results: dict[str, Any] = {
         "playback_seconds_target": seconds,
-        "source": "REAL HIRO trials at 5x" if _hiro() else "synthetic 200 Hz at 5x",
+        "source": "REAL HIRO trials at 5x" if shared_hiro() else "synthetic 200 Hz at 5x",
         "model": str(model) if model else None,
     }
     for name, arms in (("one_arm_1kHz", 1), ("two_arm_2x1kHz", 2)):

@@ -30,7 +30,7 @@ import os
 import shutil
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,7 +38,17 @@ from typing import Any
 import numpy as np
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.replay.supervision import (
+    NodeProcess,
+    environment,
+    lease_domain,
+    ros_env,
+    wait_for_nodes,
+    write_params,
+)
+from rcbht_introspection.waiting import wait_until
 
 ARMS: tuple[str, ...] = ("L", "R")
 GROWTH_WINDOW_S = 1800.0
@@ -83,10 +93,8 @@ def trial_source() -> Source:
     """REAL HIRO trials when present, else the simulator's two-arm trials; both at 5x."""
     from rcbht_introspection.bench import ros
 
-    hiro = ros._hiro()
+    hiro = shared_hiro()
     if hiro is not None:
-        from rcbht_introspection.io.hiro import find_trials, read_trial
-
         folders = find_trials([hiro])
         order = [folders[(40 + i) % len(folders)] for i in range(len(folders))]  # held out first
         read = functools.lru_cache(maxsize=len(order))(lambda k: read_trial(order[k]))
@@ -289,7 +297,7 @@ class SoakObserver:
         from rcbht_interfaces.msg import Words as WordsMsg
 
         from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, word_topics
-        from rcbht_introspection.nodes.replay_eval import segmenter_matches
+        from rcbht_introspection.replay.observer import segmenter_matches
 
         seg, cls_cfg = SegmenterConfig(), ClassifierConfig()
         self.lock = threading.Lock()
@@ -428,20 +436,6 @@ def process_figures(p: Tracked, run_end_s: float, window_s: float) -> dict[str, 
     return out
 
 
-def _await(condition: Callable[[], bool], timeout: float, procs: Sequence[Any], what: str) -> float:
-    """Poll `condition`; seconds it took. Raises InputError (with node logs) on timeout or death."""
-    t0 = time.monotonic()
-    while not condition():
-        for p in procs:
-            if not p.alive():
-                raise InputError(f"{p.name} exited (code {p.proc.returncode}):\n{p.tail()}")
-        if time.monotonic() - t0 > timeout:
-            logs = "\n".join(f"--- {p.name}\n{p.tail()}" for p in procs)
-            raise InputError(f"timed out after {timeout:.0f} s waiting for {what}\n{logs}")
-        time.sleep(0.05)
-    return time.monotonic() - t0
-
-
 def _stop(node: Any, tracked: Tracked, t: float) -> None:
     """SIGINT one node process; record its exit code and how long it took to exit."""
     if not tracked.samples or t - tracked.samples[-1][0] > 1.0:
@@ -461,13 +455,6 @@ def run(out_dir: Path) -> dict[str, Any]:
     from rcbht_introspection.bench import ros
     from rcbht_introspection.bench.__main__ import machine
     from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
-    from rcbht_introspection.nodes.replay_eval import (
-        NodeProcess,
-        environment,
-        lease_domain,
-        ros_env,
-        write_params,
-    )
 
     seconds = env_float("RCBHT_SOAK_SECONDS", 3600.0)
     sample_s = env_float("RCBHT_SOAK_SAMPLE_S", 60.0)
@@ -572,7 +559,7 @@ def run(out_dir: Path) -> dict[str, Any]:
                 observer = SoakObserver(session.node, qos)
                 publisher = SoakPublisher(session.node, qos, source, seconds)
                 result["startup_s"] = round(
-                    _await(
+                    wait_for_nodes(
                         lambda: publisher.matched() and observer.connected(session.node),
                         STARTUP_TIMEOUT_S,
                         list(nodes.values()),
@@ -629,7 +616,7 @@ def run(out_dir: Path) -> dict[str, Any]:
                     ]
                     try:
                         result["drain_s"] = round(
-                            _await(drained, DRAIN_TIMEOUT_S, running, "the drain"), 2
+                            wait_for_nodes(drained, DRAIN_TIMEOUT_S, running, "the drain"), 2
                         )
                     except InputError as exc:
                         result["aborted"] = f"drain: {str(exc).splitlines()[0]}"
@@ -680,14 +667,18 @@ def _restart(
         observer.split_ns = time.time_ns()
     # the next belief publisher must be the new process, not the old one still in the graph,
     # and the segmenter's matched-reader count (1 Hz /diagnostics) must have seen it leave
-    gone = _poll(
+    t0 = time.monotonic()
+    left = wait_until(
         lambda: observer.belief_sub.get_publisher_count() == 0 and observer.segmenter_matched() < 2,
         10.0,
     )
+    gone = time.monotonic() - t0 if left else None
     start("classifier_node", "classifier_node_2")
     new = nodes["classifier_node_2"]
     try:
-        ready = _await(lambda: observer.connected(node), STARTUP_TIMEOUT_S, [new], "new classifier")
+        ready = wait_for_nodes(
+            lambda: observer.connected(node), STARTUP_TIMEOUT_S, [new], "new classifier"
+        )
     except InputError as exc:
         return {"at_s": round(t, 1), "exit_code": old.exit_code, "error": str(exc)}
     return {
@@ -699,16 +690,6 @@ def _restart(
         "new_ready_s": round(ready, 2),
         "gap_s": round(now() - t, 2),
     }
-
-
-def _poll(condition: Callable[[], bool], timeout: float) -> float | None:
-    """Seconds until `condition` held, None after `timeout`."""
-    t0 = time.monotonic()
-    while not condition():
-        if time.monotonic() - t0 > timeout:
-            return None
-        time.sleep(0.02)
-    return time.monotonic() - t0
 
 
 def _figures(

@@ -24,6 +24,15 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from rcbht_introspection.replay.supervision import (
+    environment,
+    lease_domain,
+    node_command,
+    ros_env,
+    stop_process,
+)
+from rcbht_introspection.waiting import wait_until
+
 STOP_LIMIT_S = 5.0
 RATE_HZ = 1000.0
 PHASES = ("approach", "rotation", "insertion", "mating", "done")
@@ -124,8 +133,6 @@ def toy_model(
 
 
 def _node_command(kind: str, work: Path) -> list[str]:
-    from rcbht_introspection.nodes.replay_eval import node_command
-
     if kind == "classifier_node":
         return node_command(kind, "-p", f"model_file:={work / 'model.rcbht'}")
     return node_command(kind, "-p", "stream_profile:=causal")
@@ -166,28 +173,16 @@ def stop_once(kind: str, work: Path, env: dict[str, str], rng: random.Random, i:
     if during_startup:
         # from the moment the process's own stop handler is in (before it, the interpreter
         # and its start-up are not ours to stop cleanly; see handles_sigterm)
-        deadline = started + 60
-        while not handles_sigterm(proc.pid) and proc.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.005)
+        wait_until(lambda: handles_sigterm(proc.pid) or proc.poll() is not None, 60, poll=0.005)
         time.sleep(rng.uniform(0.0, 1.0))
         delay = time.monotonic() - started
     else:
-        deadline = started + 60
-        while up_line not in log.read_text() and time.monotonic() < deadline:
-            if proc.poll() is not None:
-                break
-            time.sleep(0.02)
+        wait_until(lambda: up_line in log.read_text() or proc.poll() is not None, 60)
         time.sleep(rng.uniform(0.2, 2.5))
         delay = time.monotonic() - started
     up = up_line in log.read_text()
     t0 = time.monotonic()
-    proc.send_signal(signal.SIGINT)
-    try:
-        code: int | None = proc.wait(STOP_LIMIT_S * 3)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
-        code = None
+    code = stop_process(proc, STOP_LIMIT_S * 3)
     seconds = time.monotonic() - t0
     text = log.read_text()
     bad = tuple(line for line in text.splitlines() if any(m in line for m in BAD_MARKERS))
@@ -210,7 +205,6 @@ def stop_loop(
 ) -> tuple[list[Stop], dict[str, int]]:
     """Stops of segmenter_node, classifier_node (fed by a running segmenter) and bag record."""
     from rcbht_introspection.nodes.common import RosSession
-    from rcbht_introspection.nodes.replay_eval import environment, lease_domain, ros_env
 
     rng = random.Random(seed)
     values = ros_env(lease_domain(), work / "ros_log")
@@ -234,8 +228,7 @@ def stop_loop(
                 for i in range(n_node):
                     stops.append(stop_once("classifier_node", work, env, rng, i))
             finally:
-                feeder.send_signal(signal.SIGINT)
-                feeder.wait(30)
+                stop_process(feeder, 30)
             for i in range(n_record):
                 stops.append(stop_once("bag_record", work, env, rng, i))
         finally:
@@ -275,7 +268,6 @@ def match_gaps(n: int, work: Path, seed: int = 0) -> list[float]:
     from std_msgs.msg import String
 
     from rcbht_introspection.nodes.common import RosSession
-    from rcbht_introspection.nodes.replay_eval import lease_domain, ros_env
 
     env = {**os.environ, **ros_env(lease_domain(), work / "ros_log")}
     env.pop("ROS_LOCALHOST_ONLY", None)

@@ -31,19 +31,6 @@ def _have(module: str) -> bool:
         return False
 
 
-def shared_hiro() -> Path | None:
-    """../shared/data/hiro/REAL_HIRO_ONE_SA_SUCCESS beside the repository, or $RCBHT_HIRO_DATA."""
-    import os
-
-    root = Path(
-        os.environ.get(
-            "RCBHT_HIRO_DATA", Path(__file__).resolve().parents[3] / "shared" / "data" / "hiro"
-        )
-    )
-    real = root / "REAL_HIRO_ONE_SA_SUCCESS"
-    return real if real.is_dir() else None
-
-
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the `demo` subcommand."""
     p = subparsers.add_parser("demo", help="simulate, train, replay through the ROS nodes, score")
@@ -62,6 +49,8 @@ def _step(text: str) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
+    from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
+
     missing = [f"{name} ({how})" for mod, (name, how) in PARTS.items() if not _have(mod)]
     use_sim = args.data in ("sim", "auto")
     hiro = shared_hiro()
@@ -74,12 +63,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
         return 1
 
     from rcbht_introspection.io.bags import write_trial_bag
-    from rcbht_introspection.io.hiro import find_trials, read_trial
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.live import live_training
     from rcbht_introspection.learn.models import save_model
-    from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval, summary
     from rcbht_introspection.plots.timeline import plot_timelines
+    from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
+    from rcbht_introspection.replay.scoring import summary
 
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)

@@ -179,7 +179,8 @@ def cmd_record(args: argparse.Namespace) -> int:
 
 
 def cmd_replay_eval(args: argparse.Namespace) -> int:
-    from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval, summary
+    from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
+    from rcbht_introspection.replay.scoring import summary
 
     options = ReplayEvalOptions(
         rate=args.rate,

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import warnings
 from pathlib import Path
 
@@ -145,3 +146,13 @@ def find_trials(paths: list[Path] | list[str]) -> list[Path]:
         else:
             raise InputError("no such trial or dataset folder", p)
     return found
+
+
+def shared_hiro() -> Path | None:
+    """../shared/data/hiro/REAL_HIRO_ONE_SA_SUCCESS beside the repository, or under $RCBHT_HIRO_DATA.
+
+    The REAL HIRO trials that `rcbht demo --data hiro` and the ROS benchmarks use when present.
+    """
+    default = Path(__file__).resolve().parents[3] / "shared" / "data" / "hiro"
+    real = Path(os.environ.get("RCBHT_HIRO_DATA", default)) / "REAL_HIRO_ONE_SA_SUCCESS"
+    return real if real.is_dir() else None

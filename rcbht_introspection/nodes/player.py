@@ -15,6 +15,7 @@ from rclpy.qos import QoSProfile
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import BagMessage, BagWriter
 from rcbht_introspection.nodes.lifetime import StopSignal
+from rcbht_introspection.waiting import wait_until
 
 
 def message_class(msgtype: str) -> type:
@@ -24,21 +25,6 @@ def message_class(msgtype: str) -> type:
         return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
     except (ImportError, AttributeError):
         raise InputError(f"message type {msgtype} is not installed") from None
-
-
-def wait_until(
-    condition: Callable[[], bool],
-    timeout: float,
-    poll: float = 0.02,
-    stop: StopSignal | None = None,
-) -> bool:
-    """Poll `condition` until true, `timeout` seconds passed or `stop` was requested."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline or (stop is not None and stop.requested):
-            return False
-        time.sleep(poll)
-    return True
 
 
 class BagPlayer:

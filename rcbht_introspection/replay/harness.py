@@ -1,0 +1,259 @@
+"""`rcbht replay-eval`: replay trial bags through segmenter_node and classifier_node and score them.
+
+The two nodes run as separate processes over real DDS, isolated as supervision.py isolates them
+(a leased ROS_DOMAIN_ID, loopback only, logs in a temporary ROS_LOG_DIR). This process plays
+each bag with its recorded timing divided by `rate` and records /task_state, the beliefs, the
+applied sub-task events and the words (observer.py); scoring.py compares them with the truth
+in the bag and with the offline run of the same stream and model.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.bags import (
+    PHASE_TOPIC,
+    BagMessage,
+    bag_messages,
+    read_trial_bag,
+    wrench_topic,
+)
+from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.live.belief import BeliefMode
+from rcbht_introspection.nodes.common import RosSession, qos_profile
+from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
+from rcbht_introspection.nodes.player import BagPlayer
+from rcbht_introspection.replay.observer import Observer, segmenter_matches
+from rcbht_introspection.replay.scoring import (
+    BagRecord,
+    Playback,
+    bag_record,
+    load_reference,
+    score,
+)
+from rcbht_introspection.replay.supervision import (
+    NodeProcess,
+    environment,
+    lease_domain,
+    release_domain,
+    ros_env,
+    wait_for_nodes,
+    write_params,
+)
+from rcbht_introspection.taxonomy.stream import StreamProfile
+
+
+@dataclass(frozen=True)
+class ReplayEvalOptions:
+    """How to run a replay evaluation."""
+
+    rate: float = 1.0
+    mode: BeliefMode = "boundary"
+    profile: str = "reference"
+    stream_profile: StreamProfile = "reference"
+    state_hold_s: float = 0.0
+    """classifier_node's state_hold_s (how long a new /task_state must hold)."""
+    startup_timeout: float = 60.0
+    drain_timeout: float = 60.0
+    domain_id: int | None = None
+    log_dir: Path | None = None
+    """Keep the node logs here (default: a temporary folder, removed afterwards)."""
+    offline: bool = True
+    """Also compute the offline references (words and verdicts)."""
+
+
+def _params(
+    work: Path, arms: tuple[str, ...], model_path: Path | None, options: ReplayEvalOptions
+) -> tuple[SegmenterConfig, ClassifierConfig, Path, Path]:
+    """The nodes' configurations, and their parameter files written to `work`."""
+    seg = SegmenterConfig(
+        arms=arms,
+        wrench_topics=tuple(wrench_topic(a, arms) for a in arms),
+        taxonomy_profile=options.profile,
+    )
+    cls_cfg = ClassifierConfig(
+        model_file=str(Path(model_path).resolve()) if model_path else "",
+        mode=options.mode,
+        arms=arms,
+    )
+    seg_params = write_params(
+        work / "segmenter.yaml",
+        SegmenterConfig,
+        {
+            "arms": list(arms),
+            "wrench_topics": list(seg.wrench_topics),
+            "taxonomy_profile": options.profile,
+            "stream_profile": options.stream_profile,
+        },
+    )
+    cls_params = write_params(
+        work / "classifier.yaml",
+        ClassifierConfig,
+        {
+            "model_file": cls_cfg.model_file,
+            "mode": options.mode,
+            "arms": list(arms),
+            "state_hold_s": options.state_hold_s,
+        },
+    )
+    return seg, cls_cfg, seg_params, cls_params
+
+
+def replay_eval(
+    bags: list[Path], model_path: Path | None, options: ReplayEvalOptions
+) -> dict[str, Any]:
+    """Run the live pipeline on `bags` and return the scores (see module doc).
+
+    Without a model (None) the classifier publishes "unknown"; latencies and drops still count.
+    """
+    if model_path is not None and not Path(model_path).is_file():
+        raise InputError("no such model file", model_path)
+    if options.rate <= 0:
+        raise InputError(f"rate must be > 0, got {options.rate}", field="rate")
+    trials = [read_trial_bag(b) for b in bags]
+    arms = trials[0].arms
+    for b, t in zip(bags, trials, strict=True):
+        if t.arms != arms:
+            raise InputError(f"arms {list(t.arms)} differ from the first bag's {list(arms)}", b)
+    domain_id = options.domain_id or lease_domain()
+    tmp = tempfile.TemporaryDirectory(prefix="rcbht-replay-")
+    work = Path(options.log_dir) if options.log_dir else Path(tmp.name)
+    work.mkdir(parents=True, exist_ok=True)
+    env = ros_env(domain_id, work / "ros_log")
+    seg, cls_cfg, seg_params, cls_params = _params(work, arms, model_path, options)
+    started = time.monotonic()
+    result: dict[str, Any] = {}
+    with environment(env):
+        procs: list[NodeProcess] = []
+        codes: dict[str, int | None] = {}
+        try:
+            procs.append(
+                NodeProcess("segmenter_node", seg_params, env, work / "segmenter_node.log")
+            )
+            procs.append(
+                NodeProcess("classifier_node", cls_params, env, work / "classifier_node.log")
+            )
+            with RosSession("rcbht_replay_eval", domain_id=domain_id) as ros:
+                qos = qos_profile(seg.qos_depth, "reliable")
+                observer = Observer(ros.node, seg, cls_cfg, qos)
+                player = BagPlayer(ros.node, qos)
+                all_messages = [list(bag_messages(b)) for b in bags]
+                for msgs in all_messages:
+                    player.prepare(msgs)
+                needed = [wrench_topic(a, arms) for a in arms] + [PHASE_TOPIC]
+                classifier_inputs = ["/" + t for t in observer.word_topics.values()] + [
+                    "/" + seg.applied_phase_topic
+                ]
+
+                matched = segmenter_matches(ros.node)
+
+                def ready() -> bool:
+                    # the graph shows the classifier's readers before the segmenter's writers
+                    # have matched them; words published in between would be lost, so the
+                    # segmenter's own /diagnostics must count both readers (observer, classifier)
+                    return (
+                        all(player.publishers[t].get_subscription_count() > 0 for t in needed)
+                        and all(s.get_publisher_count() > 0 for s in observer.subs)
+                        and all(ros.node.count_subscribers(t) >= 2 for t in classifier_inputs)
+                        and matched() >= 2
+                    )
+
+                wait_for_nodes(ready, options.startup_timeout, procs, "the nodes to connect")
+                result["startup_s"] = round(time.monotonic() - started, 2)
+                records = [
+                    _play_one(bag, msgs, stream_id, player, observer, procs, options, arms)
+                    for stream_id, (bag, msgs) in enumerate(zip(bags, all_messages, strict=True))
+                ]
+        finally:
+            for p in procs:  # both stop at once: a Ctrl-C of the harness ends within seconds
+                p.interrupt()
+            for p in procs:
+                codes[p.name] = p.stop()
+                if codes[p.name] != 0:  # the node log is in a temporary folder: keep its end
+                    result.setdefault("shutdown_logs", {})[p.name] = p.tail(40)
+            if not options.domain_id:
+                release_domain(domain_id)  # its nodes are gone
+    result.update(_score(records, trials, model_path, options, arms))
+    result.update(
+        {
+            "bags": [str(b) for b in bags],
+            "rate": options.rate,
+            "mode": options.mode,
+            "profile": options.profile,
+            "stream_profile": options.stream_profile,
+            "model": str(model_path),
+            "domain_id": domain_id,
+            "exit_codes": codes,
+            "clean_shutdown": all(c == 0 for c in codes.values()),
+            "wall_s": round(time.monotonic() - started, 2),
+        }
+    )
+    tmp.cleanup()
+    return result
+
+
+def _score(
+    records: list[BagRecord],
+    trials: list[Trial],
+    model_path: Path | None,
+    options: ReplayEvalOptions,
+    arms: tuple[str, ...],
+) -> dict[str, Any]:
+    """The scores, with the offline reference when asked for and a model was given."""
+    reference = None
+    if options.offline and model_path is not None:
+        reference = load_reference(model_path, options.profile, options.stream_profile)
+    return score(records, trials, arms, options.mode, reference)
+
+
+def _play_one(
+    bag: Path,
+    msgs: list[BagMessage],
+    stream_id: int,
+    player: BagPlayer,
+    observer: Observer,
+    procs: list[NodeProcess],
+    options: ReplayEvalOptions,
+    arms: tuple[str, ...],
+) -> BagRecord:
+    """Play one bag, wait until every verdict and end-of-stream arrived; return its record."""
+    observer.convert()
+    with observer.lock:
+        since = observer.obs.mark()
+    playback = Playback(bag)
+    t0 = time.monotonic()
+    player.play(msgs, rate=options.rate, on_publish=playback.on_publish)
+    playback.play_s = time.monotonic() - t0
+    n_subtasks = sum(1 for m in msgs if m.topic == PHASE_TOPIC) - 1  # minus the end event
+    if options.mode == "window":
+        n_subtasks = 0  # window mode issues no sub-task verdicts
+    obs = observer.obs
+
+    def progress() -> str:
+        return (
+            f"{len(observer.finals_since(since.beliefs))}/{n_subtasks} verdicts, end of stream "
+            f"{sorted(k[1:] for k in obs.ends if k[0] == stream_id)}, "
+            f"{playback.published} wrench published; received "
+            f"{len(obs.word_arrivals) - since.word_arrivals} word messages, "
+            f"{len(obs.beliefs) - since.beliefs} beliefs, "
+            f"{len(obs.states) - since.states} state changes, {len(obs.phases)} events"
+        )
+
+    wait_for_nodes(
+        lambda: (
+            observer.ended(stream_id, arms)
+            and len(observer.finals_since(since.beliefs)) >= n_subtasks
+        ),
+        options.drain_timeout,
+        procs,
+        f"the verdicts of {bag.name}",
+        progress,
+    )
+    observer.convert()
+    with observer.lock:
+        return bag_record(observer.obs, since, stream_id, arms, playback)
