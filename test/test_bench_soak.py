@@ -39,7 +39,7 @@ def test_wrench_cdr_is_what_rclpy_reads_and_writes() -> None:
 def test_playback_is_the_trial_bag_order(tmp_path: Path) -> None:
     """Samples, sub-task events and the end event come in a trial bag's order, re-stamped."""
     from rcbht_introspection.bench.ros import synthetic_trial, two_arm_trial
-    from rcbht_introspection.bench.soak import ARMS, playback
+    from rcbht_introspection.bench.soak_traffic import ARMS, playback
     from rcbht_introspection.io.bags import (
         PHASE_TOPIC,
         WRENCH_TYPE,
@@ -68,7 +68,7 @@ def test_playback_is_the_trial_bag_order(tmp_path: Path) -> None:
 
 
 def test_rss_growth_over_the_last_window() -> None:
-    from rcbht_introspection.bench.soak import growth
+    from rcbht_introspection.bench.process_watch import growth
 
     samples = [(0.0, 100.0, 0.0), (10.0, 150.0, 1.0), (20.0, 150.0, 2.0), (30.0, 153.0, 3.0)]
     g = growth(samples, 20.0)
