@@ -189,7 +189,7 @@ def test_engine_words_give_the_same_samples_as_golden(hiro_data: Path) -> None:
     """words='engine' (batch RCBHT on the wrench) splits into the same sub-task words."""
     trial = hiro_data / REAL / "20121127-HIROSA-S-30"
     engine, golden = load_samples([trial], "engine"), load_samples([trial], "golden")
-    from rcbht_introspection.grammar.encoding import compact_raw_features
+    from rcbht_introspection.grammar.encoding.compact import compact_raw_features
 
     assert [(s.subtask, s.start, s.end) for s in engine] == [
         (s.subtask, s.start, s.end) for s in golden

@@ -45,6 +45,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_live_eval(args: argparse.Namespace) -> int:
+    from rcbht_introspection.grammar.encoding.cache import SampleCache
     from rcbht_introspection.learn.data import find_inputs, load_trials
     from rcbht_introspection.learn.live import (
         load_live_config,
@@ -69,7 +70,12 @@ def run_live_eval(args: argparse.Namespace) -> int:
         trials = load_trials(train_paths, args.words)
         samples = [s for t in trials for s in t.samples]
         live = [s for v in trial_live_samples(train_paths, config, factory).values() for s in v]
-        kw = dict(classifier=args.classifier, encoding=args.encoding, random_state=args.seed)
+        kw = dict(
+            classifier=args.classifier,
+            encoding=args.encoding,
+            random_state=args.seed,
+            cache=SampleCache(),  # all models encode the same samples
+        )
         models["before"] = train_live_model(samples, live, None, **kw)
         models["after"] = train_live_model(samples, live, config, **kw)
         print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{len(live)} live")

@@ -38,6 +38,7 @@ def default_real_dir() -> Path:
 
 def classifier_accuracy(sim_dir: Path, folds: int = 4) -> dict[str, object]:
     """Trial-grouped k-fold SVM (compact encoding) accuracy of the sub-task classifier, if present."""
+    from rcbht_introspection.grammar.encoding.cache import SampleCache
     from rcbht_introspection.learn import data, models
 
     samples = data.load_samples([sim_dir], words="engine")
@@ -45,11 +46,14 @@ def classifier_accuracy(sim_dir: Path, folds: int = 4) -> dict[str, object]:
     if len(trials) < folds:
         return {"available": False, "why": f"only {len(trials)} trials"}
     correct = total = 0
+    cache = SampleCache()  # every fold encodes the same samples
     for k in range(folds):
         test = set(trials[k::folds])
         train = [s for s in samples if s.trial not in test]
         held = [s for s in samples if s.trial in test]
-        model = models.train_model(train, classifier="svm", encoding="compact", random_state=0)
+        model = models.train_model(
+            train, classifier="svm", encoding="compact", random_state=0, cache=cache
+        )
         predicted = model.predict_samples(held)
         correct += sum(p == s.subtask for p, s in zip(predicted, held, strict=True))
         total += len(held)

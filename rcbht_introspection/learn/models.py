@@ -15,7 +15,7 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 from sklearn.pipeline import Pipeline
@@ -23,12 +23,11 @@ from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVC
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.grammar.encoding import (
-    CompactEncoding,
-    PaperEncoding,
-    encoding_from_state,
-    make_encoding,
-)
+from rcbht_introspection.grammar.encoding.axes import AxisMemo
+from rcbht_introspection.grammar.encoding.cache import SampleCache
+from rcbht_introspection.grammar.encoding.compact import CompactEncoding
+from rcbht_introspection.grammar.encoding.paper import PaperEncoding
+from rcbht_introspection.grammar.encoding.registry import encoding_from_state, make_encoding
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn import CLASSIFIERS
@@ -130,6 +129,9 @@ class SubtaskModel:
     live: SubtaskModel | None = None
     """Optional head for running (unfinished) windows, trained with live-like windows
     (learn/live.py); final verdicts on finished sub-tasks always use this model itself."""
+    takes_axis_memo: ClassVar[bool] = True
+    """Its predict calls take `memo=` (an AxisMemo): the belief tracker passes the one it owns
+    for its running windows (other models it is given need not)."""
 
     def head(self, final: bool) -> SubtaskModel:
         """The model for a finished sub-task (final) or a running window (the live head if any)."""
@@ -145,16 +147,23 @@ class SubtaskModel:
         """Sub-task names in the column order of predict_proba_samples."""
         return [str(c) for c in self.estimator.classes_]
 
-    def features(self, samples: Sequence[SubtaskSample]) -> np.ndarray:
-        return self.encoder.transform(samples)
+    def features(
+        self, samples: Sequence[SubtaskSample], memo: AxisMemo | None = None
+    ) -> np.ndarray:
+        """The encoded samples; `memo`: they are running windows of the memo owner's stream."""
+        return self.encoder.transform(samples, memo)
 
-    def predict_proba_samples(self, samples: Sequence[SubtaskSample]) -> np.ndarray:
+    def predict_proba_samples(
+        self, samples: Sequence[SubtaskSample], memo: AxisMemo | None = None
+    ) -> np.ndarray:
         """(n, k) class probabilities, columns in classes_ order."""
-        return svm_predict_proba(self.estimator, self.features(samples))
+        return svm_predict_proba(self.estimator, self.features(samples, memo))
 
-    def predict_samples(self, samples: Sequence[SubtaskSample]) -> list[str]:
+    def predict_samples(
+        self, samples: Sequence[SubtaskSample], memo: AxisMemo | None = None
+    ) -> list[str]:
         """The predicted sub-task of each sample."""
-        return [str(c) for c in self.estimator.predict(self.features(samples))]
+        return [str(c) for c in self.estimator.predict(self.features(samples, memo))]
 
     def partial_fit_samples(self, samples: Sequence[SubtaskSample]) -> SubtaskModel:
         """Online update with a mini-batch (Mondrian only; the encoding stays as fitted)."""
@@ -172,18 +181,20 @@ def train_model(
     taxonomy_profile: str = "reference",
     n_estimators: int = 100,
     augment_prefixes: Sequence[float] = (),
+    cache: SampleCache | None = None,
 ) -> SubtaskModel:
     """Fit the encoding and the classifier on `samples` (training data only).
 
     `augment_prefixes` (e.g. (0.25, 0.5, 0.75)) also trains on those first fractions of every
     sub-task, so a live classifier is not surprised by a sub-task that has only just begun.
+    `cache`: a SampleCache shared by models trained on the same samples (else the encoding's own).
     """
     if classifier not in CLASSIFIERS:
         raise InputError(f"unknown classifier {classifier!r} (known: {', '.join(CLASSIFIERS)})")
     if not samples:
         raise InputError("no training samples")
     samples = list(samples) + [prefix_sample(s, f) for f in augment_prefixes for s in samples]
-    encoder = make_encoding(encoding).fit(samples)
+    encoder = make_encoding(encoding, cache).fit(samples)
     X = encoder.transform(samples)
     y = [s.subtask for s in samples]
     if classifier in ("svm", "svm-tuned"):
