@@ -32,7 +32,8 @@ from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.hiro import read_trial
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.live import LiveAugmentConfig, stream_factory
-from rcbht_introspection.learn.models import svm_predict_proba, train_model
+from rcbht_introspection.learn.models import train_model
+from rcbht_introspection.learn.svm import svm_predict_proba
 from rcbht_introspection.live.replay import stream_trial
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
 

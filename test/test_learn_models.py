@@ -15,7 +15,8 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.io.hiro import find_trials
 from rcbht_introspection.learn.data import load_samples, load_trials
-from rcbht_introspection.learn.models import load_model, save_model, train_model
+from rcbht_introspection.learn.model_file import load_model, save_model
+from rcbht_introspection.learn.models import train_model
 
 REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 # S-01..S-21 have a long rotation, S-22..S-46 a 5 ms one: take both kinds

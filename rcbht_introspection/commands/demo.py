@@ -77,7 +77,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from rcbht_introspection.io.hiro import find_trials, read_trial
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.live import live_training
-    from rcbht_introspection.learn.models import save_model
+    from rcbht_introspection.learn.model_file import save_model
     from rcbht_introspection.nodes.replay_eval import ReplayEvalOptions, replay_eval, summary
     from rcbht_introspection.plots.timeline import plot_timelines
 

@@ -54,7 +54,7 @@ def run_live_eval(args: argparse.Namespace) -> int:
         train_live_model,
         trial_live_samples,
     )
-    from rcbht_introspection.learn.models import load_model
+    from rcbht_introspection.learn.model_file import load_model
     from rcbht_introspection.live.replay import replay_beliefs, replay_summary, stream_trial
 
     paths = find_inputs(args.inputs)

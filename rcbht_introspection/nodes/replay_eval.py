@@ -584,7 +584,7 @@ def _score(
     model = None
     factory = None
     if options.offline and model_path is not None:
-        from rcbht_introspection.learn.models import load_model
+        from rcbht_introspection.learn.model_file import load_model
         from rcbht_introspection.live.segmenter import arm_stream_factory
 
         model = load_model(model_path)
