@@ -152,7 +152,7 @@ def test_record_a_replay_between_processes(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("source", SOURCES)
 def test_train_accepts_bags(request: pytest.FixtureRequest, tmp_path: Path, source: str) -> None:
-    from rcbht_introspection.learn.models import load_model
+    from rcbht_introspection.learn.model_file import load_model
 
     names = [f"20121127-HIROSA-S-{i:02d}" for i in (1, 2, 3)]
     for i, folder in enumerate(trial_folders(request, source, names, [0, 1, 2])):

@@ -16,14 +16,15 @@ from conftest import SOURCES, golden_or_engine, trial_folders
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rcbht_introspection.grammar.encoding import (
+from rcbht_introspection.grammar.encoding.axes import (
     NUMPY_MIN_WORDS,
-    VALUE_KEYS,
     AxisMemo,
     _axis_features,
     _axis_features_small,
-    _SampleCache,
-    axis_memo,
+)
+from rcbht_introspection.grammar.encoding.cache import SampleCache as _SampleCache
+from rcbht_introspection.grammar.encoding.compact import (
+    VALUE_KEYS,
     compact_raw_features,
     compact_raw_features_reference,
 )
@@ -31,7 +32,8 @@ from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.hiro import read_trial
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.live import LiveAugmentConfig, stream_factory
-from rcbht_introspection.learn.models import svm_predict_proba, train_model
+from rcbht_introspection.learn.models import train_model
+from rcbht_introspection.learn.svm import svm_predict_proba
 from rcbht_introspection.live.replay import stream_trial
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
 
@@ -109,8 +111,7 @@ def test_axis_memo_gives_the_fresh_features_of_every_running_window(
         words.add(w)
         for mode, start in (("boundary", 0.0 if t < 20 else 20.0), ("window", max(0.0, t - 2.0))):
             sample = window_sample(words, start, t, ordered=True)
-            with axis_memo(memos[mode]):
-                memoised = compact_raw_features(sample, ["R"])
+            memoised = compact_raw_features(sample, ["R"], memos[mode])
             assert _same(memoised, compact_raw_features(sample, ["R"])), (i, mode)
         longest = max(longest, *(len(e.words) for e in memos["boundary"].entries.values()))
     assert longest >= 2 * NUMPY_MIN_WORDS  # the long sequences grew through the array path

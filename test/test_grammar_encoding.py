@@ -10,12 +10,9 @@ import pytest
 from conftest import SIM_SUCCESS
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.grammar.encoding import (
-    CompactEncoding,
-    PaperEncoding,
-    encoding_from_state,
-    resample_labels,
-)
+from rcbht_introspection.grammar.encoding.compact import CompactEncoding
+from rcbht_introspection.grammar.encoding.paper import PaperEncoding, resample_labels
+from rcbht_introspection.grammar.encoding.registry import encoding_from_state
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word

@@ -11,7 +11,7 @@ from conftest import REAL, SIM_FAILURE, SIM_JAMMED, SOURCES, dataset_root, gener
 from rcbht_introspection.cli import main
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.evaluate import Protocol, evaluate
-from rcbht_introspection.learn.models import load_model
+from rcbht_introspection.learn.model_file import load_model
 
 KEYS = {"steady_state_accuracy", "curve", "per_class_accuracy", "confusion_matrix", "best_of_splits",
         "fit_seconds", "predict_ms", "duration_baseline", "prefix_accuracy", "without_near_empty"}  # fmt: skip

@@ -15,7 +15,8 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.io.hiro import find_trials
 from rcbht_introspection.learn.data import load_samples, load_trials
-from rcbht_introspection.learn.models import load_model, save_model, train_model
+from rcbht_introspection.learn.model_file import load_model, save_model
+from rcbht_introspection.learn.models import train_model
 
 REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 # S-01..S-21 have a long rotation, S-22..S-46 a 5 ms one: take both kinds
@@ -189,7 +190,7 @@ def test_engine_words_give_the_same_samples_as_golden(hiro_data: Path) -> None:
     """words='engine' (batch RCBHT on the wrench) splits into the same sub-task words."""
     trial = hiro_data / REAL / "20121127-HIROSA-S-30"
     engine, golden = load_samples([trial], "engine"), load_samples([trial], "golden")
-    from rcbht_introspection.grammar.encoding import compact_raw_features
+    from rcbht_introspection.grammar.encoding.compact import compact_raw_features
 
     assert [(s.subtask, s.start, s.end) for s in engine] == [
         (s.subtask, s.start, s.end) for s in golden

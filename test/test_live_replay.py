@@ -23,7 +23,7 @@ from rcbht_introspection.learn.live import (
     train_live_model,
     trial_live_samples,
 )
-from rcbht_introspection.learn.models import load_model, save_model
+from rcbht_introspection.learn.model_file import load_model, save_model
 from rcbht_introspection.live import offline
 from rcbht_introspection.live.belief import BeliefTracker
 from rcbht_introspection.live.replay import replay_beliefs, stream_trial

@@ -232,7 +232,7 @@ def test_a_bag_record_holds_only_its_stream_and_what_came_after_the_mark() -> No
 def test_words_and_verdicts_against_the_offline_run(tmp_path: Path) -> None:
     """The offline reference: the same words match; one word missing is named."""
     from rcbht_introspection.bench.stops import toy_model
-    from rcbht_introspection.learn.models import load_model
+    from rcbht_introspection.learn.model_file import load_model
     from rcbht_introspection.live import offline
     from rcbht_introspection.live.segmenter import arm_stream_factory
 

@@ -20,7 +20,8 @@ HELD_OUT = (41, 44)
 @pytest.fixture(scope="module")
 def model(hiro_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
     from rcbht_introspection.learn.data import load_samples
-    from rcbht_introspection.learn.models import save_model, train_model
+    from rcbht_introspection.learn.model_file import save_model
+    from rcbht_introspection.learn.models import train_model
 
     real = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS"
     folders = [real / f"20121127-HIROSA-S-{i:02d}" for i in TRAIN]

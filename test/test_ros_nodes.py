@@ -91,7 +91,8 @@ def test_classifier_without_usable_model_says_unknown(
         path.write_text("this is not a model\n")
     if model == "other_profile":
         from rcbht_introspection.grammar.split import SubtaskSample
-        from rcbht_introspection.learn.models import save_model, train_model
+        from rcbht_introspection.learn.model_file import save_model
+        from rcbht_introspection.learn.models import train_model
         from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
 
         samples = []

@@ -68,7 +68,7 @@ def _model(out_dir: Path) -> Path | None:
     hiro = shared_hiro()
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.live import live_training
-    from rcbht_introspection.learn.models import save_model
+    from rcbht_introspection.learn.model_file import save_model
 
     if hiro is None:
         return None

@@ -119,7 +119,8 @@ def toy_model(
 ) -> Path:
     """A small sub-task model (one hand-made Fz word per sample) for a node under test."""
     from rcbht_introspection.grammar.split import SubtaskSample
-    from rcbht_introspection.learn.models import save_model, train_model
+    from rcbht_introspection.learn.model_file import save_model
+    from rcbht_introspection.learn.models import train_model
     from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
 
     samples = []

@@ -65,7 +65,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     from rcbht_introspection.io.bags import write_trial_bag
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.live import live_training
-    from rcbht_introspection.learn.models import save_model
+    from rcbht_introspection.learn.model_file import save_model
     from rcbht_introspection.plots.timeline import plot_timelines
     from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
     from rcbht_introspection.replay.scoring import summary

@@ -91,7 +91,7 @@ def _common(parser: argparse.ArgumentParser) -> None:
 
 def run_train(args: argparse.Namespace) -> int:
     from rcbht_introspection.learn.live import live_training
-    from rcbht_introspection.learn.models import save_model
+    from rcbht_introspection.learn.model_file import save_model
 
     trials = load_trials(args.inputs, args.words)
     samples = [s for t in trials for s in t.samples]

@@ -46,6 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_live_eval(args: argparse.Namespace) -> int:
+    from rcbht_introspection.grammar.encoding.cache import SampleCache
     from rcbht_introspection.learn.data import find_inputs, load_trials
     from rcbht_introspection.learn.live import (
         load_live_config,
@@ -54,7 +55,7 @@ def run_live_eval(args: argparse.Namespace) -> int:
         train_live_model,
         trial_live_samples,
     )
-    from rcbht_introspection.learn.models import load_model
+    from rcbht_introspection.learn.model_file import load_model
     from rcbht_introspection.live.replay import replay_beliefs, replay_summary, stream_trial
 
     paths = find_inputs(args.inputs)
@@ -70,7 +71,12 @@ def run_live_eval(args: argparse.Namespace) -> int:
         trials = load_trials(train_paths, args.words)
         samples = [s for t in trials for s in t.samples]
         live = [s for v in trial_live_samples(train_paths, config, factory).values() for s in v]
-        kw = dict(classifier=args.classifier, encoding=args.encoding, random_state=args.seed)
+        kw = dict(
+            classifier=args.classifier,
+            encoding=args.encoding,
+            random_state=args.seed,
+            cache=SampleCache(),  # all models encode the same samples
+        )
         models["before"] = train_live_model(samples, live, None, **kw)
         models["after"] = train_live_model(samples, live, config, **kw)
         print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{len(live)} live")

@@ -22,6 +22,7 @@ from sklearn.ensemble import RandomForestClassifier
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import Encoding
+from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn import ClassifierKind
@@ -131,6 +132,7 @@ def evaluate(
     n_near_empty = sum(near_empty(s) for t in complete for s in t.samples)
     live = _live_windows(complete) if protocol.live_augment or protocol.live_score else {}
     live_acc: list[float] = []
+    cache = SampleCache()  # every model here encodes the same samples: compute each once
 
     for perm in range(protocol.permutations):
         rng = np.random.default_rng(protocol.seed + perm)
@@ -144,7 +146,7 @@ def evaluate(
             model = train_model(
                 train_samples, protocol.classifier, protocol.encoding,
                 random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
-                augment_prefixes=protocol.augment_prefixes,
+                augment_prefixes=protocol.augment_prefixes, cache=cache,
             )  # fmt: skip
             elapsed = time.perf_counter() - began
             curve[perm, j] = _accuracy(model.predict_samples(val_samples), val_samples)
@@ -157,7 +159,7 @@ def evaluate(
                 variant = train_model(
                     kept, protocol.classifier, protocol.encoding,
                     random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
-                    augment_prefixes=protocol.augment_prefixes,
+                    augment_prefixes=protocol.augment_prefixes, cache=cache,
                 )  # fmt: skip
                 i = tail_steps.index(k)
                 variant_curve[perm, i] = _accuracy(variant.predict_samples(val_kept), val_kept)
@@ -189,7 +191,7 @@ def evaluate(
                     head = train_model(
                         live_train, protocol.classifier, protocol.encoding,
                         random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
-                        augment_prefixes=protocol.augment_prefixes,
+                        augment_prefixes=protocol.augment_prefixes, cache=cache,
                     )  # fmt: skip
                 windows = [s for t in validation for s in live[t.trial]]
                 live_acc.append(_accuracy(head.predict_samples(windows), windows))
@@ -284,11 +286,14 @@ def trial_kfold_accuracy(dataset: Path, folds: int = 4) -> dict[str, object]:
     if len(trials) < folds:
         return {"available": False, "why": f"only {len(trials)} trials"}
     correct = total = 0
+    cache = SampleCache()  # every fold encodes the same samples
     for k in range(folds):
         test = set(trials[k::folds])
         train = [s for s in samples if s.trial not in test]
         held = [s for s in samples if s.trial in test]
-        model = train_model(train, classifier="svm", encoding="compact", random_state=0)
+        model = train_model(
+            train, classifier="svm", encoding="compact", random_state=0, cache=cache
+        )
         predicted = model.predict_samples(held)
         correct += sum(p == s.subtask for p, s in zip(predicted, held, strict=True))
         total += len(held)

@@ -160,8 +160,10 @@ def train_live_model(
     Final verdicts (finished sub-tasks) keep the complete-sub-task model, so they and the
     steady-state accuracy are unchanged; running windows go to the live head (model.head).
     """
+    from rcbht_introspection.grammar.encoding.cache import SampleCache
     from rcbht_introspection.learn.models import train_model
 
+    train_kwargs.setdefault("cache", SampleCache())  # both models encode `samples`
     model = train_model(samples, **train_kwargs)
     if config is not None:
         model.live = train_model([*samples, *live], **train_kwargs)

@@ -9,6 +9,7 @@ the trees' hierarchically smoothed predictive distributions. All trees share one
 from __future__ import annotations
 
 import numbers
+from dataclasses import dataclass
 
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
@@ -24,8 +25,11 @@ FEATURE_DTYPE = np.float32
 encoding); test points are cast the same way, so boxes and points compare exactly."""
 
 
-class _NodePool:
-    """Flat arrays of every node of every tree; grows by doubling."""
+class NodePool:
+    """Flat arrays of every node of every tree; grows by doubling.
+
+    Public for the model file (learn/mondrian_state.py), which stores and rebuilds it.
+    """
 
     def __init__(self, n_features: int, n_classes: int, capacity: int = 256) -> None:
         self.size = 0
@@ -64,6 +68,25 @@ class _NodePool:
             new[: len(old)] = old
             setattr(self, name, new)
         self.points.extend([None] * (capacity - len(self.points)))
+
+
+@dataclass
+class LearnedState:
+    """What a fitted forest learned beyond its parameters: the forest's own objects, not copies.
+
+    Handed out and taken back by the forest for its model file (learn/mondrian_state.py), so
+    online training continues where it stopped.
+    """
+
+    pool: NodePool
+    roots: np.ndarray
+    """Root node of each tree (int32)."""
+    X: np.ndarray
+    """Every training point so far (FEATURE_DTYPE); paused leaves index into it."""
+    y: np.ndarray
+    """Class index of each training point (intp)."""
+    rng: np.random.Generator
+    """The random stream online updates continue with."""
 
 
 class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
@@ -146,13 +169,34 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self._update_posterior()
         return self
 
+    # ---------------------------------------------------------------- model files
+    def learned_state(self) -> LearnedState:
+        """The fitted state beyond the parameters (for the model file; shared, not copied)."""
+        check_is_fitted(self, "classes_")
+        return LearnedState(self._pool, self._roots, self._X, self._y, self._rng)
+
+    def restore(
+        self, classes: np.ndarray, n_features: int, state: LearnedState
+    ) -> MondrianForestClassifier:
+        """Become the fitted forest `state` describes (a loaded model file); returns self."""
+        self.classes_ = classes
+        self.n_features_in_ = n_features
+        self._rng = state.rng
+        self._pool = state.pool
+        self._roots = state.roots
+        self._X = state.X
+        self._y = state.y
+        self.gamma_ = self.discount_factor * n_features
+        self._update_posterior()
+        return self
+
     # ---------------------------------------------------------------- training
     def _start(self, n_features: int) -> None:
         """Reset the forest: empty node pool, no data, a fresh random stream."""
         self._rng = np.random.default_rng(
             check_random_state(self.random_state).randint(np.iinfo(np.int32).max)
         )
-        self._pool = _NodePool(n_features, len(self.classes_), capacity=32 * self.n_estimators)
+        self._pool = NodePool(n_features, len(self.classes_), capacity=32 * self.n_estimators)
         self._roots = np.full(self.n_estimators, NO_NODE, dtype=np.int32)
         self._X = np.empty((0, n_features), dtype=FEATURE_DTYPE)
         self._y = np.empty(0, dtype=np.intp)

@@ -11,16 +11,14 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Literal, get_args
+from typing import Literal, get_args
 
 import numpy as np
 
+from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.io.trial import AXES, SUBTASKS
 from rcbht_introspection.live.join import WordLedger
 from rcbht_introspection.taxonomy.words import LEVELS, Level, TrialWords, Word
-
-if TYPE_CHECKING:  # the encodings pull in scikit-learn: imported when a model is used
-    from rcbht_introspection.grammar.encoding import AxisMemo
 
 UNKNOWN = "unknown"
 BeliefMode = Literal["boundary", "window"]
@@ -99,8 +97,9 @@ class BeliefTracker:
         """Windows starting before this stream time overlap lost words (a late join)."""
         self._ordered = True
         """Every axis sequence has non-decreasing starts and ends (lets windows bisect)."""
-        self._axis_memo: AxisMemo | None = None
-        """The running window's per-axis compact features (grammar.encoding.AxisMemo)."""
+        self._axis_memo = AxisMemo()
+        """This stream's running-window compact features per axis (grammar/encoding/axes.py):
+        owned here, passed to the predict calls of a model that takes one (`takes_axis_memo`)."""
 
     # --- input -------------------------------------------------------------------------------
     def add_words(
@@ -200,7 +199,6 @@ class BeliefTracker:
                 if w.end >= start and w.start <= end
             )
             return Belief(UNKNOWN, (), (), start, end, self.mode, phase, final, n)
-        from rcbht_introspection.grammar.encoding import AxisMemo, axis_memo, forget_sample
         from rcbht_introspection.grammar.split import window_sample
 
         sample = window_sample(
@@ -217,23 +215,18 @@ class BeliefTracker:
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
         # a running window goes to the model's live head when it has one (learn/live.py)
         model = self.model.head(final) if hasattr(self.model, "head") else self.model
-        if self._axis_memo is None:
-            self._axis_memo = AxisMemo()
+        memo = {"memo": self._axis_memo} if getattr(model, "takes_axis_memo", False) else {}
         try:
-            with axis_memo(self._axis_memo):
-                proba = np.asarray(model.predict_proba_samples([sample]))[0]  # type: ignore[attr-defined]
+            proba = np.asarray(model.predict_proba_samples([sample], **memo))[0]  # type: ignore[attr-defined]
             if final:
                 # a verdict is the model's own prediction (as offline evaluation uses it), which
                 # for a probabilistic SVM need not be the arg-max of its probabilities
-                verdict = str(model.predict_samples([sample])[0])  # type: ignore[attr-defined]
+                verdict = str(model.predict_samples([sample], **memo)[0])  # type: ignore[attr-defined]
             else:
                 verdict = self.classes[int(np.argmax(proba))]  # live: one model call
         except Exception as exc:  # a bad model must not stop the node
             self.last_error = f"{type(exc).__name__}: {exc}"
             return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
-        finally:
-            # each window is a new sample: caching it would only grow memory and GC pauses
-            forget_sample(sample)
         return Belief(verdict, self.classes, tuple(float(p) for p in proba), **base)
 
     def window(self) -> tuple[float, float, str]:

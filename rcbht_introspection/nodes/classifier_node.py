@@ -17,7 +17,7 @@ from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from std_msgs.msg import String
 
-from rcbht_introspection.learn.models import load_subtask_model
+from rcbht_introspection.learn.model_file import load_subtask_model
 from rcbht_introspection.live.belief import (
     UNKNOWN,
     Belief,

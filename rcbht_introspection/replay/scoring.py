@@ -17,7 +17,7 @@ import numpy as np
 
 from rcbht_introspection.io.bags import END_PHASE, WRENCH_TYPE, BagMessage, decode_wrench
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.learn.models import load_model
+from rcbht_introspection.learn.model_file import load_model
 from rcbht_introspection.live import offline
 from rcbht_introspection.live.belief import Belief, BeliefMode
 from rcbht_introspection.live.segmenter import arm_stream_factory

@@ -1,0 +1,210 @@
+"""The safe sub-task model file: loading never executes code.
+
+A model file is a NumPy .npz read with allow_pickle=False: a JSON header (format version,
+classifier, encoding with its fitted parameters, class names, taxonomy profile, SHA-256 of all
+content) and plain arrays. The SVM pipeline is stored with skops and loaded with an explicit
+trusted-type list, the Mondrian forest as its node arrays (mondrian_state.py).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar.encoding.registry import encoding_from_state
+from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.learn.models import SubtaskModel
+from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
+
+FORMAT = "rcbht-subtask-model"
+FORMAT_VERSION = 1
+SVM_TRUSTED_TYPES: tuple[str, ...] = (
+    "sklearn.pipeline.Pipeline",
+    "sklearn.preprocessing._data.StandardScaler",
+    "sklearn.svm._classes.SVC",
+)
+"""The only types a stored SVM pipeline may contain (checked before skops builds anything)."""
+LIVE_PREFIX = "live__"
+"""Array-name prefix of the live head's arrays in a model file."""
+
+
+def _checksum(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
+    """SHA-256 over the header (without its checksum) and every array's name, dtype, shape, bytes."""
+    digest = hashlib.sha256()
+    digest.update(
+        json.dumps({k: v for k, v in header.items() if k != "checksum"}, sort_keys=True).encode()
+    )
+    for name in sorted(arrays):
+        value = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}|{value.dtype.str}|{value.shape}".encode())
+        digest.update(value.tobytes())
+    return digest.hexdigest()
+
+
+def save_model(model: SubtaskModel, path: Path | str) -> Path:
+    """Write `model` as a safe .npz model file (no pickled objects)."""
+    path = Path(path)
+    header, arrays = _model_parts(model)
+    if model.live is not None:
+        header["live"], live_arrays = _model_parts(model.live)
+        arrays.update({LIVE_PREFIX + k: v for k, v in live_arrays.items()})
+    header["checksum"] = _checksum(header, arrays)
+    payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("wb") as handle:
+        np.savez_compressed(handle, **payload)
+    return path
+
+
+def _model_parts(model: SubtaskModel) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Header fields and arrays of one model (without checksum)."""
+    header: dict[str, Any] = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "classifier": model.classifier,
+        "encoding": model.encoder.to_state(),
+        "classes": model.classes_,
+        "taxonomy_profile": model.taxonomy_profile,
+        "random_state": model.random_state,
+    }
+    if model.training:
+        header["training"] = model.training
+    if model.classifier in ("svm", "svm-tuned"):
+        import skops.io as sio
+
+        arrays = {"svm_skops": np.frombuffer(sio.dumps(model.estimator), dtype=np.uint8)}
+    else:
+        header["mondrian"], arrays = forest_arrays(model.estimator)
+    return header, arrays
+
+
+def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskModel:
+    """Read a model file; a corrupt, tampered, foreign or wrong-version file is a one-line InputError."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {name: npz[name] for name in npz.files}
+    except FileNotFoundError:
+        raise InputError("model file not found", path) from None
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise InputError(f"not a readable model file ({type(exc).__name__})", path) from None
+    if "header" not in arrays:
+        raise InputError("not an rcbht model file (no header)", path)
+    try:
+        header = json.loads(arrays.pop("header").tobytes().decode())
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise InputError("model header is not valid JSON", path, field="header") from None
+    if not isinstance(header, dict) or header.get("format") != FORMAT:
+        raise InputError("not an rcbht sub-task model file", path, field="format")
+    if header.get("format_version") != FORMAT_VERSION:
+        raise InputError(
+            f"model format version {header.get('format_version')!r} is not supported "
+            f"(this version reads {FORMAT_VERSION}); retrain with `rcbht train`",
+            path,
+            field="format_version",
+        )
+    if header.get("checksum") != _checksum(header, arrays):
+        raise InputError(
+            "checksum mismatch: the model file is corrupt or was modified", path, field="checksum"
+        )
+    main = {k: v for k, v in arrays.items() if not k.startswith(LIVE_PREFIX)}
+    model = _model_from_parts(header, main, path, expect_encoding)
+    if isinstance(header.get("live"), dict):
+        live = {k[len(LIVE_PREFIX) :]: v for k, v in arrays.items() if k.startswith(LIVE_PREFIX)}
+        model.live = _model_from_parts(header["live"], live, path, expect_encoding)
+    return model
+
+
+def _model_from_parts(
+    header: dict[str, Any], arrays: dict[str, np.ndarray], path: Path, expect_encoding: str | None
+) -> SubtaskModel:
+    """One model from its header fields and arrays (the checksum is already verified)."""
+    encoder = encoding_from_state(header.get("encoding") or {})
+    if expect_encoding is not None and encoder.name != expect_encoding:
+        raise InputError(
+            f"model uses the {encoder.name!r} encoding, expected {expect_encoding!r}",
+            path,
+            field="encoding",
+        )
+    classifier = header.get("classifier")
+    try:
+        if classifier in ("svm", "svm-tuned"):
+            import skops.io as sio
+
+            data = arrays["svm_skops"].tobytes()
+            untrusted = [
+                t for t in sio.get_untrusted_types(data=data) if t not in SVM_TRUSTED_TYPES
+            ]
+            if untrusted:
+                raise InputError(f"SVM holds untrusted types {untrusted}", path, field="svm_skops")
+            estimator: Any = sio.loads(data, trusted=list(SVM_TRUSTED_TYPES))
+        elif classifier == "mondrian":
+            estimator = forest_from_arrays(header["mondrian"], arrays)
+        else:
+            raise InputError(f"unknown classifier {classifier!r}", path, field="classifier")
+    except InputError:
+        raise
+    except (KeyError, ValueError, TypeError, IndexError) as exc:
+        raise InputError(
+            f"inconsistent model content: {exc}", path, field=str(classifier)
+        ) from None
+    if [str(c) for c in estimator.classes_] != header.get("classes"):
+        raise InputError("class names differ from the header", path, field="classes")
+    return SubtaskModel(
+        classifier,
+        encoder,
+        estimator,
+        str(header.get("taxonomy_profile", "reference")),
+        int(header.get("random_state", 0)),
+        dict(header.get("training") or {}),
+    )
+
+
+def model_summary(path: Path | str) -> dict[str, Any]:
+    """Header of a model file (for `rcbht train` output and diagnostics)."""
+    model = load_model(path)
+    return {
+        "classifier": model.classifier,
+        "encoding": model.encoding,
+        "classes": model.classes_,
+        "taxonomy_profile": model.taxonomy_profile,
+        "n_features": model.encoder.n_features,
+        "training": model.training,
+    }
+
+
+def load_subtask_model(path: str, expected_profile: str = "") -> tuple[object | None, str]:
+    """(model, '') for a usable sub-task model file, else (None, why it cannot be used)."""
+    if not path:
+        return None, "no model file given (parameter model_file)"
+    try:
+        model = load_model(path)
+    except InputError as exc:
+        return None, str(exc)
+    except OSError as exc:
+        return None, f"{path}: cannot read: {exc.strerror}"
+    classes = [str(c) for c in getattr(model, "classes_", [])]
+    if not classes or not set(classes) <= set(SUBTASKS):
+        return None, f"{path}: model classes {classes} are not sub-tasks {list(SUBTASKS)}"
+    profile = str(getattr(model, "taxonomy_profile", ""))
+    if expected_profile and profile != expected_profile:
+        return None, (
+            f"{path}: model was trained with taxonomy profile {profile!r}, "
+            f"the segmenter uses {expected_profile!r}"
+        )
+    return model, ""
+
+
+__all__ = [
+    "FORMAT_VERSION",
+    "load_model",
+    "load_subtask_model",
+    "model_summary",
+    "save_model",
+]
