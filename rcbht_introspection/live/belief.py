@@ -11,11 +11,12 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import Literal, get_args
+from typing import Any, Literal, Protocol, get_args
 
 import numpy as np
 
 from rcbht_introspection.grammar.encoding.axes import AxisMemo
+from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.trial import AXES, SUBTASKS
 from rcbht_introspection.live.join import WordLedger
 from rcbht_introspection.taxonomy.words import LEVELS, Level, TrialWords, Word
@@ -52,12 +53,24 @@ class _Segment:
     end: float | None = None
 
 
+class SampleClassifier(Protocol):
+    """What the tracker asks of a model: a SubtaskModel (learn/models.py) or a stand-in with
+    these members. A model may also offer `head(final)` and take an AxisMemo (`takes_axis_memo`)."""
+
+    @property
+    def classes_(self) -> Sequence[Any]: ...
+
+    def predict_proba_samples(self, samples: list[SubtaskSample]) -> Any: ...
+
+    def predict_samples(self, samples: list[SubtaskSample]) -> Any: ...
+
+
 class BeliefTracker:
     """Collects words, tracks sub-task events and classifies windows with a SubtaskModel."""
 
     def __init__(
         self,
-        model: object | None,
+        model: SampleClassifier | None,
         mode: BeliefMode = "boundary",
         window_s: float = 2.0,
         subtasks: Sequence[str] = SUBTASKS,
@@ -73,7 +86,7 @@ class BeliefTracker:
         self.end_phases = tuple(end_phases)
         self.trial = trial
         self.classes: tuple[str, ...] = (
-            tuple(str(c) for c in model.classes_) if model is not None else ()  # type: ignore[attr-defined]
+            tuple(str(c) for c in model.classes_) if model is not None else ()
         )
         self.last_error: str | None = None
         self.reset()
@@ -199,35 +212,39 @@ class BeliefTracker:
                 if w.end >= start and w.start <= end
             )
             return Belief(UNKNOWN, (), (), start, end, self.mode, phase, final, n)
-        from rcbht_introspection.grammar.split import window_sample
-
         sample = window_sample(
             self.words, start, end, subtask=phase, trial=self.trial, ordered=self._ordered
         )
         n = sum(
-            len(ws)
+            len(seq)
             for lv in sample.words.words.values()
             for ws in lv.values()
-            for ws in ws.values()
+            for seq in ws.values()
         )
-        base = dict(start=start, end=end, mode=self.mode, phase=phase, final=final, n_words=n)
+
+        def belief(subtask: str, probabilities: tuple[float, ...]) -> Belief:
+            return Belief(
+                subtask, self.classes, probabilities, start, end, self.mode, phase, final, n
+            )
+
         if self.model is None or n == 0:
-            return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
-        # a running window goes to the model's live head when it has one (learn/live.py)
-        model = self.model.head(final) if hasattr(self.model, "head") else self.model
+            return belief(UNKNOWN, (0.0,) * len(self.classes))
+        # a running window goes to the model's live head when it has one (learn/live.py); the
+        # optional members (head, memo) are looked up, so the model is duck-typed from here
+        model: Any = self.model.head(final) if hasattr(self.model, "head") else self.model
         memo = {"memo": self._axis_memo} if getattr(model, "takes_axis_memo", False) else {}
         try:
-            proba = np.asarray(model.predict_proba_samples([sample], **memo))[0]  # type: ignore[attr-defined]
+            proba = np.asarray(model.predict_proba_samples([sample], **memo))[0]
             if final:
                 # a verdict is the model's own prediction (as offline evaluation uses it), which
                 # for a probabilistic SVM need not be the arg-max of its probabilities
-                verdict = str(model.predict_samples([sample], **memo)[0])  # type: ignore[attr-defined]
+                verdict = str(model.predict_samples([sample], **memo)[0])
             else:
                 verdict = self.classes[int(np.argmax(proba))]  # live: one model call
         except Exception as exc:  # a bad model must not stop the node
             self.last_error = f"{type(exc).__name__}: {exc}"
-            return Belief(UNKNOWN, self.classes, (0.0,) * len(self.classes), **base)
-        return Belief(verdict, self.classes, tuple(float(p) for p in proba), **base)
+            return belief(UNKNOWN, (0.0,) * len(self.classes))
+        return belief(verdict, tuple(float(p) for p in proba))
 
     def window(self) -> tuple[float, float, str]:
         """(start, end, phase) of the current window."""
@@ -274,7 +291,7 @@ class BeliefTracker:
         None while a word is missing that may still arrive or be proven lost (a verdict must
         not rest on part of a sub-task's words; call `account_losses` first).
         """
-        out = []
+        out: list[Belief] = []
         if any(ledger.has_gap for ledger in self.ledgers.values()):
             return out
         while self._issued < len(self.segments):
