@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
 
 from rcbht_introspection.errors import InputError
@@ -42,6 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `rcbht` console script."""
     command = "rcbht"
+    # SIGTERM (a supervisor, `kill`) takes Ctrl-C's path, so the finally blocks that stop node
+    # processes run; commands that install a StopSignal (bag record/replay) replace this
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         args = build_parser().parse_args(argv)
         command = f"rcbht {args.command}"

@@ -1,12 +1,20 @@
-"""StopSignal (nodes/lifetime.py) in a real process: what SIGINT/SIGTERM do before and after up()."""
+"""How our processes end: StopSignal (nodes/lifetime.py) in a real process, before and after
+up(); and SIGTERM of a harness that runs node processes."""
 
 from __future__ import annotations
 
 import signal
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import pytest
+from conftest import SIM_SUCCESS
+from ros_support import require_ros, ros_env
+
+from rcbht_introspection.replay.supervision import stop_process
+from rcbht_introspection.waiting import wait_until
 
 BUSY_START_UP = """
 import sys, time
@@ -47,3 +55,62 @@ def test_a_stop_during_start_up_ends_the_process_at_once(signum: int) -> None:
 def test_a_stop_once_up_only_asks(signum: int) -> None:
     code, out = _run(up=True, signum=signum)
     assert code == 0 and out.strip() == "stopped in order"
+
+
+def _children(pid: int) -> list[int]:
+    """Pids of the live processes whose parent is `pid` (from /proc)."""
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+@pytest.mark.ros
+def test_sigterm_of_replay_eval_stops_its_node_processes(sim_data: Path, tmp_path: Path) -> None:
+    """SIGTERM, as a supervisor sends it, ends `rcbht replay-eval` as Ctrl-C does: exit 0 and
+    both node processes stopped, none left running without their harness."""
+    require_ros()
+    from rcbht_introspection.io.bags import write_trial_bag
+    from rcbht_introspection.io.hiro import find_trials, read_trial
+    from rcbht_introspection.learn.data import load_samples
+    from rcbht_introspection.learn.model_file import save_model
+    from rcbht_introspection.learn.models import train_model
+
+    folders = find_trials([sim_data / SIM_SUCCESS])
+    bag = tmp_path / "trial.mcap"
+    write_trial_bag(read_trial(folders[-1]), bag)
+    model = save_model(
+        train_model(load_samples(folders[:-1], words="engine"), "svm", "compact"),
+        tmp_path / "model.rcbht",
+    )
+    command = ["replay-eval", str(bag), "--model", str(model), "--rate", "1"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "rcbht_introspection.cli", *command],
+        env=ros_env(tmp_path),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        assert wait_until(lambda: len(_children(proc.pid)) >= 2, timeout=120), "no node processes"
+        nodes = _children(proc.pid)
+        time.sleep(1.0)  # the nodes are starting or playing: either way they must be stopped
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        stop_process(proc)
+    assert proc.returncode == 0, out
+    assert wait_until(lambda: not any(_alive(p) for p in nodes), timeout=20), out

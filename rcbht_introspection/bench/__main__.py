@@ -13,6 +13,7 @@ import importlib
 import json
 import os
 import platform
+import signal
 import sys
 import time
 from pathlib import Path
@@ -55,6 +56,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("bench_out"))
     parser.add_argument("--only", nargs="*", help="benchmark module short names to run")
     args = parser.parse_args(argv)
+    # SIGTERM takes Ctrl-C's path: the running module's finally blocks stop its node processes
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     args.out.mkdir(parents=True, exist_ok=True)
     results: dict[str, object] = {
         "machine": machine(),
