@@ -16,7 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from rcbht_introspection.live.belief import MODES, BeliefMode
+from rcbht_introspection.io.hiro import find_trials, read_trial
+from rcbht_introspection.learn.data import load_trials
+from rcbht_introspection.learn.live import LiveAugmentConfig, live_training, stream_factory
+from rcbht_introspection.live.belief import MODES, BeliefMode, BeliefTracker
+from rcbht_introspection.live.replay import stream_trial
 
 HIRO = Path(
     os.environ.get(
@@ -29,7 +33,6 @@ TEST_TRIALS = ("20121127-HIROSA-S-45", "20121127-HIROSA-S-46")
 
 def timed_updates(streamed: Any, model: object, mode: BeliefMode) -> tuple[list[float], list[str]]:
     """(seconds per update, belief sub-task per update) of replay_beliefs' loop on `streamed`."""
-    from rcbht_introspection.live.belief import BeliefTracker
 
     tracker = BeliefTracker(model, mode, 2.0, trial=streamed.name)
     times: list[float] = []
@@ -63,10 +66,6 @@ def run(out_dir: Path) -> dict[str, Any]:
     """Median / p99 / max ms per belief update, per mode, over the held-out REAL trials."""
     if not (HIRO / REAL).is_dir():
         return {"skipped": f"no shared data at {HIRO / REAL}"}
-    from rcbht_introspection.io.hiro import find_trials, read_trial
-    from rcbht_introspection.learn.data import load_trials
-    from rcbht_introspection.learn.live import LiveAugmentConfig, live_training, stream_factory
-    from rcbht_introspection.live.replay import stream_trial
 
     train = [f for f in find_trials([HIRO / REAL]) if int(f.name.rsplit("-", 1)[1]) <= 40]
     model, _ = live_training(load_trials(train, "auto"))  # `rcbht train`'s default model

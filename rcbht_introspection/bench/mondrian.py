@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from rcbht_introspection.grammar.encoding.compact import CompactEncoding
+from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 
 HIRO = Path(
@@ -30,8 +32,6 @@ def _real_features() -> tuple[np.ndarray, list[str], np.ndarray, list[str], list
     """(X_train, y_train, X_rest, y_rest, rest samples, fitted encoder) from REAL golden words."""
     if not (HIRO / REAL).is_dir():
         return None
-    from rcbht_introspection.grammar.encoding.compact import CompactEncoding
-    from rcbht_introspection.learn.data import load_trials
 
     trials = [t for t in load_trials([HIRO / REAL], "golden") if t.complete]
     train = [s for t in trials[:36] for s in t.samples]

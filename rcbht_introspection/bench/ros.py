@@ -18,8 +18,13 @@ from typing import Any
 
 import numpy as np
 
+from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.learn.data import load_trials
+from rcbht_introspection.learn.live import live_training
+from rcbht_introspection.learn.model_file import save_model
+from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
 
 SOURCE_RATE_HZ = 200.0
 TARGET_RATE_HZ = 1000.0
@@ -66,9 +71,6 @@ def two_arm_trial(a: Trial, b: Trial) -> Trial:
 def _model(out_dir: Path) -> Path | None:
     """The model `rcbht train` writes by default (live head included) for HIRO trials 1-40."""
     hiro = shared_hiro()
-    from rcbht_introspection.learn.data import load_trials
-    from rcbht_introspection.learn.live import live_training
-    from rcbht_introspection.learn.model_file import save_model
 
     if hiro is None:
         return None
@@ -79,8 +81,6 @@ def _model(out_dir: Path) -> Path | None:
 
 def run(out_dir: Path) -> dict[str, Any]:
     """Both scenarios; figures per scenario plus the load average around them."""
-    from rcbht_introspection.io.bags import write_trial_bag
-    from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
 
     seconds = float(os.environ.get("RCBHT_BENCH_ROS_SECONDS", "60"))
     rate = TARGET_RATE_HZ / SOURCE_RATE_HZ

@@ -32,6 +32,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from rcbht_introspection.bench import ros
+from rcbht_introspection.bench.__main__ import machine
 from rcbht_introspection.bench.process_watch import Tracked, process_figures
 from rcbht_introspection.bench.soak_traffic import (
     ARMS,
@@ -40,6 +42,8 @@ from rcbht_introspection.bench.soak_traffic import (
     trial_source,
 )
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.nodes.common import RosSession, qos_profile
+from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
 from rcbht_introspection.replay.supervision import (
     NodeProcess,
     environment,
@@ -89,9 +93,6 @@ def _stop(node: Any, tracked: Tracked, t: float) -> None:
 
 def run(out_dir: Path) -> dict[str, Any]:
     """The soak; returns its figures (and prints a summary). Progress: out_dir/soak/progress.json."""
-    from rcbht_introspection.bench import ros
-    from rcbht_introspection.bench.__main__ import machine
-    from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
 
     seconds = env_float("RCBHT_SOAK_SECONDS", 3600.0)
     sample_s = env_float("RCBHT_SOAK_SAMPLE_S", 60.0)
@@ -186,8 +187,6 @@ def run(out_dir: Path) -> dict[str, Any]:
 
     result["load_avg_before"] = [round(x, 2) for x in os.getloadavg()]
     with environment(env):
-        from rcbht_introspection.nodes.common import RosSession, qos_profile
-
         start("segmenter_node", "segmenter_node")
         start("classifier_node", "classifier_node_1")
         try:

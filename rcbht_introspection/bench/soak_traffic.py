@@ -11,9 +11,25 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from geometry_msgs.msg import WrenchStamped
+from rcbht_interfaces.msg import Belief as BeliefMsg
+from rcbht_interfaces.msg import Phase as PhaseMsg
+from rcbht_interfaces.msg import Words as WordsMsg
+from std_msgs.msg import String
 
+from rcbht_introspection.bench import ros
+from rcbht_introspection.io.bags import (
+    END_PHASE,
+    PHASE_TOPIC,
+    encode_wrench,
+    trial_phase_events,
+    wrench_topic,
+)
 from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
-from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.io.trial import SUBTASKS, Trial
+from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, word_topics
+from rcbht_introspection.replay.observer import segmenter_matches
+from rcbht_introspection.sim import load_sim_config, simulate_trial
 
 ARMS: tuple[str, ...] = ("L", "R")
 TRIAL_GAP_S = 0.5
@@ -35,7 +51,6 @@ class Source:
 
 def trial_source() -> Source:
     """REAL HIRO trials when present, else the simulator's two-arm trials; both at 5x."""
-    from rcbht_introspection.bench import ros
 
     hiro = shared_hiro()
     if hiro is not None:
@@ -50,7 +65,6 @@ def trial_source() -> Source:
         return Source(
             f"REAL HIRO trials at 5x ({hiro})", ros.TARGET_RATE_HZ / ros.SOURCE_RATE_HZ, real
         )
-    from rcbht_introspection.sim import load_sim_config, simulate_trial
 
     config = load_sim_config()
     sims = [
@@ -79,7 +93,6 @@ class Playback:
 
 def playback(trial: Trial, base_ns: int, rate: float) -> Playback:
     """Trial re-stamped to start at `base_ns`; events placed as write_trial_bag places them."""
-    from rcbht_introspection.io.bags import encode_wrench, trial_phase_events
 
     t_ns = np.rint((np.asarray(trial.time, dtype=np.float64) - trial.time[0]) * 1e9).astype(
         np.int64
@@ -126,10 +139,6 @@ class SoakPublisher(threading.Thread):
 
     def __init__(self, node: Any, qos: Any, source: Source, seconds: float) -> None:
         super().__init__(name="soak-publisher", daemon=True)
-        from geometry_msgs.msg import WrenchStamped
-        from std_msgs.msg import String
-
-        from rcbht_introspection.io.bags import PHASE_TOPIC, wrench_topic
 
         self.source = source
         self.seconds = seconds
@@ -146,7 +155,6 @@ class SoakPublisher(threading.Thread):
         return all(p.get_subscription_count() > 0 for p in (*self.wrench_pubs, self.phase_pub))
 
     def run(self) -> None:
-        from rcbht_introspection.io.bags import END_PHASE
 
         stats = self.stats
         deadline = time.perf_counter() + self.seconds
@@ -220,7 +228,6 @@ class SoakPublisher(threading.Thread):
 
 @functools.cache
 def _subtask_names() -> frozenset[str]:
-    from rcbht_introspection.io.trial import SUBTASKS
 
     return frozenset(SUBTASKS)
 
@@ -236,12 +243,6 @@ class SoakObserver:
     """
 
     def __init__(self, node: Any, qos: Any) -> None:
-        from rcbht_interfaces.msg import Belief as BeliefMsg
-        from rcbht_interfaces.msg import Phase as PhaseMsg
-        from rcbht_interfaces.msg import Words as WordsMsg
-
-        from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, word_topics
-        from rcbht_introspection.replay.observer import segmenter_matches
 
         seg, cls_cfg = SegmenterConfig(), ClassifierConfig()
         self.lock = threading.Lock()

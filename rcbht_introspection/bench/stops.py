@@ -24,6 +24,17 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from rcbht_introspection.grammar.split import SubtaskSample
+from rcbht_introspection.io.bags import bag_messages
+from rcbht_introspection.learn.model_file import save_model
+from rcbht_introspection.learn.models import train_model
+from rcbht_introspection.nodes.common import RosSession, qos_profile
+from rcbht_introspection.nodes.conversions import to_time
 from rcbht_introspection.replay.supervision import (
     environment,
     lease_domain,
@@ -31,6 +42,7 @@ from rcbht_introspection.replay.supervision import (
     ros_env,
     stop_process,
 )
+from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
 from rcbht_introspection.waiting import wait_until
 
 STOP_LIMIT_S = 5.0
@@ -73,10 +85,6 @@ class WrenchTraffic:
     """1 kHz WrenchStamped on /wrench and a sub-task event every 2 s, from a background thread."""
 
     def __init__(self, ros: Any) -> None:
-        from geometry_msgs.msg import WrenchStamped
-        from std_msgs.msg import String
-
-        from rcbht_introspection.nodes.common import qos_profile
 
         qos = qos_profile(1000, "reliable")
         self.wrench = ros.node.create_publisher(WrenchStamped, "/wrench", qos)
@@ -88,7 +96,6 @@ class WrenchTraffic:
         self._thread.start()
 
     def _run(self) -> None:
-        from rcbht_introspection.nodes.conversions import to_time
 
         t0 = time.perf_counter()
         n = 0
@@ -118,10 +125,6 @@ def toy_model(
     path: Path, classes: tuple[str, ...] = ("approach", "rotation", "insertion", "mating")
 ) -> Path:
     """A small sub-task model (one hand-made Fz word per sample) for a node under test."""
-    from rcbht_introspection.grammar.split import SubtaskSample
-    from rcbht_introspection.learn.model_file import save_model
-    from rcbht_introspection.learn.models import train_model
-    from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
 
     samples = []
     for i in range(2 * len(classes)):
@@ -189,8 +192,6 @@ def stop_once(kind: str, work: Path, env: dict[str, str], rng: random.Random, i:
     bad = tuple(line for line in text.splitlines() if any(m in line for m in BAD_MARKERS))
     bag_ok = None
     if kind == "bag_record" and up:
-        from rcbht_introspection.io.bags import bag_messages
-
         try:
             sum(1 for _ in bag_messages(bag))
             bag_ok = True
@@ -205,7 +206,6 @@ def stop_loop(
     n_node: int, n_record: int, work: Path, seed: int = 0
 ) -> tuple[list[Stop], dict[str, int]]:
     """Stops of segmenter_node, classifier_node (fed by a running segmenter) and bag record."""
-    from rcbht_introspection.nodes.common import RosSession
 
     rng = random.Random(seed)
     values = ros_env(lease_domain(), work / "ros_log")
@@ -240,9 +240,6 @@ def stop_loop(
 
 def _first_message() -> None:
     """Child of `match_gaps`: subscribe to /match_probe, print (subscribed ns, first stamp ns)."""
-    import rclpy
-    from rclpy.node import Node
-    from std_msgs.msg import String
 
     rclpy.init()
     node = Node("match_probe_reader")
@@ -266,9 +263,6 @@ def match_gaps(n: int, work: Path, seed: int = 0) -> list[float]:
     With volatile durability, what the publisher sends in this gap never reaches the new
     subscriber: the window in which a (re)started classifier misses words.
     """
-    from std_msgs.msg import String
-
-    from rcbht_introspection.nodes.common import RosSession
 
     env = {**os.environ, **ros_env(lease_domain(), work / "ros_log")}
     env.pop("ROS_LOCALHOST_ONLY", None)

@@ -27,6 +27,7 @@ from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn import ClassifierKind
 from rcbht_introspection.learn.data import TrialSamples, load_samples
+from rcbht_introspection.learn.live import load_live_config, trial_live_samples
 from rcbht_introspection.learn.models import train_model
 
 VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
@@ -263,7 +264,6 @@ def evaluate(
 
 def _live_windows(trials: Sequence[TrialSamples]) -> dict[str, list[SubtaskSample]]:
     """Live-like windows of every trial (words final by t, learn/live.py), by trial name."""
-    from rcbht_introspection.learn.live import load_live_config, trial_live_samples
 
     by_path = trial_live_samples([t.path for t in trials], load_live_config())
     return {t.trial: by_path[str(t.path)] for t in trials}

@@ -20,10 +20,14 @@ import numpy as np
 
 from rcbht_introspection.config_files import config_path, load_config, to_mapping
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io import bags
+from rcbht_introspection.io.hiro import read_trial
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.learn.models import train_model
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
+from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.taxonomy.stream import StreamProfile
 
 LIVE_CONFIG_FILE = "live.yaml"
@@ -114,14 +118,12 @@ def sample_word_count(sample: SubtaskSample) -> int:
 
 def stream_factory(config: LiveAugmentConfig) -> Any:
     """`arm -> ArmStream` with the configured taxonomy and stream profiles."""
-    from rcbht_introspection.live.segmenter import arm_stream_factory
 
     return arm_stream_factory(config.taxonomy_profile, stream_profile=config.stream_profile)
 
 
 def read_any_trial(path: Path) -> Trial:
     """A trial folder or a bag as a Trial."""
-    from rcbht_introspection.io.hiro import read_trial
 
     if Path(path).is_file() and bags.is_bag(path):
         return bags.read_trial_bag(path)
@@ -160,8 +162,6 @@ def train_live_model(
     Final verdicts (finished sub-tasks) keep the complete-sub-task model, so they and the
     steady-state accuracy are unchanged; running windows go to the live head (model.head).
     """
-    from rcbht_introspection.grammar.encoding.cache import SampleCache
-    from rcbht_introspection.learn.models import train_model
 
     train_kwargs.setdefault("cache", SampleCache())  # both models encode `samples`
     model = train_model(samples, **train_kwargs)

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import skops.io as sio
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.registry import encoding_from_state
@@ -76,8 +77,6 @@ def _model_parts(model: SubtaskModel) -> tuple[dict[str, Any], dict[str, np.ndar
     if model.training:
         header["training"] = model.training
     if model.classifier in ("svm", "svm-tuned"):
-        import skops.io as sio
-
         arrays = {"svm_skops": np.frombuffer(sio.dumps(model.estimator), dtype=np.uint8)}
     else:
         header["mondrian"], arrays = forest_arrays(model.estimator)
@@ -135,8 +134,6 @@ def _model_from_parts(
     classifier = header.get("classifier")
     try:
         if classifier in ("svm", "svm-tuned"):
-            import skops.io as sio
-
             data = arrays["svm_skops"].tobytes()
             untrusted = [
                 t for t in sio.get_untrusted_types(data=data) if t not in SVM_TRUSTED_TYPES

@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from sklearn.model_selection import GroupKFold, cross_val_score
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 from sklearn.svm import SVC
@@ -92,7 +93,6 @@ def tune_svm(
     Returns pipeline parameters (svc__C, svc__gamma); the paper's C=1, gamma='scale' when there
     are fewer than 3 training trials to cross-validate over.
     """
-    from sklearn.model_selection import GroupKFold, cross_val_score
 
     if len(set(groups)) < 3:
         return {"svc__C": 1.0, "svc__gamma": "scale"}

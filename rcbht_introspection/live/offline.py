@@ -12,6 +12,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from rcbht_introspection.grammar.split import split_words
 from rcbht_introspection.io.trial import SUBTASKS, Trial
 from rcbht_introspection.taxonomy.words import TrialWords, Word
 
@@ -67,7 +68,6 @@ def trial_words(name: str, words: dict[str, list[Word]]) -> TrialWords:
 
 def offline_verdicts(model: object, trial: Trial, words: dict[str, list[Word]]) -> list[str]:
     """The model's verdict on each sub-task of the trial from the given words (spec 2.7 split)."""
-    from rcbht_introspection.grammar.split import split_words
 
     samples = split_words(trial_words(trial.name, words), trial.state_times, trial.end_time)
     if not samples:

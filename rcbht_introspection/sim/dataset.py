@@ -12,6 +12,8 @@ import shutil
 from pathlib import Path
 from typing import Literal, get_args
 
+from tqdm import tqdm
+
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import write_trial
@@ -107,8 +109,6 @@ def write_dataset(
     plan = trial_plan(n_trials, seed, failures, config.failures.types)
     items = enumerate(plan)
     if progress:
-        from tqdm import tqdm
-
         items = tqdm(items, total=len(plan), desc="simulating", unit="trial")
     written: list[Path] = []
     index: list[dict[str, object]] = []

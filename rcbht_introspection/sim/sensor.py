@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import lfilter
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.sim.config import SensorConfig
@@ -75,7 +76,6 @@ def ornstein_uhlenbeck(
     rng: np.random.Generator,
 ) -> np.ndarray:
     """Low-frequency disturbance (N, 6): an exact-discretised Ornstein-Uhlenbeck process."""
-    from scipy.signal import lfilter
 
     n = len(time)
     if n < 2:

@@ -10,6 +10,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from rcbht_introspection.config_files import config_path, load_profile
 from rcbht_introspection.errors import InputError
 
 CONFIG_FILE = "rcbht.yaml"
@@ -96,7 +97,6 @@ def load_taxonomy_config(
     profile: str = "reference", path: Path | str | None = None
 ) -> TaxonomyConfig:
     """Load one profile of config/rcbht.yaml (`profiles: {name: {field: value}}`) over the defaults."""
-    from rcbht_introspection.config_files import config_path, load_profile
 
     file = Path(path) if path is not None else config_path(CONFIG_FILE)
     return load_profile(
