@@ -69,12 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         optional = name in OPTIONAL
         if (args.only or optional) and short not in (args.only or ()):
             continue
-        try:
-            module = importlib.import_module(name)
-        except ModuleNotFoundError as exc:
-            if exc.name == name:
-                continue
-            raise
+        module = importlib.import_module(name)
         print(f"== {short}", flush=True)
         try:
             figures = module.run(args.out)

@@ -12,6 +12,7 @@ import sys
 import time
 from functools import partial
 
+import sklearn
 from rcbht_interfaces.msg import Belief as BeliefMsg
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
@@ -200,12 +201,7 @@ class ClassifierNode(ManagedNode):
 
 def sklearn_fast_predict() -> None:
     """Per-sample predictions: skip scikit-learn's input validation (features are finite)."""
-    try:
-        import sklearn
-
-        sklearn.set_config(assume_finite=True, skip_parameter_validation=True)
-    except ImportError:  # no model can load without it anyway
-        pass
+    sklearn.set_config(assume_finite=True, skip_parameter_validation=True)
 
 
 def main(args: list[str] | None = None, stop: StopSignal | None = None) -> int:
