@@ -66,3 +66,14 @@ def test_every_relative_link_of_readme_and_docs_resolves() -> None:
             if not (page.parent / target).exists():
                 broken.append(f"{page.relative_to(root)}: {target}")
     assert not broken, broken
+
+
+def test_every_module_path_named_in_readme_and_docs_exists() -> None:
+    """A page naming `live/belief.py` or `test/test_x.py` must name a file that is there."""
+    root = DOCS.parents[1]
+    missing = []
+    for page in [root / "README.md", *sorted((root / "docs").glob("*.md"))]:
+        for path in re.findall(r"`([a-z_]+/[a-z_/]+\.py)`", page.read_text()):
+            if not (root / "rcbht_introspection" / path).exists() and not (root / path).exists():
+                missing.append(f"{page.relative_to(root)}: {path}")
+    assert not missing, missing
