@@ -58,7 +58,9 @@ def save_model(model: SubtaskModel, path: Path | str) -> Path:
     payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("wb") as handle:
-        np.savez_compressed(handle, **payload)
+        # numpy's stub has a bool `allow_pickle` keyword beside **arrays, so mypy takes any
+        # str-keyed ** dict as possibly feeding it; the keys here are array names
+        np.savez_compressed(handle, **payload)  # type: ignore[arg-type]
     return path
 
 
