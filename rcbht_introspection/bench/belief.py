@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from rcbht_introspection.live.belief import MODES, BeliefMode
+from rcbht_introspection.live.belief import MODES, BeliefMode, SampleClassifier
 
 HIRO = Path(
     os.environ.get(
@@ -27,7 +27,9 @@ REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 TEST_TRIALS = ("20121127-HIROSA-S-45", "20121127-HIROSA-S-46")
 
 
-def timed_updates(streamed: Any, model: object, mode: BeliefMode) -> tuple[list[float], list[str]]:
+def timed_updates(
+    streamed: Any, model: SampleClassifier, mode: BeliefMode
+) -> tuple[list[float], list[str]]:
     """(seconds per update, belief sub-task per update) of replay_beliefs' loop on `streamed`."""
     from rcbht_introspection.live.belief import BeliefTracker
 

@@ -181,7 +181,7 @@ def model_summary(path: Path | str) -> dict[str, Any]:
     }
 
 
-def load_subtask_model(path: str, expected_profile: str = "") -> tuple[object | None, str]:
+def load_subtask_model(path: str, expected_profile: str = "") -> tuple[SubtaskModel | None, str]:
     """(model, '') for a usable sub-task model file, else (None, why it cannot be used)."""
     if not path:
         return None, "no model file given (parameter model_file)"
