@@ -50,6 +50,7 @@ soak: setup
 lint: setup
 	$(VENV)/bin/ruff check rcbht_introspection test launch
 	$(VENV)/bin/ruff format --check rcbht_introspection test launch
+	$(VENV)/bin/mypy
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -17,13 +17,17 @@ import types
 import typing
 from collections.abc import Callable, Hashable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import yaml
 
 from rcbht_introspection.errors import InputError
 
-T = TypeVar("T")
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
+
+T = TypeVar("T", bound="DataclassInstance")
+"""A config class: a dataclass."""
 
 REPO_CONFIG_DIR = Path(__file__).resolve().parents[1] / "config"
 
@@ -251,7 +255,7 @@ def from_mapping(
     one-line errors (with lines when `data` came from read_yaml)."""
     line = getattr(data, "line", None) or line
     hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}  # type: ignore[arg-type]
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     for key in data:
         if key not in fields:
             raise InputError(
@@ -324,7 +328,7 @@ def config_from_document(
     prefix = "".join(f"{k}." for k in section)
     config = from_mapping(cls, data, path=path, prefix=prefix)
     if fixed:
-        config = dataclasses.replace(config, **fixed)  # type: ignore[type-var]
+        config = dataclasses.replace(config, **fixed)
     if check is not None:
         try:
             check(config)

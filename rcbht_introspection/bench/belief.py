@@ -19,7 +19,7 @@ import numpy as np
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.live import LiveAugmentConfig, live_training, stream_factory
-from rcbht_introspection.live.belief import MODES, BeliefMode, BeliefTracker
+from rcbht_introspection.live.belief import MODES, BeliefMode, BeliefTracker, SampleClassifier
 from rcbht_introspection.live.replay import stream_trial
 
 HIRO = Path(
@@ -31,7 +31,9 @@ REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 TEST_TRIALS = ("20121127-HIROSA-S-45", "20121127-HIROSA-S-46")
 
 
-def timed_updates(streamed: Any, model: object, mode: BeliefMode) -> tuple[list[float], list[str]]:
+def timed_updates(
+    streamed: Any, model: SampleClassifier, mode: BeliefMode
+) -> tuple[list[float], list[str]]:
     """(seconds per update, belief sub-task per update) of replay_beliefs' loop on `streamed`."""
 
     tracker = BeliefTracker(model, mode, 2.0, trial=streamed.name)

@@ -9,12 +9,17 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rcbht_introspection.grammar.encoding.compact import CompactEncoding
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
+
+if TYPE_CHECKING:
+    from rcbht_introspection.grammar.encoding.compact import CompactEncoding
+    from rcbht_introspection.grammar.split import SubtaskSample
 
 HIRO = Path(
     os.environ.get(
@@ -28,7 +33,9 @@ def _median_ms(times: list[float]) -> float:
     return round(1000.0 * float(np.median(times)), 3)
 
 
-def _real_features() -> tuple[np.ndarray, list[str], np.ndarray, list[str], list, object] | None:
+def _real_features() -> (
+    tuple[np.ndarray, list[str], np.ndarray, list[str], list[SubtaskSample], CompactEncoding] | None
+):
     """(X_train, y_train, X_rest, y_rest, rest samples, fitted encoder) from REAL golden words."""
     if not (HIRO / REAL).is_dir():
         return None
@@ -50,17 +57,12 @@ def run(out_dir: Path) -> dict:
         rng = np.random.default_rng(0)
         X = rng.random((184, 101))
         y = [("approach", "rotation", "insertion", "mating")[i % 4] for i in range(184)]
-        X_train, y_train, X_rest, y_rest, rest, encoder = (
-            X[:144],
-            y[:144],
-            X[144:],
-            y[144:],
-            None,
-            None,
-        )
+        X_train, y_train, X_rest, y_rest = X[:144], y[:144], X[144:], y[144:]
+        real: tuple[list[SubtaskSample], CompactEncoding] | None = None  # no samples to encode
         source = "synthetic 184 x 101"
     else:
         X_train, y_train, X_rest, y_rest, rest, encoder = data
+        real = (rest, encoder)
         source = f"{REAL} golden words, compact encoding"
     forest = MondrianForestClassifier(n_estimators=100, random_state=0)
     began = time.perf_counter()
@@ -74,7 +76,8 @@ def run(out_dir: Path) -> dict:
             forest.predict_proba(row[None, :])
             predict.append(time.perf_counter() - t0)
     with_encoding = []
-    if rest is not None:
+    if real is not None:
+        rest, encoder = real
         for sample in rest:
             t0 = time.perf_counter()
             forest.predict_proba(encoder.transform([sample]))

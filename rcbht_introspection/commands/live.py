@@ -6,13 +6,16 @@ import argparse
 import json
 import time
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS
 from rcbht_introspection.learn.data import WORD_SOURCES
 from rcbht_introspection.live.belief import MODES, BeliefMode
+
+if TYPE_CHECKING:
+    from rcbht_introspection.learn.models import SubtaskModel
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -64,7 +67,7 @@ def run_live_eval(args: argparse.Namespace) -> int:
     train_paths, held_paths = paths[: -args.held_out], paths[-args.held_out :]
     config = load_live_config(args.live_config)
     factory = stream_factory(config)
-    models: dict[str, Any] = {}
+    models: dict[str, SubtaskModel] = {}
     if args.model is not None:
         models["model"] = load_model(args.model)
     else:

@@ -14,7 +14,7 @@ from bisect import bisect_right
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from rcbht_introspection.learn.models import train_model
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.taxonomy.stream import StreamProfile
+
+if TYPE_CHECKING:
+    from rcbht_introspection.learn.models import SubtaskModel
 
 LIVE_CONFIG_FILE = "live.yaml"
 
@@ -156,7 +159,7 @@ def train_live_model(
     live: Sequence[SubtaskSample],
     config: LiveAugmentConfig | None,
     **train_kwargs: Any,
-) -> Any:
+) -> SubtaskModel:
     """Model on complete sub-tasks; with `config`, plus a live head on them and the live samples.
 
     Final verdicts (finished sub-tasks) keep the complete-sub-task model, so they and the
@@ -187,7 +190,7 @@ def live_training(
     enabled: bool | None = None,
     config_file: Path | str | None = None,
     **train_kwargs: Any,
-) -> tuple[Any, int]:
+) -> tuple[SubtaskModel, int]:
     """(model, number of live samples) for TrialSamples `trials`; `enabled` None = config's."""
     config = load_live_config(config_file)
     use = config.enabled if enabled is None else enabled

@@ -59,7 +59,9 @@ def save_model(model: SubtaskModel, path: Path | str) -> Path:
     payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("wb") as handle:
-        np.savez_compressed(handle, **payload)
+        # numpy's stub has a bool `allow_pickle` keyword beside **arrays, so mypy takes any
+        # str-keyed ** dict as possibly feeding it; the keys here are array names
+        np.savez_compressed(handle, **payload)  # type: ignore[arg-type]
     return path
 
 
@@ -176,7 +178,7 @@ def model_summary(path: Path | str) -> dict[str, Any]:
     }
 
 
-def load_subtask_model(path: str, expected_profile: str = "") -> tuple[object | None, str]:
+def load_subtask_model(path: str, expected_profile: str = "") -> tuple[SubtaskModel | None, str]:
     """(model, '') for a usable sub-task model file, else (None, why it cannot be used)."""
     if not path:
         return None, "no model file given (parameter model_file)"

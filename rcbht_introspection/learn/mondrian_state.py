@@ -38,10 +38,16 @@ def forest_arrays(
     """Parameters and arrays that fully describe a fitted forest (including online state)."""
     state = forest.learned_state()
     pool, size = state.pool, state.pool.size
-    leaves = [i for i in range(size) if pool.points[i] is not None]
+    leaves: list[int] = []
+    points: list[np.ndarray] = []  # the stored points of each leaf, in node order
+    for i in range(size):
+        stored = pool.points[i]
+        if stored is not None:
+            leaves.append(i)
+            points.append(stored)
     offsets = np.zeros(len(leaves) + 1, dtype=np.int64)
-    offsets[1:] = np.cumsum([len(pool.points[i]) for i in leaves])
-    flat = np.concatenate([pool.points[i] for i in leaves]) if leaves else np.empty(0, np.int64)
+    offsets[1:] = np.cumsum([len(p) for p in points])
+    flat = np.concatenate(points) if points else np.empty(0, np.int64)
     params = {
         "n_estimators": int(forest.n_estimators),
         "discount_factor": float(forest.discount_factor),

@@ -49,13 +49,10 @@ def svm_predict_proba(estimator: Any, X: np.ndarray) -> np.ndarray:
     (StandardScaler's in-place centring and scaling, then SVC's libsvm call), so the result is
     identical. Any other estimator, or input the checks would reject, takes the checked path.
     """
-    steps = getattr(estimator, "steps", None)
-    if (
-        not isinstance(estimator, Pipeline)
-        or len(steps) != 2
-        or type(steps[0][1]) is not StandardScaler
-        or type(steps[1][1]) is not SVC
-    ):
+    if not isinstance(estimator, Pipeline):
+        return estimator.predict_proba(X)
+    steps = estimator.steps
+    if len(steps) != 2 or type(steps[0][1]) is not StandardScaler or type(steps[1][1]) is not SVC:
         return estimator.predict_proba(X)
     scaler, svc = steps[0][1], steps[1][1]
     if (

@@ -9,12 +9,17 @@ event finishing the stream), so node words can be compared word for word. The sc
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from rcbht_introspection.grammar.split import split_words
 from rcbht_introspection.io.trial import SUBTASKS, Trial
 from rcbht_introspection.taxonomy.words import TrialWords, Word
+
+if TYPE_CHECKING:
+    from rcbht_introspection.live.belief import SampleClassifier
+    from rcbht_introspection.taxonomy.stream import ArmStream
 
 
 def trial_events(trial: Trial, end_phase: str = "done") -> list[tuple[float, str]]:
@@ -25,7 +30,7 @@ def trial_events(trial: Trial, end_phase: str = "done") -> list[tuple[float, str
 
 
 def offline_stream_words(
-    trial: Trial, stream_factory: Callable[[str], object], end_phase: str = "done"
+    trial: Trial, stream_factory: Callable[[str], ArmStream], end_phase: str = "done"
 ) -> dict[str, list[Word]]:
     """Words per arm, in emission order, of ArmStream fed the trial as the segmenter node is."""
     out: dict[str, list[Word]] = {}
@@ -41,15 +46,15 @@ def offline_stream_words(
         finished = False
         for i in range(len(ns)):
             t = (int(ns[i]) - int(ns[0])) / 1e9
-            words.extend(stream.push(t, wrench[i]))  # type: ignore[attr-defined]
+            words.extend(stream.push(t, wrench[i]))
             # events before the next sample apply at this one (the bag plays them right after it)
             while ev < len(events) and (i + 1 == len(ns) or event_ns[ev] < ns[i + 1]):
                 name = events[ev][1]
                 if name == end_phase:
-                    words.extend(stream.finish())  # type: ignore[attr-defined]
+                    words.extend(stream.finish())
                     finished = True
                 else:
-                    words.extend(stream.mark_boundary(t, name))  # type: ignore[attr-defined]
+                    words.extend(stream.mark_boundary(t, name))
                 ev += 1
             if finished:
                 break
@@ -66,13 +71,15 @@ def trial_words(name: str, words: dict[str, list[Word]]) -> TrialWords:
     return tw
 
 
-def offline_verdicts(model: object, trial: Trial, words: dict[str, list[Word]]) -> list[str]:
+def offline_verdicts(
+    model: SampleClassifier, trial: Trial, words: dict[str, list[Word]]
+) -> list[str]:
     """The model's verdict on each sub-task of the trial from the given words (spec 2.7 split)."""
 
     samples = split_words(trial_words(trial.name, words), trial.state_times, trial.end_time)
     if not samples:
         return []
-    return [str(v) for v in model.predict_samples(samples)]  # type: ignore[attr-defined]
+    return [str(v) for v in model.predict_samples(samples)]
 
 
 def first_word_mismatch(node: Sequence[Word], offline: Sequence[Word]) -> str:

@@ -24,6 +24,7 @@ from rcbht_introspection.live.belief import (
     Belief,
     BeliefMode,
     BeliefTracker,
+    SampleClassifier,
     StateFilter,
 )
 from rcbht_introspection.live.segmenter import PhaseEvent, SegmenterSession, WordBatch
@@ -123,7 +124,7 @@ class LiveReplay:
 
 def replay_beliefs(
     streamed: StreamedTrial,
-    model: object | None,
+    model: SampleClassifier | None,
     mode: BeliefMode = "boundary",
     window_s: float = 2.0,
     end_phase: str = "done",
@@ -157,7 +158,7 @@ def replay_beliefs(
 
 def live_replay(
     trial: Trial,
-    model: object | None,
+    model: SampleClassifier | None,
     stream_factory: Callable[[str], ArmStream],
     mode: BeliefMode = "boundary",
     window_s: float = 2.0,

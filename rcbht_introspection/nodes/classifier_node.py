@@ -84,11 +84,11 @@ class ClassifierNode(ManagedNode):
             )
             for (arm, _), topic in word_topics(cfg.words_namespace, cfg.arms).items()
         ]  # fmt: skip
-        # on_phase takes (msg, MessageInfo), which rclpy passes to two-argument callbacks; its
-        # annotation names only the one-argument form
         self.phase_sub = self.create_subscription(
             PhaseMsg,
             cfg.phase_topic,
+            # on_phase takes (msg, MessageInfo), which rclpy passes to two-argument callbacks;
+            # its annotation of `callback` names only the one-argument form
             self.on_phase,  # type: ignore[arg-type]
             phase_qos(cfg.qos_reliability),
             callback_group=drained,

@@ -8,7 +8,7 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
@@ -27,13 +27,14 @@ from rcbht_introspection.nodes.conversions import diagnostic_array
 from rcbht_introspection.nodes.draining import serve_ready, spin_draining
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import (
+    ClassifierConfig,
+    NodeConfig,
     Reliability,
+    SegmenterConfig,
     config_from_parameters,
     defaults,
     descriptions,
 )
-
-T = TypeVar("T")
 
 
 def qos_profile(depth: int, reliability: Reliability) -> QoSProfile:
@@ -69,7 +70,7 @@ def declare_parameters(node: Node, cls: type) -> None:
         node.declare_parameter(name, default, ParameterDescriptor(description=texts[name]))
 
 
-def read_config(node: Node, cls: type[T]) -> T:
+def read_config(node: Node, cls: type[NodeConfig]) -> NodeConfig:
     """The validated config from the node's current parameter values (InputError names one)."""
     values = {name: node.get_parameter(name).value for name in defaults(cls)}
     return config_from_parameters(cls, values)
@@ -89,7 +90,7 @@ class ManagedNode(LifecycleNode):
     of `health()` goes to /diagnostics once a second in every state.
     """
 
-    def __init__(self, name: str, config_class: type) -> None:
+    def __init__(self, name: str, config_class: type[SegmenterConfig | ClassifierConfig]) -> None:
         super().__init__(name)
         self.config_class = config_class
         declare_parameters(self, config_class)

@@ -24,7 +24,6 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.live.belief import BeliefMode
 from rcbht_introspection.taxonomy.stream import StreamProfile
 
-T = TypeVar("T")
 Reliability = Literal["reliable", "best_effort"]
 """QoS reliability of every subscription and publisher of a node."""
 LEVEL_TOPICS: tuple[str, ...] = ("primitives", "compositions", "behaviors")
@@ -105,6 +104,10 @@ class ClassifierConfig:
     qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
 
 
+NodeConfig = TypeVar("NodeConfig", bound=SegmenterConfig | ClassifierConfig)
+"""The config of one node (the checks and the defaults file depend on which)."""
+
+
 def descriptions(cls: type) -> dict[str, str]:
     """Parameter name -> description."""
     return {f.name: f.metadata.get("description", "") for f in dataclasses.fields(cls)}
@@ -146,10 +149,10 @@ def _check(cond: bool, field_name: str, message: str, path: Path | None) -> None
         raise InputError(message, path=path, field=field_name)
 
 
-def validate(cfg: T, path: Path | None = None) -> T:
+def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
     """Checks beyond the field types (from_mapping checks those, Literal choices included);
     InputError names the parameter."""
-    arms = cfg.arms  # type: ignore[attr-defined]
+    arms = cfg.arms
     _check(1 <= len(arms) <= 2, "arms", f"expected one or two arms, got {list(arms)}", path)
     _check(
         len(set(arms)) == len(arms) and all(arms),
@@ -157,7 +160,7 @@ def validate(cfg: T, path: Path | None = None) -> T:
         "arm names must be unique and non-empty",
         path,
     )
-    _check(cfg.qos_depth >= 1, "qos_depth", f"must be >= 1, got {cfg.qos_depth}", path)  # type: ignore[attr-defined]
+    _check(cfg.qos_depth >= 1, "qos_depth", f"must be >= 1, got {cfg.qos_depth}", path)
     for name in TOPIC_FIELDS:
         values = getattr(cfg, name, ())
         for value in (values,) if isinstance(values, str) else values:
@@ -210,7 +213,9 @@ def validate(cfg: T, path: Path | None = None) -> T:
     return cfg
 
 
-def config_from_parameters(cls: type[T], values: dict[str, Any], path: Path | None = None) -> T:
+def config_from_parameters(
+    cls: type[NodeConfig], values: dict[str, Any], path: Path | None = None
+) -> NodeConfig:
     """Typed, validated config from parameter values (unknown names and bad types are errors)."""
     return validate(from_mapping(cls, values, path=path), path)
 
@@ -219,7 +224,7 @@ NODE_NAMES = {SegmenterConfig: "segmenter_node", ClassifierConfig: "classifier_n
 CONFIG_FILES = {SegmenterConfig: "segmenter.yaml", ClassifierConfig: "classifier.yaml"}
 
 
-def load_node_config(cls: type[T], path: Path | str | None = None) -> T:
+def load_node_config(cls: type[NodeConfig], path: Path | str | None = None) -> NodeConfig:
     """Config of a node from a ROS parameter file (default: config/<node>.yaml).
 
     The parameters are `<node>: ros__parameters: {...}` (or under the wildcard `/**`), the layout

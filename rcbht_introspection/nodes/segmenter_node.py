@@ -94,11 +94,11 @@ class SegmenterNode(ManagedNode):
             )
             for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True)
         ]  # fmt: skip
-        # on_phase takes (msg, MessageInfo), which rclpy passes to two-argument callbacks; its
-        # annotation names only the one-argument form
         self.phase_sub = self.create_subscription(
             String,
             cfg.phase_topic,
+            # on_phase takes (msg, MessageInfo), which rclpy passes to two-argument callbacks;
+            # its annotation of `callback` names only the one-argument form
             self.on_phase,  # type: ignore[arg-type]
             self.qos,
             callback_group=drained,

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -22,8 +22,11 @@ from rcbht_introspection.live import offline
 from rcbht_introspection.live.belief import Belief, BeliefMode
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.nodes.params import LEVEL_TOPICS
-from rcbht_introspection.taxonomy.stream import StreamProfile
+from rcbht_introspection.taxonomy.stream import ArmStream, StreamProfile
 from rcbht_introspection.taxonomy.words import LEVELS, Word
+
+if TYPE_CHECKING:
+    from rcbht_introspection.learn.models import SubtaskModel
 
 
 @dataclass(frozen=True)
@@ -169,8 +172,8 @@ def bag_record(
 class Reference:
     """The offline run to compare with: the model and the arm streams of the nodes' profiles."""
 
-    model: Any
-    stream_factory: Callable[[str], object]
+    model: SubtaskModel
+    stream_factory: Callable[[str], ArmStream]
 
 
 def load_reference(model_path: Path, profile: str, stream_profile: StreamProfile) -> Reference:

@@ -143,8 +143,8 @@ class RepeatedBehaviors(Op):
             out = self._flush()
         self.label = row[bh.B_LBL]
         carry, k = row, 0
-        while k < len(self.blocks) and self.blocks[k] is not None:
-            carry = bh.merge_behaviors(self.blocks[k], carry, None)  # type: ignore[arg-type]
+        while k < len(self.blocks) and (block := self.blocks[k]) is not None:
+            carry = bh.merge_behaviors(block, carry, None)
             self.blocks[k] = None
             k += 1
         if k == len(self.blocks):

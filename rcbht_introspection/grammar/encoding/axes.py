@@ -70,9 +70,10 @@ class AxisMemo:
                 keep = len(old.words) - 1  # its last word may be clipped differently now
                 entry.names = dict(old.names)
                 tail = _word_arrays(words[keep:], value_key, entry.names)
-                arrays = tuple(
+                starts, ends, values, codes = (
                     np.concatenate((a[:keep], t)) for a, t in zip(old.arrays, tail, strict=True)
                 )
+                arrays = (starts, ends, values, codes)
             else:
                 arrays = _word_arrays(words, value_key, entry.names)
             starts = arrays[0]
@@ -80,7 +81,7 @@ class AxisMemo:
                 entry.names = {}
                 _axis_features(entry.features, prefix, words, value_key)
             else:
-                entry.arrays = arrays  # type: ignore[assignment]
+                entry.arrays = arrays
                 _array_features(entry.features, prefix, *arrays, entry.names)
         self.entries[prefix] = entry
         return entry.features

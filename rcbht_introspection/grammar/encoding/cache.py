@@ -7,6 +7,7 @@ encoded with an AxisMemo instead and never enter a SampleCache.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from rcbht_introspection.grammar.split import SubtaskSample
@@ -24,7 +25,7 @@ class SampleCache:
         self.entries: dict[int, tuple[SubtaskSample, dict[Any, Any]]] = {}
         self.size = 0
 
-    def get(self, sample: SubtaskSample, key: Any, compute: Any) -> Any:
+    def get(self, sample: SubtaskSample, key: Any, compute: Callable[[], Any]) -> Any:
         """The result `key` of `sample`: cached, or `compute()` stored under it."""
         hit = self.entries.get(id(sample))
         if hit is not None and hit[0] is sample and key in hit[1]:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -30,6 +31,13 @@ def label_arrays(words: Sequence[Word], level: Level) -> tuple[np.ndarray, np.nd
     ends = np.maximum(np.array([w.end for w in ordered], dtype=float), starts)
     codes = np.array([label_index(level, w.label) for w in ordered], dtype=int)
     return starts, ends, codes
+
+
+def _axis_label_arrays(
+    sample: SubtaskSample, arm: str, level: Level, axis: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """label_arrays of one arm/level/axis word sequence of `sample`."""
+    return label_arrays(sample.words.axis_words(arm, level, axis), level)
 
 
 def resample_labels(words: Sequence[Word], level: Level, n: int) -> np.ndarray:
@@ -122,18 +130,16 @@ class PaperEncoding:
                 for level in LEVELS:
                     n = self.n[level.value]
                     for axis in AXES:
-                        arrays = get(
+                        arrays: tuple[np.ndarray, np.ndarray, np.ndarray] = get(
                             sample,
                             ("labels", arm, level, axis),
-                            lambda a=arm, lv=level, ax=axis, s=sample: label_arrays(
-                                s.words.axis_words(a, lv, ax), lv
-                            ),
+                            partial(_axis_label_arrays, sample, arm, level, axis),
                         )
                         parts.append(
                             get(
                                 sample,
                                 ("paper", arm, level, axis, n),
-                                lambda arr=arrays, k=n: resample_arrays(*arr, k),
+                                partial(resample_arrays, *arrays, n),
                             )
                         )
             out[row] = np.concatenate(parts)
