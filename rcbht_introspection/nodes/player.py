@@ -8,6 +8,7 @@ import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
@@ -63,8 +64,6 @@ class BagPlayer:
 
         One deadline for all publishers, checked in short steps, so a stop request ends it.
         """
-        from rclpy.duration import Duration
-
         deadline = time.monotonic() + timeout
         step = Duration(nanoseconds=50_000_000)
         for pub in self.publishers.values():
