@@ -19,7 +19,8 @@ import numpy as np
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.live import LiveAugmentConfig, live_training, stream_factory
-from rcbht_introspection.live.belief import MODES, BeliefMode, BeliefTracker, SampleClassifier
+from rcbht_introspection.live import MODES, BeliefMode
+from rcbht_introspection.live.belief import BeliefTracker, SampleClassifier
 from rcbht_introspection.live.replay import stream_trial
 
 HIRO = Path(

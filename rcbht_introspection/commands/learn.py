@@ -11,8 +11,7 @@ from typing import Any
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
-from rcbht_introspection.learn import CLASSIFIERS
-from rcbht_introspection.learn.data import WORD_SOURCES, load_trials
+from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -90,6 +89,7 @@ def _common(parser: argparse.ArgumentParser) -> None:
 
 
 def run_train(args: argparse.Namespace) -> int:
+    from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.live import live_training
     from rcbht_introspection.learn.model_file import save_model
 
@@ -121,6 +121,7 @@ def _clean(value: Any) -> Any:
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
+    from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.evaluate import Protocol, evaluate, total_steps
 
     if args.permutations < 1:

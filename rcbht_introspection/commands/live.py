@@ -10,9 +10,8 @@ from typing import TYPE_CHECKING, Any
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
-from rcbht_introspection.learn import CLASSIFIERS
-from rcbht_introspection.learn.data import WORD_SOURCES
-from rcbht_introspection.live.belief import MODES, BeliefMode
+from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
+from rcbht_introspection.live import MODES, BeliefMode
 
 if TYPE_CHECKING:
     from rcbht_introspection.learn.models import SubtaskModel

@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import get_args
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.live.belief import BeliefMode
-from rcbht_introspection.taxonomy.stream import StreamProfile
+from rcbht_introspection.live import BeliefMode
+from rcbht_introspection.taxonomy import StreamProfile
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, get_args
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample, split_words
@@ -13,13 +12,9 @@ from rcbht_introspection.io import bags
 from rcbht_introspection.io.hiro import ARMS, find_trials, read_state, read_trial
 from rcbht_introspection.io.rcbht_format import level_path, read_trial_words
 from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.learn import WORD_SOURCES, WordSource
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, TrialWords
-
-WordSource = Literal["auto", "golden", "engine"]
-"""Where sub-task words come from: golden label files if present (auto), only golden, or the
-batch engine."""
-WORD_SOURCES: tuple[str, ...] = get_args(WordSource)
 
 
 @dataclass

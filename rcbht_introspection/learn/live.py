@@ -28,7 +28,7 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.models import train_model
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
 from rcbht_introspection.live.segmenter import arm_stream_factory
-from rcbht_introspection.taxonomy.stream import StreamProfile
+from rcbht_introspection.taxonomy import StreamProfile
 
 if TYPE_CHECKING:
     from rcbht_introspection.learn.models import SubtaskModel

@@ -11,20 +11,18 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Literal, Protocol, get_args
+from typing import Any, Protocol
 
 import numpy as np
 
 from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.trial import AXES, SUBTASKS
+from rcbht_introspection.live import MODES, BeliefMode
 from rcbht_introspection.live.join import WordLedger
 from rcbht_introspection.taxonomy.words import LEVELS, Level, TrialWords, Word
 
 UNKNOWN = "unknown"
-BeliefMode = Literal["boundary", "window"]
-"""boundary: the words since the last sub-task event; window: the last `window_s` seconds."""
-MODES: tuple[BeliefMode, ...] = get_args(BeliefMode)
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.config import load_taxonomy_config
-from rcbht_introspection.taxonomy.stream import ArmStream, StreamProfile, load_stream_config
+from rcbht_introspection.taxonomy.stream import ArmStream, load_stream_config
 from rcbht_introspection.taxonomy.words import Word
 
 RECENT_SAMPLES = 2000

@@ -21,8 +21,8 @@ from rcbht_introspection.config_files import (
     read_yaml,
 )
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.live.belief import BeliefMode
-from rcbht_introspection.taxonomy.stream import StreamProfile
+from rcbht_introspection.live import BeliefMode
+from rcbht_introspection.taxonomy import StreamProfile
 
 Reliability = Literal["reliable", "best_effort"]
 """QoS reliability of every subscription and publisher of a node."""

@@ -24,7 +24,7 @@ from rcbht_introspection.io.bags import (
     wrench_topic,
 )
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.live.belief import BeliefMode
+from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.nodes.common import RosSession, qos_profile
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
 from rcbht_introspection.nodes.player import BagPlayer
@@ -45,7 +45,7 @@ from rcbht_introspection.replay.supervision import (
     wait_for_nodes,
     write_params,
 )
-from rcbht_introspection.taxonomy.stream import StreamProfile
+from rcbht_introspection.taxonomy import StreamProfile
 
 
 @dataclass(frozen=True)

@@ -18,11 +18,12 @@ import numpy as np
 from rcbht_introspection.io.bags import END_PHASE, WRENCH_TYPE, BagMessage, decode_wrench
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import load_model
-from rcbht_introspection.live import offline
-from rcbht_introspection.live.belief import Belief, BeliefMode
+from rcbht_introspection.live import BeliefMode, offline
+from rcbht_introspection.live.belief import Belief
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.nodes.params import LEVEL_TOPICS
-from rcbht_introspection.taxonomy.stream import ArmStream, StreamProfile
+from rcbht_introspection.taxonomy import StreamProfile
+from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import LEVELS, Word
 
 if TYPE_CHECKING:

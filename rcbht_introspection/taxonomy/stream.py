@@ -28,6 +28,7 @@ from typing import Literal
 import numpy as np
 
 from rcbht_introspection.config_files import config_path, load_profile
+from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.behaviors import behavior_word
 from rcbht_introspection.taxonomy.compositions import composition_word
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config
@@ -45,9 +46,6 @@ from rcbht_introspection.taxonomy.words import AXES, TrialWords, Word
 
 STREAM_CONFIG_FILE = "stream.yaml"
 
-StreamProfile = Literal["reference", "causal"]
-"""reference: the words equal the batch engine's (whole-trial quantities are waited for);
-causal: past samples only."""
 NonfinitePolicy = Literal["hold_last", "drop"]
 GapPolicy = Literal["count", "interpolate"]
 
