@@ -365,7 +365,16 @@ def test_package_xml_lists_every_run_dependency() -> None:
     exec_depends = {d.name for d in package.exec_depends}
     imported = set()
     for source in (REPO / PACKAGE).rglob("*.py"):
-        for node in ast.walk(ast.parse(source.read_text())):
+        tree = ast.parse(source.read_text())
+        typing_only = {  # `if TYPE_CHECKING:` imports are read by the type checker, never run
+            id(n)
+            for block in ast.walk(tree)
+            if isinstance(block, ast.If) and ast.unparse(block.test).endswith("TYPE_CHECKING")
+            for n in ast.walk(block)
+        }
+        for node in ast.walk(tree):
+            if id(node) in typing_only:
+                continue
             if isinstance(node, ast.Import):
                 imported |= {a.name.split(".")[0] for a in node.names}
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
