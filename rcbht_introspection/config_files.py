@@ -75,19 +75,25 @@ class _LineLoader(yaml.SafeLoader):
 
 
 def _construct_mapping(loader: _LineLoader, node: yaml.MappingNode) -> YamlMapping:
-    """A mapping with key lines; a repeated key is an error (PyYAML would keep the last)."""
-    loader.flatten_mapping(node)  # merge keys (<<: *anchor)
+    """A mapping with key lines; a key written twice is an error (PyYAML would keep the last).
+    Keys merged in (`<<: *anchor`) may be overridden, as YAML's merge key allows."""
+    explicit = sum(1 for k, _ in node.value if k.tag != "tag:yaml.org,2002:merge")
+    loader.flatten_mapping(node)  # the merged pairs come first, the explicit ones after them
+    merged = len(node.value) - explicit
     out = YamlMapping(node.start_mark.line + 1)
-    for key_node, value_node in node.value:
+    written: set[Hashable] = set()
+    for i, (key_node, value_node) in enumerate(node.value):
         key = loader.construct_object(key_node, deep=True)
         if not isinstance(key, Hashable):
             raise yaml.constructor.ConstructorError(
                 None, None, "a list or mapping cannot be a key", key_node.start_mark
             )
-        if key in out:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"duplicate key {key!r}", key_node.start_mark
-            )
+        if i >= merged:
+            if key in written:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key {key!r}", key_node.start_mark
+                )
+            written.add(key)
         out[key] = loader.construct_object(value_node, deep=True)
         out.lines[key] = key_node.start_mark.line + 1
     return out

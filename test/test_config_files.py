@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import pytest
+import yaml
 
 from rcbht_introspection.config_files import (
     REPO_CONFIG_DIR,
@@ -205,3 +206,21 @@ def test_choices_text() -> None:
     assert choices_text(("a",)) == "a"
     assert choices_text(("a", "b")) == "a or b"
     assert choices_text(("a", "b", "c")) == "a, b or c"
+
+
+def test_merge_keys_may_be_overridden_but_explicit_keys_not_repeated(tmp_path: Path) -> None:
+    """YAML's `<<: *anchor` merges a mapping whose keys the explicit ones override (as PyYAML's
+    safe_load reads it); a key written twice by hand is still an error."""
+    from rcbht_introspection.config_files import read_yaml
+
+    f = tmp_path / "anchors.yaml"
+    f.write_text(
+        "base: &base {window: 5, step: 1}\n"
+        "other: &other {window: 6, gap: 2}\n"
+        "one:\n  <<: *base\n  window: 7\n"
+        "two:\n  <<: [*base, *other]\n  step: 3\n"
+    )
+    assert read_yaml(f) == yaml.safe_load(f.read_text())
+    f.write_text("one:\n  <<: {window: 5}\n  window: 7\n  window: 8\n")
+    with pytest.raises(InputError, match="line 4: not valid YAML: duplicate key 'window'"):
+        read_yaml(f)
