@@ -172,12 +172,17 @@ def replay_eval(
         finally:
             for p in procs:  # both stop at once: a Ctrl-C of the harness ends within seconds
                 p.interrupt()
-            for p in procs:
-                codes[p.name] = p.stop()
-                if codes[p.name] != 0:  # the node log is in a temporary folder: keep its end
-                    result.setdefault("shutdown_logs", {})[p.name] = p.tail(40)
-            if not options.domain_id:
-                release_domain(domain_id)  # its nodes are gone
+            try:
+                for p in procs:
+                    codes[p.name] = p.stop()
+                    if codes[p.name] != 0:  # the node log is in a temporary folder: keep its end
+                        result.setdefault("shutdown_logs", {})[p.name] = p.tail(40)
+            finally:
+                for p in procs:  # a second Ctrl-C while waiting: no node is left behind
+                    if p.alive():
+                        p.proc.kill()
+                if not options.domain_id:
+                    release_domain(domain_id)  # its nodes are gone
     result.update(_score(records, trials, model_path, options, arms))
     result.update(
         {

@@ -117,7 +117,8 @@ def stop_process(
         return proc.wait(timeout)
     except subprocess.TimeoutExpired:
         proc.kill()
-        proc.wait(5)
+        with contextlib.suppress(subprocess.TimeoutExpired):  # only a process stuck in the kernel
+            proc.wait(5)
         return None
 
 
@@ -161,10 +162,11 @@ class NodeProcess:
 
     def stop(self, timeout: float = 20.0) -> int | None:
         """SIGINT, then SIGKILL after `timeout`; returns the exit code (None if it was killed)."""
-        self.interrupt()  # once: a second SIGINT is not a harder stop
-        code = stop_process(self.proc, timeout, signum=None)
-        self._log_file.close()
-        return code
+        try:
+            self.interrupt()  # once: a second SIGINT is not a harder stop
+            return stop_process(self.proc, timeout, signum=None)
+        finally:
+            self._log_file.close()
 
 
 def wait_for_nodes(
