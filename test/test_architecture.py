@@ -18,7 +18,7 @@ pure-Python rosbags)."""
 ROS_AND_PLOTTING = frozenset(
     {"rclpy", "matplotlib", "geometry_msgs", "std_msgs", "rcbht_interfaces", "diagnostic_msgs"}
 )
-ROS_FREE = ("waiting", "replay.scoring", "replay.supervision")
+ROS_FREE = ("waiting", "config_files", "replay.scoring", "replay.supervision")
 """Modules outside the core that must work without ROS, with all they import: the one polling
 loop (every layer waits with it), the replay's scores (unit-tested without ROS) and the process
 supervision (the node processes import rclpy, their supervisor does not)."""

@@ -18,7 +18,6 @@ from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 
 if TYPE_CHECKING:
-    from rcbht_introspection.grammar.encoding.compact import CompactEncoding
     from rcbht_introspection.grammar.split import SubtaskSample
 
 HIRO = Path(

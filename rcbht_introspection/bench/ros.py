@@ -68,7 +68,7 @@ def two_arm_trial(a: Trial, b: Trial) -> Trial:
     return Trial(a.name, a.time, {"R": a.wrench["R"], "L": b.wrench["R"][idx]}, a.state_times)
 
 
-def _model(out_dir: Path) -> Path | None:
+def bench_model(out_dir: Path) -> Path | None:
     """The model `rcbht train` writes by default (live head included) for HIRO trials 1-40."""
     hiro = shared_hiro()
 
@@ -87,7 +87,7 @@ def run(out_dir: Path) -> dict[str, Any]:
     work = Path(out_dir) / "ros"
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
-    model = _model(work)
+    model = bench_model(work)
     sources = _sources(seconds * rate)
     results: dict[str, Any] = {
         "playback_seconds_target": seconds,

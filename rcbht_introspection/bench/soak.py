@@ -105,7 +105,7 @@ def run(out_dir: Path) -> dict[str, Any]:
     wall0 = time.monotonic()
     source = trial_source()
     model_env = os.environ.get("RCBHT_SOAK_MODEL", "")
-    model = Path(model_env) if model_env else ros._model(work)
+    model = Path(model_env) if model_env else ros.bench_model(work)
     if model is not None and not model.is_file():
         raise InputError("no such model file", model)
     domain_id = lease_domain()  # held for the whole run

@@ -142,7 +142,6 @@ class SoakPublisher(threading.Thread):
 
         self.source = source
         self.seconds = seconds
-        self.String = String
         self.wrench_pubs = [
             node.create_publisher(WrenchStamped, wrench_topic(arm, ARMS), qos) for arm in ARMS
         ]
@@ -168,7 +167,7 @@ class SoakPublisher(threading.Thread):
                 if record["samples_per_arm"] == 0:
                     break  # cut before its first sample: there is no stream to end
                 if record["cut"]:  # the end event the cut left out
-                    self.phase_pub.publish(self.String(data=END_PHASE))
+                    self.phase_pub.publish(String(data=END_PHASE))
                 stats.end_events += 1
                 stats.trials.append(record)
                 i += 1
@@ -206,7 +205,7 @@ class SoakPublisher(threading.Thread):
             n += 1
             stats.in_trial = n
             for name in pb.events.get(i, ()):
-                self.phase_pub.publish(self.String(data=name))
+                self.phase_pub.publish(String(data=name))
                 if name in _subtask_names():
                     subtasks += 1
         play_s = perf() - t0

@@ -2,6 +2,6 @@
 
 from typing import Literal, get_args
 
-Encoding = Literal["compact", "paper"]
-"""Encoding names; here (not in encoding.py) so the CLI lists them without importing scikit-learn."""
-ENCODINGS: tuple[str, ...] = get_args(Encoding)
+EncodingName = Literal["compact", "paper"]
+"""Encoding names; here (not in encoding/) so the CLI lists them without importing scikit-learn."""
+ENCODINGS: tuple[str, ...] = get_args(EncodingName)

@@ -21,7 +21,7 @@ import numpy as np
 from sklearn.ensemble import RandomForestClassifier
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.grammar import Encoding
+from rcbht_introspection.grammar import EncodingName
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
@@ -43,7 +43,7 @@ class Protocol:
     """Settings of one evaluation run."""
 
     classifier: ClassifierKind = "svm"
-    encoding: Encoding = "compact"
+    encoding: EncodingName = "compact"
     permutations: int = 20
     n_validation: int | None = None
     start_trials: int | None = None

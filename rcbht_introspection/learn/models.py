@@ -12,6 +12,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar import EncodingName
 from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.encoding.compact import CompactEncoding
@@ -19,7 +20,7 @@ from rcbht_introspection.grammar.encoding.paper import PaperEncoding
 from rcbht_introspection.grammar.encoding.registry import make_encoding
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.trial import SUBTASKS
-from rcbht_introspection.learn import CLASSIFIERS
+from rcbht_introspection.learn import CLASSIFIERS, ClassifierKind
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 from rcbht_introspection.learn.svm import fit_svm, make_svm, svm_predict_proba, tune_svm
 
@@ -84,8 +85,8 @@ class SubtaskModel:
 
 def train_model(
     samples: Sequence[SubtaskSample],
-    classifier: str = "svm",
-    encoding: str = "compact",
+    classifier: ClassifierKind = "svm",
+    encoding: EncodingName = "compact",
     random_state: int = 0,
     taxonomy_profile: str = "reference",
     n_estimators: int = 100,

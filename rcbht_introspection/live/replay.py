@@ -18,11 +18,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rcbht_introspection.io.trial import SUBTASKS, Trial
-from rcbht_introspection.live import offline
+from rcbht_introspection.live import BeliefMode, offline
 from rcbht_introspection.live.belief import (
     UNKNOWN,
     Belief,
-    BeliefMode,
     BeliefTracker,
     SampleClassifier,
     StateFilter,

@@ -24,7 +24,9 @@ from rcbht_introspection.io.bags import (
     wrench_topic,
 )
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.learn.model_file import load_model
 from rcbht_introspection.live import BeliefMode
+from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.nodes.common import RosSession, qos_profile
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
 from rcbht_introspection.nodes.player import BagPlayer
@@ -32,8 +34,8 @@ from rcbht_introspection.replay.observer import Observer, segmenter_matches
 from rcbht_introspection.replay.scoring import (
     BagRecord,
     Playback,
+    Reference,
     bag_record,
-    load_reference,
     score,
 )
 from rcbht_introspection.replay.supervision import (
@@ -200,6 +202,12 @@ def replay_eval(
     )
     tmp.cleanup()
     return result
+
+
+def load_reference(model_path: Path, profile: str, stream_profile: StreamProfile) -> Reference:
+    """The model file and the stream factory that the nodes use (the offline run to compare)."""
+    factory = arm_stream_factory(profile, stream_profile=stream_profile)
+    return Reference(load_model(model_path), factory)
 
 
 def _score(

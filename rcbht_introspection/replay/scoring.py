@@ -17,12 +17,9 @@ import numpy as np
 
 from rcbht_introspection.io.bags import END_PHASE, WRENCH_TYPE, BagMessage, decode_wrench
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.learn.model_file import load_model
 from rcbht_introspection.live import BeliefMode, offline
 from rcbht_introspection.live.belief import Belief
-from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.nodes.params import LEVEL_TOPICS
-from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import LEVELS, Word
 
@@ -175,12 +172,6 @@ class Reference:
 
     model: SubtaskModel
     stream_factory: Callable[[str], ArmStream]
-
-
-def load_reference(model_path: Path, profile: str, stream_profile: StreamProfile) -> Reference:
-    """The model file and the stream factory that the nodes use."""
-    factory = arm_stream_factory(profile, stream_profile=stream_profile)
-    return Reference(load_model(model_path), factory)
 
 
 @dataclass

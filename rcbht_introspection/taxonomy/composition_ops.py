@@ -184,9 +184,7 @@ class AdjustmentChains(Op):
                 self._decide(self.next_i)
                 self.next_i += 1
             safe = self.next_i - self.ctr
-        elif cyc.start_known or not self.ended:
-            safe = self._available()  # every buffered row lies before startIndex
-        else:
+        else:  # startIndex known or not yet reached, or the stream ended: all buffered rows
             safe = self._available()
         out: list[Row] = []
         while self.base < safe and self.rows:
@@ -220,7 +218,6 @@ class RepeatedCompositions(Op):
         self.count = 0
         self.sum_avg = 0.0
         self.max_rms = -math.inf
-        self.second_avg = 0.0
 
     def _flush(self) -> list[Row]:
         """Merge the held run (if longer than one row) and release it."""
