@@ -8,10 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import matplotlib
-
-matplotlib.use("Agg")  # files only, never a window: set before pyplot is imported
-
-import matplotlib.pyplot as plt
+from matplotlib.figure import Figure  # no pyplot: no backend, no global figure state
 
 from rcbht_introspection.taxonomy.words import AXES, Level, TrialWords
 
@@ -30,7 +27,8 @@ def plot_trial(trial, words: TrialWords, out: Path, arm: str | None = None) -> P
 
     arm = arm or (trial.arms[0] if trial.arms else "R")
     wrench = trial.wrench[arm]
-    fig, axes = plt.subplots(len(AXES), 1, figsize=(14, 2.2 * len(AXES)), sharex=True)
+    fig = Figure(figsize=(14, 2.2 * len(AXES)))
+    axes = fig.subplots(len(AXES), 1, sharex=True)
     colours = {level: _colours(level.labels) for level in BAND_LEVELS}
     for a, (ax, name) in enumerate(zip(axes, AXES, strict=True)):
         y = wrench[:, a]
@@ -63,5 +61,4 @@ def plot_trial(trial, words: TrialWords, out: Path, arm: str | None = None) -> P
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
-    plt.close(fig)
     return out

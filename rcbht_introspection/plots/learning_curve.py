@@ -5,18 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")  # files only, never a window: set before pyplot is imported
-
-import matplotlib.pyplot as plt
+from matplotlib.figure import Figure  # no pyplot: no backend, no global figure state
 
 
 def plot_learning_curve(results: list[dict[str, Any]], out: Path | str, title: str = "") -> Path:
     """Accuracy vs number of training trials (mean +- std over permutations) per result,
     with the duration-only reference as a dashed curve."""
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    fig = Figure(figsize=(6.4, 4.0))
+    ax = fig.subplots()
     for result in results:
         label = f"{result['classifier']} / {result['encoding']}"
         for curve, style, name in (
@@ -47,5 +44,4 @@ def plot_learning_curve(results: list[dict[str, Any]], out: Path | str, title: s
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=120)
-    plt.close(fig)
     return out

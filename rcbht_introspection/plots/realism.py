@@ -4,12 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")  # files only, never a window: set before pyplot is imported
-
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure  # no pyplot: no backend, no global figure state
 
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.trial import SUBTASKS
@@ -26,7 +22,8 @@ LABEL_COLORS: dict[str, str] = {
 def plot_label_frequencies(real: SetStats, sim: SetStats, path: Path) -> None:
     """Stacked LLB label frequencies per sub-task and axis, real beside simulated."""
 
-    fig, axes = plt.subplots(1, len(SUBTASKS), figsize=(16, 4.2), sharey=True)
+    fig = Figure(figsize=(16, 4.2))
+    axes = fig.subplots(1, len(SUBTASKS), sharey=True)
     for ax, subtask in zip(axes, SUBTASKS, strict=True):
         x = np.arange(len(AXES))
         for offset, stats, hatch in ((-0.2, real, ""), (0.2, sim, "//")):
@@ -51,13 +48,13 @@ def plot_label_frequencies(real: SetStats, sim: SetStats, path: Path) -> None:
     fig.legend(loc="center right", fontsize=8)
     fig.tight_layout(rect=(0, 0, 0.95, 1))
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_variability(real: SetStats, sim: SetStats, path: Path) -> None:
     """Box plots of sub-task durations, |Fz| and Fz word counts: the spread of both sets."""
 
-    fig, (a1, a2, a3) = plt.subplots(1, 3, figsize=(16, 4.2))
+    fig = Figure(figsize=(16, 4.2))
+    a1, a2, a3 = fig.subplots(1, 3)
     positions = np.arange(len(SUBTASKS)) * 3.0
     for ax, getter, title in (
         (a1, lambda s, st: s.durations(st), "sub-task duration (s)"),
@@ -85,13 +82,13 @@ def plot_variability(real: SetStats, sim: SetStats, path: Path) -> None:
     a1.legend([r["boxes"][0], s["boxes"][0]], ["real", "sim"], fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_example_trials(real_dir: Path, sim_dir: Path, path: Path) -> None:
     """The wrench of the first real and the first simulated trial, sub-task starts dashed."""
 
-    fig, axes = plt.subplots(2, 2, figsize=(16, 6), sharex="col")
+    fig = Figure(figsize=(16, 6))
+    axes = fig.subplots(2, 2, sharex="col")
     for col, folder in enumerate((find_trials([real_dir])[0], find_trials([sim_dir])[0])):
         trial = read_trial(folder)
         w = trial.wrench["R"]
@@ -109,4 +106,3 @@ def plot_example_trials(real_dir: Path, sim_dir: Path, path: Path) -> None:
         axes[1, col].set_xlabel("time (s); dashed: rotation, insertion, mating start")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
-    plt.close(fig)

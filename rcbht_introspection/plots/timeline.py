@@ -5,11 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")  # files only, never a window: set before pyplot is imported
-
-import matplotlib.pyplot as plt
+from matplotlib.figure import Figure  # no pyplot: no backend, no global figure state
 from matplotlib.patches import Patch
 
 from rcbht_introspection.io.trial import SUBTASKS
@@ -39,7 +35,8 @@ def plot_timelines(result: dict[str, Any], path: Path, durations: dict[str, floa
     """One row pair (truth, /task_state) per trial; writes `path` (PNG)."""
 
     bags = result["per_bag"]
-    fig, ax = plt.subplots(figsize=(11, 0.9 + 0.75 * len(bags)))
+    fig = Figure(figsize=(11, 0.9 + 0.75 * len(bags)))
+    ax = fig.subplots()
     ticks, labels = [], []
     for i, b in enumerate(bags):
         end = durations[b["name"]]
@@ -69,5 +66,4 @@ def plot_timelines(result: dict[str, Any], path: Path, durations: dict[str, floa
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
     return path
