@@ -141,7 +141,7 @@ def test_record_a_replay_between_processes(tmp_path: Path) -> None:
         assert "published 406 messages" in play.stdout  # 400 samples, 5 events, 1 info record
         # the player waited for the recorder's acknowledgments; the recorder settles at stop
     finally:
-        code = stop_process(recorder)
+        code = stop_process(recorder, timeout=15)
     rec_log.close()
     assert code == 0, (tmp_path / "record.log").read_text()
     back = read_trial_bag(tmp_path / "rec.mcap")

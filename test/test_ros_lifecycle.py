@@ -135,7 +135,7 @@ def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, st
             assert diag.values("classifier_node: belief")["model file"] == str(second)
             assert proc.poll() is None  # the same process all along
     finally:
-        code = stop_process(proc)
+        code = stop_process(proc, timeout=15)
     text = log.read_text()
     assert code == 0, text
     assert "classes ['approach', 'mating']" in text and "classes ['approach', 'rotation']" in text
@@ -172,7 +172,7 @@ def test_segmenter_diagnostics_report_rate_and_rejections(
             # once nothing moves any more, the arm is OK again
             assert wait_until(lambda: diag.latest[arm].level == b"\x00", 5)  # type: ignore[attr-defined]
     finally:
-        code = stop_process(proc)
+        code = stop_process(proc, timeout=15)
     assert code == 0, log.read_text()
 
 
@@ -217,7 +217,7 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
 
             phase.publish(String(data="approach"))
             send(600)
-            assert stop_process(first) == 0, first_log.read_text()
+            assert stop_process(first, timeout=15) == 0, first_log.read_text()
             send(200)  # words the restarted classifier never sees
             # the segmenter's diagnostics (1 Hz) report the first classifier gone, then the
             # second one matched by its own writers (not just seen in the graph)
@@ -244,7 +244,7 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
         assert rotation.phase == "rotation" and rotation.subtask in ("approach", "rotation")
         assert lost > 0
     finally:
-        codes = [stop_process(p) for p in (seg, second) if p is not None]
+        codes = [stop_process(p, timeout=15) for p in (seg, second) if p is not None]
     text = second_log.read_text()
     assert "words of this stream never arrived" in text
     assert codes == [0, 0], text
@@ -282,7 +282,7 @@ def test_a_failed_configure_leaves_the_node_unconfigured_and_says_why(
                     assert node.transition("configure") and node.transition("activate")
                     assert node.state() == "active"
     finally:
-        code = stop_process(proc)
+        code = stop_process(proc, timeout=15)
     text = log.read_text()
     assert code == 0, text
     assert "configure failed: field wrench_topics: not a valid ROS topic name" in text

@@ -113,7 +113,7 @@ def test_classifier_without_usable_model_says_unknown(
         assert set(states) == {"unknown"}
         assert proc.poll() is None
     finally:
-        code = stop_process(proc)
+        code = stop_process(proc, timeout=15)
     text = log.read_text()
     assert "no usable model" in text and expect in text
     assert code == 0, text
@@ -165,7 +165,7 @@ def test_segmenter_survives_malformed_input_and_sigint(tmp_path: Path, env: dict
         assert words > 0
         assert proc.poll() is None  # still running after the bad input
     finally:
-        code = stop_process(proc)
+        code = stop_process(proc, timeout=15)
     text = log.read_text()
     assert "ignored unknown /task_phase name 'pirouette'" in text
     assert "dropped a wrench sample" in text
@@ -197,7 +197,7 @@ def test_a_late_subscriber_still_gets_the_applied_sub_task_events(
             )
             assert wait_until(lambda: got == ["approach"], 10), (got, log.read_text())
     finally:
-        assert stop_process(proc) == 0, log.read_text()
+        assert stop_process(proc, timeout=15) == 0, log.read_text()
 
 
 def test_a_draining_node_still_answers_parameter_requests(
@@ -231,4 +231,4 @@ def test_a_draining_node_still_answers_parameter_requests(
                     assert text == descriptions(SegmenterConfig)["event_hold_s"]
                 time.sleep(0.001)
     finally:
-        assert stop_process(proc) == 0, log.read_text()
+        assert stop_process(proc, timeout=15) == 0, log.read_text()
