@@ -9,9 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import signal
 import sys
-import threading
 
 from rcbht_introspection.errors import InputError
 
@@ -38,11 +36,6 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `rcbht` console script."""
     command = "rcbht"
-    # SIGTERM (a supervisor, `kill`) takes Ctrl-C's path, so the finally blocks that stop node
-    # processes run; commands that install a StopSignal (bag record/replay) replace this. Called
-    # in-process (tests, another program's main thread) the caller's handler comes back after.
-    main_thread = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGTERM, signal.default_int_handler) if main_thread else None
     try:
         args = build_parser().parse_args(argv)
         command = f"rcbht {args.command}"
@@ -53,9 +46,6 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # Ctrl-C (also while starting): finally blocks have cleaned up
         print(f"{command}: interrupted", file=sys.stderr)
         return 0
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

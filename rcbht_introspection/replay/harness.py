@@ -44,6 +44,7 @@ from rcbht_introspection.replay.supervision import (
     lease_domain,
     release_domain,
     ros_env,
+    sigterm_as_interrupt,
     wait_for_nodes,
     write_params,
 )
@@ -130,7 +131,7 @@ def replay_eval(
     seg, cls_cfg, seg_params, cls_params = _params(work, arms, model_path, options)
     started = time.monotonic()
     result: dict[str, Any] = {}
-    with environment(env):
+    with environment(env), sigterm_as_interrupt():
         procs: list[NodeProcess] = []
         codes: dict[str, int | None] = {}
         try:

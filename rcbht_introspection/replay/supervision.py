@@ -15,6 +15,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
@@ -100,6 +101,21 @@ def write_params(path: Path, cls: type, values: dict[str, Any]) -> Path:
 def node_command(module: str, *ros_args: str) -> list[str]:
     """Command line that starts node `module` as its own process (`python -m ...nodes NODE`)."""
     return [sys.executable, "-m", "rcbht_introspection.nodes", module, "--ros-args", *ros_args]
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While the block runs, SIGTERM (a supervisor, `kill`) raises KeyboardInterrupt as Ctrl-C
+    does, so the finally blocks that stop child node processes run; the old handler comes back
+    after (main thread only: elsewhere the block runs unchanged)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def stop_process(
