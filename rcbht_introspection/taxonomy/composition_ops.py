@@ -15,6 +15,7 @@ from rcbht_introspection.taxonomy import compositions as mc
 from rcbht_introspection.taxonomy import primitives as pr
 from rcbht_introspection.taxonomy.config import TaxonomyConfig
 from rcbht_introspection.taxonomy.ops import (
+    HoldsOneRow,
     Op,
     PairPass,
     Row,
@@ -25,7 +26,7 @@ from rcbht_introspection.taxonomy.ops import (
 )
 
 
-class Compose(Op):
+class Compose(HoldsOneRow):
     """The MC layer: P1 with the next primitive (the last one pairs with itself)."""
 
     def __init__(self, config: TaxonomyConfig) -> None:
@@ -46,9 +47,6 @@ class Compose(Op):
         out, _ = mc.match_primitives(self.pending, self.pending, self.config)
         self.pending = None
         return [out]
-
-    def retained(self) -> int:
-        return 1 if self.pending is not None else 0
 
 
 @dataclass
@@ -253,7 +251,7 @@ class RepeatedCompositions(Op):
         return 1 if self.first is not None else 0
 
 
-class PrimitiveDurations(Op):
+class PrimitiveDurations(HoldsOneRow):
     """Step 3: relabel from the much longer primitive; stops at the first amplitude-gate failure."""
 
     def __init__(self, ctx: StreamContext, cycle: CycleState) -> None:
@@ -308,15 +306,10 @@ class PrimitiveDurations(Op):
 
     def finish(self) -> list[Row]:
         self.cycle.max_amp_final = True
-        out = [self.pending] if self.pending is not None else []
-        self.pending = None
-        return out
-
-    def retained(self) -> int:
-        return 1 if self.pending is not None else 0
+        return super().finish()
 
 
-class CompositionDurations(Op):
+class CompositionDurations(HoldsOneRow):
     """Step 4: absorb an MC into a neighbour five times longer; stops like step 3."""
 
     def __init__(self, ctx: StreamContext, cycle: CycleState) -> None:
@@ -368,14 +361,6 @@ class CompositionDurations(Op):
             mc.merge_previous(row, r, None, False)
             return self._advance(row, [])  # the merged row is compared with the next one
         return self._advance(row, [r])
-
-    def finish(self) -> list[Row]:
-        out = [self.pending] if self.pending is not None else []
-        self.pending = None
-        return out
-
-    def retained(self) -> int:
-        return 1 if self.pending is not None else 0
 
 
 class ContactAmplitudes(Op):

@@ -98,7 +98,21 @@ class BufferedOp(Op):
         return len(self.rows)
 
 
-class PairPass(Op):
+class HoldsOneRow(Op):
+    """An operator that holds at most one row back (`pending`); the end releases it."""
+
+    pending: Row | None = None
+
+    def finish(self) -> list[Row]:
+        out = [self.pending] if self.pending is not None else []
+        self.pending = None
+        return out
+
+    def retained(self) -> int:
+        return 1 if self.pending is not None else 0
+
+
+class PairPass(HoldsOneRow):
     """A greedy left-to-right pass over pairs (i, i+1); a merged pair is not compared again.
 
     `decide(a, b)` returns the merged row or None. Rows before `start(pos)` pass through, and so
@@ -136,14 +150,6 @@ class PairPass(Op):
         else:
             out.append(row)
         return out
-
-    def finish(self) -> list[Row]:
-        out = [self.pending] if self.pending is not None else []
-        self.pending = None
-        return out
-
-    def retained(self) -> int:
-        return 1 if self.pending is not None else 0
 
 
 class Chain(Op):
