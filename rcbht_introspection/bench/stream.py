@@ -16,8 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rcbht_introspection.bench.taxonomy import hiro_root
-from rcbht_introspection.io.hiro import find_trials, read_trial
+from rcbht_introspection.io.hiro import find_trials, hiro_root, read_trial
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.config import default_config
 from rcbht_introspection.taxonomy.primitives import axis_domain

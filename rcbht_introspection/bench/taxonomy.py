@@ -16,20 +16,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from rcbht_introspection.io.hiro import find_trials, read_trial
+from rcbht_introspection.io.hiro import find_trials, hiro_root, read_trial
 from rcbht_introspection.io.rcbht_format import write_trial_words
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.config import default_config
 
 REPEATS = 3
-
-
-def hiro_root() -> Path:
-    """../shared/data/hiro next to the repository, or $RCBHT_HIRO_DATA."""
-    env = os.environ.get("RCBHT_HIRO_DATA")
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[3] / "shared" / "data" / "hiro"
 
 
 def _children_cpu() -> float:

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.hiro import hiro_root
 from rcbht_introspection.learn.evaluate import trial_kfold_accuracy
 from rcbht_introspection.plots.realism import (
     plot_example_trials,
@@ -20,18 +21,13 @@ from rcbht_introspection.taxonomy.words import AXES
 
 
 def default_real_dir() -> Path:
-    """$RCBHT_HIRO_DATA/REAL_HIRO_ONE_SA_SUCCESS, else ../shared/data/hiro/... beside the checkout."""
-    root = os.environ.get("RCBHT_HIRO_DATA")
-    if root:
-        return Path(root) / "REAL_HIRO_ONE_SA_SUCCESS"
-    candidates = [
-        Path.cwd().parent / "shared" / "data" / "hiro",
-        Path(__file__).resolve().parents[2].parent / "shared" / "data" / "hiro",
-    ]
-    for base in candidates:
-        if (base / "REAL_HIRO_ONE_SA_SUCCESS").is_dir():
-            return base / "REAL_HIRO_ONE_SA_SUCCESS"
-    return candidates[0] / "REAL_HIRO_ONE_SA_SUCCESS"
+    """The real HIRO set: ../shared/data/hiro beside the working directory when it is there,
+    else under `io.hiro.hiro_root()` ($RCBHT_HIRO_DATA first)."""
+    real = "REAL_HIRO_ONE_SA_SUCCESS"
+    beside_cwd = Path.cwd().parent / "shared" / "data" / "hiro" / real
+    if not os.environ.get("RCBHT_HIRO_DATA") and beside_cwd.is_dir():
+        return beside_cwd
+    return hiro_root() / real
 
 
 def _markdown(result: dict[str, Any], accuracy: dict[str, Any]) -> str:

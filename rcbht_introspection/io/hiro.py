@@ -148,11 +148,16 @@ def find_trials(paths: list[Path] | list[str]) -> list[Path]:
     return found
 
 
-def shared_hiro() -> Path | None:
-    """../shared/data/hiro/REAL_HIRO_ONE_SA_SUCCESS beside the repository, or under $RCBHT_HIRO_DATA.
+def hiro_root() -> Path:
+    """The shared HIRO data: $RCBHT_HIRO_DATA, else ../shared/data/hiro beside the repository."""
+    env = os.environ.get("RCBHT_HIRO_DATA")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parents[3] / "shared" / "data" / "hiro"
 
-    The REAL HIRO trials that `rcbht demo --data hiro` and the ROS benchmarks use when present.
-    """
-    default = Path(__file__).resolve().parents[3] / "shared" / "data" / "hiro"
-    real = Path(os.environ.get("RCBHT_HIRO_DATA", default)) / "REAL_HIRO_ONE_SA_SUCCESS"
+
+def shared_hiro() -> Path | None:
+    """REAL_HIRO_ONE_SA_SUCCESS under `hiro_root()`, if present: the REAL HIRO trials that
+    `rcbht demo --data hiro` and the ROS benchmarks use."""
+    real = hiro_root() / "REAL_HIRO_ONE_SA_SUCCESS"
     return real if real.is_dir() else None
