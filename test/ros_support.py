@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import time
 from pathlib import Path
 
 import pytest
@@ -110,3 +111,22 @@ def wrench_msg(stamp_ns: int, fz: float, mx: float = 0.0):
     msg.wrench.force.z = fz
     msg.wrench.torque.x = mx
     return msg
+
+
+def answer(send, timeout: float = 20.0, attempt: float = 3.0):
+    """The response to an idempotent service request, sent again while none arrives.
+
+    `wait_for_service` only says the server was discovered, not that its response writer has
+    matched our response reader; Fast DDS waits 100 ms for that match and otherwise drops the
+    response (ros2/rmw_fastrtps#390, #467), which happens on a loaded machine. The request is
+    therefore repeated every `attempt` seconds, as a ROS lifecycle manager would."""
+    from rcbht_introspection.waiting import wait_until
+
+    futures = []
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        futures.append(send())
+        left = deadline - time.monotonic()
+        if wait_until(lambda: any(f.done() for f in futures), max(0.0, min(attempt, left))):
+            return next(f for f in futures if f.done()).result()
+    raise AssertionError(f"no response in {timeout} s to {len(futures)} requests")

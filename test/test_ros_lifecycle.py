@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 from ros_support import (
+    answer,
     env,
     segmenter_inputs,
     start_node,
@@ -37,23 +38,33 @@ class Lifecycle:
     def state(self) -> str:
         from lifecycle_msgs.srv import GetState
 
-        future = self.get.call_async(GetState.Request())
-        assert wait_until(future.done, 10)
-        return future.result().current_state.label
+        return answer(lambda: self.get.call_async(GetState.Request())).current_state.label
 
     def transition(self, label: str) -> bool:
+        """Whether the transition succeeded; a lost response is told apart from a refused one
+        by asking the state, and the request is repeated only if the node is still where it was."""
         from lifecycle_msgs.msg import Transition
         from lifecycle_msgs.srv import ChangeState
 
-        ids = {
-            "configure": Transition.TRANSITION_CONFIGURE,
-            "activate": Transition.TRANSITION_ACTIVATE,
-            "deactivate": Transition.TRANSITION_DEACTIVATE,
-            "cleanup": Transition.TRANSITION_CLEANUP,
-        }
-        future = self.change.call_async(ChangeState.Request(transition=Transition(id=ids[label])))
-        assert wait_until(future.done, 20)
-        return bool(future.result().success)
+        transition_id, goal = {
+            "configure": (Transition.TRANSITION_CONFIGURE, "inactive"),
+            "activate": (Transition.TRANSITION_ACTIVATE, "active"),
+            "deactivate": (Transition.TRANSITION_DEACTIVATE, "inactive"),
+            "cleanup": (Transition.TRANSITION_CLEANUP, "unconfigured"),
+        }[label]
+        request = ChangeState.Request(transition=Transition(id=transition_id))
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            future = self.change.call_async(request)
+            if wait_until(future.done, 3):
+                return bool(future.result().success)
+            state = self.state()
+            while state.endswith("ing") and time.monotonic() < deadline:  # still transitioning
+                time.sleep(0.2)
+                state = self.state()
+            if state == goal:
+                return True
+        raise AssertionError(f"no response to {label} in 30 s")
 
 
 class DiagnosticsProbe:
@@ -118,13 +129,12 @@ def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, st
 
             client = AsyncParameterClient(ros.node, "classifier_node")
             assert client.wait_for_services(10)
-            refused = client.set_parameters([Parameter("model_file", value=str(second))])
-            assert wait_until(refused.done, 10)
-            assert not refused.result().results[0].successful
+            model = [Parameter("model_file", value=str(second))]
+            refused = answer(lambda: client.set_parameters(model))
+            assert not refused.results[0].successful
             assert node.transition("deactivate") and node.state() == "inactive"
             assert node.transition("cleanup") and node.state() == "unconfigured"
-            accepted = client.set_parameters([Parameter("model_file", value=str(second))])
-            assert wait_until(accepted.done, 10) and accepted.result().results[0].successful
+            assert answer(lambda: client.set_parameters(model)).results[0].successful
             assert node.transition("configure") and node.transition("activate")
             assert wait_until(
                 lambda: (
@@ -268,8 +278,8 @@ def test_a_failed_configure_leaves_the_node_unconfigured_and_says_why(
             client = AsyncParameterClient(ros.node, "segmenter_node")
             assert client.wait_for_services(10)
             for value in ("bad topic", "/wrench_ok"):
-                done = client.set_parameters([Parameter("wrench_topics", value=[value])])
-                assert wait_until(done.done, 10) and done.result().results[0].successful
+                topics = [Parameter("wrench_topics", value=[value])]
+                assert answer(lambda p=topics: client.set_parameters(p)).results[0].successful
                 if value == "bad topic":
                     assert not node.transition("configure")
                     assert node.state() == "unconfigured"

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 from ros_support import (
+    answer,
     env,
     require_ros,
     ros_env,
@@ -223,11 +224,10 @@ def test_a_draining_node_still_answers_parameter_requests(
             for i in range(400):  # keep the node busy draining while the requests come
                 wrench.publish(wrench_msg(1_700_000_000 * 10**9 + i * 1_000_000, math.sin(i / 20)))
                 if i % 100 == 50:
-                    values = client.get_parameters(["event_hold_s"])
-                    described = client.describe_parameters(["event_hold_s"])
-                    assert wait_until(lambda v=values, d=described: v.done() and d.done(), 10)
-                    assert values.result().values[0].double_value == 0.3
-                    text = described.result().descriptors[0].description
+                    values = answer(lambda: client.get_parameters(["event_hold_s"]))
+                    described = answer(lambda: client.describe_parameters(["event_hold_s"]))
+                    assert values.values[0].double_value == 0.3
+                    text = described.descriptors[0].description
                     assert text == descriptions(SegmenterConfig)["event_hold_s"]
                 time.sleep(0.001)
     finally:
