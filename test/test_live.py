@@ -190,7 +190,7 @@ def test_late_event_is_placed_at_the_sample_before_it() -> None:
 def test_session_rejects_malformed_samples() -> None:
     from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
 
-    session = SegmenterSession(("R",), arm_stream_factory())
+    session = SegmenterSession(("R",), arm_stream_factory(), subtasks=("approach",))
     base = 1_700_000_000 * 10**9
     assert session.push("R", base, [0.0] * 6).rejected is None
     assert session.push("R", base + 5_000_000, [float("nan")] + [0.0] * 5).rejected == "non_finite"

@@ -26,7 +26,7 @@ from rcbht_introspection.io.bags import (
     wrench_topic,
 )
 from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
-from rcbht_introspection.io.trial import SUBTASKS, Trial
+from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, word_topics
 from rcbht_introspection.replay.observer import segmenter_matches
 from rcbht_introspection.sim import load_sim_config, simulate_trial
@@ -206,7 +206,7 @@ class SoakPublisher(threading.Thread):
             stats.in_trial = n
             for name in pb.events.get(i, ()):
                 self.phase_pub.publish(String(data=name))
-                if name in _subtask_names():
+                if name != END_PHASE:
                     subtasks += 1
         play_s = perf() - t0
         for arm in ARMS:
@@ -223,12 +223,6 @@ class SoakPublisher(threading.Thread):
             "subtask_events": subtasks,
             "cut": cut,
         }
-
-
-@functools.cache
-def _subtask_names() -> frozenset[str]:
-
-    return frozenset(SUBTASKS)
 
 
 # --- the observer --------------------------------------------------------------------------
@@ -285,7 +279,7 @@ class SoakObserver:
 
     def on_phase(self, msg: Any) -> None:
         with self.lock:
-            self.applied["end" if msg.name not in _subtask_names() else "subtask"] += 1
+            self.applied["end" if msg.name == END_PHASE else "subtask"] += 1
 
     def connected(self, node: Any) -> bool:
         """The nodes publish what this observes, and the segmenter's writers matched both the

@@ -104,7 +104,7 @@ def run_train(args: argparse.Namespace) -> int:
     print(
         f"wrote {args.out}: {args.classifier}/{args.encoding}, {len(samples)} samples "
         f"(+{n_live} live) from {len(trials)} trials, {model.encoder.n_features} features, "
-        f"classes {model.classes_}"
+        f"classes {model.classes_}, task {list(model.task.subtasks)}"
     )
     return 0
 

@@ -39,16 +39,20 @@ def _clip(word: Word, start: float | None = None, end: float | None = None) -> W
 
 
 def split_words(
-    words: TrialWords, state_times: Sequence[float], end_time: float
+    words: TrialWords,
+    state_times: Sequence[float],
+    end_time: float,
+    names: Sequence[str] = SUBTASKS,
 ) -> list[SubtaskSample]:
     """One SubtaskSample per sub-task that has a start time; the last ends at `end_time`.
 
     For each arm/level/axis the words are walked in order against the marks (the state times
     after the first, then `end_time`): a word ending before a mark stays in the current
     sub-task, one ending at it closes the sub-task, one crossing it is cut in two. Words past
-    `end_time` are clipped to it; sub-tasks beyond SUBTASKS are ignored.
+    `end_time` are clipped to it; `names` names the sub-task of each state time (state times
+    beyond it are ignored; a repeated name gives another sample of that sub-task).
     """
-    starts = [float(t) for t in list(state_times)[: len(SUBTASKS)]]
+    starts = [float(t) for t in list(state_times)[: len(names)]]
     if not starts:
         return []
     marks = [*starts[1:], float(end_time)]
@@ -79,7 +83,7 @@ def split_words(
                     if state >= len(marks):
                         break
     return [
-        SubtaskSample(words.name, SUBTASKS[i], starts[i], marks[i], parts[i])
+        SubtaskSample(words.name, names[i], starts[i], marks[i], parts[i])
         for i in range(len(starts))
     ]
 

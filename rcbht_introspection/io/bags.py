@@ -1,7 +1,7 @@
 """rosbag2 trial bags via rosbags (no ROS install needed): write, read and recognise them.
 
 A trial bag holds geometry_msgs/WrenchStamped on /wrench (one arm) or /<arm>/wrench (two arms),
-std_msgs/String sub-task events on /task_phase (the SUBTASKS names at the state times, then
+std_msgs/String sub-task events on /task_phase (the trial's phase names at its state times, then
 END_PHASE at the last sample) and one std_msgs/String JSON record on /rcbht/trial_info (name,
 outcome, time origin). Stamps are TIME_ORIGIN_NS + trial time, so no stamp is zero.
 The storage follows the suffix: `x.mcap` / `x.db3` is one storage file; any other path is a
@@ -28,7 +28,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.io.trial import AXES, SUBTASKS, Trial
+from rcbht_introspection.io.trial import AXES, Trial, check_phases
 
 # rosbags.rosbag2 (readers, writers, storage plugins: ~150 ms) is imported where a bag is opened,
 # so that `rcbht --help`, which reaches this module through learn/data.py, does not pay for it
@@ -175,7 +175,9 @@ class BagWriter:
 
 def trial_phase_events(trial: Trial) -> list[tuple[float, str]]:
     """(time, name) /task_phase events of a trial: each sub-task start, then END_PHASE at the end."""
-    events = [(float(t), SUBTASKS[i]) for i, t in enumerate(trial.state_times[: len(SUBTASKS)])]
+    events = [
+        (float(t), name) for t, name in zip(trial.state_times, trial.phase_names, strict=False)
+    ]
     events.append((trial.end_time, END_PHASE))
     return events
 
@@ -200,6 +202,8 @@ def write_trial_bag(trial: Trial, path: Path | str, time_origin_ns: int = TIME_O
             "time_origin_ns": int(time_origin_ns),
             "arms": list(trial.arms),
         }
+        if isinstance(trial.metadata.get("task"), dict):
+            info["task"] = trial.metadata["task"]  # the task the trial belongs to (Task.to_dict)
         bag.write(TRIAL_INFO_TOPIC, String(data=json.dumps(info)), int(t_ns[0]))
         events = trial_phase_events(trial)
         ev = 0
@@ -304,8 +308,11 @@ def decode_string(raw: bytes) -> str:
     return raw[8 : 8 + n - 1].decode()
 
 
-def read_trial_bag(path: Path | str) -> Trial:
-    """Trial of a bag written by write_trial_bag or recorded live (/wrench or /<arm>/wrench)."""
+def read_trial_bag(path: Path | str, end_phases: Sequence[str] = (END_PHASE,)) -> Trial:
+    """Trial of a bag written by write_trial_bag or recorded live (/wrench or /<arm>/wrench).
+
+    Every /task_phase event before the first end phase starts a sub-task of that name; events
+    after it are counted in metadata['events_after_end'] and not used."""
     path = Path(path)
     info: dict = {}
     stamps: dict[str, list[int]] = {}
@@ -342,18 +349,29 @@ def read_trial_bag(path: Path | str) -> Trial:
         raise InputError(f"wrench stamps do not increase at message {k}", path, field="stamp")
     wrench = {arm: np.asarray(values[arm], dtype=np.float64).reshape(-1, len(AXES)) for arm in arms}
     state: list[float] = []
-    for log_ns, sample_ns, name in phases:
-        if len(state) < len(SUBTASKS) and name == SUBTASKS[len(state)]:
-            # written bags log events at their trial time; recorded ones at receive time, so
-            # there the event belongs to the last sample received before it
-            t = log_ns if info else (sample_ns or int(ref[0]))
-            state.append((t - origin) / _NS)
-    name = str(info.get("name", path.name.split(".")[0]))
-    return Trial(
-        name=name,
+    names: list[str] = []
+    after_end = 0
+    for log_ns, sample_ns, phase in phases:
+        if phase in end_phases or after_end:
+            after_end += 1
+            continue
+        # written bags log events at their trial time; recorded ones at receive time, so
+        # there the event belongs to the last sample received before it
+        t = log_ns if info else (sample_ns or int(ref[0]))
+        state.append((t - origin) / _NS)
+        names.append(phase.strip())
+    trial = Trial(
+        name=str(info.get("name", path.name.split(".")[0])),
         time=time,
         wrench=wrench,
         state_times=tuple(state),
         outcome=str(info.get("outcome", "success")),
-        metadata={"bag": str(path)},
+        metadata={
+            "bag": str(path),
+            "events_after_end": max(0, after_end - 1),
+            **({"task": info["task"]} if isinstance(info.get("task"), dict) else {}),
+        },
+        phases=tuple(names),
     )
+    check_phases(trial, path)
+    return trial

@@ -12,9 +12,11 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.io.trial import AXES, Trial
+from rcbht_introspection.io.trial import AXES, Trial, check_phases
+from rcbht_introspection.task import HIRO_TASK, TASK_FILE, Task, task_of_folder
 
 COLUMNS: tuple[str, ...] = ("t", *AXES)
 ARMS: tuple[str, ...] = ("L", "R")
@@ -114,11 +116,19 @@ def read_trial(folder: Path | str) -> Trial:
         state = read_state(folder / "L_State.dat")
     outcome_file = folder / "outcome.txt"
     outcome = outcome_file.read_text().strip() if outcome_file.is_file() else "success"
-    return Trial(name=folder.name, time=time, wrench=wrench, state_times=state, outcome=outcome)
+    task = task_of_folder(folder)
+    phases: tuple[str, ...] = ()
+    if task != HIRO_TASK:  # HIRO's own trials keep the default names (and their extra lines)
+        state = state[: len(task.subtasks)]
+        phases = task.subtasks[: len(state)]
+    trial = Trial(folder.name, time, wrench, state, outcome, phases=phases)
+    check_phases(trial, folder / ("R_State.dat" if "R" in wrench else "L_State.dat"))
+    return trial
 
 
-def write_trial(trial: Trial, folder: Path | str) -> Path:
-    """Write `trial` in the HIRO layout (<arm>_Torques.dat, <arm>_State.dat, outcome.txt)."""
+def write_trial(trial: Trial, folder: Path | str, task: Task | None = None) -> Path:
+    """Write `trial` in the HIRO layout (<arm>_Torques.dat, <arm>_State.dat, outcome.txt), and
+    task.yaml when its sub-tasks are not HIRO's (`task`, else the trial's phase names)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     for arm, wrench in trial.wrench.items():
@@ -126,6 +136,17 @@ def write_trial(trial: Trial, folder: Path | str) -> Path:
         np.savetxt(folder / f"{arm}_Torques.dat", table, fmt="%.9g", delimiter="\t")
         (folder / f"{arm}_State.dat").write_text("".join(f"{t:.6g}\n" for t in trial.state_times))
     (folder / "outcome.txt").write_text(trial.outcome + "\n")
+    names = trial.phase_names
+    if task is None and trial.phases and names != HIRO_TASK.subtasks[: len(names)]:
+        task = Task(names)
+    if task is not None and task != HIRO_TASK:
+        if tuple(names) != task.subtasks[: len(names)]:
+            raise InputError(
+                f"phases {list(names)} are not a start of the task's sub-tasks "
+                f"{list(task.subtasks)} (a trial folder holds times only); write a bag",
+                folder,
+            )
+        (folder / TASK_FILE).write_text(yaml.safe_dump(task.to_dict(), sort_keys=False))
     return folder
 
 

@@ -11,8 +11,9 @@ from rcbht_introspection.grammar.split import SubtaskSample, split_words
 from rcbht_introspection.io import bags
 from rcbht_introspection.io.hiro import ARMS, find_trials, read_state, read_trial
 from rcbht_introspection.io.rcbht_format import level_path, read_trial_words
-from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn import WORD_SOURCES, WordSource
+from rcbht_introspection.task import HIRO_TASK, Task, task_of_folder, task_of_names
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, TrialWords
 
@@ -25,11 +26,26 @@ class TrialSamples:
     path: Path
     source: str
     samples: list[SubtaskSample]
+    task: Task = HIRO_TASK
+    """The task the trial belongs to (its folder's task.yaml, or the names of its phases)."""
 
     @property
     def complete(self) -> bool:
-        """True when every sub-task of SUBTASKS has a sample."""
-        return [s.subtask for s in self.samples] == list(SUBTASKS)
+        """True when the trial runs its task's sub-tasks once each, in order."""
+        return self.covers(self.task)
+
+    def covers(self, task: Task) -> bool:
+        """True when the trial's sub-tasks are `task`'s, once each, in order."""
+        return [s.subtask for s in self.samples] == list(task.subtasks)
+
+
+def task_of_trials(trials: Iterable[TrialSamples]) -> Task:
+    """The one task of a set of trials: their common task, else the names of all their phases."""
+    trials = list(trials)
+    tasks = {t.task for t in trials}
+    if len(tasks) == 1:
+        return tasks.pop()
+    return task_of_names([s.subtask for s in t.samples] for t in trials)
 
 
 def _golden_arms(folder: Path) -> list[tuple[str, Path]]:
@@ -74,9 +90,10 @@ def load_trial_samples(path: Path, words: WordSource = "auto") -> TrialSamples:
         if words == "golden":
             raise InputError("a bag has no golden label files; use words='engine'", path)
         trial = bags.read_trial_bag(path)
-        trial_words = label_trial(trial)
-        samples = split_words(trial_words, trial.state_times, trial.end_time)
-        return TrialSamples(trial.name, path, "engine", samples)
+        samples = split_words(
+            label_trial(trial), trial.state_times, trial.end_time, trial.phase_names
+        )
+        return TrialSamples(trial.name, path, "engine", samples, task_of_bag(trial))
     golden = _golden_arms(path)
     if words == "golden" or (words == "auto" and golden):
         if not golden:
@@ -86,11 +103,20 @@ def load_trial_samples(path: Path, words: WordSource = "auto") -> TrialSamples:
             part = read_trial_words(root, name=path.name, arm=arm, levels=LEVELS)
             trial_words.words.update(part.words)
         state = read_state(path / "R_State.dat") or read_state(path / "L_State.dat")
-        samples = split_words(trial_words, state, _end_time(path))
-        return TrialSamples(path.name, path, "golden", samples)
+        task = task_of_folder(path)
+        samples = split_words(trial_words, state, _end_time(path), task.subtasks)
+        return TrialSamples(path.name, path, "golden", samples, task)
     trial = read_trial(path)
-    samples = split_words(label_trial(trial), trial.state_times, trial.end_time)
-    return TrialSamples(trial.name, path, "engine", samples)
+    samples = split_words(label_trial(trial), trial.state_times, trial.end_time, trial.phase_names)
+    return TrialSamples(trial.name, path, "engine", samples, task_of_folder(path))
+
+
+def task_of_bag(trial: Trial) -> Task:
+    """A bag's task: the one its writer stored (trial info 'task'), else its own phase names."""
+    stored = trial.metadata.get("task")
+    if isinstance(stored, dict):
+        return Task.from_dict(stored)
+    return task_of_names([trial.phase_names])
 
 
 def find_inputs(paths: Iterable[Path | str]) -> list[Path]:

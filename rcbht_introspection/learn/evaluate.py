@@ -24,9 +24,8 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import EncodingName
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
-from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn import ClassifierKind
-from rcbht_introspection.learn.data import TrialSamples, load_samples
+from rcbht_introspection.learn.data import TrialSamples, load_samples, task_of_trials
 from rcbht_introspection.learn.live import load_live_config, trial_live_samples
 from rcbht_introspection.learn.models import train_model
 
@@ -108,8 +107,10 @@ def evaluate(
     progress: Callable[[int], None] | None = None,
 ) -> dict[str, Any]:
     """Run the protocol; returns the JSON-ready result (keys documented in docs/learning.md)."""
-    complete = [t for t in trials if t.complete]
-    excluded = [t.trial for t in trials if not t.complete]
+    task = task_of_trials(trials)
+    complete = [t for t in trials if t.covers(task)]
+    excluded = [t.trial for t in trials if not t.covers(task)]
+    names = task.subtasks
     two_arm = any(len(s.words.arms) > 1 for t in complete for s in t.samples[:1])
     n_val = protocol.n_validation or default_validation(len(complete), two_arm)
     start = protocol.start_trials or START_TRIALS[protocol.classifier]
@@ -126,7 +127,7 @@ def evaluate(
     variant_curve = np.full((protocol.permutations, len(tail_steps)), math.nan)
     variant_base = np.full((protocol.permutations, len(tail_steps)), math.nan)
     final_acc, fit_seconds, predict_ms = [], [], []
-    confusion = np.zeros((len(SUBTASKS), len(SUBTASKS)), dtype=int)
+    confusion = np.zeros((len(names), len(names)), dtype=int)
     prefix_acc: dict[float, list[float]] = {f: [] for f in PREFIX_FRACTIONS}
     prefix_base: dict[float, list[float]] = {f: [] for f in PREFIX_FRACTIONS}
     near_empty = lambda s: s.duration < protocol.near_empty_seconds  # noqa: E731
@@ -147,7 +148,7 @@ def evaluate(
             model = train_model(
                 train_samples, protocol.classifier, protocol.encoding,
                 random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
-                augment_prefixes=protocol.augment_prefixes, cache=cache,
+                augment_prefixes=protocol.augment_prefixes, cache=cache, task=task,
             )  # fmt: skip
             elapsed = time.perf_counter() - began
             curve[perm, j] = _accuracy(model.predict_samples(val_samples), val_samples)
@@ -175,8 +176,8 @@ def evaluate(
             predicted = model.predict_samples(val_samples)
             final_acc.append(_accuracy(predicted, val_samples))
             for p, s in zip(predicted, val_samples, strict=True):
-                if p in SUBTASKS and s.subtask in SUBTASKS:
-                    confusion[SUBTASKS.index(s.subtask), SUBTASKS.index(p)] += 1
+                if p in names and s.subtask in names:
+                    confusion[names.index(s.subtask), names.index(p)] += 1
             timings = []
             for s in val_samples[: min(len(val_samples), 12)]:
                 t0 = time.perf_counter()
@@ -221,10 +222,11 @@ def evaluate(
         ],
         "per_class_accuracy": {
             name: (float(confusion[i, i] / rows[i]) if rows[i] else math.nan)
-            for i, name in enumerate(SUBTASKS)
+            for i, name in enumerate(names)
         },
         "confusion_matrix": confusion.tolist(),
-        "confusion_labels": list(SUBTASKS),
+        "confusion_labels": list(names),
+        "task": task.to_dict(),
         "trial_splits": {**_mean_std(final_acc), "n": len(final_acc)},
         "best_of_splits": float(np.nanmax(final_acc)) if final_acc else math.nan,
         "fit_seconds": float(np.mean(fit_seconds)) if fit_seconds else math.nan,
@@ -271,7 +273,8 @@ def _live_windows(trials: Sequence[TrialSamples]) -> dict[str, list[SubtaskSampl
 
 def total_steps(trials: Sequence[TrialSamples], protocol: Protocol) -> int:
     """Number of curve steps `evaluate` will run (for a progress bar)."""
-    complete = [t for t in trials if t.complete]
+    task = task_of_trials(trials)
+    complete = [t for t in trials if t.covers(task)]
     two_arm = any(len(s.words.arms) > 1 for t in complete for s in t.samples[:1])
     n_val = protocol.n_validation or default_validation(len(complete), two_arm)
     start = protocol.start_trials or START_TRIALS[protocol.classifier]

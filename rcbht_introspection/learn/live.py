@@ -25,6 +25,7 @@ from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io import bags
 from rcbht_introspection.io.hiro import read_trial
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.learn.data import task_of_trials
 from rcbht_introspection.learn.models import train_model
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
 from rcbht_introspection.live.segmenter import arm_stream_factory
@@ -195,6 +196,7 @@ def live_training(
     config = load_live_config(config_file)
     use = config.enabled if enabled is None else enabled
     samples = [s for t in trials for s in t.samples]
+    train_kwargs.setdefault("task", task_of_trials(trials))
     live: list[SubtaskSample] = []
     if use:
         live = [s for v in trial_live_samples([t.path for t in trials], config).values() for s in v]

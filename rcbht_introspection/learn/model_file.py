@@ -19,9 +19,9 @@ import skops.io as sio
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.registry import encoding_from_state
-from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn.models import SubtaskModel
 from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
+from rcbht_introspection.task import Task, task_of_names
 
 FORMAT = "rcbht-subtask-model"
 FORMAT_VERSION = 1
@@ -75,6 +75,7 @@ def _model_parts(model: SubtaskModel) -> tuple[dict[str, Any], dict[str, np.ndar
         "classes": model.classes_,
         "taxonomy_profile": model.taxonomy_profile,
         "random_state": model.random_state,
+        "task": model.task.to_dict(),
     }
     if model.training:
         header["training"] = model.training
@@ -162,7 +163,23 @@ def _model_from_parts(
         str(header.get("taxonomy_profile", "reference")),
         int(header.get("random_state", 0)),
         dict(header.get("training") or {}),
+        task=_task_of_header(header, path),
     )
+
+
+def _task_of_header(header: dict[str, Any], path: Path) -> Task:
+    """The model's task; files written before tasks were stored: HIRO's, or their classes."""
+    data = header.get("task")
+    if data is None:
+        return task_of_names([[str(c) for c in header.get("classes") or []]])
+    if not isinstance(data, dict):
+        raise InputError("task must be a mapping", path, field="task")
+    try:
+        return Task.from_dict(data)
+    except InputError as exc:
+        raise InputError(
+            exc.message, path, field=f"task.{exc.field}" if exc.field else "task"
+        ) from None
 
 
 def model_summary(path: Path | str) -> dict[str, Any]:
@@ -173,6 +190,7 @@ def model_summary(path: Path | str) -> dict[str, Any]:
         "encoding": model.encoding,
         "classes": model.classes_,
         "taxonomy_profile": model.taxonomy_profile,
+        "task": model.task.to_dict(),
         "n_features": model.encoder.n_features,
         "training": model.training,
     }
@@ -189,8 +207,11 @@ def load_subtask_model(path: str, expected_profile: str = "") -> tuple[SubtaskMo
     except OSError as exc:
         return None, f"{path}: cannot read: {exc.strerror}"
     classes = [str(c) for c in getattr(model, "classes_", [])]
-    if not classes or not set(classes) <= set(SUBTASKS):
-        return None, f"{path}: model classes {classes} are not sub-tasks {list(SUBTASKS)}"
+    if not classes or not set(classes) <= set(model.task.subtasks):
+        return (
+            None,
+            f"{path}: model classes {classes} are not sub-tasks {list(model.task.subtasks)}",
+        )
     profile = str(getattr(model, "taxonomy_profile", ""))
     if expected_profile and profile != expected_profile:
         return None, (

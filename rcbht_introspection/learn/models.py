@@ -19,10 +19,10 @@ from rcbht_introspection.grammar.encoding.compact import CompactEncoding
 from rcbht_introspection.grammar.encoding.paper import PaperEncoding
 from rcbht_introspection.grammar.encoding.registry import make_encoding
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
-from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn import CLASSIFIERS, ClassifierKind
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 from rcbht_introspection.learn.svm import fit_svm, make_svm, svm_predict_proba, tune_svm
+from rcbht_introspection.task import HIRO_TASK, Task, task_of_names
 
 
 @dataclass
@@ -36,6 +36,8 @@ class SubtaskModel:
     random_state: int = 0
     training: dict[str, Any] = field(default_factory=dict)
     """How it was trained, stored in the header (e.g. live_augment settings, learn/live.py)."""
+    task: Task = HIRO_TASK
+    """The task it knows: its sub-task names in order and the phases that end a trial."""
     live: SubtaskModel | None = None
     """Optional head for running (unfinished) windows, trained with live-like windows
     (learn/live.py); final verdicts on finished sub-tasks always use this model itself."""
@@ -92,6 +94,7 @@ def train_model(
     n_estimators: int = 100,
     augment_prefixes: Sequence[float] = (),
     cache: SampleCache | None = None,
+    task: Task | None = None,
 ) -> SubtaskModel:
     """Fit the encoding and the classifier on `samples` (training data only).
 
@@ -103,6 +106,7 @@ def train_model(
         raise InputError(f"unknown classifier {classifier!r} (known: {', '.join(CLASSIFIERS)})")
     if not samples:
         raise InputError("no training samples")
+    task = task or task_of_samples(samples)
     samples = list(samples) + [prefix_sample(s, f) for f in augment_prefixes for s in samples]
     encoder = make_encoding(encoding, cache).fit(samples)
     X = encoder.transform(samples)
@@ -115,10 +119,18 @@ def train_model(
             svm.set_params(**tune_svm(X, y, [s.trial for s in samples], random_state))
         estimator: Any = fit_svm(svm, X, y)
     else:
-        classes = sorted(set(SUBTASKS) | set(y))
+        classes = sorted(set(task.subtasks) | set(y))
         estimator = MondrianForestClassifier(n_estimators=n_estimators, random_state=random_state)
         estimator.partial_fit(X, y, classes=classes)
-    return SubtaskModel(classifier, encoder, estimator, taxonomy_profile, random_state)
+    return SubtaskModel(classifier, encoder, estimator, taxonomy_profile, random_state, task=task)
 
 
-__all__ = ["SubtaskModel", "train_model"]
+def task_of_samples(samples: Sequence[SubtaskSample]) -> Task:
+    """The task the samples show: their sub-task names, in the order the trials run them."""
+    per_trial: dict[str, list[str]] = {}
+    for s in samples:
+        per_trial.setdefault(s.trial, []).append(s.subtask)
+    return task_of_names(per_trial.values())
+
+
+__all__ = ["SubtaskModel", "task_of_samples", "train_model"]

@@ -17,7 +17,7 @@ import numpy as np
 
 from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
-from rcbht_introspection.io.trial import AXES, SUBTASKS
+from rcbht_introspection.io.trial import AXES
 from rcbht_introspection.live import MODES, BeliefMode
 from rcbht_introspection.live.join import WordLedger
 from rcbht_introspection.taxonomy.words import LEVELS, Level, TrialWords, Word
@@ -71,7 +71,7 @@ class BeliefTracker:
         model: SampleClassifier | None,
         mode: BeliefMode = "boundary",
         window_s: float = 2.0,
-        subtasks: Sequence[str] = SUBTASKS,
+        subtasks: Sequence[str] | None = None,
         end_phases: Sequence[str] = ("done",),
         trial: str = "live",
     ) -> None:
@@ -80,7 +80,11 @@ class BeliefTracker:
         self.model = model
         self.mode = mode
         self.window_s = float(window_s)
+        if subtasks is None:
+            task = getattr(model, "task", None)  # a SubtaskModel's; a stand-in: its classes
+            subtasks = task.subtasks if task is not None else getattr(model, "classes_", ())
         self.subtasks = tuple(subtasks)
+        """Names that start a sub-task (the model's task); empty: every name but an end phase."""
         self.end_phases = tuple(end_phases)
         self.trial = trial
         self.classes: tuple[str, ...] = (
@@ -171,7 +175,7 @@ class BeliefTracker:
             self.task_ended = True
             self.now = max(self.now, t)
             return True
-        if name not in self.subtasks:
+        if self.subtasks and name not in self.subtasks:
             return False
         if self.segments and self.segments[-1].end is None:
             self.segments[-1].end = t

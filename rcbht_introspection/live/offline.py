@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rcbht_introspection.grammar.split import split_words
-from rcbht_introspection.io.trial import SUBTASKS, Trial
+from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.taxonomy.words import TrialWords, Word
 
 if TYPE_CHECKING:
@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
 def trial_events(trial: Trial, end_phase: str = "done") -> list[tuple[float, str]]:
     """The /task_phase events of a trial bag: sub-task starts, then `end_phase` at the end."""
-    events = [(float(t), SUBTASKS[i]) for i, t in enumerate(trial.state_times[: len(SUBTASKS)])]
+    events = [(float(t), n) for t, n in zip(trial.state_times, trial.phase_names, strict=False)]
     events.append((trial.end_time, end_phase))
     return events
 
@@ -76,7 +76,9 @@ def offline_verdicts(
 ) -> list[str]:
     """The model's verdict on each sub-task of the trial from the given words (spec 2.7 split)."""
 
-    samples = split_words(trial_words(trial.name, words), trial.state_times, trial.end_time)
+    samples = split_words(
+        trial_words(trial.name, words), trial.state_times, trial.end_time, trial.phase_names
+    )
     if not samples:
         return []
     return [str(v) for v in model.predict_samples(samples)]
@@ -94,9 +96,10 @@ def first_word_mismatch(node: Sequence[Word], offline: Sequence[Word]) -> str:
 
 def truth_at(trial: Trial, t: np.ndarray) -> np.ndarray:
     """True sub-task name at each stream time (state times relative to the first sample)."""
-    starts = np.asarray(trial.state_times[: len(SUBTASKS)], dtype=float) - float(trial.time[0])
+    phases = trial.phase_names
+    starts = np.asarray(trial.state_times[: len(phases)], dtype=float) - float(trial.time[0])
     idx = np.searchsorted(starts, t, side="right") - 1
-    names = np.array(["unknown", *SUBTASKS[: len(starts)]], dtype=object)
+    names = np.array(["unknown", *phases[: len(starts)]], dtype=object)
     return names[np.clip(idx + 1, 0, len(starts))]
 
 

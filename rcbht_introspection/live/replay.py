@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rcbht_introspection.io.trial import SUBTASKS, Trial
+from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live import BeliefMode, offline
 from rcbht_introspection.live.belief import (
     UNKNOWN,
@@ -61,7 +61,7 @@ class StreamedTrial:
         events = [p for s in self.steps for p in s.phases]
         out: list[tuple[str, float, float]] = []
         for i, p in enumerate(events):
-            if p.end or p.name not in SUBTASKS:
+            if p.end:
                 continue
             end = events[i + 1].time if i + 1 < len(events) else self.duration
             out.append((p.name, p.time, end))

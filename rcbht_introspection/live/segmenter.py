@@ -19,7 +19,6 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.config import load_taxonomy_config
 from rcbht_introspection.taxonomy.stream import ArmStream, load_stream_config
@@ -118,14 +117,15 @@ class SegmenterSession:
         arms: Sequence[str],
         stream_factory: Callable[[str], ArmStream],
         end_phases: Sequence[str] = ("done",),
-        subtasks: Sequence[str] = SUBTASKS,
+        subtasks: Sequence[str] | None = None,
         hold_s: float = 0.2,
         max_hold_s: float = 10.0,
     ) -> None:
         self.arms = tuple(arms)
         self.stream_factory = stream_factory
         self.end_phases = tuple(end_phases)
-        self.subtasks = tuple(subtasks)
+        self.subtasks = None if subtasks is None else tuple(subtasks)
+        """Names that start a sub-task; None: every name that is not an end phase."""
         self.hold_ns = int(hold_s * 1e9)
         self.max_hold_ns = int(max_hold_s * 1e9)
         self.counts = {arm: ArmCounts() for arm in self.arms}
@@ -204,7 +204,7 @@ class SegmenterSession:
         out = Output()
         name = name.strip()
         end = name in self.end_phases
-        if not end and name not in self.subtasks:
+        if not end and self.subtasks is not None and name not in self.subtasks:
             self.unknown_phases += 1
             out.unknown_phase = name
             return out

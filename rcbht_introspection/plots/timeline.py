@@ -8,15 +8,16 @@ from typing import Any
 from matplotlib.figure import Figure  # no pyplot: no backend, no global figure state
 from matplotlib.patches import Patch
 
-from rcbht_introspection.io.trial import SUBTASKS
+UNKNOWN_COLOR = "#bbbbbb"
+PALETTE = ("#4c72b0", "#dd8452", "#55a868", "#c44e52", "#8172b3", "#937860", "#da8bc3", "#8c8c8c")
+"""Colours of the sub-tasks in the order they first appear (HIRO's four keep theirs)."""
 
-COLORS = {
-    "approach": "#4c72b0",
-    "rotation": "#dd8452",
-    "insertion": "#55a868",
-    "mating": "#c44e52",
-    "unknown": "#bbbbbb",
-}
+
+def subtask_colors(names: list[str]) -> dict[str, str]:
+    """A colour per sub-task name, in order of appearance; 'unknown' is grey."""
+    ordered = list(dict.fromkeys(n for n in names if n != "unknown"))
+    colors = {n: PALETTE[i % len(PALETTE)] for i, n in enumerate(ordered)}
+    return {**colors, "unknown": UNKNOWN_COLOR}
 
 
 def _spans(
@@ -35,6 +36,9 @@ def plot_timelines(result: dict[str, Any], path: Path, durations: dict[str, floa
     """One row pair (truth, /task_state) per trial; writes `path` (PNG)."""
 
     bags = result["per_bag"]
+    colors = subtask_colors(
+        [s for b in bags for s in [*b["truth"], b["initial_state"], *(c[1] for c in b["timeline"])]]
+    )
     fig = Figure(figsize=(11, 0.9 + 0.75 * len(bags)))
     ax = fig.subplots()
     ticks, labels = [], []
@@ -47,7 +51,7 @@ def plot_timelines(result: dict[str, Any], path: Path, durations: dict[str, floa
             (y, _spans([tuple(c) for c in b["timeline"]], b["initial_state"], end)),
         ):
             for t0, t1, s in spans:
-                ax.barh(row, t1 - t0, left=t0, height=0.8, color=COLORS.get(s, "#000000"))
+                ax.barh(row, t1 - t0, left=t0, height=0.8, color=colors.get(s, "#000000"))
         ticks += [y + 0.9, y]
         labels += [f"{b['name']} truth", f"/task_state ({b['time_accuracy']:.0%})"]
     ax.set_yticks(ticks, labels, fontsize=8)
@@ -57,7 +61,7 @@ def plot_timelines(result: dict[str, Any], path: Path, durations: dict[str, floa
         f"time accuracy {result['time_accuracy']}"
     )
     ax.legend(
-        handles=[Patch(color=COLORS[s], label=s) for s in (*SUBTASKS, "unknown")],
+        handles=[Patch(color=c, label=s) for s, c in colors.items()],
         loc="upper center",
         bbox_to_anchor=(0.5, -0.25 if len(bags) < 4 else -0.12),
         ncol=5,
