@@ -109,7 +109,8 @@ def test_lost_words_are_counted_and_blind_the_sub_task() -> None:
 
 
 def test_an_unknown_event_is_reported_not_applied() -> None:
-    session = _session()
+    """A name outside the tracker's sub-tasks (a model's task) is reported and not applied."""
+    session = ClassifierSession(BeliefTracker(None, subtasks=("approach",)), StateFilter())
     step: Step = session.receive([_phase("wobble", 0.0)])
     assert step.ignored_events == ["wobble"] and session.tracker.segments == []
 
