@@ -127,7 +127,9 @@ def test_segmenter_survives_malformed_input_and_sigint(tmp_path: Path, env: dict
     from rcbht_introspection.nodes.common import RosSession, qos_profile
 
     log = tmp_path / "segmenter.log"
-    proc = start_node("segmenter_node", {}, env, log)
+    task = tmp_path / "task.yaml"  # names the sub-tasks: 'pirouette' below is not one of them
+    task.write_text("subtasks: [approach, rotation, insertion, mating]\n")
+    proc = start_node("segmenter_node", {"task_file": str(task)}, env, log)
     ends: list[Words] = []
     words = 0
     try:

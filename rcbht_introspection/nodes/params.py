@@ -54,6 +54,11 @@ class SegmenterConfig:
         "rcbht/phase", "rcbht_interfaces/Phase: each /task_phase event placed on the stream clock"
     )
     end_phases: tuple[str, ...] = _f(("done",), "event names that end the task (flush the streams)")
+    task_file: str = _f(
+        "",
+        "task.yaml naming the sub-tasks; other event names are counted as unknown and ignored "
+        "(empty: every event that is not an end phase starts a sub-task)",
+    )
     event_hold_s: float = _f(
         0.2,
         "an event no later sample applies (the end event) is applied after this long once the "
@@ -192,7 +197,7 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
             f"must be in [event_hold_s, 600], got {cfg.event_max_hold_s}",
             path,
         )
-        for name in ("taxonomy_config_file", "stream_config_file"):
+        for name in ("taxonomy_config_file", "stream_config_file", "task_file"):
             value = getattr(cfg, name)
             _check(not value or Path(value).is_file(), name, f"no such file: {value}", path)
     if isinstance(cfg, ClassifierConfig):

@@ -31,6 +31,7 @@ from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_s
 from rcbht_introspection.nodes.draining import DrainedGroup, take
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import SegmenterConfig, word_topics
+from rcbht_introspection.task import load_task_file
 from rcbht_introspection.taxonomy.words import LEVELS
 
 MAX_BURST = 1000
@@ -56,6 +57,7 @@ class SegmenterNode(ManagedNode):
             cfg.arms,
             factory,
             cfg.end_phases,
+            load_task_file(cfg.task_file).subtasks if cfg.task_file else None,
             hold_s=cfg.event_hold_s,
             max_hold_s=cfg.event_max_hold_s,
         )
