@@ -75,23 +75,32 @@ def task_from_sequences(
 ) -> Task:
     """The task whose sub-tasks are the names of the phase sequences, in their usual order.
 
-    A name is placed after the latest name that precedes it in the first sequence that has it, so
-    trials that skip or repeat a sub-task keep the order of the others.
+    Each sequence (up to its first end phase) says that a name comes after the one before it; the
+    names are sorted so that these precedences hold (a topological order), and where they do not
+    decide (or contradict each other), the name seen first in the recordings comes first.
     """
-    order: list[str] = []
     ends = set(end_phases)
-    for sequence in sequences:
-        previous = -1
-        for phase in sequence:
+    first_seen: dict[str, tuple[int, int]] = {}
+    after: dict[str, set[str]] = {}
+    for i, sequence in enumerate(sequences):
+        previous: str | None = None
+        for j, phase in enumerate(sequence):
             if phase in ends:
                 break
-            if phase in order:
-                previous = max(previous, order.index(phase))
-            else:
-                order.insert(previous + 1, phase)
-                previous += 1
-    if not order:
+            first_seen.setdefault(phase, (i, j))
+            after.setdefault(phase, set())
+            if previous is not None and previous != phase:
+                after[phase].add(previous)
+            previous = phase
+    if not first_seen:
         raise InputError("no sub-task names in the phase events of the recordings")
+    order: list[str] = []
+    left = sorted(first_seen, key=first_seen.__getitem__)
+    while left:
+        ready = [n for n in left if not (after[n] & set(left))]
+        chosen = ready[0] if ready else left[0]  # a contradiction: the name seen first
+        order.append(chosen)
+        left.remove(chosen)
     task = Task(tuple(order), tuple(end_phases), name)
     check_task(task)
     return task
