@@ -5,8 +5,9 @@ message types, become trial bags with the stamp policy's counts, the mapped phas
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
@@ -15,6 +16,9 @@ from ros_support import have
 
 from rcbht_introspection.cli import main
 from rcbht_introspection.errors import InputError
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 TAGGED = "my_robot/msg/TaggedWrench"
 TAGGED_MSG = "geometry_msgs/WrenchStamped wrench_stamped\nint32 tag\n"
@@ -91,7 +95,7 @@ def recording(
     return Recording(stamps, log, tags, wrench, list(repeated), list(decreasing))
 
 
-def _ros1_store():  # type: ignore[no-untyped-def]
+def _ros1_store() -> Typestore:
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     store = get_typestore(Stores.ROS1_NOETIC)
@@ -100,12 +104,12 @@ def _ros1_store():  # type: ignore[no-untyped-def]
     return store
 
 
-def _wrench(store, w: np.ndarray):  # type: ignore[no-untyped-def]
+def _wrench(store: Typestore, w: np.ndarray) -> Any:
     V, W = store.types["geometry_msgs/msg/Vector3"], store.types["geometry_msgs/msg/Wrench"]
     return W(force=V(x=w[0], y=w[1], z=w[2]), torque=V(x=w[3], y=w[4], z=w[5]))
 
 
-def _time(store, ns: int):  # type: ignore[no-untyped-def]
+def _time(store: Typestore, ns: int) -> Any:
     return store.types["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
 
 
@@ -133,8 +137,8 @@ def write_tagged_ros1(path: Path, rec: Recording) -> Path:
     return path
 
 
-def tagged_bag(tmp_path: Path, seed: int = 0, **kw: object) -> tuple[Path, Recording]:
-    rec = recording(seed, **kw)  # type: ignore[arg-type]
+def tagged_bag(tmp_path: Path, seed: int = 0, **kw: Any) -> tuple[Path, Recording]:
+    rec = recording(seed, **kw)
     return write_tagged_ros1(tmp_path / f"run{seed}.bag", rec), rec
 
 
@@ -142,7 +146,9 @@ def import_cli(*args: str) -> int:
     return main(["bag", "import", *args])
 
 
-def test_ros1_custom_type_with_an_integer_phase_map(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+def test_ros1_custom_type_with_an_integer_phase_map(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from rcbht_introspection.io.bags import read_trial_bag
 
     bag, rec = tagged_bag(tmp_path, repeated=[40, 300, 700], decreasing=[90, 500])
@@ -230,7 +236,9 @@ def test_imported_bags_train_a_model_with_the_mapped_names(tmp_path: Path) -> No
     assert model.task.subtasks == PHASES
 
 
-def test_task_file_is_stored_and_checked(tmp_path: Path) -> None:
+def test_task_file_is_stored_and_checked(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     from rcbht_introspection.io.bags import read_trial_bag
 
     bag, _ = tagged_bag(tmp_path)
@@ -253,6 +261,8 @@ def test_task_file_is_stored_and_checked(tmp_path: Path) -> None:
     }
     other = "0=reach,1=grasp,2=press,3="
     assert import_cli(str(bag), "--out", str(tmp_path / "o2"), *common, "--phase-map", other) == 2
+    err = capsys.readouterr().err
+    assert "phases ['press'] are not sub-tasks of the task (reach, grasp, insert)" in err
 
 
 def write_ros2(
@@ -345,6 +355,26 @@ def test_phase_csv_relative_and_absolute(tmp_path: Path) -> None:
     np.testing.assert_array_equal(results[0].wrench["R"], results[1].wrench["R"])
 
 
+def test_a_csv_folder_serves_several_bags(tmp_path: Path) -> None:
+    from rcbht_introspection.io.bag_import import ImportOptions, import_bags
+    from rcbht_introspection.io.bags import read_trial_bag
+
+    bags = [tagged_bag(tmp_path, seed)[0] for seed in (8, 9)]
+    folder = tmp_path / "phases"
+    folder.mkdir()
+    for bag, t in zip(bags, (1.0, 2.0), strict=True):
+        (folder / f"{bag.stem}.csv").write_text(f"time,phase\n0,reach\n{t},insert\n")
+    options = ImportOptions(wrench={"R": "/tag_multimodal.wrench_stamped"}, phase_csv=folder)
+    done = list(import_bags(bags, tmp_path / "out", options))
+    assert [out.name for _, out, _ in done] == ["run8.mcap", "run9.mcap"]
+    for (_, out, report), t in zip(done, (1.0, 2.0), strict=True):
+        trial = read_trial_bag(out)
+        assert trial.phases == ("reach", "insert") and report.phase_counts.end == "appended"
+        assert trial.state_times[1] == pytest.approx(t, abs=1e-9)  # a CSV time is kept as given
+    with pytest.raises(InputError, match="one CSV for several bags"):
+        next(import_bags(bags, tmp_path / "o2", ImportOptions(phase_csv=folder / "run8.csv")))
+
+
 def test_resampling_is_linear_interpolation_on_a_fixed_grid(tmp_path: Path) -> None:
     from rcbht_introspection.io.bag_import import ImportOptions, read_foreign_bag
     from rcbht_introspection.io.phase_events import parse_phase_map
@@ -416,98 +446,43 @@ def test_two_arms_of_one_message_and_of_two_topics(tmp_path: Path) -> None:
     two_topics = ImportOptions(wrench={"R": "/dual.right", "L": "/left.left"}, phase="/dual.phase")
     with pytest.raises(InputError, match="different stamps: give --rate"):
         read_foreign_bag(bag, two_topics)
-    trial, report = read_foreign_bag(
-        bag, ImportOptions(**{**two_topics.__dict__, "rate_hz": 100.0})
-    )
+    trial, report = read_foreign_bag(bag, replace(two_topics, rate_hz=100.0))
     assert trial.arms == ("L", "R") and report.samples == len(trial.time)
+    np.testing.assert_allclose(np.diff(trial.time), 0.01, atol=1e-9)
+    # the grid starts where both arms have samples: the left arm's first, 3 ms after the right's
+    assert report.time_origin_ns == rec.stamps[0] + 3_000_000
 
 
-BAD = [
-    (
-        ["--wrench", "/nope", "--phase", "/tag_multimodal.tag", "--phase-map", PHASE_MAP],
-        "field /nope: no such topic; the bag has /chatter (std_msgs/msg/String), /tag_multimodal (my_robot/msg/TaggedWrench)",
-    ),
-    (
-        [
-            "--wrench",
-            "/tag_multimodal.wrench_stampd.wrench",
-            "--phase",
-            "/tag_multimodal.tag",
-            "--phase-map",
-            PHASE_MAP,
-        ],
-        "no field 'wrench_stampd' in my_robot/msg/TaggedWrench (fields: wrench_stamped, tag)",
-    ),
-    (
-        [
-            "--wrench",
-            "/tag_multimodal.wrench_stamped.wrench.forc",
-            "--phase",
-            "/tag_multimodal.tag",
-            "--phase-map",
-            PHASE_MAP,
-        ],
-        "no field 'forc' in geometry_msgs/msg/Wrench (fields: force, torque)",
-    ),
-    (
-        [
-            "--wrench",
-            "/tag_multimodal.tag",
-            "--phase",
-            "/tag_multimodal.tag",
-            "--phase-map",
-            PHASE_MAP,
-        ],
-        "field /tag_multimodal.tag: is int32, not a WrenchStamped or Wrench",
-    ),
-    (
-        ["--wrench", "/tag_multimodal.wrench_stamped", "--phase", "/tag_multimodal.tag.value"],
-        "tag is int32, it has no field 'value'",
-    ),
-    (
-        ["--wrench", "/tag_multimodal.wrench_stamped", "--phase", "/tag_multimodal.tag"],
-        "is int32: give --phase-map",
-    ),
-    (
-        [
-            "--wrench",
-            "/tag_multimodal.wrench_stamped",
-            "--phase",
-            "/tag_multimodal.tag",
-            "--phase-map",
-            "0=reach,1=grasp,3=",
-        ],
-        "field /tag_multimodal.tag: value 2 has no name in --phase-map (named: 0, 1, 3)",
-    ),
-    (
-        [
-            "--wrench",
-            "/tag_multimodal.wrench_stamped",
-            "--phase",
-            "/tag_multimodal.tag",
-            "--phase-map",
-            "0=reach,one=grasp",
-        ],
-        "field --phase-map: 'one=grasp' is not VALUE=NAME",
-    ),
-    (
-        [
-            "--wrench",
-            "/tag_multimodal.wrench_stamped",
-            "--phase",
-            "/chatter",
-            "--phase-map",
-            PHASE_MAP,
-        ],
-        "field /chatter: is string; --phase-map needs an integer field",
-    ),
-]
+TAG = f"--phase /tag_multimodal.tag --phase-map {PHASE_MAP}"
+WS = "--wrench /tag_multimodal.wrench_stamped"
+BAD = [  # (arguments after BAG --out DIR, the error's text)
+    (f"--wrench /nope {TAG}",
+     "field /nope: no such topic; the bag has /chatter (std_msgs/msg/String), /tag_multimodal (my_robot/msg/TaggedWrench)"),
+    (f"--wrench /tag_multimodal.wrench_stampd.wrench {TAG}",
+     "no field 'wrench_stampd' in my_robot/msg/TaggedWrench (fields: wrench_stamped, tag)"),
+    (f"--wrench /tag_multimodal.wrench_stamped.wrench.forc {TAG}",
+     "no field 'forc' in geometry_msgs/msg/Wrench (fields: force, torque)"),
+    (f"--wrench /tag_multimodal.tag {TAG}",
+     "field /tag_multimodal.tag: is int32, not a WrenchStamped or Wrench"),
+    (f"{WS} --phase /tag_multimodal.tag.value", "tag is int32, it has no field 'value'"),
+    (f"{WS} --phase /tag_multimodal.tag", "is int32: give --phase-map"),
+    (f"{WS} --phase /tag_multimodal.tag --phase-map 0=reach,1=grasp,3=",
+     "field /tag_multimodal.tag: value 2 has no name in --phase-map (named: 0, 1, 3)"),
+    (f"{WS} --phase /tag_multimodal.tag --phase-map 0=reach,one=grasp",
+     "field --phase-map: 'one=grasp' is not VALUE=NAME"),
+    (f"{WS} --phase /tag_multimodal.tag --phase-map 0=reach,1=grasp,2=done,3= --end-phase finish",
+     "phase 'done' would end the trial in the written bag"),
+    (f"{WS} --phase /chatter --phase-map {PHASE_MAP}",
+     "field /chatter: is string; --phase-map needs an integer field"),
+]  # fmt: skip
 
 
 @pytest.mark.parametrize(("args", "message"), BAD)
-def test_bad_input_is_one_named_line(tmp_path: Path, capsys, args: list[str], message: str) -> None:  # type: ignore[no-untyped-def]
+def test_bad_input_is_one_named_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: str, message: str
+) -> None:
     bag, _ = tagged_bag(tmp_path, n_end=3)
-    assert import_cli(str(bag), "--out", str(tmp_path / "out"), *args) == 2
+    assert import_cli(str(bag), "--out", str(tmp_path / "out"), *args.split()) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
     if "--phase-map:" not in message:
@@ -515,7 +490,7 @@ def test_bad_input_is_one_named_line(tmp_path: Path, capsys, args: list[str], me
     assert not (tmp_path / "out" / "run0.mcap").exists()
 
 
-def test_bad_phase_csv_and_bad_bag(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+def test_bad_phase_csv_and_bad_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag, _ = tagged_bag(tmp_path, n_end=3)
     csv = tmp_path / "p.csv"
     csv.write_text("seconds,phase\n0.1,reach\n")
@@ -535,7 +510,9 @@ def test_bad_phase_csv_and_bad_bag(tmp_path: Path, capsys) -> None:  # type: ign
     assert f"{broken}: cannot read bag" in capsys.readouterr().err
 
 
-def test_a_wrench_without_header_takes_receive_times(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+def test_a_wrench_without_header_takes_receive_times(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """geometry_msgs/Wrench on its own topic: `auto` uses the receive times, `header` is an error
     (a Wrench inside a WrenchStamped takes that header: the dual-arm test)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
