@@ -384,11 +384,14 @@ def import_bags(
     csv = options.phase_csv
     if csv is not None and not csv.is_dir() and len(inputs) > 1:
         raise InputError("one CSV for several bags: give a folder of <bag name>.csv", csv)
-    for path, name in zip(inputs, names, strict=True):
+    outs = [Path(out_dir) / f"{name}{suffix}" for name in names]
+    for out in outs:  # before any bag is read: a long import should not fail at its end
+        if out.exists():
+            raise InputError("exists already, not overwriting", out)
+    for path, name, out in zip(inputs, names, outs, strict=True):
         own = (
             options
             if csv is None or not csv.is_dir()
             else replace(options, phase_csv=csv / f"{name}.csv")
         )
-        out = Path(out_dir) / f"{name}{suffix}"
         yield path, out, import_bag(path, out, own)

@@ -10,6 +10,7 @@ same time, or it starts at or after the last sample) is dropped and counted.
 from __future__ import annotations
 
 import csv
+import math
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -73,6 +74,8 @@ def read_phase_csv(path: Path | str) -> PhaseCsv:
             raise InputError(f"expected 2 columns, got {len(cells)}", path, line=number)
         try:
             seconds = float(cells[0])
+            if not math.isfinite(seconds):
+                raise ValueError
         except ValueError:
             raise InputError(
                 f"not a number: {cells[0]!r}", path, line=number, field=header[0]
