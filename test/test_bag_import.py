@@ -371,7 +371,7 @@ def test_a_csv_folder_serves_several_bags(tmp_path: Path) -> None:
         trial = read_trial_bag(out)
         assert trial.phases == ("reach", "insert") and report.phase_counts.end == "appended"
         assert trial.state_times[1] == pytest.approx(t, abs=1e-9)  # a CSV time is kept as given
-    with pytest.raises(InputError, match="run8.mcap: exists already"):
+    with pytest.raises(InputError, match=r"run8\.mcap: exists already"):
         next(import_bags(bags, tmp_path / "out", options))
     with pytest.raises(InputError, match="one CSV for several bags"):
         next(import_bags(bags, tmp_path / "o2", ImportOptions(phase_csv=folder / "run8.csv")))
