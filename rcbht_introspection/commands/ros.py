@@ -1,4 +1,4 @@
-"""`rcbht bag from-hiro|replay|record|info` and `rcbht replay-eval`: bags and the live nodes."""
+"""`rcbht bag from-hiro|import|replay|record|info` and `rcbht replay-eval`: bags and the live nodes."""
 
 from __future__ import annotations
 
@@ -47,6 +47,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("bag", type=Path)
     p.set_defaults(func=cmd_info)
 
+    _register_import(sub)
+
     p = subparsers.add_parser(
         "replay-eval",
         help="replay bags through segmenter_node and classifier_node (real DDS) and score them",
@@ -71,6 +73,82 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--timeline", action="store_true", help="print the /task_state timeline")
     p.set_defaults(func=cmd_replay_eval)
+
+
+IMPORT_HELP = """\
+Import another robot's ROS 1 bags (.bag) or rosbag2 bags (.mcap, .db3, bag directory) as trial
+bags (/wrench or /<arm>/wrench, /task_phase, /rcbht/trial_info), one OUT/<name>.mcap per bag.
+Message definitions come from the bag itself, so custom types need no robot packages.
+
+SPEC is a topic (/ft_sensor) or a field path into its messages (/tag_multimodal.wrench_stamped):
+a WrenchStamped or Wrench for --wrench, a string or an integer for --phase.
+
+Stamps: a stamp equal to the previous kept one is dropped (the first is kept), one before it is
+dropped, a zero header stamp is dropped; samples before the first phase and after the end phase
+are cut. Each count is printed and stored in the bag's trial info ("import"). Phase events: an
+event naming the running phase continues it, a phase without samples is dropped, events after
+the end phase are not used. Details: docs/bags.md, "Importing bags from another robot".
+"""
+
+
+def _register_import(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "import",
+        help="another robot's ROS 1 / rosbag2 bags -> trial bags",
+        description=IMPORT_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("bags", nargs="+", type=Path, help="ROS 1 or rosbag2 bags")
+    p.add_argument("--out", type=Path, required=True, help="folder for the trial bags")
+    p.add_argument("--format", choices=("mcap", "db3"), default="mcap", help="output storage")
+    p.add_argument(
+        "--wrench",
+        action="append",
+        default=[],
+        metavar="[ARM=]SPEC",
+        help="wrench of an arm (repeat for several arms; no ARM: R); "
+        "default: the bag's one WrenchStamped/Wrench topic as arm R",
+    )
+    phase = p.add_mutually_exclusive_group(required=True)
+    phase.add_argument(
+        "--phase", metavar="SPEC", help="string phase names, or integers with --phase-map"
+    )
+    phase.add_argument(
+        "--phase-csv",
+        type=Path,
+        metavar="CSV",
+        help="file with header 'time,phase' (seconds from the bag's first wrench sample) or "
+        "'stamp,phase' (absolute seconds, the clock of the stamps); a folder: <bag name>.csv each",
+    )
+    p.add_argument(
+        "--phase-map",
+        metavar="V=NAME,...",
+        help="names of integer phase values, e.g. 0=reach,1=grasp,3= (empty name: the end)",
+    )
+    p.add_argument(
+        "--end-phase",
+        default=None,
+        metavar="NAME",
+        help="phase that ends the trial (default: the --task end phases, else done); "
+        "without one the trial ends at its last sample",
+    )
+    p.add_argument(
+        "--stamps",
+        choices=("auto", "header", "receive"),  # io.bag_import.STAMP_SOURCES (imported lazily)
+        default="auto",
+        help="sample times: header stamps, receive (log) times, or auto: header when there is one",
+    )
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="resample to HZ (linear; default off)",
+    )
+    p.add_argument(
+        "--task", type=Path, default=None, metavar="TASK_YAML", help="the task of the trials"
+    )
+    p.set_defaults(func=cmd_import)
 
 
 def _bags(paths: list[Path]) -> list[Path]:
@@ -102,6 +180,32 @@ def cmd_from_hiro(args: argparse.Namespace) -> int:
         out = args.out if single else args.out / f"{folder.name}.{args.format}"
         write_trial_bag(read_trial(folder), out)
         print(out)
+    return 0
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from rcbht_introspection.io.bag_import import ImportOptions, import_bags, parse_wrench_specs
+    from rcbht_introspection.io.bags import END_PHASE
+    from rcbht_introspection.io.phase_events import parse_phase_map
+    from rcbht_introspection.task import load_task_file
+
+    task = load_task_file(args.task) if args.task is not None else None
+    if args.end_phase is not None:
+        end_phases: tuple[str, ...] = (args.end_phase,)
+    else:
+        end_phases = task.end_phases if task is not None else (END_PHASE,)
+    options = ImportOptions(
+        wrench=parse_wrench_specs(args.wrench),
+        phase=args.phase or "",
+        phase_map=parse_phase_map(args.phase_map) if args.phase_map is not None else None,
+        phase_csv=args.phase_csv,
+        end_phases=end_phases,
+        stamps=args.stamps,
+        rate_hz=args.rate,
+        task=task,
+    )
+    for bag, out, report in import_bags(args.bags, args.out, options, f".{args.format}"):
+        print(f"{bag} -> {out}: {report.summary()}", flush=True)
     return 0
 
 

@@ -3,7 +3,7 @@
 A trial bag holds geometry_msgs/WrenchStamped on /wrench (one arm) or /<arm>/wrench (two arms),
 std_msgs/String sub-task events on /task_phase (the trial's phase names at its state times, then
 END_PHASE at the last sample) and one std_msgs/String JSON record on /rcbht/trial_info (name,
-outcome, time origin). Stamps are TIME_ORIGIN_NS + trial time, so no stamp is zero.
+outcome, time origin, and the INFO_RECORDS the trial's metadata holds). Stamps are TIME_ORIGIN_NS + trial time, so no stamp is zero.
 The storage follows the suffix: `x.mcap` / `x.db3` is one storage file; any other path is a
 rosbag2 directory (MCAP inside). Reading accepts storage files and rosbag2 directories.
 """
@@ -44,6 +44,9 @@ END_PHASE = "done"
 TIME_ORIGIN_NS = 1_700_000_000 * 10**9
 """Absolute stamp of trial time 0 in written bags (a zero stamp means 'unset' in ROS)."""
 BAG_SUFFIXES = (".mcap", ".db3")
+INFO_RECORDS = ("task", "import")
+"""Trial metadata records that the trial info carries as JSON objects: the trial's task and, for
+an imported bag, what the import read and dropped (io/bag_import.py)."""
 _NS = 10**9
 
 
@@ -202,8 +205,9 @@ def write_trial_bag(trial: Trial, path: Path | str, time_origin_ns: int = TIME_O
             "time_origin_ns": int(time_origin_ns),
             "arms": list(trial.arms),
         }
-        if isinstance(trial.metadata.get("task"), dict):
-            info["task"] = trial.metadata["task"]  # the task the trial belongs to (Task.to_dict)
+        for key in INFO_RECORDS:  # task: Task.to_dict; import: bag_import.ImportReport.to_dict
+            if isinstance(trial.metadata.get(key), dict):
+                info[key] = trial.metadata[key]
         bag.write(TRIAL_INFO_TOPIC, String(data=json.dumps(info)), int(t_ns[0]))
         events = trial_phase_events(trial)
         ev = 0
@@ -369,7 +373,7 @@ def read_trial_bag(path: Path | str, end_phases: Sequence[str] = (END_PHASE,)) -
         metadata={
             "bag": str(path),
             "events_after_end": max(0, after_end - 1),
-            **({"task": info["task"]} if isinstance(info.get("task"), dict) else {}),
+            **{key: info[key] for key in INFO_RECORDS if isinstance(info.get(key), dict)},
         },
         phases=tuple(names),
     )
