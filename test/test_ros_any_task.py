@@ -1,0 +1,67 @@
+"""Another task end to end: bags of the simulated peg-in-hole (its own four phase names, a noisy
+100 Hz sensor) through `rcbht train`, `rcbht evaluate` and `rcbht replay-eval`, whose two node
+processes run with their default parameters and publish the task's names on /task_state."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from ros_support import require_ros
+
+from rcbht_introspection.cli import main
+from rcbht_introspection.io.bags import read_trial_bag
+
+pytestmark = [pytest.mark.ros]
+
+PEG = ("reach", "search", "insert", "release")
+"""The peg-in-hole task's sub-tasks (config/sim_peg.yaml), none of them HIRO's."""
+TRIALS = 10
+HELD_OUT = 2
+
+
+@pytest.fixture(scope="module")
+def peg_bags(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
+    out = tmp_path_factory.mktemp("peg")
+    args = ["sim", "--task", "peg-in-hole", "--trials", str(TRIALS), "--seed", "5"]
+    assert main([*args, "--format", "bag", "--out", str(out), "--progress", "off"]) == 0
+    bags = sorted(out.glob("*.mcap"))
+    assert len(bags) == TRIALS
+    return bags
+
+
+def test_a_second_task_trains_evaluates_and_runs_live(peg_bags: list[Path], tmp_path: Path) -> None:
+    require_ros()
+    assert read_trial_bag(peg_bags[0]).phases == PEG
+    train, held_out = peg_bags[:-HELD_OUT], peg_bags[-HELD_OUT:]
+    model = tmp_path / "peg.rcbht"
+    assert main(["train", *map(str, train), "--out", str(model)]) == 0
+    from rcbht_introspection.learn.model_file import load_model
+
+    trained = load_model(model)
+    assert trained.task.subtasks == PEG and sorted(trained.classes_) == sorted(PEG)
+
+    report = tmp_path / "evaluate.json"
+    args = ["evaluate", *map(str, peg_bags), "--permutations", "2", "--validation-trials", "2"]
+    assert main([*args, "--no-variant", "--no-progress", "--json", str(report)]) == 0
+    evaluated = json.loads(report.read_text())
+    assert evaluated["confusion_labels"] == list(PEG) and evaluated["n_trials"] == TRIALS
+    assert set(evaluated["per_class_accuracy"]) == set(PEG)
+
+    scores = tmp_path / "replay.json"
+    bags = [str(b) for b in held_out]
+    assert main(["replay-eval", *bags, "--model", str(model), "--rate", "2", "--json", str(scores)]) == 0
+    result = json.loads(scores.read_text())
+    assert result["clean_shutdown"], (result["exit_codes"], result.get("shutdown_logs"))
+    assert result["dropped_wrench"] == 0
+    assert result["subtasks"] == len(PEG) * HELD_OUT
+    assert result["verdicts_match_offline"], [
+        (b["verdicts"], b["offline_verdicts"]) for b in result["per_bag"]
+    ]
+    for bag in result["per_bag"]:
+        assert bag["truth"] == list(PEG)
+        assert set(bag["verdicts"]) <= set(PEG)
+        published = {state for _, state in bag["timeline"]} | {bag["initial_state"]}
+        assert published <= {*PEG, "unknown"}, published  # /task_state, as received over DDS
+        assert published & set(PEG), published
