@@ -20,6 +20,9 @@ from rcbht_introspection.sim.peg_model import GRIP, PegPhysics, build_peg_model
 from rcbht_introspection.sim.sensor import SensorDraw, decimation, draw_sensor, measure, resample
 from rcbht_introspection.sim.simulate import SETTLE_TIME
 
+BOUND_SLACK = 1.0
+"""Time (s) added to the sum of the phases' bounds (each may overrun its bound by a step)."""
+
 
 def _uniform(rng: np.random.Generator, r: tuple[float, float]) -> float:
     return float(rng.uniform(r[0], r[1]))
@@ -72,7 +75,7 @@ def max_duration(config: PegConfig) -> float:
         + c.seat_settle[1]
         + c.release_pause[1]
         + c.retreat_time[1]
-        + 1.0
+        + BOUND_SLACK
     )
 
 
