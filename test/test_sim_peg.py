@@ -149,3 +149,14 @@ def test_cli_task_option(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
 def test_snap_config_is_refused_for_the_peg_task(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="does not configure task peg-in-hole"):
         write_dataset(tmp_path, 1, task="peg-in-hole", config=load_sim_config())
+
+
+def test_realism_report_refuses_a_peg_set(
+    peg_set: list[Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """sim-report compares with HIRO's four sub-tasks: a peg set is named, not half-compared."""
+    real = tmp_path / "real"
+    real.mkdir()
+    args = ["sim-report", str(peg_set[0].parent), "--real", str(real), "--out", str(tmp_path)]
+    assert cli_main(args) == 2
+    assert "holds peg-in-hole trials" in capsys.readouterr().err
