@@ -22,6 +22,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.live import LiveAugmentConfig, load_live_config
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, load_node_config
 from rcbht_introspection.sim.config import SimConfig, load_sim_config
+from rcbht_introspection.sim.peg_config import PegConfig, load_peg_config
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
 from rcbht_introspection.taxonomy.stream import StreamConfig, load_stream_config
 
@@ -51,6 +52,7 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
         (lambda p: load_stream_config("causal", p), StreamConfig(profile="causal")),
     ],
     "sim.yaml": [(load_sim_config, SimConfig())],
+    "sim_peg.yaml": [(load_peg_config, PegConfig())],
     "live.yaml": [(load_live_config, LiveAugmentConfig())],
     "segmenter.yaml": [(lambda p: load_node_config(SegmenterConfig, p), SegmenterConfig())],
     "classifier.yaml": [(lambda p: load_node_config(ClassifierConfig, p), ClassifierConfig())],

@@ -34,3 +34,11 @@ def test_demo_on_simulated_trials(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert result["words_match_offline"] and result["verdicts_match_offline"]
     assert result["dropped_wrench"] == 0 and result["clean_shutdown"]
     assert (out / "task_state_timeline.png").stat().st_size > 10_000
+
+
+def test_demo_task_choice_is_for_simulated_data(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = ["demo", "--out", str(tmp_path / "out"), "--data", "hiro", "--task", "peg-in-hole"]
+    assert main(args) == 2
+    assert "--task chooses a simulated task" in capsys.readouterr().err

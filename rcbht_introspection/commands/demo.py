@@ -3,7 +3,8 @@
 Simulate trials (the project's own simulator), train a sub-task model on most of them, convert
 the held-out trials to bags, replay them through segmenter_node and classifier_node (separate
 processes, real DDS), then print the /task_state timeline against the truth, the accuracy, and
-save a plot. With --data hiro it uses the ../shared HIRO data instead (train on REAL trials
+save a plot. --task peg-in-hole simulates the second task (its own four sub-tasks, a noisy
+100 Hz sensor). With --data hiro it uses the ../shared HIRO data instead (train on REAL trials
 1-40, replay 41-46). It names every missing part instead of failing obscurely.
 """
 
@@ -15,6 +16,7 @@ import json
 import time
 from pathlib import Path
 
+from rcbht_introspection.commands.sim import TASK_CHOICES
 from rcbht_introspection.errors import InputError
 
 PARTS: dict[str, tuple[str, str]] = {
@@ -37,6 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, default=Path("demo_out"))
     p.add_argument("--data", choices=("auto", "sim", "hiro"), default="auto",
                    help="auto or sim: the project's simulator; hiro: ../shared REAL HIRO trials")  # fmt: skip
+    p.add_argument("--task", choices=TASK_CHOICES, default="snap-assembly",
+                   help="simulated task (default snap-assembly; --data sim or auto only)")  # fmt: skip
     p.add_argument("--trials", type=int, default=12, help="simulated trials (default 12)")
     p.add_argument("--held-out", type=int, default=3, help="simulated trials replayed (default 3)")
     p.add_argument("--rate", type=float, default=5.0, help="replay speed factor (default 5)")
@@ -53,6 +57,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
     missing = [f"{name} ({how})" for mod, (name, how) in PARTS.items() if not _have(mod)]
     use_sim = args.data in ("sim", "auto")
+    if not use_sim and args.task != "snap-assembly":
+        raise InputError("--task chooses a simulated task; --data hiro is the snap assembly")
     hiro = shared_hiro()
     if not use_sim and hiro is None:
         missing.append("REAL HIRO trials (../shared/data/hiro or $RCBHT_HIRO_DATA)")
@@ -78,8 +84,11 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
         if args.held_out < 1 or args.trials - args.held_out < 2:
             raise InputError("need --held-out >= 1 and at least 2 training trials", field="trials")
-        _step(f"1. simulate {args.trials} one-arm trials (seed {args.seed}) -> {out / 'sim'}")
-        folders = write_dataset(out / "sim", args.trials, scenario="one-arm", seed=args.seed)
+        what = "one-arm" if args.task == "snap-assembly" else f"{args.task} one-arm"
+        _step(f"1. simulate {args.trials} {what} trials (seed {args.seed}) -> {out / 'sim'}")
+        folders = write_dataset(
+            out / "sim", args.trials, scenario="one-arm", seed=args.seed, task=args.task
+        )
         train, held = folders[: -args.held_out], folders[-args.held_out :]
         source = "simulator"
     else:

@@ -9,33 +9,54 @@ from pathlib import Path
 
 from rcbht_introspection.errors import InputError
 
+TASK_CHOICES: tuple[str, ...] = ("snap-assembly", "peg-in-hole")
+"""sim.tasks.SIM_TASKS, spelled out so that `rcbht --help` does not import MuJoCo."""
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the `sim` and `sim-report` subcommands."""
     p = subparsers.add_parser(
         "sim",
-        help="simulate snap-assembly trials with MuJoCo",
-        description="Simulate snap-assembly trials (MuJoCo) into HIRO trial folders or rosbag2 files.",
+        help="simulate snap-assembly or peg-in-hole trials with MuJoCo",
+        description="Simulate trials of a contact task (MuJoCo) into HIRO trial folders or "
+        "rosbag2 files.",
     )
     p.add_argument("--trials", type=int, default=12, help="number of trials (default 12)")
-    p.add_argument("--scenario", choices=("one-arm", "two-arm"), default="one-arm")
+    p.add_argument(
+        "--task",
+        choices=TASK_CHOICES,
+        default="snap-assembly",
+        help="snap-assembly (HIRO's four sub-tasks, default) or peg-in-hole (reach, search, "
+        "insert, release; a noisy 100 Hz sensor)",
+    )
+    p.add_argument(
+        "--scenario",
+        choices=("one-arm", "two-arm"),
+        default="one-arm",
+        help="two-arm: a second arm holds the snap housing (snap-assembly only)",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
         "--failures",
         action="store_true",
-        help="make every second trial a failure (misalignment, jamming, missed_snap)",
+        help="make every second trial a failure (misalignment, jamming, missed_snap; "
+        "snap-assembly only)",
     )
     p.add_argument(
         "--rate",
         type=float,
-        default=200.0,
+        default=None,
         metavar="HZ",
-        help="sensor output rate: 200 (HIRO) or 1000 Hz; must divide 1 kHz",
+        help="sensor output rate; must divide 1 kHz (default: the task's sensor, "
+        "200 Hz snap-assembly as HIRO, 100 Hz peg-in-hole)",
     )
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
     p.add_argument("--format", choices=("hiro", "bag"), default="hiro", dest="fmt")
     p.add_argument(
-        "--config", type=Path, default=None, help="sim config YAML (default config/sim.yaml)"
+        "--config",
+        type=Path,
+        default=None,
+        help="sim config YAML (default config/sim.yaml, peg-in-hole: config/sim_peg.yaml)",
     )
     p.add_argument(
         "--progress",
@@ -65,11 +86,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_sim(args: argparse.Namespace) -> int:
     """Simulate and write the data set; print a one-line summary."""
-    from rcbht_introspection.sim import load_sim_config, write_dataset
+    from rcbht_introspection.sim import write_dataset
+    from rcbht_introspection.sim.tasks import load_task_config
 
     if args.trials < 1:
         raise InputError(f"--trials must be at least 1, got {args.trials}", field="trials")
-    config = load_sim_config(args.config)
+    config = load_task_config(args.task, args.config)
     progress = args.progress == "on" or (
         args.progress == "auto" and args.trials > 4 and sys.stderr.isatty()
     )
@@ -84,9 +106,11 @@ def run_sim(args: argparse.Namespace) -> int:
         fmt=args.fmt,
         progress=progress,
         config=config,
+        task=args.task,
     )
     elapsed = time.perf_counter() - start
-    print(f"wrote {len(written)} {args.scenario} trials to {args.out} in {elapsed:.1f} s")
+    kind = args.scenario if args.task == "snap-assembly" else f"{args.task} {args.scenario}"
+    print(f"wrote {len(written)} {kind} trials to {args.out} in {elapsed:.1f} s")
     return 0
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.io.hiro import hiro_root
+from rcbht_introspection.io.hiro import find_trials, hiro_root
 from rcbht_introspection.learn.evaluate import trial_kfold_accuracy
 from rcbht_introspection.plots.realism import (
     plot_example_trials,
@@ -17,6 +17,7 @@ from rcbht_introspection.plots.realism import (
     plot_variability,
 )
 from rcbht_introspection.sim.realism import compare, engine_words, golden_words, set_stats
+from rcbht_introspection.task import HIRO_TASK, task_of_folder
 from rcbht_introspection.taxonomy.words import AXES
 
 
@@ -88,6 +89,14 @@ def write_report(sim_dir: Path, real_dir: Path | None, out_dir: Path) -> str:
         raise InputError("real HIRO set not found (pass --real REAL_DIR)", path=real_dir)
     if not Path(sim_dir).is_dir():
         raise InputError("simulated set not found", path=sim_dir)
+    tasks = {task_of_folder(folder) for folder in find_trials([Path(sim_dir)])} - {HIRO_TASK}
+    if tasks:
+        names = ", ".join(sorted(t.name or "/".join(t.subtasks) for t in tasks))
+        raise InputError(
+            f"the report compares snap-assembly trials with the real HIRO set; this set holds "
+            f"{names} trials",
+            path=sim_dir,
+        )
     real = set_stats(Path(real_dir).name, Path(real_dir), golden_words)
     sim = set_stats(Path(sim_dir).name, Path(sim_dir), engine_words)
     result = compare(real, sim)

@@ -118,10 +118,12 @@ def read_trial(folder: Path | str) -> Trial:
     outcome = outcome_file.read_text().strip() if outcome_file.is_file() else "success"
     task = task_of_folder(folder)
     phases: tuple[str, ...] = ()
+    metadata: dict[str, object] = {}
     if task != HIRO_TASK:  # HIRO's own trials keep the default names (and their extra lines)
         state = state[: len(task.subtasks)]
         phases = task.subtasks[: len(state)]
-    trial = Trial(folder.name, time, wrench, state, outcome, phases=phases)
+        metadata["task"] = task.to_dict()  # a bag written from the trial keeps its task
+    trial = Trial(folder.name, time, wrench, state, outcome, metadata, phases)
     check_phases(trial, folder / ("R_State.dat" if "R" in wrench else "L_State.dat"))
     return trial
 

@@ -283,12 +283,13 @@ def total_steps(trials: Sequence[TrialSamples], protocol: Protocol) -> int:
 
 def trial_kfold_accuracy(dataset: Path, folds: int = 4) -> dict[str, object]:
     """Trial-grouped k-fold SVM (compact encoding) accuracy on one dataset folder: a quick check
-    that the words of a (simulated) set carry the sub-task."""
+    that the words of a (simulated) set carry the sub-task; `duration_accuracy` is the
+    duration-only reference on the same folds."""
     samples = load_samples([dataset], words="engine")
     trials = sorted({s.trial for s in samples})
     if len(trials) < folds:
         return {"available": False, "why": f"only {len(trials)} trials"}
-    correct = total = 0
+    correct = by_duration = total = 0
     cache = SampleCache()  # every fold encodes the same samples
     for k in range(folds):
         test = set(trials[k::folds])
@@ -299,5 +300,13 @@ def trial_kfold_accuracy(dataset: Path, folds: int = 4) -> dict[str, object]:
         )
         predicted = model.predict_samples(held)
         correct += sum(p == s.subtask for p, s in zip(predicted, held, strict=True))
+        guessed = _duration_model(train, seed=0).predict(_log_duration(held))
+        by_duration += sum(p == s.subtask for p, s in zip(guessed, held, strict=True))
         total += len(held)
-    return {"available": True, "folds": folds, "samples": total, "accuracy": correct / total}
+    return {
+        "available": True,
+        "folds": folds,
+        "samples": total,
+        "accuracy": correct / total,
+        "duration_accuracy": by_duration / total,
+    }

@@ -176,12 +176,16 @@ class FailureConfig:
 
 @dataclass(frozen=True)
 class SensorConfig:
-    """Force/torque sensor model: white noise std, low-frequency drift, output filtering."""
+    """Force/torque sensor model: output rate, white noise std, low-frequency drift, output filtering."""
 
+    rate_hz: float = 200.0
+    """Output rate (Hz) when none is asked for; it must divide the physics rate."""
     noise_force: float = 0.012
     noise_torque: float = 0.0006
     drift_force: float = 0.05
     drift_torque: float = 0.002
+    drift_period: Range = (15.0, 60.0)
+    """Range (s) of the period of the slow sinusoidal drift, drawn per trial."""
     vibration_force: float = 0.035
     """Std (N) of the arm's structural vibration seen by the sensor (low-pass, see vibration_time)."""
     vibration_torque: float = 0.0015

@@ -2,7 +2,8 @@
 
 Trial i of a set uses seed `seed * 1000 + i`; with failures on, every second trial is a failure,
 cycling through the configured failure types. A dataset-level sim_meta.json lists every trial's
-outcome and variation; each HIRO trial folder also gets outcome.txt and meta.json.
+outcome and variation; each HIRO trial folder also gets outcome.txt and meta.json, and task.yaml
+when its task is not the snap assembly (bags carry the task in their trial info).
 """
 
 from __future__ import annotations
@@ -17,9 +18,15 @@ from tqdm import tqdm
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import write_trial
-from rcbht_introspection.sim.config import FailureType, SimConfig, load_sim_config
+from rcbht_introspection.sim.config import FailureType, SimConfig
 from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
-from rcbht_introspection.sim.simulate import simulate_trial
+from rcbht_introspection.sim.tasks import (
+    SimTaskName,
+    TaskConfig,
+    check_request,
+    get_sim_task,
+    trial_simulator,
+)
 
 DatasetFormat = Literal["hiro", "bag"]
 """A data set is HIRO trial folders or one rosbag2 per trial."""
@@ -37,9 +44,12 @@ def trial_plan(
     return plan
 
 
-def trial_name(scenario: ScenarioName, index: int, failure: FailureType | None) -> str:
-    """Folder name in the HIRO style: SIM-<ONE|TWO>-S-<nn> or SIM-<..>-F-<nn>-<type>."""
-    arms = "ONE" if scenario == "one-arm" else "TWO"
+def trial_name(
+    scenario: ScenarioName, index: int, failure: FailureType | None, label: str | None = None
+) -> str:
+    """Folder name in the HIRO style: SIM-<label>-S-<nn> or SIM-<label>-F-<nn>-<type>; the label
+    is the task's (PEG), else the scenario's (ONE or TWO)."""
+    arms = label or ("ONE" if scenario == "one-arm" else "TWO")
     if failure is None:
         return f"SIM-{arms}-S-{index + 1:02d}"
     return f"SIM-{arms}-F-{index + 1:02d}-{failure}"
@@ -90,36 +100,43 @@ def write_dataset(
     scenario: ScenarioName = "one-arm",
     seed: int = 0,
     failures: bool = False,
-    rate_hz: float = 200.0,
+    rate_hz: float | None = None,
     fmt: DatasetFormat = "hiro",
     progress: bool = False,
-    config: SimConfig | None = None,
+    config: TaskConfig | None = None,
+    task: SimTaskName = "snap-assembly",
 ) -> list[Path]:
-    """Simulate `n_trials` trials into `out_dir`; returns the written trial folders (or bag files)."""
+    """Simulate `n_trials` trials of `task` into `out_dir`; returns the written trial folders (or
+    bag files). `rate_hz` None is the task's sensor rate (config sensor.rate_hz)."""
     if fmt not in FORMATS:
         raise InputError(f"unknown format {fmt!r} (known: {', '.join(FORMATS)})", field="format")
     if n_trials < 1:
         raise InputError(f"need at least one trial, got {n_trials}", field="trials")
     get_scenario(scenario)
-    config = config or load_sim_config()
+    sim_task = get_sim_task(task)
+    check_request(sim_task, scenario, failures)
+    config = config or sim_task.load_config(None)
+    rate = config.sensor.rate_hz if rate_hz is None else rate_hz
+    simulate = trial_simulator(sim_task, config, scenario, rate)
     write_bag = write_trial_bag if fmt == "bag" else None
     out = Path(out_dir)
     _clear_previous_set(out)
     out.mkdir(parents=True, exist_ok=True)
-    plan = trial_plan(n_trials, seed, failures, config.failures.types)
+    types = config.failures.types if isinstance(config, SimConfig) else ()
+    plan = trial_plan(n_trials, seed, failures, types)
     items = enumerate(plan)
     if progress:
         items = tqdm(items, total=len(plan), desc="simulating", unit="trial")
     written: list[Path] = []
     index: list[dict[str, object]] = []
     for i, (trial_seed, failure) in items:
-        name = trial_name(scenario, i, failure)
-        trial = simulate_trial(config, trial_seed, scenario, failure, rate_hz, name=name)
+        name = trial_name(scenario, i, failure, sim_task.label)
+        trial = simulate(trial_seed, failure, name)
         if write_bag is not None:
             path = out / f"{name}.mcap"
             write_bag(trial, path)
         else:
-            path = write_trial(trial, out / name)
+            path = write_trial(trial, out / name, task=sim_task.task)
             (path / "meta.json").write_text(json.dumps(trial.metadata, indent=1) + "\n")
         written.append(path)
         index.append(
@@ -134,9 +151,10 @@ def write_dataset(
     (out / "sim_meta.json").write_text(
         json.dumps(
             {
+                "task": sim_task.name,
                 "scenario": scenario,
                 "seed": seed,
-                "rate_hz": rate_hz,
+                "rate_hz": rate,
                 "format": fmt,
                 "trials": index,
             },

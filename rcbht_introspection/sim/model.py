@@ -38,13 +38,13 @@ class TrialPhysics:
     """Initial tool centre point x, y, z (m); the initial pitch is set on the arm's joint."""
 
 
-def _prism(points_xz: list[tuple[float, float]], y0: float, y1: float) -> str:
+def prism_vertices(points_xz: list[tuple[float, float]], y0: float, y1: float) -> str:
     """Vertex list of a convex prism: a polygon in the x-z plane extruded from y0 to y1."""
     verts = [(x, y, z) for y in (y0, y1) for x, z in points_xz]
     return " ".join(f"{v:.6g}" for p in verts for v in p)
 
 
-def _arm_joints(prefix: str, kd_lin: float, kd_rot: float) -> str:
+def arm_joints_xml(prefix: str, kd_lin: float, kd_rot: float) -> str:
     """Six servo joints of a Cartesian arm: slides first (world axes), then hinges at the TCP."""
     lines = []
     for name in ARM_JOINTS:
@@ -57,7 +57,7 @@ def _arm_joints(prefix: str, kd_lin: float, kd_rot: float) -> str:
     return "\n".join(lines)
 
 
-def _actuators(prefix: str, kp_lin: float, kp_rot: float) -> str:
+def arm_actuators_xml(prefix: str, kp_lin: float, kp_rot: float) -> str:
     """Position servos (the arm controller's inner loop) on the six arm joints."""
     lines = []
     for name in ARM_JOINTS:
@@ -104,10 +104,10 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
         (-bt / 2, z_tip + g.hook_ramp),
     ]
     bw = g.beam_half_width
-    meshes.append(f'<mesh name="wall_lo" vertex="{_prism(wall_profile, -y_out, -y_in)}"/>')
-    meshes.append(f'<mesh name="wall_hi" vertex="{_prism(wall_profile, y_in, y_out)}"/>')
-    meshes.append(f'<mesh name="beam" vertex="{_prism(beam_profile, -bw, bw)}"/>')
-    meshes.append(f'<mesh name="hook" vertex="{_prism(hook_profile, -bw, bw)}"/>')
+    meshes.append(f'<mesh name="wall_lo" vertex="{prism_vertices(wall_profile, -y_out, -y_in)}"/>')
+    meshes.append(f'<mesh name="wall_hi" vertex="{prism_vertices(wall_profile, y_in, y_out)}"/>')
+    meshes.append(f'<mesh name="beam" vertex="{prism_vertices(beam_profile, -bw, bw)}"/>')
+    meshes.append(f'<mesh name="hook" vertex="{prism_vertices(hook_profile, -bw, bw)}"/>')
     beam_mass = 0.004
     for i, yaw in enumerate(SIDES):
         q = f'euler="0 0 {yaw}"'
@@ -137,7 +137,7 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
             f'euler="0 0 {physics.female_yaw:.6g}" gravcomp="1">'
             f'<inertial pos="0 0 0" mass="{p.arm_link_mass:.6g}" '
             f'diaginertia="{p.arm_link_inertia:.6g} {p.arm_link_inertia:.6g} {p.arm_link_inertia:.6g}"/>'
-            f"{_arm_joints('l', p.holder_kd_lin, p.holder_kd_rot)}"
+            f"{arm_joints_xml('l', p.holder_kd_lin, p.holder_kd_rot)}"
             '<geom type="cylinder" size="0.02 0.015" pos="0 0 -0.015" contype="0" conaffinity="0" rgba=".5 .5 .5 1"/>'
             f'<body name="female" pos="0 0 {g.base_thickness + 0.03:.6g}">'
             f'<inertial pos="0 0 -0.005" mass="{p.female_mass:.6g}" diaginertia="1e-4 1e-4 1e-4"/>'
@@ -159,7 +159,7 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
         f'<body name="r_hand" pos="{sx:.6g} {sy:.6g} {sz:.6g}" gravcomp="1">'
         f'<inertial pos="0 0 0" mass="{p.arm_link_mass:.6g}" '
         f'diaginertia="{p.arm_link_inertia:.6g} {p.arm_link_inertia:.6g} {p.arm_link_inertia:.6g}"/>'
-        f"{_arm_joints('r', p.arm_kd_lin, p.arm_kd_rot)}"
+        f"{arm_joints_xml('r', p.arm_kd_lin, p.arm_kd_rot)}"
         '<body name="male" pos="0 0 0">'
         f'<inertial pos="0 0 {hl:.6g}" mass="{p.male_mass + p.hand_mass:.6g}" diaginertia="2e-4 2e-4 2e-4"/>'
         f'<site name="r_ft" pos="0 0 {g.sensor_height:.6g}"/>'
@@ -169,9 +169,9 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
         'contype="0" conaffinity="0" rgba=".6 .6 .6 1"/>'
         "</body></body>"
     )
-    actuators = _actuators("r", p.arm_kp_lin, p.arm_kp_rot)
+    actuators = arm_actuators_xml("r", p.arm_kp_lin, p.arm_kp_rot)
     if two_arm:
-        actuators += "\n" + _actuators("l", p.holder_kp_lin, p.holder_kp_rot)
+        actuators += "\n" + arm_actuators_xml("l", p.holder_kp_lin, p.holder_kp_rot)
     sensors = '<force name="r_force" site="r_ft"/><torque name="r_torque" site="r_ft"/>'
     if two_arm:
         sensors += '<force name="l_force" site="l_ft"/><torque name="l_torque" site="l_ft"/>'

@@ -6,13 +6,14 @@ The physics runs at 1/timestep; the sensor averages the physics samples of each 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import lfilter
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.sim.config import SensorConfig
+from rcbht_introspection.sim.config import Range, SensorConfig
 
 
 @dataclass(frozen=True)
@@ -24,6 +25,29 @@ class SensorDraw:
     drift_period: float
     drift_phase: float
     noise_scale: float
+
+
+def draw_sensor(
+    config: SensorConfig,
+    rng: np.random.Generator,
+    bias_force: float,
+    bias_torque: float,
+    noise_scale: Range,
+) -> SensorDraw:
+    """One trial's sensor errors: bias (std bias_force / bias_torque), drift amplitude, period and
+    phase, and the noise scale (uniform in `noise_scale`)."""
+    scale6 = np.array([1.0] * 3 + [0.0] * 3)
+    bias = rng.normal(0.0, 1.0, 6) * (scale6 * bias_force + (1 - scale6) * bias_torque)
+    drift = rng.normal(0.0, 1.0, 6) * (
+        scale6 * config.drift_force + (1 - scale6) * config.drift_torque
+    )
+    return SensorDraw(
+        bias=bias,
+        drift=drift,
+        drift_period=float(rng.uniform(*config.drift_period)),
+        drift_phase=float(rng.uniform(0.0, 2 * math.pi)),
+        noise_scale=float(rng.uniform(*noise_scale)),
+    )
 
 
 def decimation(rate_hz: float, timestep: float) -> int:

@@ -15,7 +15,7 @@ import numpy as np
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.sim.config import FailureType, SimConfig
+from rcbht_introspection.sim.config import FailureType, SensorConfig, SimConfig
 from rcbht_introspection.sim.controller import (
     ControllerState,
     ControlPlan,
@@ -24,7 +24,13 @@ from rcbht_introspection.sim.controller import (
 )
 from rcbht_introspection.sim.model import ARM_JOINTS, TrialPhysics, build_model
 from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
-from rcbht_introspection.sim.sensor import SensorDraw, decimation, measure, resample
+from rcbht_introspection.sim.sensor import (
+    SensorDraw,
+    decimation,
+    draw_sensor,
+    measure,
+    resample,
+)
 
 SETTLE_TIME = 0.3
 """Time (s) the arm servos settle under gravity before taring and recording start."""
@@ -87,17 +93,7 @@ def draw_trial(
         retract_lateral=(_uniform(rng, cc.retract_lateral), _uniform(rng, cc.retract_lateral)),
         ripple_seed=int(rng.integers(0, 2**31)),
     )
-    s = config.sensor
-    scale6 = np.array([1.0] * 3 + [0.0] * 3)
-    bias = rng.normal(0.0, 1.0, 6) * (scale6 * var.bias_force + (1 - scale6) * var.bias_torque)
-    drift = rng.normal(0.0, 1.0, 6) * (scale6 * s.drift_force + (1 - scale6) * s.drift_torque)
-    sensor = SensorDraw(
-        bias=bias,
-        drift=drift,
-        drift_period=float(rng.uniform(15.0, 60.0)),
-        drift_phase=float(rng.uniform(0.0, 2 * math.pi)),
-        noise_scale=_uniform(rng, var.noise_scale),
-    )
+    sensor = draw_sensor(config.sensor, rng, var.bias_force, var.bias_torque, var.noise_scale)
     return physics, plan, sensor
 
 
@@ -204,7 +200,7 @@ def simulate_trial(
     sensor_rng = np.random.default_rng([int(seed), attempts, 7])
     for arm in scen.arms:
         cols = slice(0, 6) if arm == "R" else slice(6, 12)
-        draw = sensor if arm == "R" else _other_sensor(sensor, sensor_rng)
+        draw = sensor if arm == "R" else _other_sensor(sensor, config.sensor, sensor_rng)
         wrench[arm] = measure(samples[:, cols], time, config.sensor, draw, sensor_rng)
     state_times = tuple(round(round(t / period) * period, 9) for t in state.switch_times)
     if failure is None:
@@ -237,12 +233,12 @@ def simulate_trial(
     )
 
 
-def _other_sensor(draw: SensorDraw, rng: np.random.Generator) -> SensorDraw:
+def _other_sensor(draw: SensorDraw, config: SensorConfig, rng: np.random.Generator) -> SensorDraw:
     """The second arm's sensor: its own bias and drift with the same error magnitudes."""
     return SensorDraw(
         bias=draw.bias[rng.permutation(6)],
         drift=draw.drift[rng.permutation(6)],
-        drift_period=float(rng.uniform(15.0, 60.0)),
+        drift_period=float(rng.uniform(*config.drift_period)),
         drift_phase=float(rng.uniform(0.0, 2 * math.pi)),
         noise_scale=draw.noise_scale,
     )

@@ -1,0 +1,156 @@
+"""Typed configuration of the peg-in-hole simulator (config/sim_peg.yaml): geometry, physics,
+controller set-points, per-trial variation and the (Robotiq-like) sensor, none in the code."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rcbht_introspection.config_files import config_path, load_config
+from rcbht_introspection.sim.config import Range, SensorConfig
+
+
+@dataclass(frozen=True)
+class PegGeometryConfig:
+    """Dimensions (m) of the square peg, the hole block and the sensor's place on the hand."""
+
+    peg_half: float = 0.008
+    """Half width of the square peg."""
+    peg_length: float = 0.05
+    clearance: float = 0.0002
+    """Gap between each peg face and the hole wall facing it."""
+    hole_depth: float = 0.015
+    chamfer: float = 0.0008
+    """Size of the 45 degree lead-in chamfer on the hole's top edge."""
+    block_half: float = 0.04
+    """Half width of the square block the hole is cut in."""
+    floor_thickness: float = 0.01
+    grip_height: float = 0.035
+    """Height above the peg tip where the gripper holds the peg (the hand's frame)."""
+    sensor_height: float = 0.08
+    """Height of the force/torque sensor site above the peg tip."""
+
+
+@dataclass(frozen=True)
+class PegPhysicsConfig:
+    """MuJoCo constants: time step, masses, friction, contact and grip softness, arm servo gains."""
+
+    timestep: float = 0.001
+    gravity: float = 9.81
+    peg_mass: float = 0.06
+    gripper_mass: float = 0.4
+    """Mass of the gripper between the sensor and the peg (tared away with the peg)."""
+    friction: float = 0.3
+    contact_solref: tuple[float, float] = (0.008, 1.0)
+    contact_solimp: tuple[float, float, float] = (0.95, 0.99, 0.001)
+    grip_solref: tuple[float, float] = (0.002, 1.0)
+    """Softness of the grip (a weld between gripper and peg, switched off when the gripper opens)."""
+    grip_solimp: tuple[float, float, float] = (0.99, 0.999, 0.001)
+    arm_kp_lin: float = 20000.0
+    """Stiffness (N/m) of the arm's Cartesian position servo."""
+    arm_kd_lin: float = 250.0
+    arm_kp_rot: float = 60.0
+    arm_kd_rot: float = 0.6
+    arm_link_mass: float = 0.5
+    arm_link_inertia: float = 0.001
+
+
+@dataclass(frozen=True)
+class PegControllerConfig:
+    """Scripted force/position controller of reach, search, insert and release."""
+
+    start_height: Range = (0.008, 0.035)
+    """Initial clearance (m) of the peg tip above the block surface, drawn per trial."""
+    reach_speed: Range = (0.008, 0.02)
+    contact_force: float = 3.0
+    """Guarded move: force (N) that ends the reach."""
+    reach_timeout: float = 10.0
+    search_force: Range = (5.0, 9.0)
+    """Force (N) pressed on the surface while searching."""
+    search_speed: Range = (0.005, 0.01)
+    """Path speed (m/s) of the spiral search."""
+    spiral_pitch: float = 0.0012
+    """Radial growth (m) of the spiral per turn; below twice the capture width, so no hole is missed."""
+    search_drop: float = 0.00025
+    """The hole is found when the tip is this far (m) below the height where contact was made."""
+    search_max_speed: float = 0.01
+    """Speed limit (m/s) of the admittance loop while searching."""
+    search_timeout: float = 15.0
+    insert_force: Range = (8.0, 15.0)
+    """Force (N) set-point of the insertion; pressed against the hole's floor at the end."""
+    insert_speed: Range = (0.005, 0.012)
+    """Speed limit (m/s) of the insertion's descent (the admittance loop's limit)."""
+    insert_timeout: float = 8.0
+    seat_tolerance: float = 0.002
+    """Seated when the tip is within this height (m) of the believed hole floor ..."""
+    seat_fraction: float = 0.7
+    """... and the force is back to this fraction of the insertion set-point."""
+    seat_settle: Range = (0.2, 0.5)
+    """Time (s) pressed on the floor before the gripper opens."""
+    release_pause: Range = (0.2, 0.8)
+    """Time (s) the open gripper stays before it moves away."""
+    retreat_speed: Range = (0.01, 0.02)
+    retreat_time: Range = (0.5, 2.0)
+    force_gain: float = 0.0008
+    """Admittance gain (m/s per N) of the force-controlled axis."""
+    force_ripple: float = 0.05
+    """Std of the force loop's hunting around its set-point, as a fraction of the set-point."""
+    force_ripple_time: float = 0.3
+    """Correlation time (s) of that ripple."""
+    lateral_compliance: float = 0.0004
+    """Lateral admittance (m/s per N) during insertion: yield to the hole walls' push."""
+    force_filter: float = 0.02
+    """Time constant (s) of the controller's force low-pass filter."""
+
+
+@dataclass(frozen=True)
+class PegVariationConfig:
+    """Per-trial random variation of a trial (uniform ranges or std)."""
+
+    hole_offset: Range = (0.002, 0.0035)
+    """Unknown hole position error (m) as a Chebyshev radius (max of |x|, |y|): always beyond the
+    chamfer's capture, so every trial searches; the direction is uniform."""
+    offset_z: float = 0.0003
+    """Std (m) of the hole's height error."""
+    offset_yaw: float = 0.004
+    """Std (rad) of the hole's yaw error (the square peg fits within about 0.025 rad)."""
+    friction_scale: Range = (0.7, 1.4)
+    noise_scale: Range = (0.8, 1.25)
+    bias_force: float = 0.5
+    bias_torque: float = 0.02
+
+
+@dataclass(frozen=True)
+class PegSensorConfig(SensorConfig):
+    """A Robotiq FT 300-like sensor: a 100 Hz stream in 0.01 N / 0.001 N m units, white noise
+    about 8x the snap assembly's (fields: SensorConfig)."""
+
+    rate_hz: float = 100.0
+    noise_force: float = 0.1
+    noise_torque: float = 0.005
+    drift_force: float = 0.2
+    drift_torque: float = 0.005
+    vibration_force: float = 0.05
+    vibration_torque: float = 0.002
+    wander_force: float = 0.05
+    wander_torque: float = 0.002
+    quantization_force: float = 0.01
+    quantization_torque: float = 0.001
+
+
+@dataclass(frozen=True)
+class PegConfig:
+    """Every number of the peg-in-hole simulator, one object per trial set."""
+
+    geometry: PegGeometryConfig = field(default_factory=PegGeometryConfig)
+    physics: PegPhysicsConfig = field(default_factory=PegPhysicsConfig)
+    controller: PegControllerConfig = field(default_factory=PegControllerConfig)
+    variation: PegVariationConfig = field(default_factory=PegVariationConfig)
+    sensor: PegSensorConfig = field(default_factory=PegSensorConfig)
+    max_attempts: int = 4
+    """Draws of one trial until its peg ends in the hole (a failed draw is redrawn)."""
+
+
+def load_peg_config(path: Path | str | None = None) -> PegConfig:
+    """Load config/sim_peg.yaml (or `path`); unknown keys and wrong types give one-line errors."""
+    return load_config(PegConfig, path if path is not None else config_path("sim_peg.yaml"))
