@@ -51,7 +51,10 @@ def test_a_second_task_trains_evaluates_and_runs_live(peg_bags: list[Path], tmp_
 
     scores = tmp_path / "replay.json"
     bags = [str(b) for b in held_out]
-    assert main(["replay-eval", *bags, "--model", str(model), "--rate", "2", "--json", str(scores)]) == 0
+    assert (
+        main(["replay-eval", *bags, "--model", str(model), "--rate", "2", "--json", str(scores)])
+        == 0
+    )
     result = json.loads(scores.read_text())
     assert result["clean_shutdown"], (result["exit_codes"], result.get("shutdown_logs"))
     assert result["dropped_wrench"] == 0
