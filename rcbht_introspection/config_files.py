@@ -379,6 +379,35 @@ def load_profile(
     )
 
 
+def only_profile(path: Path | str, *, kind: str) -> str:
+    """The name of the one profile of a `profiles:` file (an error names them if there are more)."""
+    document = read_yaml(path)
+    profiles = document.get("profiles") if isinstance(document, Mapping) else None
+    if not isinstance(profiles, Mapping) or len(profiles) != 1:
+        names = ", ".join(map(str, profiles)) if isinstance(profiles, Mapping) else "none"
+        raise InputError(
+            f"expected one {kind} profile, found: {names}; name the profile to use",
+            path=Path(path),
+            line=_line_of(document, "profiles", None),
+            field="profiles",
+        )
+    return str(next(iter(profiles)))
+
+
+def write_profile(
+    path: Path | str, name: str, obj: Any, *, omit: Sequence[str] = (), header: str = ""
+) -> Path:
+    """Write config dataclass `obj` as `profiles: {name: {...}}` (without the `omit` fields),
+    which load_profile reads back to an equal object; `header` becomes leading # comments."""
+    path = Path(path)
+    fields = {k: v for k, v in to_mapping(obj).items() if k not in omit}
+    text = yaml.safe_dump({"profiles": {name: fields}}, sort_keys=False, default_flow_style=None)
+    comments = "".join(f"# {line}".rstrip() + "\n" for line in header.splitlines())
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(comments + text, encoding="utf-8")
+    return path
+
+
 def to_mapping(obj: Any) -> dict[str, Any]:
     """Plain-YAML form of a config dataclass (tuples become lists)."""
 
