@@ -394,6 +394,16 @@ def only_profile(path: Path | str, *, kind: str) -> str:
     return str(next(iter(profiles)))
 
 
+class _ProfileDumper(yaml.SafeDumper):
+    """Safe YAML with mappings as blocks and lists on one line, as config/*.yaml are written."""
+
+
+_ProfileDumper.add_representer(
+    list,
+    lambda dumper, data: dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True),
+)
+
+
 def write_profile(
     path: Path | str, name: str, obj: Any, *, omit: Sequence[str] = (), header: str = ""
 ) -> Path:
@@ -401,7 +411,8 @@ def write_profile(
     which load_profile reads back to an equal object; `header` becomes leading # comments."""
     path = Path(path)
     fields = {k: v for k, v in to_mapping(obj).items() if k not in omit}
-    text = yaml.safe_dump({"profiles": {name: fields}}, sort_keys=False, default_flow_style=None)
+    document = {"profiles": {name: fields}}
+    text = yaml.dump(document, Dumper=_ProfileDumper, sort_keys=False, width=100)
     comments = "".join(f"# {line}".rstrip() + "\n" for line in header.splitlines())
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(comments + text, encoding="utf-8")

@@ -75,26 +75,26 @@ def table(calibration: Calibration, comparison: Comparison) -> str:
     from rcbht_introspection.taxonomy.words import AXES, LEVELS
 
     before, after = comparison.before, comparison.after
-    b, a = before.profile[:10], after.profile[:10]
     floors = calibration.config.fit_noise_floor or {}
     lines = [
         f"{calibration.rate_hz:.4g} Hz; window {before.window} -> {after.window} samples; "
         f"target: at most {MAX_CUT_FRACTION} primitives per window",
-        f"{'':6} {'primitives per window':>23}   {'cons share':>21}   {'noise floor':>11}",
-        f"{'axis':6} {b:>11} {a:>11}   {b:>10} {a:>10}   {'(factor)':>11}",
+        f"before: profile {before.profile!r}, after: profile {after.profile!r}",
+        f"{'':6} {'primitives per window':>21}   {'cons share':>17}   {'noise floor':>11}",
+        f"{'axis':6} {'before':>10} {'after':>10}   {'before':>8} {'after':>8}   {'factor':>11}",
     ]
     for axis in AXES:
         lines.append(
-            f"{axis:6} {before.primitives_per_window[axis]:11.3f} "
-            f"{after.primitives_per_window[axis]:11.3f}   {before.const_share[axis]:10.3f} "
-            f"{after.const_share[axis]:10.3f}   {calibration.floor_factor[axis]:11.3g}"
+            f"{axis:6} {before.primitives_per_window[axis]:10.3f} "
+            f"{after.primitives_per_window[axis]:10.3f}   {before.const_share[axis]:8.3f} "
+            f"{after.const_share[axis]:8.3f}   {calibration.floor_factor[axis]:11.3g}"
             + ("" if axis in floors else " (none)")
         )
-    for key in ("all", *(level.value for level in LEVELS)):
-        label = "words/s" if key == "all" else f"  {key}"
-        lines.append(
-            f"{label:12} {before.words_per_second[key]:11.1f} {after.words_per_second[key]:11.1f}"
-        )
+    rates = "; ".join(
+        f"{key} {before.words_per_second[key]:.1f} -> {after.words_per_second[key]:.1f}"
+        for key in ("all", *(level.value for level in LEVELS))
+    )
+    lines.append(f"words per second: {rates}")
     agreement = ", ".join(f"{k} {v:.3f}" for k, v in comparison.agreement.items())
     lines.append(f"label agreement with {before.profile} (share of samples): {agreement}")
     return "\n".join(lines)
