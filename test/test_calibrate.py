@@ -135,6 +135,21 @@ def test_a_zero_noise_floor_is_the_original_fit_test(trials: list[Trial]) -> Non
     assert label_trial(trials[0], zero).words == label_trial(trials[0]).words
 
 
+def test_a_dead_axis_group_keeps_the_default_thresholds(trials: list[Trial]) -> None:
+    dead = [
+        dataclasses.replace(
+            t, wrench={"R": np.column_stack([t.wrench["R"][:, :3], np.zeros((len(t.time), 3))])}
+        )
+        for t in trials[:2]
+    ]
+    calibration = calibrate_profile(dead, "forces_only")
+    spectra = calibration.config.calibrated_thresholds or {}
+    for axis in ("Mx", "My", "Mz"):
+        assert spectra[axis] == default_config().gradient_thresholds
+    assert [n.split(":")[0] for n in calibration.notes] == ["Mx", "My", "Mz"]
+    assert spectra["Fx"] != default_config().gradient_thresholds
+
+
 # --------------------------------------------------------------------------- domain rule
 
 

@@ -102,7 +102,8 @@ class Calibration:
     domains: dict[str, float]
     """Per axis: median domain (adjustAxes.m) over the inputs, for the report."""
     notes: list[str] = field(default_factory=list)
-    """Axes left at the base profile's values, and why."""
+    """What could not be fitted, one line each: axes kept at the base profile's thresholds, axes
+    still above MAX_CUT_FRACTION."""
 
 
 def trial_series(trials: Sequence[TrialLike]) -> list[Series]:
@@ -145,7 +146,13 @@ def residual_variance(series: Sequence[Series], window: int) -> dict[str, float]
     if not per_axis:
         return dict.fromkeys(AXES, 0.0)
     values = np.concatenate(per_axis)
-    return {axis: float(np.median(values[:, a])) for a, axis in enumerate(AXES)}
+    return {axis: _median_finite(values[:, a]) for a, axis in enumerate(AXES)}
+
+
+def _median_finite(values: np.ndarray) -> float:
+    """Median of the finite values (a bag may carry NaN samples; 0 when none is finite)."""
+    finite = values[np.isfinite(values)]
+    return float(np.median(finite)) if len(finite) else 0.0
 
 
 def _segments(series: Sequence[Series], config: TaxonomyConfig) -> list[list[list[float]]]:
@@ -190,6 +197,7 @@ def gradient_limits(gradients: dict[str, np.ndarray]) -> dict[str, tuple[float, 
     for group in AXIS_GROUPS:
         parts = [np.abs(gradients[a]) for a in group if a in gradients]
         pooled = np.concatenate(parts) if parts else np.empty(0)
+        pooled = pooled[np.isfinite(pooled)]
         pimp, pconst = (
             (
                 float(np.quantile(pooled, IMPULSE_QUANTILE)),
@@ -248,7 +256,7 @@ def calibrate_profile(
             )
     config = dataclasses.replace(config, calibrated_thresholds=spectra, domain_axes=())
     domains = {
-        axis: float(np.median([axis_domain(y[:, a], base) for _, y in series]))
+        axis: _median_finite(np.array([axis_domain(y[:, a], base) for _, y in series]))
         for a, axis in enumerate(AXES)
     }
     return Calibration(config, rate, variance, factors, limits, domains, notes)
