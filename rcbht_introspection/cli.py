@@ -16,6 +16,7 @@ from rcbht_introspection.errors import InputError
 # Modules that register subcommands, in help order. Each owns its subcommands.
 COMMAND_MODULES: tuple[str, ...] = (
     "rcbht_introspection.commands.taxonomy",  # label, conformance, plot
+    "rcbht_introspection.commands.calibrate",  # calibrate
     "rcbht_introspection.commands.learn",  # train, evaluate
     "rcbht_introspection.commands.live",  # live-eval (offline live /task_state replay)
     "rcbht_introspection.commands.sim",  # sim, sim-report

@@ -379,6 +379,46 @@ def load_profile(
     )
 
 
+def only_profile(path: Path | str, *, kind: str) -> str:
+    """The name of the one profile of a `profiles:` file (an error names them if there are more)."""
+    document = read_yaml(path)
+    profiles = document.get("profiles") if isinstance(document, Mapping) else None
+    if not isinstance(profiles, Mapping) or len(profiles) != 1:
+        names = ", ".join(map(str, profiles)) if isinstance(profiles, Mapping) else "none"
+        raise InputError(
+            f"expected one {kind} profile, found: {names}; name the profile to use",
+            path=Path(path),
+            line=_line_of(document, "profiles", None),
+            field="profiles",
+        )
+    return str(next(iter(profiles)))
+
+
+class _ProfileDumper(yaml.SafeDumper):
+    """Safe YAML with mappings as blocks and lists on one line, as config/*.yaml are written."""
+
+
+_ProfileDumper.add_representer(
+    list,
+    lambda dumper, data: dumper.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True),
+)
+
+
+def write_profile(
+    path: Path | str, name: str, obj: Any, *, omit: Sequence[str] = (), header: str = ""
+) -> Path:
+    """Write config dataclass `obj` as `profiles: {name: {...}}` (without the `omit` fields),
+    which load_profile reads back to an equal object; `header` becomes leading # comments."""
+    path = Path(path)
+    fields = {k: v for k, v in to_mapping(obj).items() if k not in omit}
+    document = {"profiles": {name: fields}}
+    text = yaml.dump(document, Dumper=_ProfileDumper, sort_keys=False, width=100)
+    comments = "".join(f"# {line}".rstrip() + "\n" for line in header.splitlines())
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(comments + text, encoding="utf-8")
+    return path
+
+
 def to_mapping(obj: Any) -> dict[str, Any]:
     """Plain-YAML form of a config dataclass (tuples become lists)."""
 

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_from_args
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
@@ -86,6 +87,7 @@ def _common(parser: argparse.ArgumentParser) -> None:
         metavar="F",
         help="also train on these fractions of each sub-task (e.g. 0.25 0.5 0.75)",
     )
+    add_taxonomy_options(parser)
 
 
 def run_train(args: argparse.Namespace) -> int:
@@ -93,10 +95,11 @@ def run_train(args: argparse.Namespace) -> int:
     from rcbht_introspection.learn.live import live_training
     from rcbht_introspection.learn.model_file import save_model
 
-    trials = load_trials(args.inputs, args.words)
+    taxonomy = taxonomy_from_args(args)
+    trials = load_trials(args.inputs, args.words, taxonomy)
     samples = [s for t in trials for s in t.samples]
     model, n_live = live_training(
-        trials, args.live_augment, args.live_config, classifier=args.classifier,
+        trials, args.live_augment, args.live_config, taxonomy, classifier=args.classifier,
         encoding=args.encoding, random_state=args.seed,
         augment_prefixes=tuple(args.augment_prefixes),
     )  # fmt: skip
@@ -104,7 +107,8 @@ def run_train(args: argparse.Namespace) -> int:
     print(
         f"wrote {args.out}: {args.classifier}/{args.encoding}, {len(samples)} samples "
         f"(+{n_live} live) from {len(trials)} trials, {model.encoder.n_features} features, "
-        f"classes {model.classes_}, task {list(model.task.subtasks)}"
+        f"classes {model.classes_}, task {list(model.task.subtasks)}, "
+        f"taxonomy profile {model.taxonomy_profile!r} ({model.taxonomy_sha256[:12]})"
     )
     return 0
 
@@ -126,7 +130,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
     if args.permutations < 1:
         raise InputError("--permutations must be at least 1", field="--permutations")
-    trials = load_trials(args.inputs, args.words)
+    taxonomy = taxonomy_from_args(args)
+    trials = load_trials(args.inputs, args.words, taxonomy)
     if args.trials is not None:
         trials = trials[: args.trials]
     protocol = Protocol(
@@ -140,6 +145,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         augment_prefixes=tuple(args.augment_prefixes),
         live_augment=args.live_augment,
         live_score=args.live_score,
+        taxonomy=taxonomy,
     )
     bar = None
     if not args.no_progress:
@@ -158,6 +164,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             bar.close()
     result["datasets"] = [str(p) for p in args.inputs]
     result["words"] = args.words
+    result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"
     result = _clean(result)
     ss, base = result["steady_state_accuracy"], result["duration_baseline"]
     print(

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_from_args
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
@@ -44,15 +45,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--live-config", type=Path, default=None, metavar="YAML")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", type=Path, default=None, metavar="OUT")
+    add_taxonomy_options(p)
     p.set_defaults(func=run_live_eval)
 
 
 def run_live_eval(args: argparse.Namespace) -> int:
     from rcbht_introspection.grammar.encoding.cache import SampleCache
-    from rcbht_introspection.learn.data import find_inputs, load_trials
+    from rcbht_introspection.learn.data import find_inputs, load_trials, read_any_trial
     from rcbht_introspection.learn.live import (
         load_live_config,
-        read_any_trial,
         stream_factory,
         train_live_model,
         trial_live_samples,
@@ -65,12 +66,13 @@ def run_live_eval(args: argparse.Namespace) -> int:
         raise InputError(f"--held-out must be 1..{len(paths) - 1}", field="--held-out")
     train_paths, held_paths = paths[: -args.held_out], paths[-args.held_out :]
     config = load_live_config(args.live_config)
-    factory = stream_factory(config)
+    taxonomy = taxonomy_from_args(args)
+    factory = stream_factory(config, taxonomy)
     models: dict[str, SubtaskModel] = {}
     if args.model is not None:
         models["model"] = load_model(args.model)
     else:
-        trials = load_trials(train_paths, args.words)
+        trials = load_trials(train_paths, args.words, taxonomy)
         samples = [s for t in trials for s in t.samples]
         live = [s for v in trial_live_samples(train_paths, config, factory).values() for s in v]
         kw = dict(
@@ -79,8 +81,8 @@ def run_live_eval(args: argparse.Namespace) -> int:
             random_state=args.seed,
             cache=SampleCache(),  # all models encode the same samples
         )
-        models["before"] = train_live_model(samples, live, None, **kw)
-        models["after"] = train_live_model(samples, live, config, **kw)
+        models["before"] = train_live_model(samples, live, None, taxonomy, **kw)
+        models["after"] = train_live_model(samples, live, config, taxonomy, **kw)
         print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{len(live)} live")
     held = [read_any_trial(p) for p in held_paths]
     streamed = [stream_trial(t, factory) for t in held]

@@ -9,12 +9,17 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_or_default
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.conformance import CONFORMANCE_LEVELS, compare_trial
 from rcbht_introspection.io.rcbht_format import write_trial_words
 from rcbht_introspection.io.words_jsonl import write_jsonl
 from rcbht_introspection.taxonomy.words import Level
+
+if TYPE_CHECKING:
+    from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
 ENGINES = ("batch", "stream")
 FORMATS = ("rcbht", "jsonl")
@@ -28,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
     p.add_argument("--format", choices=FORMATS, default="rcbht")
-    p.add_argument("--profile", default="reference", help="profile of config/rcbht.yaml")
+    add_taxonomy_options(p)
     p.add_argument("--engine", choices=ENGINES, default="batch")
     p.set_defaults(func=run_label)
 
@@ -36,22 +41,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "conformance", help="compare the engine with a dataset's golden/ files"
     )
     p.add_argument("dataset", type=Path, metavar="DATASET_DIR")
-    p.add_argument("--profile", default="reference")
+    add_taxonomy_options(p)
     p.add_argument("--engine", choices=ENGINES, default="batch")
     p.set_defaults(func=run_conformance)
 
     p = subparsers.add_parser("plot", help="draw a trial's primitives, MCs and LLBs per axis")
     p.add_argument("trial", type=Path, metavar="TRIAL_DIR")
     p.add_argument("--out", type=Path, required=True, metavar="FILE.png")
-    p.add_argument("--profile", default="reference")
+    add_taxonomy_options(p)
     p.set_defaults(func=run_plot)
 
 
-def labeller(engine: str, profile: str) -> Callable:
-    """trial -> TrialWords for the chosen engine and profile."""
-    from rcbht_introspection.taxonomy.config import load_taxonomy_config
-
-    config = load_taxonomy_config(profile)
+def labeller(engine: str, config: TaxonomyConfig) -> Callable:
+    """trial -> TrialWords for the chosen engine and taxonomy profile."""
     if engine == "stream":
         from rcbht_introspection.taxonomy.stream import label_trial_streamed
 
@@ -67,7 +69,7 @@ def labeller(engine: str, profile: str) -> Callable:
 def run_label(args: argparse.Namespace) -> int:
     from rcbht_introspection.io.hiro import find_trials, read_trial
 
-    label = labeller(args.engine, args.profile)
+    label = labeller(args.engine, taxonomy_or_default(args))
     trials = find_trials(args.trials)
     if not trials:
         raise InputError("no trial folders found", path=args.trials[0])
@@ -87,7 +89,8 @@ def run_label(args: argparse.Namespace) -> int:
 def run_conformance(args: argparse.Namespace) -> int:
     from rcbht_introspection.io.hiro import find_trials, read_trial
 
-    label = labeller(args.engine, args.profile)
+    config = taxonomy_or_default(args)
+    label = labeller(args.engine, config)
     trials = [t for t in find_trials([args.dataset]) if (t / "golden").is_dir()]
     if not trials:
         raise InputError("no trial folders with golden/ outputs", path=args.dataset)
@@ -107,7 +110,7 @@ def run_conformance(args: argparse.Namespace) -> int:
     names = {Level.COMPOSITION: "Composites", Level.BEHAVIOR: "llBehaviors"}
     for level in CONFORMANCE_LEVELS:
         print(f"{names[level]}: {identical[level]}/{total[level]} files identical")
-    print(f"{len(trials)} trials, engine {args.engine}, profile {args.profile}")
+    print(f"{len(trials)} trials, engine {args.engine}, profile {config.profile}")
     return 1 if failures else 0
 
 
@@ -119,7 +122,7 @@ def run_plot(args: argparse.Namespace) -> int:
     from rcbht_introspection.plots.action_grammar import plot_trial
 
     trial = read_trial(args.trial)
-    words = labeller("batch", args.profile)(trial)
+    words = labeller("batch", taxonomy_or_default(args))(trial)
     plot_trial(trial, words, args.out)
     print(f"wrote {args.out}")
     return 0

@@ -15,6 +15,7 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn import WORD_SOURCES, WordSource
 from rcbht_introspection.task import HIRO_TASK, Task, task_of_folder, task_of_names
 from rcbht_introspection.taxonomy.batch import label_trial
+from rcbht_introspection.taxonomy.config import TaxonomyConfig, is_reference
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, TrialWords
 
 
@@ -81,20 +82,33 @@ def _end_time(folder: Path) -> float:
     raise InputError("no R_Torques.dat or L_Torques.dat", folder)
 
 
-def load_trial_samples(path: Path, words: WordSource = "auto") -> TrialSamples:
-    """Samples of one trial folder or bag; `words` picks golden files or the batch engine."""
+def load_trial_samples(
+    path: Path, words: WordSource = "auto", taxonomy: TaxonomyConfig | None = None
+) -> TrialSamples:
+    """Samples of one trial folder or bag; `words` picks golden files or the batch engine.
+
+    `taxonomy` labels engine words (None: reference). The golden files hold the reference
+    profile's words, so with another profile 'auto' means the engine and 'golden' is an error.
+    """
     if words not in WORD_SOURCES:
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
     path = Path(path)
+    reference = taxonomy is None or is_reference(taxonomy)
+    if words == "golden" and taxonomy is not None and not reference:
+        raise InputError(
+            f"golden label files hold the reference profile's words, not {taxonomy.profile!r}'s; "
+            "use words='engine'",
+            path,
+        )
     if path.is_file() and bags.is_bag(path):
         if words == "golden":
             raise InputError("a bag has no golden label files; use words='engine'", path)
         trial = bags.read_trial_bag(path)
         samples = split_words(
-            label_trial(trial), trial.state_times, trial.end_time, trial.phase_names
+            label_trial(trial, taxonomy), trial.state_times, trial.end_time, trial.phase_names
         )
         return TrialSamples(trial.name, path, "engine", samples, task_of_bag(trial))
-    golden = _golden_arms(path)
+    golden = _golden_arms(path) if reference else []
     if words == "golden" or (words == "auto" and golden):
         if not golden:
             raise InputError("no golden/ label files in this trial", path)
@@ -107,7 +121,9 @@ def load_trial_samples(path: Path, words: WordSource = "auto") -> TrialSamples:
         samples = split_words(trial_words, state, _end_time(path), task.subtasks)
         return TrialSamples(path.name, path, "golden", samples, task)
     trial = read_trial(path)
-    samples = split_words(label_trial(trial), trial.state_times, trial.end_time, trial.phase_names)
+    samples = split_words(
+        label_trial(trial, taxonomy), trial.state_times, trial.end_time, trial.phase_names
+    )
     return TrialSamples(trial.name, path, "engine", samples, task_of_folder(path))
 
 
@@ -117,6 +133,13 @@ def task_of_bag(trial: Trial) -> Task:
     if isinstance(stored, dict):
         return Task.from_dict(stored)
     return task_of_names([trial.phase_names])
+
+
+def read_any_trial(path: Path | str) -> Trial:
+    """A trial folder or a bag (as find_inputs lists them) as a Trial."""
+    if Path(path).is_file() and bags.is_bag(path):
+        return bags.read_trial_bag(path)
+    return read_trial(path)
 
 
 def find_inputs(paths: Iterable[Path | str]) -> list[Path]:
@@ -142,13 +165,21 @@ def find_trials_safe(path: Path) -> list[Path]:
         return []
 
 
-def load_trials(paths: Iterable[Path | str], words: WordSource = "auto") -> list[TrialSamples]:
-    """Per-trial samples of every trial under `paths`."""
+def load_trials(
+    paths: Iterable[Path | str],
+    words: WordSource = "auto",
+    taxonomy: TaxonomyConfig | None = None,
+) -> list[TrialSamples]:
+    """Per-trial samples of every trial under `paths` (engine words labelled by `taxonomy`)."""
     if words not in WORD_SOURCES:
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
-    return [load_trial_samples(p, words) for p in find_inputs(paths)]
+    return [load_trial_samples(p, words, taxonomy) for p in find_inputs(paths)]
 
 
-def load_samples(paths: Iterable[Path | str], words: WordSource = "auto") -> list[SubtaskSample]:
+def load_samples(
+    paths: Iterable[Path | str],
+    words: WordSource = "auto",
+    taxonomy: TaxonomyConfig | None = None,
+) -> list[SubtaskSample]:
     """All sub-task samples of the trials under `paths` (dataset dirs, trial dirs or bags)."""
-    return [s for trial in load_trials(paths, words) for s in trial.samples]
+    return [s for trial in load_trials(paths, words, taxonomy) for s in trial.samples]

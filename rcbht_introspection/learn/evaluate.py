@@ -26,8 +26,9 @@ from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.learn import ClassifierKind
 from rcbht_introspection.learn.data import TrialSamples, load_samples, task_of_trials
-from rcbht_introspection.learn.live import load_live_config, trial_live_samples
+from rcbht_introspection.learn.live import load_live_config, stream_factory, trial_live_samples
 from rcbht_introspection.learn.models import train_model
+from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
 VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
 """The paper's held-out trial counts by data-set size (REAL 36/10, SIM 30/8, two-arm 14/6)."""
@@ -59,6 +60,8 @@ class Protocol:
     (learn/live.py, config/live.yaml); the curve and verdicts use the complete-sub-task model."""
     live_score: bool = False
     """Score the final model on the validation trials' live windows (live_accuracy)."""
+    taxonomy: TaxonomyConfig | None = None
+    """Profile of the live windows' words, as the trials' (None: config/live.yaml's)."""
 
 
 def default_validation(n_trials: int, two_arm: bool = False) -> int:
@@ -132,7 +135,11 @@ def evaluate(
     prefix_base: dict[float, list[float]] = {f: [] for f in PREFIX_FRACTIONS}
     near_empty = lambda s: s.duration < protocol.near_empty_seconds  # noqa: E731
     n_near_empty = sum(near_empty(s) for t in complete for s in t.samples)
-    live = _live_windows(complete) if protocol.live_augment or protocol.live_score else {}
+    live = (
+        _live_windows(complete, protocol.taxonomy)
+        if protocol.live_augment or protocol.live_score
+        else {}
+    )
     live_acc: list[float] = []
     cache = SampleCache()  # every model here encodes the same samples: compute each once
 
@@ -264,10 +271,13 @@ def evaluate(
     return result
 
 
-def _live_windows(trials: Sequence[TrialSamples]) -> dict[str, list[SubtaskSample]]:
+def _live_windows(
+    trials: Sequence[TrialSamples], taxonomy: TaxonomyConfig | None = None
+) -> dict[str, list[SubtaskSample]]:
     """Live-like windows of every trial (words final by t, learn/live.py), by trial name."""
-
-    by_path = trial_live_samples([t.path for t in trials], load_live_config())
+    config = load_live_config()
+    factory = stream_factory(config, taxonomy)
+    by_path = trial_live_samples([t.path for t in trials], config, factory)
     return {t.trial: by_path[str(t.path)] for t in trials}
 
 

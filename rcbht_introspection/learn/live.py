@@ -22,14 +22,12 @@ from rcbht_introspection.config_files import config_path, load_config, to_mappin
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
-from rcbht_introspection.io import bags
-from rcbht_introspection.io.hiro import read_trial
-from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.learn.data import task_of_trials
+from rcbht_introspection.learn.data import read_any_trial, task_of_trials
 from rcbht_introspection.learn.models import train_model
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.taxonomy import StreamProfile
+from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config, taxonomy_digest
 
 if TYPE_CHECKING:
     from rcbht_introspection.learn.models import SubtaskModel
@@ -120,18 +118,13 @@ def sample_word_count(sample: SubtaskSample) -> int:
     )
 
 
-def stream_factory(config: LiveAugmentConfig) -> Any:
-    """`arm -> ArmStream` with the configured taxonomy and stream profiles."""
+def stream_factory(config: LiveAugmentConfig, taxonomy: TaxonomyConfig | None = None) -> Any:
+    """`arm -> ArmStream` with the stream profile of `config` and the taxonomy profile
+    `taxonomy` (None: config.taxonomy_profile)."""
 
-    return arm_stream_factory(config.taxonomy_profile, stream_profile=config.stream_profile)
-
-
-def read_any_trial(path: Path) -> Trial:
-    """A trial folder or a bag as a Trial."""
-
-    if Path(path).is_file() and bags.is_bag(path):
-        return bags.read_trial_bag(path)
-    return read_trial(path)
+    return arm_stream_factory(
+        config.taxonomy_profile, stream_profile=config.stream_profile, taxonomy=taxonomy
+    )
 
 
 def trial_live_samples(
@@ -146,12 +139,16 @@ def trial_live_samples(
     return out
 
 
-def training_header(config: LiveAugmentConfig | None, n_live: int) -> dict[str, Any]:
+def training_header(
+    config: LiveAugmentConfig | None, n_live: int, taxonomy: TaxonomyConfig | None = None
+) -> dict[str, Any]:
     """What the model header records about live augmentation (nodes and users can check it)."""
     if config is None:
         return {"live_augment": None}
     settings = to_mapping(config)
     settings.pop("enabled", None)
+    if taxonomy is not None:
+        settings["taxonomy_profile"] = taxonomy.profile
     return {"live_augment": {**settings, "n_samples": int(n_live)}}
 
 
@@ -159,6 +156,7 @@ def train_live_model(
     samples: Sequence[SubtaskSample],
     live: Sequence[SubtaskSample],
     config: LiveAugmentConfig | None,
+    taxonomy: TaxonomyConfig | None = None,
     **train_kwargs: Any,
 ) -> SubtaskModel:
     """Model on complete sub-tasks; with `config`, plus a live head on them and the live samples.
@@ -168,10 +166,13 @@ def train_live_model(
     """
 
     train_kwargs.setdefault("cache", SampleCache())  # both models encode `samples`
+    used = taxonomy or default_config()
+    train_kwargs.setdefault("taxonomy_profile", used.profile)
+    train_kwargs.setdefault("taxonomy_sha256", taxonomy_digest(used))
     model = train_model(samples, **train_kwargs)
     if config is not None:
         model.live = train_model([*samples, *live], **train_kwargs)
-    model.training = training_header(config, len(live) if config is not None else 0)
+    model.training = training_header(config, len(live) if config is not None else 0, taxonomy)
     return model
 
 
@@ -190,14 +191,21 @@ def live_training(
     trials: Sequence[Any],
     enabled: bool | None = None,
     config_file: Path | str | None = None,
+    taxonomy: TaxonomyConfig | None = None,
     **train_kwargs: Any,
 ) -> tuple[SubtaskModel, int]:
-    """(model, number of live samples) for TrialSamples `trials`; `enabled` None = config's."""
+    """(model, number of live samples) for TrialSamples `trials`; `enabled` None = config's.
+
+    `taxonomy`: the profile the trials' words came from, also used for the live windows
+    (None: reference, and config/live.yaml's taxonomy_profile for the live windows)."""
     config = load_live_config(config_file)
     use = config.enabled if enabled is None else enabled
     samples = [s for t in trials for s in t.samples]
     train_kwargs.setdefault("task", task_of_trials(trials))
     live: list[SubtaskSample] = []
     if use:
-        live = [s for v in trial_live_samples([t.path for t in trials], config).values() for s in v]
-    return train_live_model(samples, live, config if use else None, **train_kwargs), len(live)
+        factory = stream_factory(config, taxonomy)
+        paths = [t.path for t in trials]
+        live = [s for v in trial_live_samples(paths, config, factory).values() for s in v]
+    model = train_live_model(samples, live, config if use else None, taxonomy, **train_kwargs)
+    return model, len(live)

@@ -74,6 +74,7 @@ def _model_parts(model: SubtaskModel) -> tuple[dict[str, Any], dict[str, np.ndar
         "encoding": model.encoder.to_state(),
         "classes": model.classes_,
         "taxonomy_profile": model.taxonomy_profile,
+        "taxonomy_sha256": model.taxonomy_sha256,
         "random_state": model.random_state,
         "task": model.task.to_dict(),
     }
@@ -164,6 +165,7 @@ def _model_from_parts(
         int(header.get("random_state", 0)),
         dict(header.get("training") or {}),
         task=_task_of_header(header, path),
+        taxonomy_sha256=str(header.get("taxonomy_sha256", "")),
     )
 
 
@@ -190,6 +192,7 @@ def model_summary(path: Path | str) -> dict[str, Any]:
         "encoding": model.encoding,
         "classes": model.classes_,
         "taxonomy_profile": model.taxonomy_profile,
+        "taxonomy_sha256": model.taxonomy_sha256,
         "task": model.task.to_dict(),
         "n_features": model.encoder.n_features,
         "training": model.training,

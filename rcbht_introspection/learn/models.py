@@ -41,6 +41,8 @@ class SubtaskModel:
     live: SubtaskModel | None = None
     """Optional head for running (unfinished) windows, trained with live-like windows
     (learn/live.py); final verdicts on finished sub-tasks always use this model itself."""
+    taxonomy_sha256: str = ""
+    """taxonomy.config.taxonomy_digest of the profile its words came from ('' in older files)."""
     takes_axis_memo: ClassVar[bool] = True
     """Its predict calls take `memo=` (an AxisMemo): the belief tracker passes the one it owns
     for its running windows (other models it is given need not)."""
@@ -95,6 +97,7 @@ def train_model(
     augment_prefixes: Sequence[float] = (),
     cache: SampleCache | None = None,
     task: Task | None = None,
+    taxonomy_sha256: str = "",
 ) -> SubtaskModel:
     """Fit the encoding and the classifier on `samples` (training data only).
 
@@ -122,7 +125,15 @@ def train_model(
         classes = sorted(set(task.subtasks) | set(y))
         estimator = MondrianForestClassifier(n_estimators=n_estimators, random_state=random_state)
         estimator.partial_fit(X, y, classes=classes)
-    return SubtaskModel(classifier, encoder, estimator, taxonomy_profile, random_state, task=task)
+    return SubtaskModel(
+        classifier,
+        encoder,
+        estimator,
+        taxonomy_profile,
+        random_state,
+        task=task,
+        taxonomy_sha256=taxonomy_sha256,
+    )
 
 
 def task_of_samples(samples: Sequence[SubtaskSample]) -> Task:

@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from rcbht_introspection.taxonomy import StreamProfile
-from rcbht_introspection.taxonomy.config import load_taxonomy_config
+from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
 from rcbht_introspection.taxonomy.stream import ArmStream, load_stream_config
 from rcbht_introspection.taxonomy.words import Word
 
@@ -316,9 +316,11 @@ def arm_stream_factory(
     taxonomy_file: str = "",
     stream_file: str = "",
     stream_profile: StreamProfile = "reference",
+    taxonomy: TaxonomyConfig | None = None,
 ) -> Callable[[str], ArmStream]:
-    """`arm -> ArmStream`: taxonomy thresholds (profile or file) and stream profile (or file)."""
-    config = load_taxonomy_config(profile, taxonomy_file or None)
+    """`arm -> ArmStream`: taxonomy thresholds (profile of config/rcbht.yaml or of
+    taxonomy_file, e.g. from `rcbht calibrate`; or a loaded `taxonomy`) and stream profile."""
+    config = taxonomy or load_taxonomy_config(profile, taxonomy_file or None)
     stream_config = load_stream_config(stream_profile, stream_file or None)
 
     def make(arm: str) -> ArmStream:

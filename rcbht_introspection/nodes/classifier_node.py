@@ -54,6 +54,12 @@ class ClassifierNode(ManagedNode):
     def configure(self, cfg: ClassifierConfig) -> None:
         self.cfg = cfg
         model, self.model_problem = load_subtask_model(cfg.model_file, cfg.expected_profile)
+        self.model_taxonomy = (
+            f", taxonomy profile {model.taxonomy_profile} "
+            f"(sha256 {model.taxonomy_sha256[:12] or 'not recorded'})"
+            if model is not None
+            else ""
+        )
         self.model_sha256 = file_sha256(cfg.model_file)
         if model is None:
             self.get_logger().error(
@@ -100,7 +106,8 @@ class ClassifierNode(ManagedNode):
         )
         self.publish_state()
         self.get_logger().info(
-            f"mode {cfg.mode}, model {cfg.model_file or '(none)'}, classes {list(self.tracker.classes)}"
+            f"mode {cfg.mode}, model {cfg.model_file or '(none)'}, classes "
+            f"{list(self.tracker.classes)}{self.model_taxonomy}"
         )
 
     def deactivate(self) -> None:

@@ -67,8 +67,13 @@ class SegmenterConfig:
     event_max_hold_s: float = _f(
         10.0, "... and after this long in any case (samples lost or the sensor stopped earlier)"
     )
-    taxonomy_profile: str = _f("reference", "taxonomy threshold profile of config/rcbht.yaml")
-    taxonomy_config_file: str = _f("", "optional YAML file overriding the taxonomy thresholds")
+    taxonomy_profile: str = _f(
+        "reference", "taxonomy profile of config/rcbht.yaml, or of taxonomy_config_file"
+    )
+    taxonomy_config_file: str = _f(
+        "",
+        "optional YAML file of taxonomy profiles instead of config/rcbht.yaml (e.g. from `rcbht calibrate`)",
+    )
     stream_profile: StreamProfile = _f(
         "reference",
         "reference (words equal the batch engine's; whole-trial quantities are waited for) or "

@@ -32,6 +32,7 @@ from rcbht_introspection.nodes.draining import DrainedGroup, take
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import SegmenterConfig, word_topics
 from rcbht_introspection.task import load_task_file
+from rcbht_introspection.taxonomy.config import load_taxonomy_config, taxonomy_digest
 from rcbht_introspection.taxonomy.words import LEVELS
 
 MAX_BURST = 1000
@@ -46,11 +47,10 @@ class SegmenterNode(ManagedNode):
 
     def configure(self, cfg: SegmenterConfig) -> None:
         self.cfg = cfg
+        taxonomy = load_taxonomy_config(cfg.taxonomy_profile, cfg.taxonomy_config_file or None)
+        self.taxonomy_sha256 = taxonomy_digest(taxonomy)
         factory = arm_stream_factory(
-            cfg.taxonomy_profile,
-            cfg.taxonomy_config_file,
-            cfg.stream_config_file,
-            cfg.stream_profile,
+            stream_file=cfg.stream_config_file, stream_profile=cfg.stream_profile, taxonomy=taxonomy
         )
         self.last_sample = time.monotonic()
         self.session = SegmenterSession(
@@ -108,7 +108,8 @@ class SegmenterNode(ManagedNode):
         self.flush_timer = self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
         self.get_logger().info(
             f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
-            f"profile {cfg.taxonomy_profile}, stream {cfg.stream_profile}"
+            f"profile {cfg.taxonomy_profile} (sha256 {self.taxonomy_sha256[:12]}), "
+            f"stream {cfg.stream_profile}"
         )
 
     def deactivate(self) -> None:

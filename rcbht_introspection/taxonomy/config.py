@@ -7,11 +7,20 @@ files, including its [bug]-tagged behaviours (spec 2.1-2.5); other profiles may 
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from rcbht_introspection.config_files import config_path, load_profile
+from rcbht_introspection.config_files import (
+    config_path,
+    load_profile,
+    only_profile,
+    to_mapping,
+    write_profile,
+)
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.taxonomy.words import AXES
 
 CONFIG_FILE = "rcbht.yaml"
 
@@ -28,6 +37,9 @@ class TaxonomyConfig:
     """A window still "fits" while R^2 > fit_threshold."""
     fit_zero_sum: float = 1e-4
     """SSres or SStot below this count as 0 (then R^2 is 1)."""
+    fit_noise_floor: dict[str, float] | None = None
+    """Per-axis residual variance per sample that still counts as a fit (a sensor's noise,
+    from `rcbht calibrate`): a window also fits while SSres <= n * floor. None = R^2 only."""
     # 2.1 gradient classification: [pimp bpos mpos spos sneg mneg bneg nimp]
     gradient_thresholds: tuple[float, ...] = (70.0, 46.0, 23.0, 1.0, -1.0, -23.0, -46.0, -70.0)
     calibrated_thresholds: dict[str, tuple[float, ...]] | None = None
@@ -45,7 +57,6 @@ class TaxonomyConfig:
     """Run primitivesCleanUp.m (False: the primitives go to the MC layer as segmented)."""
     final_segment: bool = True
     """Keep the wrap-up segment wStart..N (False: the later code state that drops it)."""
-    """Run primitivesCleanUp.m (False: the primitives go to the MC layer as segmented)."""
     primitive_amplitude_ratio: float = 2.0
     primitive_length_ratio: float = 5.0
     # 2.2 MC layer
@@ -91,17 +102,56 @@ def _check(config: TaxonomyConfig) -> None:
             f"expected 8 values, got {len(config.gradient_thresholds)}",
             field="gradient_thresholds",
         )
+    for axis, values in (config.calibrated_thresholds or {}).items():
+        if axis not in AXES:
+            raise InputError(
+                f"unknown axis (known: {', '.join(AXES)})", field=f"calibrated_thresholds.{axis}"
+            )
+        if len(values) != 8:
+            raise InputError(
+                f"expected 8 values, got {len(values)}", field=f"calibrated_thresholds.{axis}"
+            )
+    for axis, floor in (config.fit_noise_floor or {}).items():
+        if axis not in AXES:
+            raise InputError(
+                f"unknown axis (known: {', '.join(AXES)})", field=f"fit_noise_floor.{axis}"
+            )
+        if not floor >= 0:
+            raise InputError(f"must be >= 0, got {floor}", field=f"fit_noise_floor.{axis}")
+    if config.window < 1:
+        raise InputError(f"must be >= 1, got {config.window}", field="window")
 
 
 def load_taxonomy_config(
-    profile: str = "reference", path: Path | str | None = None
+    profile: str | None = "reference", path: Path | str | None = None
 ) -> TaxonomyConfig:
-    """Load one profile of config/rcbht.yaml (`profiles: {name: {field: value}}`) over the defaults."""
+    """Load one profile of config/rcbht.yaml (`profiles: {name: {field: value}}`) over the defaults.
 
+    With `path` (e.g. a file written by `rcbht calibrate`), profile None means its only profile.
+    """
     file = Path(path) if path is not None else config_path(CONFIG_FILE)
+    if profile is None:
+        profile = only_profile(file, kind="taxonomy") if path is not None else "reference"
     return load_profile(
         TaxonomyConfig, file, profile, kind="taxonomy", fixed={"profile": profile}, check=_check
     )
+
+
+def write_taxonomy_config(config: TaxonomyConfig, path: Path | str, header: str = "") -> Path:
+    """Write `config` as the one profile of a YAML file (config/rcbht.yaml's form), named by
+    config.profile; load_taxonomy_config reads it back equal."""
+    return write_profile(path, config.profile, config, omit=("profile",), header=header)
+
+
+def taxonomy_digest(config: TaxonomyConfig) -> str:
+    """SHA-256 of the profile's values (not its name): equal digests label alike."""
+    values = {k: v for k, v in to_mapping(config).items() if k != "profile"}
+    return hashlib.sha256(json.dumps(values, sort_keys=True).encode()).hexdigest()
+
+
+def is_reference(config: TaxonomyConfig) -> bool:
+    """True when `config` has the reference profile's values (the golden files' words)."""
+    return taxonomy_digest(config) == taxonomy_digest(default_config())
 
 
 def config_fields() -> tuple[str, ...]:

@@ -70,9 +70,14 @@ def axis_domain(values: np.ndarray, config: TaxonomyConfig) -> float:
 
 
 def axis_thresholds(axis: str, domain: float | None, config: TaxonomyConfig) -> tuple[float, ...]:
-    """The 8-value spectrum [pimp bpos mpos spos sneg mneg bneg nimp] after the moment-axis rule."""
+    """The 8-value spectrum [pimp bpos mpos spos sneg mneg bneg nimp] after the domain rule.
+
+    A small domain divides the default spectrum by domain_divisor; a calibrated spectrum keeps
+    its spos and is rebuilt from pimp / domain_divisor (GradientClassification.m, spec 2.1)."""
     values = config.thresholds(axis)
     if axis in config.domain_axes and domain is not None and domain < config.domain_threshold:
+        if config.calibrated_thresholds and axis in config.calibrated_thresholds:
+            return gradient_spectrum(values[0] / config.domain_divisor, values[3])
         values = tuple(v / config.domain_divisor for v in values)
     return values
 
@@ -225,6 +230,9 @@ class Segmenter:
         self.window = config.window
         self.threshold = config.fit_threshold
         self.zero = config.fit_zero_sum
+        floors = config.fit_noise_floor or {}
+        self.floors = [float(floors.get(axis, 0.0)) for axis in AXES[:n_axes]]
+        """Per-axis residual variance per sample that counts as a fit (0: the R^2 test only)."""
         self.n_axes = n_axes
         self.samples = 0
         self.blocks = 0
@@ -262,6 +270,7 @@ class Segmenter:
         k0 = self.blocks
         n_full = count - 1 if final else count
         for a in range(self.n_axes):
+            floor = self.floors[a]
             n, mt, my, stt, syy, sty, smax, smin, ts = self.state[a]
             pt, py = self.last_t, self.last_y[a]
             segs = self.segments[a]
@@ -283,7 +292,8 @@ class Segmenter:
                     good = True
                 else:
                     ssres = wyy - wty * wty / wtt if wtt > 0 else wyy
-                    good = ssres < zero or 1.0 - ssres / wyy > threshold
+                    # floor 0: ssres <= 0 is already < zero, so the original test is unchanged
+                    good = ssres < zero or ssres <= nn * floor or 1.0 - ssres / wyy > threshold
                 if good:
                     n, stt, syy, sty = nn, wtt, wyy, wty
                     mt = mt + dt * m / nn
