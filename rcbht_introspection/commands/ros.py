@@ -58,7 +58,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--rate", type=float, default=1.0, help="playback speed factor")
     p.add_argument("--json", type=Path, default=None, help="write the scores here")
     p.add_argument("--mode", choices=get_args(BeliefMode), default="boundary")
-    p.add_argument("--profile", default="reference", help="taxonomy profile of the segmenter")
+    p.add_argument(
+        "--profile",
+        default="",
+        help="taxonomy profile of the segmenter: of config/rcbht.yaml (default reference), or of "
+        "--taxonomy-config (default: its only profile)",
+    )
+    p.add_argument(
+        "--taxonomy-config",
+        default="",
+        metavar="FILE",
+        help="YAML file of taxonomy profiles for the segmenter, e.g. written by `rcbht calibrate`",
+    )
     p.add_argument(
         "--stream-profile",
         choices=get_args(StreamProfile),
@@ -290,6 +301,9 @@ def cmd_replay_eval(args: argparse.Namespace) -> int:
         rate=args.rate,
         mode=args.mode,
         profile=args.profile,
+        taxonomy_config_file=str(Path(args.taxonomy_config).resolve())
+        if args.taxonomy_config
+        else "",
         stream_profile=args.stream_profile,
         state_hold_s=args.state_hold_s,
     )

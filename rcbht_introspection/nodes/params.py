@@ -68,7 +68,9 @@ class SegmenterConfig:
         10.0, "... and after this long in any case (samples lost or the sensor stopped earlier)"
     )
     taxonomy_profile: str = _f(
-        "reference", "taxonomy profile of config/rcbht.yaml, or of taxonomy_config_file"
+        "",
+        "taxonomy profile of config/rcbht.yaml (empty: reference), or of taxonomy_config_file "
+        "(empty: its only profile)",
     )
     taxonomy_config_file: str = _f(
         "",

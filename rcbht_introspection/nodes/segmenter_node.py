@@ -47,7 +47,10 @@ class SegmenterNode(ManagedNode):
 
     def configure(self, cfg: SegmenterConfig) -> None:
         self.cfg = cfg
-        taxonomy = load_taxonomy_config(cfg.taxonomy_profile, cfg.taxonomy_config_file or None)
+        taxonomy = load_taxonomy_config(
+            cfg.taxonomy_profile or None, cfg.taxonomy_config_file or None
+        )
+        self.taxonomy_profile = taxonomy.profile
         self.taxonomy_sha256 = taxonomy_digest(taxonomy)
         factory = arm_stream_factory(
             stream_file=cfg.stream_config_file, stream_profile=cfg.stream_profile, taxonomy=taxonomy
@@ -108,7 +111,7 @@ class SegmenterNode(ManagedNode):
         self.flush_timer = self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
         self.get_logger().info(
             f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
-            f"profile {cfg.taxonomy_profile} (sha256 {self.taxonomy_sha256[:12]}), "
+            f"profile {self.taxonomy_profile} (sha256 {self.taxonomy_sha256[:12]}), "
             f"stream {cfg.stream_profile}"
         )
 

@@ -49,6 +49,7 @@ from rcbht_introspection.replay.supervision import (
     write_params,
 )
 from rcbht_introspection.taxonomy import StreamProfile
+from rcbht_introspection.taxonomy.config import load_taxonomy_config
 
 
 @dataclass(frozen=True)
@@ -57,7 +58,10 @@ class ReplayEvalOptions:
 
     rate: float = 1.0
     mode: BeliefMode = "boundary"
-    profile: str = "reference"
+    profile: str = ""
+    """Taxonomy profile of config/rcbht.yaml (empty: reference) or of taxonomy_config_file."""
+    taxonomy_config_file: str = ""
+    """A file of taxonomy profiles, e.g. from `rcbht calibrate` (empty: config/rcbht.yaml)."""
     stream_profile: StreamProfile = "reference"
     state_hold_s: float = 0.0
     """classifier_node's state_hold_s (how long a new /task_state must hold)."""
@@ -78,6 +82,7 @@ def _params(
         arms=arms,
         wrench_topics=tuple(wrench_topic(a, arms) for a in arms),
         taxonomy_profile=options.profile,
+        taxonomy_config_file=options.taxonomy_config_file,
     )
     cls_cfg = ClassifierConfig(
         model_file=str(Path(model_path).resolve()) if model_path else "",
@@ -91,6 +96,7 @@ def _params(
             "arms": list(arms),
             "wrench_topics": list(seg.wrench_topics),
             "taxonomy_profile": options.profile,
+            "taxonomy_config_file": options.taxonomy_config_file,
             "stream_profile": options.stream_profile,
         },
     )
@@ -205,9 +211,10 @@ def replay_eval(
     return result
 
 
-def load_reference(model_path: Path, profile: str, stream_profile: StreamProfile) -> Reference:
+def load_reference(model_path: Path, options: ReplayEvalOptions) -> Reference:
     """The model file and the stream factory that the nodes use (the offline run to compare)."""
-    factory = arm_stream_factory(profile, stream_profile=stream_profile)
+    taxonomy = load_taxonomy_config(options.profile or None, options.taxonomy_config_file or None)
+    factory = arm_stream_factory(stream_profile=options.stream_profile, taxonomy=taxonomy)
     return Reference(load_model(model_path), factory)
 
 
@@ -221,7 +228,7 @@ def _score(
     """The scores, with the offline reference when asked for and a model was given."""
     reference = None
     if options.offline and model_path is not None:
-        reference = load_reference(model_path, options.profile, options.stream_profile)
+        reference = load_reference(model_path, options)
     return score(records, trials, arms, options.mode, reference)
 
 
