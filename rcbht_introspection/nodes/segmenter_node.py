@@ -3,7 +3,8 @@
 Parameters: see config/segmenter.yaml (`ros2 param describe` shows each description). /task_phase
 events are placed on the stream clock, applied as sub-task boundaries and republished as
 rcbht_interfaces/Phase; an end event ("done") finishes the streams. Malformed samples are
-dropped and counted (Words.samples_rejected).
+dropped and counted (Words.samples_rejected). The sensor intake (parameters intake.*, live/intake.py)
+runs in the session; this node only subscribes the sensor poses and serves `~/tare`.
 """
 
 from __future__ import annotations
@@ -14,7 +15,9 @@ import time
 from collections.abc import Iterable
 from functools import partial
 
-from geometry_msgs.msg import WrenchStamped
+from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.srv import SelfTest
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from rclpy.event_handler import PublisherEventCallbacks
@@ -23,7 +26,15 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from rcbht_introspection.io.bags import decode_wrench_sample
-from rcbht_introspection.live.health import OK, ArmHealth, CounterWatch, Health, events_health
+from rcbht_introspection.live.gravity import rotation_from_quaternion
+from rcbht_introspection.live.health import (
+    OK,
+    WARN,
+    ArmHealth,
+    CounterWatch,
+    Health,
+    events_health,
+)
 from rcbht_introspection.live.join import Watermarks, batch_messages
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
@@ -35,6 +46,10 @@ from rcbht_introspection.taxonomy.words import LEVELS
 
 MAX_BURST = 1000
 """Most samples per arm taken in one executor wake-up."""
+TARE_SERVICE = "~/tare"
+"""Re-tare at the next samples. Type diagnostic_msgs/srv/SelfTest: std_srvs (Trigger) is not among
+the pinned PyPI ROS wheels; SelfTest has Trigger's empty request, and its response says whether
+the request was taken (`passed`) and why, in one DiagnosticStatus message."""
 
 
 class SegmenterNode(ManagedNode):
@@ -42,6 +57,9 @@ class SegmenterNode(ManagedNode):
 
     def __init__(self) -> None:
         super().__init__("segmenter_node", SegmenterConfig)
+        self.pose_subs: list = []
+        self.bad_poses = 0
+        self.create_service(SelfTest, TARE_SERVICE, self.on_tare)
 
     def configure(self, cfg: SegmenterConfig) -> None:
         self.cfg = cfg
@@ -58,6 +76,7 @@ class SegmenterNode(ManagedNode):
             cfg.end_phases,
             hold_s=cfg.event_hold_s,
             max_hold_s=cfg.event_max_hold_s,
+            intake=cfg.intake,
         )
         self.arm_health = {arm: ArmHealth(arm) for arm in cfg.arms}
         self.marks = Watermarks()
@@ -103,6 +122,16 @@ class SegmenterNode(ManagedNode):
             self.qos,
             callback_group=drained,
         )
+        # the latest pose is what counts: depth 1, served by the executor (at least every 20 ms)
+        self.pose_subs = [
+            self.create_subscription(
+                PoseStamped,
+                topic,
+                partial(self.on_pose, arm),
+                qos_profile(1, cfg.qos_reliability),
+            )
+            for arm, topic in zip(cfg.arms, cfg.pose_topics, strict=True)
+        ]
         self.flush_timer = self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
         self.get_logger().info(
             f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
@@ -113,8 +142,11 @@ class SegmenterNode(ManagedNode):
         for _, sub in self.wrench_subs:
             self.destroy_subscription(sub)
         self.destroy_subscription(self.phase_sub)
+        for pose_sub in self.pose_subs:
+            self.destroy_subscription(pose_sub)
         self.destroy_timer(self.flush_timer)
         self.wrench_subs = []
+        self.pose_subs = []
         self.log_statistics()
 
     def cleanup(self) -> None:
@@ -164,6 +196,42 @@ class SegmenterNode(ManagedNode):
                 f"(rejected so far: {self.session.counts[arm].rejected})",
                 throttle_duration_sec=1.0,
             )
+
+    def on_pose(self, arm: str, msg: PoseStamped) -> None:
+        """The sensor's latest orientation in the world, for the gravity compensation."""
+        q = msg.pose.orientation
+        try:
+            rotation = rotation_from_quaternion(q.x, q.y, q.z, q.w)
+        except ValueError as exc:  # a zero quaternion
+            self.bad_poses += 1
+            self.get_logger().warning(
+                f"ignored a pose of arm {arm}: {exc}", throttle_duration_sec=1.0
+            )
+            return
+        self.session.pose(arm, rotation)  # subscribed only while active: the session exists
+
+    def on_tare(self, request: SelfTest.Request, response: SelfTest.Response) -> SelfTest.Response:
+        """~/tare: measure each arm's tare over its next intake.tare_window_s seconds."""
+        response.id = f"{self.get_name()} tare"
+        if self.state_label != "active":
+            response.passed = 0
+            message = f"not active ({self.state_label}): no tare"
+        else:
+            self.session.tare()
+            response.passed = 1
+            message = (
+                f"tare of arms {list(self.cfg.arms)} over the next "
+                f"{self.cfg.intake.tare_window_s} s of samples"
+            )
+            self.get_logger().info(message)
+        response.status = [
+            DiagnosticStatus(
+                level=bytes([OK if response.passed else WARN]),
+                name=f"{self.get_name()}: tare",
+                message=message,
+            )
+        ]
+        return response
 
     def on_phase(self, msg: String, info: dict) -> None:
         out = self.session.phase(msg.data, info.get("source_timestamp") or None)
@@ -262,12 +330,16 @@ class SegmenterNode(ManagedNode):
                     intake,
                     st.last_t,
                     self.state_label == "active",
+                    self.session.frozen[arm] if self.cfg.intake.frozen_samples else None,
+                    self.session.tares[arm],
+                    counts.respaced,
                 )
             )
         events = {
             "unknown events": self.session.unknown_phases,
             "late events": self.session.late_phases,
             "pending events": len(self.session.pending),
+            "poses ignored": self.bad_poses,
         }
         out.append(events_health("segmenter_node", events, self.event_watch))
         out.append(outputs_health(self.word_pubs.values(), self.phase_pub))
