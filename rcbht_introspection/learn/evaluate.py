@@ -267,7 +267,8 @@ def evaluate(
 def _live_windows(trials: Sequence[TrialSamples]) -> dict[str, list[SubtaskSample]]:
     """Live-like windows of every trial (words final by t, learn/live.py), by trial name."""
 
-    by_path = trial_live_samples([t.path for t in trials], load_live_config())
+    repeated = next((t.repeated for t in trials), None)  # as load_trials read them
+    by_path = trial_live_samples([t.path for t in trials], load_live_config(), repeated=repeated)
     return {t.trial: by_path[str(t.path)] for t in trials}
 
 

@@ -24,6 +24,7 @@ from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io import bags
 from rcbht_introspection.io.hiro import read_trial
+from rcbht_introspection.io.sensor_checks import RepeatedPolicy
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.data import task_of_trials
 from rcbht_introspection.learn.models import train_model
@@ -126,22 +127,25 @@ def stream_factory(config: LiveAugmentConfig) -> Any:
     return arm_stream_factory(config.taxonomy_profile, stream_profile=config.stream_profile)
 
 
-def read_any_trial(path: Path) -> Trial:
-    """A trial folder or a bag as a Trial."""
+def read_any_trial(path: Path, repeated: RepeatedPolicy | None = None) -> Trial:
+    """A trial folder or a bag as a Trial (`repeated`: the repeated-stamp policy, None: error)."""
 
     if Path(path).is_file() and bags.is_bag(path):
-        return bags.read_trial_bag(path)
-    return read_trial(path)
+        return bags.read_trial_bag(path, repeated=repeated)
+    return read_trial(path, repeated)
 
 
 def trial_live_samples(
-    paths: Iterable[Path], config: LiveAugmentConfig, factory: Any | None = None
+    paths: Iterable[Path],
+    config: LiveAugmentConfig,
+    factory: Any | None = None,
+    repeated: RepeatedPolicy | None = None,
 ) -> dict[str, list[SubtaskSample]]:
     """Live samples per trial path (trial folders or bags)."""
     factory = factory or stream_factory(config)
     out = {}
     for path in paths:
-        trial = read_any_trial(Path(path))
+        trial = read_any_trial(Path(path), repeated)
         out[str(path)] = live_samples(stream_trial(trial, factory), config)
     return out
 
@@ -199,5 +203,7 @@ def live_training(
     train_kwargs.setdefault("task", task_of_trials(trials))
     live: list[SubtaskSample] = []
     if use:
-        live = [s for v in trial_live_samples([t.path for t in trials], config).values() for s in v]
+        repeated = next((t.repeated for t in trials), None)  # as load_trials read them
+        by_path = trial_live_samples([t.path for t in trials], config, repeated=repeated)
+        live = [s for v in by_path.values() for s in v]
     return train_live_model(samples, live, config if use else None, **train_kwargs), len(live)
