@@ -109,6 +109,7 @@ class ArmHealth:
         frozen: FrozenWatch | None = None,
         tare: Tare | None = None,
         respaced: int = 0,
+        pose: str = "",
     ) -> Health:
         """The arm's status for the period that just ended (WARN also while the sensor is frozen)."""
         rate = (accepted - self.accepted_before) / period_s if period_s > 0 else 0.0
@@ -121,6 +122,8 @@ class ArmHealth:
         values = [("input rate (Hz)", f"{rate:.1f}"), ("samples accepted", str(accepted))]
         values += [(f"samples {k}", str(v)) for k, v in losses.items() if k != "frozen episodes"]
         values += sensor_values(frozen, tare, respaced)
+        if pose:
+            values.append(("sensor pose", pose))
         for word_level in LEVELS:
             backlog = (
                 last_t - self.released[word_level]

@@ -144,6 +144,8 @@ class SegmenterSession:
     ) -> None:
         self.arms = tuple(arms)
         self.intake = intake or IntakeConfig()
+        self._gravity = self.intake.compensates_gravity
+        self._watch_frozen = self.intake.frozen_samples > 0
         self.frozen = {
             arm: FrozenWatch(self.intake.frozen_samples, self.intake.frozen_s) for arm in self.arms
         }
@@ -208,7 +210,7 @@ class SegmenterSession:
             reason = self._repeated(st, stamp_ns, wrench, source_ns)
             if reason is None:
                 return out  # held until a later stamp spreads it
-        elif self.rotations[arm] is None and self.intake.compensates_gravity:
+        elif self._gravity and self.rotations[arm] is None:
             reason = "no_pose"
         if reason is not None:
             counts.rejected[reason] += 1
@@ -265,12 +267,12 @@ class SegmenterSession:
         if st.first_t is None:
             st.first_t = t
         self.counts[arm].accepted += 1
-        intake = self.intake
-        if intake.frozen_samples:
+        if self._watch_frozen:
             self.frozen[arm].push(stamp_ns, tuple(wrench))
         values: Sequence[float] = wrench
         rotation = self.rotations[arm]
-        if intake.compensates_gravity and rotation is not None:  # push rejects None (no_pose)
+        if self._gravity and rotation is not None:  # push rejects None (no_pose)
+            intake = self.intake
             values = compensate_gravity(
                 wrench,
                 rotation,
@@ -279,7 +281,7 @@ class SegmenterSession:
                 intake.gravity_m_s2,
             ).tolist()
         tare = self.tares[arm]
-        if tare.idle:
+        if tare.offsets is None and not tare.measuring:  # Tare.idle, inlined (per sample)
             words = st.stream.push(t, values)
         else:
             words = [w for at, v in tare.push(t, values) for w in st.stream.push(at, v)]

@@ -130,7 +130,7 @@ class SegmenterNode(ManagedNode):
                 partial(self.on_pose, arm),
                 qos_profile(1, cfg.qos_reliability),
             )
-            for arm, topic in zip(cfg.arms, cfg.pose_topics, strict=True)
+            for arm, topic in zip(cfg.arms, cfg.pose_topics, strict=False)  # none, or one per arm
         ]
         self.flush_timer = self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
         self.get_logger().info(
@@ -210,23 +210,29 @@ class SegmenterNode(ManagedNode):
             return
         self.session.pose(arm, rotation)  # subscribed only while active: the session exists
 
+    def pose_state(self, arm: str) -> str:
+        """For /diagnostics: whether the arm's gravity compensation has a pose ('' without one)."""
+        if not self.cfg.intake.compensates_gravity:
+            return ""
+        return "none yet" if self.session.rotations[arm] is None else "received"
+
     def on_tare(self, request: SelfTest.Request, response: SelfTest.Response) -> SelfTest.Response:
         """~/tare: measure each arm's tare over its next intake.tare_window_s seconds."""
         response.id = f"{self.get_name()} tare"
-        if self.state_label != "active":
-            response.passed = 0
+        taken = self.state_label == "active"
+        if not taken:
             message = f"not active ({self.state_label}): no tare"
         else:
             self.session.tare()
-            response.passed = 1
             message = (
                 f"tare of arms {list(self.cfg.arms)} over the next "
                 f"{self.cfg.intake.tare_window_s} s of samples"
             )
             self.get_logger().info(message)
+        response.passed = bytes([taken])  # a `byte` field
         response.status = [
             DiagnosticStatus(
-                level=bytes([OK if response.passed else WARN]),
+                level=bytes([OK if taken else WARN]),
                 name=f"{self.get_name()}: tare",
                 message=message,
             )
@@ -333,6 +339,7 @@ class SegmenterNode(ManagedNode):
                     self.session.frozen[arm] if self.cfg.intake.frozen_samples else None,
                     self.session.tares[arm],
                     counts.respaced,
+                    self.pose_state(arm),
                 )
             )
         events = {
