@@ -198,7 +198,8 @@ def test_tare_holds_a_window_then_subtracts_its_mean() -> None:
     assert [t for t, _ in released] == [k * 0.1 for k in range(5)] + [0.5]
     assert [v[0] for _, v in released] == [-2.0, -1.0, 0.0, 1.0, 2.0, 7.0]
     assert tare.completed == 1 and tare.offsets == (2.0,) * 6
-    tare.request()  # a re-tare: the old offsets apply until the new ones are measured
+    tare.request()  # a re-tare: the next samples are held and get the new offsets
+    assert tare.release() == [] and tare.measuring  # no sample yet: the request stays
     assert tare.push(1.0, [4.0] * 6) == []
     assert tare.release() == [(1.0, [0.0] * 6)]  # the end of a stream closes it early
     assert tare.offsets == (4.0,) * 6 and tare.completed == 2

@@ -129,13 +129,12 @@ class Tare:
         return []
 
     def release(self) -> list[tuple[float, Sequence[float]]]:
-        """End the measurement with the samples held so far (also at the end of a stream)."""
-        if not self.measuring:
+        """End the measurement with the samples held so far (also at the end of a stream); without
+        any, the request stays for the next samples."""
+        if not self.measuring or not self.held:
             return []
         self.measuring = False
         held, self.held = self.held, []
-        if not held:
-            return []
         self.offsets = tare_offsets([v for _, v in held])
         self.completed += 1
         return [(t, self.apply(v)) for t, v in held]

@@ -285,8 +285,13 @@ class SegmenterNode(ManagedNode):
     def log_statistics(self) -> None:
         """Log what the node did (samples, rejections, CPU time): its last line when it stops."""
         counts = {arm: (c.accepted, c.rejected_total) for arm, c in self.session.counts.items()}
+        intake = {
+            arm: (c.respaced, self.session.frozen[arm].episodes, self.session.tares[arm].completed)
+            for arm, c in self.session.counts.items()
+        }
         self.get_logger().info(
-            f"samples (accepted, rejected) per arm {counts}, unknown events "
+            f"samples (accepted, rejected) per arm {counts}, (respaced samples, frozen episodes, "
+            f"tares) per arm {intake}, unknown events "
             f"{self.session.unknown_phases}, late events {self.session.late_phases}, "
             f"CPU {time.process_time() - self.cpu_at_start:.2f} s after start-up"
         )
