@@ -419,6 +419,16 @@ def write_profile(
     return path
 
 
+def described(default: Any, description: str) -> Any:
+    """A dataclass field with a description (a ROS parameter's; tuples and lists become tuples)."""
+    if isinstance(default, (list, tuple)):
+        value = tuple(default)
+        return dataclasses.field(
+            default_factory=lambda: value, metadata={"description": description}
+        )
+    return dataclasses.field(default=default, metadata={"description": description})
+
+
 def to_mapping(obj: Any) -> dict[str, Any]:
     """Plain-YAML form of a config dataclass (tuples become lists)."""
 

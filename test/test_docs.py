@@ -28,7 +28,7 @@ def table_after(heading: str) -> dict[str, tuple[str, str]]:
         if rows and not line.startswith("|"):
             break
         cells = [c.strip() for c in line.strip().strip("|").split("|")]
-        match = re.fullmatch(r"`(\w+)`", cells[0]) if len(cells) == 3 else None
+        match = re.fullmatch(r"`([\w.]+)`", cells[0]) if len(cells) == 3 else None
         if match:
             rows[match.group(1)] = (cells[1].strip("`"), cells[2])
     return rows

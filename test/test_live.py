@@ -196,7 +196,7 @@ def test_session_rejects_malformed_samples() -> None:
     assert session.push("R", base + 5_000_000, [float("nan")] + [0.0] * 5).rejected == "non_finite"
     assert session.push("R", 0, [0.0] * 6).rejected == "zero_stamp"
     assert session.push("R", base - 1, [0.0] * 6).rejected == "non_increasing_stamp"
-    assert session.push("R", base, [0.0] * 6).rejected == "non_increasing_stamp"
+    assert session.push("R", base, [0.0] * 6).rejected == "duplicate_sample"  # a re-sent one
     assert session.push("R", base + 10_000_000, [1.0] * 6).rejected is None
     counts = session.counts["R"]
     assert counts.accepted == 2 and counts.rejected_total == 4

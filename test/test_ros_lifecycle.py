@@ -186,6 +186,54 @@ def test_segmenter_diagnostics_report_rate_and_rejections(
     assert code == 0, log.read_text()
 
 
+def test_segmenter_intake_pose_frozen_sensor_and_tare(tmp_path: Path, env: dict[str, str]) -> None:
+    """Gravity compensation waits for a pose (samples rejected, counted); a frozen sensor is a
+    WARN with its reason; ~/tare is taken and completes over the next samples."""
+    from diagnostic_msgs.srv import SelfTest
+    from geometry_msgs.msg import PoseStamped
+
+    from rcbht_introspection.nodes.common import RosSession, qos_profile
+
+    log = tmp_path / "segmenter.log"
+    params = {"pose_topics": ["/pose"], "intake.tool_mass_kg": 1.0, "intake.tare_window_s": 0.2}
+    proc = start_node("segmenter_node", params, env, log)
+    arm = "segmenter_node: arm R"
+    try:
+        with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+            diag = DiagnosticsProbe(ros)
+            wrench, _ = segmenter_inputs(ros, log)
+            pose = ros.node.create_publisher(PoseStamped, "/pose", qos_profile(1, "reliable"))
+            assert wait_until(lambda: pose.get_subscription_count() > 0), log.read_text()
+            for i in range(50):  # no pose yet: rejected
+                wrench.publish(wrench_msg(BASE_NS + i * 2_000_000, math.sin(i / 50)))
+            assert wait_until(lambda: diag.values(arm).get("samples rejected no_pose") == "50", 30)
+            assert diag.values(arm)["sensor pose"] == "none yet"
+            upright = PoseStamped()
+            upright.pose.orientation.w = 1.0
+            pose.publish(upright)
+            assert wait_until(lambda: diag.values(arm).get("sensor pose") == "received", 30)
+            for i in range(50, 650):  # 1.2 s of the same value at 500 Hz: frozen
+                wrench.publish(wrench_msg(BASE_NS + i * 2_000_000, 2.0))
+                time.sleep(0.002)
+            assert wait_until(lambda: diag.values(arm).get("frozen episodes") == "1", 30)
+            warned = [m for m in diag.messages(arm, b"\x01") if "wrench frozen" in m]
+            assert warned and "the same values (0, 0, 2, 0, 0, 0)" in warned[-1], warned
+            tare = ros.node.create_client(SelfTest, "/segmenter_node/tare")
+            assert tare.wait_for_service(20.0)
+            reply = answer(lambda: tare.call_async(SelfTest.Request()))
+            assert reply.passed == b"\x01" and "tare of arms ['R']" in reply.status[0].message
+            for i in range(650, 900):  # 0.5 s of a moving wrench: the tare's window passes
+                wrench.publish(wrench_msg(BASE_NS + i * 2_000_000, math.sin(i / 50)))
+                time.sleep(0.002)
+            assert wait_until(lambda: diag.values(arm).get("samples accepted") == "850", 30)
+            values = diag.values(arm)
+            assert values["tares completed"] == "1" and values["frozen now"] == "no"
+            assert values["tare offsets"].startswith("Fx=0 Fy=0 Fz=")
+    finally:
+        code = stop_process(proc, timeout=15)
+    assert code == 0, log.read_text()
+
+
 def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundary(
     tmp_path: Path, env: dict[str, str]
 ) -> None:

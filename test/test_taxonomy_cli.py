@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -107,3 +108,41 @@ def test_bad_arguments_are_one_line_errors(tmp_path: Path, argv: list[str]) -> N
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and "error: " in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_conformance_compares_both_arms_of_a_two_arm_trial(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A simulated two-arm trial with golden files written by the batch engine (golden/L, golden/R):
+    identical; one changed label in L's files is found and named with its arm."""
+    from rcbht_introspection.io.rcbht_format import write_trial_words
+    from rcbht_introspection.sim import load_sim_config, simulate_trial
+
+    trial = simulate_trial(load_sim_config(), 7, scenario="two-arm", name="TWO")
+    folder = write_trial(trial, tmp_path / "set" / "TWO")
+    write_trial_words(label_trial(read_trial(folder)), folder / "golden")
+    assert main(["conformance", str(tmp_path / "set")]) == 0
+    out = capsys.readouterr().out
+    assert "Composites: 12/12 files identical" in out and "llBehaviors: 12/12" in out
+    # change the first MC label of arm L's Fz file: only that file of that arm differs
+    path = level_path(folder / "golden" / "L", Level.COMPOSITION, "Fz")
+    ours = read_words(path, Level.COMPOSITION, "Fz")
+    other = next(lb for lb in ("a", "i", "d", "k") if lb != ours[0].label)
+    text = path.read_text()
+    label_line = f"Label         : {ours[0].label}\n"
+    assert label_line in text
+    path.write_text(text.replace(label_line, f"Label         : {other}\n", 1))
+    assert main(["conformance", str(tmp_path / "set")]) == 1
+    out = capsys.readouterr().out
+    assert (
+        f"DIFF TWO L composition Fz: record 1: label {ours[0].label!r} != golden {other!r}" in out
+    )
+    assert "Composites: 11/12 files identical" in out and "llBehaviors: 12/12" in out
+    # golden files of one arm only (R's, flat, as a one-arm trial has them): L differs everywhere
+    shutil.rmtree(folder / "golden" / "L")
+    for sub in (folder / "golden" / "R").iterdir():
+        sub.rename(folder / "golden" / sub.name)
+    assert main(["conformance", str(tmp_path / "set")]) == 1
+    out = capsys.readouterr().out
+    assert "DIFF TWO L behavior Mz: no golden files of arm L (golden/L/)" in out
+    assert "Composites: 6/12 files identical" in out

@@ -7,12 +7,17 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_from_args
+from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy, warn
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
+
+if TYPE_CHECKING:
+    from rcbht_introspection.learn.data import TrialSamples
+    from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -88,15 +93,31 @@ def _common(parser: argparse.ArgumentParser) -> None:
         help="also train on these fractions of each sub-task (e.g. 0.25 0.5 0.75)",
     )
     add_taxonomy_options(parser)
+    add_repeated_stamps(parser)
+
+
+def load_checked(
+    args: argparse.Namespace, command: str, taxonomy: TaxonomyConfig | None
+) -> list[TrialSamples]:
+    """The trials of `args.inputs` (engine words labelled by `taxonomy`) read with
+    `--repeated-stamps`; their sensor findings printed as warnings (frozen-sensor thresholds from
+    config/segmenter.yaml's intake section)."""
+    from rcbht_introspection.learn.data import load_trials
+    from rcbht_introspection.live.intake import load_intake_config
+
+    policy = repeated_policy(args)
+    trials = load_trials(args.inputs, args.words, taxonomy, policy, load_intake_config())
+    for trial in trials:
+        warn(command, trial.trial, trial.findings)
+    return trials
 
 
 def run_train(args: argparse.Namespace) -> int:
-    from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.live import live_training
     from rcbht_introspection.learn.model_file import save_model
 
     taxonomy = taxonomy_from_args(args)
-    trials = load_trials(args.inputs, args.words, taxonomy)
+    trials = load_checked(args, "train", taxonomy)
     samples = [s for t in trials for s in t.samples]
     model, n_live = live_training(
         trials, args.live_augment, args.live_config, taxonomy, classifier=args.classifier,
@@ -125,13 +146,12 @@ def _clean(value: Any) -> Any:
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
-    from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.evaluate import Protocol, evaluate, total_steps
 
     if args.permutations < 1:
         raise InputError("--permutations must be at least 1", field="--permutations")
     taxonomy = taxonomy_from_args(args)
-    trials = load_trials(args.inputs, args.words, taxonomy)
+    trials = load_checked(args, "evaluate", taxonomy)
     if args.trials is not None:
         trials = trials[: args.trials]
     protocol = Protocol(

@@ -12,13 +12,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_or_default
+from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy, warn
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.io.conformance import CONFORMANCE_LEVELS, compare_trial
+from rcbht_introspection.io.conformance import CONFORMANCE_LEVELS, compare_arms
 from rcbht_introspection.io.rcbht_format import write_trial_words
 from rcbht_introspection.io.words_jsonl import write_jsonl
 from rcbht_introspection.taxonomy.words import Level
 
 if TYPE_CHECKING:
+    from rcbht_introspection.io.trial import Trial
     from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
 ENGINES = ("batch", "stream")
@@ -35,6 +37,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--format", choices=FORMATS, default="rcbht")
     add_taxonomy_options(p)
     p.add_argument("--engine", choices=ENGINES, default="batch")
+    add_repeated_stamps(p)
     p.set_defaults(func=run_label)
 
     p = subparsers.add_parser(
@@ -43,6 +46,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("dataset", type=Path, metavar="DATASET_DIR")
     add_taxonomy_options(p)
     p.add_argument("--engine", choices=ENGINES, default="batch")
+    add_repeated_stamps(p)
     p.set_defaults(func=run_conformance)
 
     p = subparsers.add_parser("plot", help="draw a trial's primitives, MCs and LLBs per axis")
@@ -66,15 +70,33 @@ def labeller(engine: str, config: TaxonomyConfig) -> Callable:
 # --------------------------------------------------------------------------- label
 
 
+def checked_reader(command: str, args: argparse.Namespace) -> Callable[[Path], Trial]:
+    """folder -> Trial read with `--repeated-stamps`, its sensor findings printed as warnings."""
+    from rcbht_introspection.io.hiro import read_trial
+    from rcbht_introspection.io.sensor_checks import trial_findings
+    from rcbht_introspection.live.intake import load_intake_config
+
+    checks = load_intake_config()
+    policy = repeated_policy(args)
+
+    def read(folder: Path) -> Trial:
+        trial = read_trial(folder, policy)
+        warn(command, folder.name, trial_findings(trial, checks.frozen_samples, checks.frozen_s))
+        return trial
+
+    return read
+
+
 def run_label(args: argparse.Namespace) -> int:
-    from rcbht_introspection.io.hiro import find_trials, read_trial
+    from rcbht_introspection.io.hiro import find_trials
 
     label = labeller(args.engine, taxonomy_or_default(args))
+    read = checked_reader("label", args)
     trials = find_trials(args.trials)
     if not trials:
         raise InputError("no trial folders found", path=args.trials[0])
     for folder in trials:
-        words = label(read_trial(folder))
+        words = label(read(folder))
         if args.format == "rcbht":
             write_trial_words(words, args.out / folder.name)
         else:
@@ -87,10 +109,11 @@ def run_label(args: argparse.Namespace) -> int:
 
 
 def run_conformance(args: argparse.Namespace) -> int:
-    from rcbht_introspection.io.hiro import find_trials, read_trial
+    from rcbht_introspection.io.hiro import find_trials
 
     config = taxonomy_or_default(args)
     label = labeller(args.engine, config)
+    read = checked_reader("conformance", args)
     trials = [t for t in find_trials([args.dataset]) if (t / "golden").is_dir()]
     if not trials:
         raise InputError("no trial folders with golden/ outputs", path=args.dataset)
@@ -98,13 +121,15 @@ def run_conformance(args: argparse.Namespace) -> int:
     total = {level: 0 for level in CONFORMANCE_LEVELS}
     failures: list[str] = []
     for folder in trials:
-        words = label(read_trial(folder))
-        for level, axis, diff in compare_trial(folder, words):
+        words = label(read(folder))
+        two_arms = len(words.arms) > 1
+        for arm, level, axis, diff in compare_arms(folder, words):
             total[level] += 1
             if diff is None:
                 identical[level] += 1
             else:
-                failures.append(f"{folder.name} {level.value} {axis}: {diff}")
+                where = f"{folder.name} {arm}" if two_arms else folder.name
+                failures.append(f"{where} {level.value} {axis}: {diff}")
     for line in failures:
         print(f"DIFF {line}")
     names = {Level.COMPOSITION: "Composites", Level.BEHAVIOR: "llBehaviors"}

@@ -28,6 +28,11 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.sensor_checks import (
+    REPEATED_METADATA,
+    RepeatedPolicy,
+    resolve_repeated_stamps,
+)
 from rcbht_introspection.io.trial import AXES, Trial, check_phases
 
 # rosbags.rosbag2 (readers, writers, storage plugins: ~150 ms) is imported where a bag is opened,
@@ -312,11 +317,17 @@ def decode_string(raw: bytes) -> str:
     return raw[8 : 8 + n - 1].decode()
 
 
-def read_trial_bag(path: Path | str, end_phases: Sequence[str] = (END_PHASE,)) -> Trial:
+def read_trial_bag(
+    path: Path | str,
+    end_phases: Sequence[str] = (END_PHASE,),
+    repeated: RepeatedPolicy | None = None,
+) -> Trial:
     """Trial of a bag written by write_trial_bag or recorded live (/wrench or /<arm>/wrench).
 
     Every /task_phase event before the first end phase starts a sub-task of that name; events
-    after it are counted in metadata['events_after_end'] and not used."""
+    after it are counted in metadata['events_after_end'] and not used. A wrench stamp equal to
+    the previous one is an error, or with a `repeated` policy resolved as segmenter_node does
+    (io/sensor_checks; counts per arm in metadata['repeated_stamps'])."""
     path = Path(path)
     info: dict = {}
     stamps: dict[str, list[int]] = {}
@@ -341,17 +352,28 @@ def read_trial_bag(path: Path | str, end_phases: Sequence[str] = (END_PHASE,)) -
     if not stamps:
         raise InputError("no WrenchStamped messages (/wrench or /<arm>/wrench)", path)
     arms = sorted(stamps)
-    ref = np.asarray(stamps[arms[0]], dtype=np.int64)
+    repeats: dict[str, dict[str, int]] = {}
+    arm_stamp: dict[str, np.ndarray] = {}
+    wrench: dict[str, np.ndarray] = {}
+    for arm in arms:
+        arm_stamps = np.asarray(stamps[arm], dtype=np.int64)
+        arm_values = np.asarray(values[arm], dtype=np.float64).reshape(-1, len(AXES))
+        if repeated is not None and bool((np.diff(arm_stamps) >= 0).all()):
+            arm_stamps, arm_values, repeats[arm] = resolve_repeated_stamps(
+                arm_stamps, arm_values, repeated
+            )
+        arm_stamp[arm], wrench[arm] = arm_stamps, arm_values
+    ref = arm_stamp[arms[0]]
     for arm in arms[1:]:
-        other = np.asarray(stamps[arm], dtype=np.int64)
+        other = arm_stamp[arm]
         if len(other) != len(ref) or np.any(np.abs(other - ref) > 1000):
             raise InputError(f"arm {arm} stamps differ from arm {arms[0]}'s", path, field="stamp")
     origin = int(info.get("time_origin_ns", ref[0]))
     time = (ref - origin) / _NS
     if np.any(np.diff(time) <= 0):
         k = int(np.argmax(np.diff(time) <= 0)) + 1
-        raise InputError(f"wrench stamps do not increase at message {k}", path, field="stamp")
-    wrench = {arm: np.asarray(values[arm], dtype=np.float64).reshape(-1, len(AXES)) for arm in arms}
+        hint = "; see --repeated-stamps" if repeated is None and time[k] == time[k - 1] else ""
+        raise InputError(f"wrench stamps do not increase at message {k}{hint}", path, field="stamp")
     state: list[float] = []
     names: list[str] = []
     after_end = 0
@@ -374,6 +396,7 @@ def read_trial_bag(path: Path | str, end_phases: Sequence[str] = (END_PHASE,)) -
             "bag": str(path),
             "events_after_end": max(0, after_end - 1),
             **{key: info[key] for key in INFO_RECORDS if isinstance(info.get(key), dict)},
+            **({REPEATED_METADATA: repeats} if repeats else {}),
         },
         phases=tuple(names),
     )

@@ -2,14 +2,17 @@
 
 The composition and behaviour levels are compared record by record (label and the four span
 times within TOLERANCE); the first difference is reported so a mismatch can be found by eye.
+A two-arm trial's golden files are per arm (golden/L/..., golden/R/..., as `rcbht label` writes
+them); every arm is compared.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.hiro import ARMS
 from rcbht_introspection.io.rcbht_format import level_path, read_words
 from rcbht_introspection.taxonomy.words import AXES, Level, TrialWords, Word
 
@@ -33,15 +36,51 @@ def first_difference(ours: list[Word], golden: list[Word]) -> str | None:
     return None
 
 
-def compare_trial(folder: Path, words: TrialWords) -> Iterable[tuple[Level, str, str | None]]:
-    """(level, axis, first difference or None) for each golden Composites/llBehaviors file."""
-    arm = words.arms[0] if words.arms else "R"
-    for level in CONFORMANCE_LEVELS:
-        for axis in AXES:
-            path = level_path(folder / "golden", level, axis)
-            try:
-                golden = read_words(path, level, axis, arm)
-            except InputError as exc:
-                yield level, axis, f"golden file unreadable: {exc}"
-                continue
-            yield level, axis, first_difference(words.axis_words(arm, level, axis), golden)
+def golden_roots(folder: Path, arms: Sequence[str] = ARMS) -> dict[str, Path]:
+    """Arm -> its golden root in a trial folder: golden/<arm>/ (or golden/<arm>_golden/), as
+    write_trial_words lays out two arms; else golden/ itself for the one arm (or R of two)."""
+    root = Path(folder) / "golden"
+    found = {}
+    for arm in arms:
+        for candidate in (root / arm, root / f"{arm}_golden"):
+            if level_path(candidate, Level.PRIMITIVE, AXES[0]).is_file():
+                found[arm] = candidate
+                break
+    if not found and level_path(root, Level.PRIMITIVE, AXES[0]).is_file():
+        found[arms[0] if len(arms) == 1 else "R"] = root
+    return found
+
+
+def compare_arms(folder: Path, words: TrialWords) -> Iterable[tuple[str, Level, str, str | None]]:
+    """(arm, level, axis, first difference or None) for every arm of `words` and each of its
+    golden Composites/llBehaviors files; an arm without golden files differs in every file."""
+    arms = words.arms or ("R",)
+    roots = golden_roots(folder, arms)
+    for arm in arms:
+        root = roots.get(arm)
+        for level in CONFORMANCE_LEVELS:
+            for axis in AXES:
+                if root is None:
+                    yield arm, level, axis, f"no golden files of arm {arm} (golden/{arm}/)"
+                    continue
+                yield arm, level, axis, _compare_file(root, level, axis, words, arm)
+
+
+def compare_trial(
+    folder: Path, words: TrialWords, arm: str | None = None
+) -> Iterable[tuple[Level, str, str | None]]:
+    """(level, axis, first difference or None) for one arm's golden files (default: the first
+    arm); `compare_arms` compares every arm."""
+    arm = arm or (words.arms[0] if words.arms else "R")
+    for got_arm, level, axis, diff in compare_arms(folder, words):
+        if got_arm == arm:
+            yield level, axis, diff
+
+
+def _compare_file(root: Path, level: Level, axis: str, words: TrialWords, arm: str) -> str | None:
+    path = level_path(root, level, axis)
+    try:
+        golden = read_words(path, level, axis, arm)
+    except InputError as exc:
+        return f"golden file unreadable: {exc}"
+    return first_difference(words.axis_words(arm, level, axis), golden)

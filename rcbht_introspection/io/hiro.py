@@ -15,6 +15,11 @@ import numpy as np
 import yaml
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.sensor_checks import (
+    REPEATED_METADATA,
+    RepeatedPolicy,
+    resolve_repeated_stamps,
+)
 from rcbht_introspection.io.trial import AXES, Trial, check_phases
 from rcbht_introspection.task import HIRO_TASK, TASK_FILE, Task, task_of_folder
 
@@ -22,8 +27,16 @@ COLUMNS: tuple[str, ...] = ("t", *AXES)
 ARMS: tuple[str, ...] = ("L", "R")
 
 
-def read_table(path: Path, columns: tuple[str, ...] = COLUMNS) -> np.ndarray:
-    """Parse a whitespace table of len(columns) numeric columns; time (column 0) strictly increasing.
+def _ordered(steps: np.ndarray, allow_repeated: bool) -> bool:
+    """Every time step positive (or, allowing repeated times, none negative)."""
+    return bool((steps >= 0).all() if allow_repeated else (steps > 0).all())
+
+
+def read_table(
+    path: Path, columns: tuple[str, ...] = COLUMNS, allow_repeated: bool = False
+) -> np.ndarray:
+    """Parse a whitespace table of len(columns) numeric columns; time (column 0) strictly increasing
+    (with `allow_repeated`, a time may equal the one before it: io/sensor_checks resolves those).
 
     Fast path: NumPy's C parser, accepted only if every value is finite and time increases;
     anything else is re-parsed line by line to name the file, line and field of the problem.
@@ -40,7 +53,7 @@ def read_table(path: Path, columns: tuple[str, ...] = COLUMNS) -> np.ndarray:
             fast.shape[0] > 0
             and fast.shape[1] == len(columns)
             and np.isfinite(fast).all()
-            and (fast.shape[0] == 1 or bool((np.diff(fast[:, 0]) > 0).all()))
+            and (fast.shape[0] == 1 or _ordered(np.diff(fast[:, 0]), allow_repeated))
         ):
             return np.ascontiguousarray(fast)
     except ValueError:
@@ -62,9 +75,13 @@ def read_table(path: Path, columns: tuple[str, ...] = COLUMNS) -> np.ndarray:
             if not math.isfinite(value):
                 raise InputError(f"not a finite number: {part!r}", path, lineno, name)
             row.append(value)
-        if row[0] <= last_t:
+        if row[0] < last_t or (row[0] == last_t and not allow_repeated):
+            hint = "" if allow_repeated or row[0] < last_t else "; see --repeated-stamps"
             raise InputError(
-                f"time does not increase ({row[0]} after {last_t})", path, lineno, columns[0]
+                f"time does not increase ({row[0]} after {last_t}){hint}",
+                path,
+                lineno,
+                columns[0],
             )
         last_t = row[0]
         rows.append(row)
@@ -93,22 +110,29 @@ def read_state(path: Path) -> tuple[float, ...]:
     return tuple(times)
 
 
-def read_trial(folder: Path | str) -> Trial:
-    """Load a HIRO trial folder (one arm R_*, or two arms L_* and R_*)."""
+def read_trial(folder: Path | str, repeated: RepeatedPolicy | None = None) -> Trial:
+    """Load a HIRO trial folder (one arm R_*, or two arms L_* and R_*).
+
+    A time equal to the previous row's is an error, or with a `repeated` policy resolved by
+    io/sensor_checks (counts per arm in metadata['repeated_stamps'])."""
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError("not a trial folder", folder)
     wrench: dict[str, np.ndarray] = {}
     time: np.ndarray | None = None
+    repeats: dict[str, dict[str, int]] = {}
     for arm in ARMS:
         path = folder / f"{arm}_Torques.dat"
         if not path.is_file():
             continue
-        table = read_table(path)
-        if time is not None and (len(table) != len(time) or not np.allclose(table[:, 0], time)):
+        table = read_table(path, allow_repeated=repeated is not None)
+        arm_time, values = table[:, 0], table[:, 1:]
+        if repeated is not None:
+            arm_time, values, repeats[arm] = resolve_repeated_stamps(arm_time, values, repeated)
+        if time is not None and (len(arm_time) != len(time) or not np.allclose(arm_time, time)):
             raise InputError("time column differs from the other arm's", path, field="t")
-        time = table[:, 0]
-        wrench[arm] = np.ascontiguousarray(table[:, 1:])
+        time = arm_time
+        wrench[arm] = np.ascontiguousarray(values)
     if time is None:
         raise InputError("no R_Torques.dat or L_Torques.dat", folder)
     state = read_state(folder / "R_State.dat")
@@ -118,7 +142,7 @@ def read_trial(folder: Path | str) -> Trial:
     outcome = outcome_file.read_text().strip() if outcome_file.is_file() else "success"
     task = task_of_folder(folder)
     phases: tuple[str, ...] = ()
-    metadata: dict[str, object] = {}
+    metadata: dict[str, object] = {REPEATED_METADATA: repeats} if repeats else {}
     if task != HIRO_TASK:  # HIRO's own trials keep the default names (and their extra lines)
         state = state[: len(task.subtasks)]
         phases = task.subtasks[: len(state)]

@@ -9,14 +9,17 @@ from pathlib import Path
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample, split_words
 from rcbht_introspection.io import bags
+from rcbht_introspection.io.conformance import golden_roots
 from rcbht_introspection.io.hiro import ARMS, find_trials, read_state, read_trial
-from rcbht_introspection.io.rcbht_format import level_path, read_trial_words
+from rcbht_introspection.io.rcbht_format import read_trial_words
+from rcbht_introspection.io.sensor_checks import RepeatedPolicy, trial_findings
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn import WORD_SOURCES, WordSource
+from rcbht_introspection.live.intake import IntakeConfig
 from rcbht_introspection.task import HIRO_TASK, Task, task_of_folder, task_of_names
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, is_reference
-from rcbht_introspection.taxonomy.words import AXES, LEVELS, TrialWords
+from rcbht_introspection.taxonomy.words import LEVELS, TrialWords
 
 
 @dataclass
@@ -29,6 +32,10 @@ class TrialSamples:
     samples: list[SubtaskSample]
     task: Task = HIRO_TASK
     """The task the trial belongs to (its folder's task.yaml, or the names of its phases)."""
+    findings: tuple[str, ...] = ()
+    """Problems of the trial's wrench (io/sensor_checks.trial_findings), when it was read."""
+    repeated: RepeatedPolicy | None = None
+    """The repeated-stamp policy the trial was read with (None: a repeated stamp is an error)."""
 
     @property
     def complete(self) -> bool:
@@ -47,20 +54,6 @@ def task_of_trials(trials: Iterable[TrialSamples]) -> Task:
     if len(tasks) == 1:
         return tasks.pop()
     return task_of_names([s.subtask for s in t.samples] for t in trials)
-
-
-def _golden_arms(folder: Path) -> list[tuple[str, Path]]:
-    """(arm, golden root) pairs present in a trial folder (golden/ or golden/<arm>/)."""
-    root = folder / "golden"
-    found = []
-    for arm in ARMS:
-        for candidate in (root / arm, root / f"{arm}_golden"):
-            if level_path(candidate, LEVELS[0], AXES[0]).is_file():
-                found.append((arm, candidate))
-                break
-    if not found and level_path(root, LEVELS[0], AXES[0]).is_file():
-        found.append(("R", root))
-    return found
 
 
 def _end_time(folder: Path) -> float:
@@ -83,16 +76,23 @@ def _end_time(folder: Path) -> float:
 
 
 def load_trial_samples(
-    path: Path, words: WordSource = "auto", taxonomy: TaxonomyConfig | None = None
+    path: Path,
+    words: WordSource = "auto",
+    taxonomy: TaxonomyConfig | None = None,
+    repeated: RepeatedPolicy | None = None,
+    checks: IntakeConfig | None = None,
 ) -> TrialSamples:
     """Samples of one trial folder or bag; `words` picks golden files or the batch engine.
 
     `taxonomy` labels engine words (None: reference). The golden files hold the reference
     profile's words, so with another profile 'auto' means the engine and 'golden' is an error.
+    A trial whose wrench is read (engine words) is resolved with the `repeated` stamp policy
+    and checked for a frozen sensor (thresholds of `checks`, default IntakeConfig()).
     """
     if words not in WORD_SOURCES:
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
     path = Path(path)
+    checks = checks or IntakeConfig()
     reference = taxonomy is None or is_reference(taxonomy)
     if words == "golden" and taxonomy is not None and not reference:
         raise InputError(
@@ -103,12 +103,14 @@ def load_trial_samples(
     if path.is_file() and bags.is_bag(path):
         if words == "golden":
             raise InputError("a bag has no golden label files; use words='engine'", path)
-        trial = bags.read_trial_bag(path)
+        trial = bags.read_trial_bag(path, repeated=repeated)
         samples = split_words(
             label_trial(trial, taxonomy), trial.state_times, trial.end_time, trial.phase_names
         )
-        return TrialSamples(trial.name, path, "engine", samples, task_of_bag(trial))
-    golden = _golden_arms(path) if reference else []
+        found = tuple(trial_findings(trial, checks.frozen_samples, checks.frozen_s))
+        task = task_of_bag(trial)
+        return TrialSamples(trial.name, path, "engine", samples, task, found, repeated)
+    golden = list(golden_roots(path).items()) if reference else []
     if words == "golden" or (words == "auto" and golden):
         if not golden:
             raise InputError("no golden/ label files in this trial", path)
@@ -120,11 +122,13 @@ def load_trial_samples(
         task = task_of_folder(path)
         samples = split_words(trial_words, state, _end_time(path), task.subtasks)
         return TrialSamples(path.name, path, "golden", samples, task)
-    trial = read_trial(path)
+    trial = read_trial(path, repeated)
     samples = split_words(
         label_trial(trial, taxonomy), trial.state_times, trial.end_time, trial.phase_names
     )
-    return TrialSamples(trial.name, path, "engine", samples, task_of_folder(path))
+    found = tuple(trial_findings(trial, checks.frozen_samples, checks.frozen_s))
+    task = task_of_folder(path)
+    return TrialSamples(trial.name, path, "engine", samples, task, found, repeated)
 
 
 def task_of_bag(trial: Trial) -> Task:
@@ -135,11 +139,12 @@ def task_of_bag(trial: Trial) -> Task:
     return task_of_names([trial.phase_names])
 
 
-def read_any_trial(path: Path | str) -> Trial:
-    """A trial folder or a bag (as find_inputs lists them) as a Trial."""
+def read_any_trial(path: Path | str, repeated: RepeatedPolicy | None = None) -> Trial:
+    """A trial folder or a bag (as find_inputs lists them) as a Trial (`repeated`: the
+    repeated-stamp policy, None: a repeated stamp is an error)."""
     if Path(path).is_file() and bags.is_bag(path):
-        return bags.read_trial_bag(path)
-    return read_trial(path)
+        return bags.read_trial_bag(path, repeated=repeated)
+    return read_trial(path, repeated)
 
 
 def find_inputs(paths: Iterable[Path | str]) -> list[Path]:
@@ -169,11 +174,13 @@ def load_trials(
     paths: Iterable[Path | str],
     words: WordSource = "auto",
     taxonomy: TaxonomyConfig | None = None,
+    repeated: RepeatedPolicy | None = None,
+    checks: IntakeConfig | None = None,
 ) -> list[TrialSamples]:
-    """Per-trial samples of every trial under `paths` (engine words labelled by `taxonomy`)."""
+    """Per-trial samples of every trial under `paths` (see load_trial_samples)."""
     if words not in WORD_SOURCES:
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
-    return [load_trial_samples(p, words, taxonomy) for p in find_inputs(paths)]
+    return [load_trial_samples(p, words, taxonomy, repeated, checks) for p in find_inputs(paths)]
 
 
 def load_samples(

@@ -277,7 +277,8 @@ def _live_windows(
     """Live-like windows of every trial (words final by t, learn/live.py), by trial name."""
     config = load_live_config()
     factory = stream_factory(config, taxonomy)
-    by_path = trial_live_samples([t.path for t in trials], config, factory)
+    repeated = next((t.repeated for t in trials), None)  # as load_trials read them
+    by_path = trial_live_samples([t.path for t in trials], config, factory, repeated=repeated)
     return {t.trial: by_path[str(t.path)] for t in trials}
 
 

@@ -22,6 +22,7 @@ from rcbht_introspection.config_files import config_path, load_config, to_mappin
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
+from rcbht_introspection.io.sensor_checks import RepeatedPolicy
 from rcbht_introspection.learn.data import read_any_trial, task_of_trials
 from rcbht_introspection.learn.models import train_model
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
@@ -128,13 +129,16 @@ def stream_factory(config: LiveAugmentConfig, taxonomy: TaxonomyConfig | None = 
 
 
 def trial_live_samples(
-    paths: Iterable[Path], config: LiveAugmentConfig, factory: Any | None = None
+    paths: Iterable[Path],
+    config: LiveAugmentConfig,
+    factory: Any | None = None,
+    repeated: RepeatedPolicy | None = None,
 ) -> dict[str, list[SubtaskSample]]:
     """Live samples per trial path (trial folders or bags)."""
     factory = factory or stream_factory(config)
     out = {}
     for path in paths:
-        trial = read_any_trial(Path(path))
+        trial = read_any_trial(Path(path), repeated)
         out[str(path)] = live_samples(stream_trial(trial, factory), config)
     return out
 
@@ -205,7 +209,9 @@ def live_training(
     live: list[SubtaskSample] = []
     if use:
         factory = stream_factory(config, taxonomy)
+        repeated = next((t.repeated for t in trials), None)  # as load_trials read them
         paths = [t.path for t in trials]
-        live = [s for v in trial_live_samples(paths, config, factory).values() for s in v]
+        by_path = trial_live_samples(paths, config, factory, repeated=repeated)
+        live = [s for v in by_path.values() for s in v]
     model = train_live_model(samples, live, config if use else None, taxonomy, **train_kwargs)
     return model, len(live)

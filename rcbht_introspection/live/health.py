@@ -14,7 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
+from rcbht_introspection.io.sensor_checks import FrozenWatch
+from rcbht_introspection.live.intake import Tare
+from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, Word
 
 OK, WARN, ERROR = 0, 1, 2
 """diagnostic_msgs/DiagnosticStatus levels."""
@@ -104,15 +106,24 @@ class ArmHealth:
         intake: Mapping[str, int],
         last_t: float | None,
         active: bool,
+        frozen: FrozenWatch | None = None,
+        tare: Tare | None = None,
+        respaced: int = 0,
+        pose: str = "",
     ) -> Health:
-        """The arm's status for the period that just ended."""
+        """The arm's status for the period that just ended (WARN also while the sensor is frozen)."""
         rate = (accepted - self.accepted_before) / period_s if period_s > 0 else 0.0
         self.accepted_before = accepted
         losses = {f"rejected {k}": v for k, v in rejected.items()}
         losses.update({k: v for k, v in intake.items() if v})
+        if frozen is not None:
+            losses["frozen episodes"] = frozen.episodes
         moved = self.watch.moved(losses)
         values = [("input rate (Hz)", f"{rate:.1f}"), ("samples accepted", str(accepted))]
-        values += [(f"samples {k}", str(v)) for k, v in losses.items()]
+        values += [(f"samples {k}", str(v)) for k, v in losses.items() if k != "frozen episodes"]
+        values += sensor_values(frozen, tare, respaced)
+        if pose:
+            values.append(("sensor pose", pose))
         for word_level in LEVELS:
             backlog = (
                 last_t - self.released[word_level]
@@ -120,13 +131,42 @@ class ArmHealth:
                 else float("nan")
             )
             values.append((f"finality backlog {word_level.value} (s)", f"{backlog:.3f}"))
-        if moved:
+        if frozen is not None and frozen.frozen:
+            level, message = WARN, frozen.describe(self.arm)
+            if moved:
+                message += f"; {_moved_text(moved)} in the last period"
+        elif moved:
             level, message = WARN, f"arm {self.arm}: {_moved_text(moved)} in the last period"
         elif active and rate == 0:
             level, message = OK, f"arm {self.arm}: waiting for wrench"
         else:
             level, message = OK, f"arm {self.arm}: {rate:.0f} samples/s"
         return Health(f"segmenter_node: arm {self.arm}", level, message, tuple(values))
+
+
+def sensor_values(
+    frozen: FrozenWatch | None, tare: Tare | None, respaced: int
+) -> list[tuple[str, str]]:
+    """/diagnostics values of an arm's sensor intake: spread stamps, frozen sensor, tare."""
+    values = [("samples respaced (repeated stamp)", str(respaced))]
+    if frozen is not None:
+        values += [
+            ("frozen now", "yes" if frozen.frozen else "no"),
+            ("frozen episodes", str(frozen.episodes)),
+            ("frozen samples", str(frozen.frozen_samples)),
+        ]
+    if tare is not None:
+        offsets = (
+            "none"
+            if tare.offsets is None
+            else " ".join(f"{a}={v:.4g}" for a, v in zip(AXES, tare.offsets, strict=True))
+        )
+        values += [
+            ("tares completed", str(tare.completed)),
+            ("tare measuring", "yes" if tare.measuring else "no"),
+            ("tare offsets", offsets),
+        ]
+    return values
 
 
 def events_health(node: str, counts: Mapping[str, int], watch: CounterWatch) -> Health:

@@ -2,7 +2,9 @@
 
 Stream time is seconds since the stream's first accepted sample (any arm), so absolute ROS stamps
 never enter the regression fits. A sample is rejected (and counted) when its values are not all
-finite or its stamp is zero or not after the arm's previous stamp.
+finite, its stamp is zero or before the arm's previous stamp, or it repeats the previous stamp
+(policy `IntakeConfig.repeated_stamps`, io/sensor_checks.py). The intake (live/intake.py) then
+watches for a frozen sensor, subtracts a known tool's weight and a tare when configured.
 
 A sub-task event (/task_phase) applies at each arm's last sample published before it. Wrench and
 events travel on different topics, so their arrival order is not their publication order; when
@@ -19,6 +21,11 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
+from rcbht_introspection.io.sensor_checks import FrozenWatch, spread_stamp
+from rcbht_introspection.live.gravity import compensate_gravity
+from rcbht_introspection.live.intake import IntakeConfig, Tare
 from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
 from rcbht_introspection.taxonomy.stream import ArmStream, load_stream_config
@@ -30,8 +37,15 @@ REJECT_REASONS: tuple[str, ...] = (
     "non_finite",
     "zero_stamp",
     "non_increasing_stamp",
+    "repeated_stamp",
+    "duplicate_sample",
+    "no_pose",
     "published_before_end",
 )
+"""non_increasing_stamp: before the previous stamp; repeated_stamp: the previous stamp with
+other values (policy reject, or left over at the end of a stream with spread); duplicate_sample:
+the previous stamp and values (a re-sent message); no_pose: gravity compensation is configured
+and no pose of the sensor has arrived yet."""
 
 
 @dataclass
@@ -40,6 +54,8 @@ class ArmCounts:
 
     accepted: int = 0
     rejected: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REJECT_REASONS, 0))
+    respaced: int = 0
+    """Samples of a repeated stamp spread towards the next stamp (policy spread)."""
 
     @property
     def rejected_total(self) -> int:
@@ -99,6 +115,10 @@ class _Arm:
     def __init__(self, stream: ArmStream) -> None:
         self.stream = stream
         self.last_ns = 0
+        self.last_wrench: Sequence[float] = ()
+        """Values of the last sample taken at `last_ns` (accepted, or held to be spread)."""
+        self.held: list[tuple[Sequence[float], int | None]] = []
+        """Samples sharing `last_ns`, held until a later stamp spreads them (values, source)."""
         self.last_t: float | None = None
         self.first_t: float | None = None
         self.last_source: int | None = None
@@ -120,8 +140,18 @@ class SegmenterSession:
         subtasks: Sequence[str] | None = None,
         hold_s: float = 0.2,
         max_hold_s: float = 10.0,
+        intake: IntakeConfig | None = None,
     ) -> None:
         self.arms = tuple(arms)
+        self.intake = intake or IntakeConfig()
+        self._gravity = self.intake.compensates_gravity
+        self._watch_frozen = self.intake.frozen_samples > 0
+        self.frozen = {
+            arm: FrozenWatch(self.intake.frozen_samples, self.intake.frozen_s) for arm in self.arms
+        }
+        self.tares = {arm: Tare(self.intake.tare_window_s) for arm in self.arms}
+        self.rotations: dict[str, np.ndarray | None] = dict.fromkeys(self.arms)
+        """Latest orientation (3x3) of each arm's sensor in the world, for gravity compensation."""
         self.stream_factory = stream_factory
         self.end_phases = tuple(end_phases)
         self.subtasks = None if subtasks is None else tuple(subtasks)
@@ -140,6 +170,17 @@ class SegmenterSession:
         self.state = {arm: _Arm(self.stream_factory(arm)) for arm in self.arms}
         self.origin_ns: int | None = None
         self.stream_id += 1
+        if self.intake.tare_at_start:
+            self.tare()
+
+    def tare(self, arms: Sequence[str] | None = None) -> None:
+        """Measure a new tare of each arm (all by default) over its next samples."""
+        for arm in arms or self.arms:
+            self.tares[arm].request()
+
+    def pose(self, arm: str, rotation: np.ndarray) -> None:
+        """The latest orientation (3x3, sensor to world) of the arm's sensor."""
+        self.rotations[arm] = rotation
 
     def stream_time(self, stamp_ns: int) -> float:
         """Seconds since the stream's time origin."""
@@ -166,17 +207,55 @@ class SegmenterSession:
         elif stamp_ns <= 0:
             reason = "zero_stamp"
         elif stamp_ns <= st.last_ns:
-            reason = "non_increasing_stamp"
+            reason = self._repeated(st, stamp_ns, wrench, source_ns)
+            if reason is None:
+                return out  # held until a later stamp spreads it
+        elif self._gravity and self.rotations[arm] is None:
+            reason = "no_pose"
         if reason is not None:
             counts.rejected[reason] += 1
             out.rejected = reason
             return out
+        if st.held:
+            held, st.held = st.held, []
+            previous = st.last_ns
+            for i, (values, source) in enumerate(held, start=1):
+                at = spread_stamp(previous, stamp_ns, i, len(held))
+                self._accept(arm, st, int(at), values, source, out)
+            counts.respaced += len(held)
+        self._accept(arm, st, stamp_ns, wrench, source_ns, out)
+        return out
+
+    def _repeated(
+        self, st: _Arm, stamp_ns: int, wrench: Sequence[float], source_ns: int | None
+    ) -> str | None:
+        """Why a sample stamped at or before the previous one is rejected (None: held to spread)."""
+        if stamp_ns < st.last_ns:
+            return "non_increasing_stamp"
+        if list(map(float, wrench)) == list(map(float, st.last_wrench)):
+            return "duplicate_sample"
+        if self.intake.repeated_stamps == "reject":
+            return "repeated_stamp"
+        st.held.append((wrench, source_ns))
+        st.last_wrench = wrench
+        return None
+
+    def _accept(
+        self,
+        arm: str,
+        st: _Arm,
+        stamp_ns: int,
+        wrench: Sequence[float],
+        source_ns: int | None,
+        out: Output,
+    ) -> None:
+        """Take a valid sample into the arm's stream: intake (frozen check, gravity, tare), words."""
         origin_ns = self.origin_ns
         first_of_stream = origin_ns is None
         if origin_ns is None:
             origin_ns = self.origin_ns = stamp_ns
         t = (stamp_ns - origin_ns) / 1e9  # stream_time, inlined on the per-sample path
-        st.last_ns, st.last_t = stamp_ns, t
+        st.last_ns, st.last_t, st.last_wrench = stamp_ns, t, wrench
         if source_ns is not None and st.last_source is not None and source_ns > st.last_source:
             gap = source_ns - st.last_source
             st.source_interval = (
@@ -187,8 +266,25 @@ class SegmenterSession:
             st.recent.append((source_ns, t, stamp_ns))
         if st.first_t is None:
             st.first_t = t
-        counts.accepted += 1
-        words = st.stream.push(t, wrench)
+        self.counts[arm].accepted += 1
+        if self._watch_frozen:
+            self.frozen[arm].push(stamp_ns, tuple(wrench))
+        values: Sequence[float] = wrench
+        rotation = self.rotations[arm]
+        if self._gravity and rotation is not None:  # push rejects None (no_pose)
+            intake = self.intake
+            values = compensate_gravity(
+                wrench,
+                rotation,
+                intake.tool_mass_kg,
+                intake.tool_com_m,
+                intake.gravity_m_s2,
+            ).tolist()
+        tare = self.tares[arm]
+        if tare.offsets is None and not tare.measuring:  # Tare.idle, inlined (per sample)
+            words = st.stream.push(t, values)
+        else:
+            words = [w for at, v in tare.push(t, values) for w in st.stream.push(at, v)]
         if words:
             out.batches.append(WordBatch(arm, list(words), stamp_ns, origin_ns, self.stream_id))
         if first_of_stream:
@@ -196,7 +292,6 @@ class SegmenterSession:
             self._apply_due(
                 out, lambda p: p.source_ns is None or source_ns is None or p.source_ns < source_ns
             )
-        return out
 
     # --- events ----------------------------------------------------------------------------
     def phase(self, name: str, source_ns: int | None = None) -> Output:
@@ -295,7 +390,13 @@ class SegmenterSession:
             p.time = at_t if at_t is not None else 0.0
             p.stamp_ns = at_ns or self.origin_ns
         if p.end:
-            words = st.stream.finish()
+            # samples still held (a tare being measured, a repeated stamp with none after it)
+            tared = self.tares[arm].release()
+            words = [w for at, v in tared for w in st.stream.push(at, v)]
+            if st.held:
+                self.counts[arm].rejected["repeated_stamp"] += len(st.held)
+                st.held = []
+            words += st.stream.finish()
             st.finished = True
             out.batches.append(
                 WordBatch(

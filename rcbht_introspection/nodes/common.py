@@ -67,7 +67,12 @@ def declare_parameters(node: Node, cls: type) -> None:
     """Declare one parameter per config field (with its description); configure reads them."""
     texts = descriptions(cls)
     for name, default in defaults(cls).items():
-        node.declare_parameter(name, default, ParameterDescriptor(description=texts[name]))
+        # an empty list has no element type for rclpy to infer (it would take bytes): such a
+        # parameter takes any type, and the config's own check (read_config) types it
+        untyped = isinstance(default, list) and not default
+        node.declare_parameter(
+            name, default, ParameterDescriptor(description=texts[name], dynamic_typing=untyped)
+        )
 
 
 def read_config(node: Node, cls: type[NodeConfig]) -> NodeConfig:

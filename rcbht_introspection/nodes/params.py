@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeVar
@@ -20,20 +21,15 @@ from rcbht_introspection.config_files import (
     from_mapping,
     read_yaml,
 )
+from rcbht_introspection.config_files import described as _f
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
+from rcbht_introspection.live.intake import IntakeConfig, check_intake
 from rcbht_introspection.taxonomy import StreamProfile
 
 Reliability = Literal["reliable", "best_effort"]
 """QoS reliability of every subscription and publisher of a node."""
 LEVEL_TOPICS: tuple[str, ...] = ("primitives", "compositions", "behaviors")
-
-
-def _f(default: Any, description: str) -> Any:
-    """A dataclass field with a parameter description."""
-    if isinstance(default, (list, tuple)):
-        return field(default_factory=lambda: tuple(default), metadata={"description": description})
-    return field(default=default, metadata={"description": description})
 
 
 @dataclass(frozen=True)
@@ -86,6 +82,13 @@ class SegmenterConfig:
         10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
     )
     qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
+    pose_topics: tuple[str, ...] = _f(
+        (),
+        "geometry_msgs/PoseStamped of each arm's sensor in the world, in `arms` order, for "
+        "intake.tool_mass_kg (empty: no gravity compensation)",
+    )
+    intake: IntakeConfig = field(default_factory=IntakeConfig)
+    """Parameters `intake.<name>`: what happens to each sample before the RCBHT."""
 
 
 @dataclass(frozen=True)
@@ -120,16 +123,47 @@ NodeConfig = TypeVar("NodeConfig", bound=SegmenterConfig | ClassifierConfig)
 """The config of one node (the checks and the defaults file depend on which)."""
 
 
-def descriptions(cls: type) -> dict[str, str]:
-    """Parameter name -> description."""
-    return {f.name: f.metadata.get("description", "") for f in dataclasses.fields(cls)}
+def descriptions(cls: type, prefix: str = "") -> dict[str, str]:
+    """Parameter name -> description; a nested config's fields are `<field>.<name>`."""
+    out = {}
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        kind = hints[f.name]
+        if isinstance(kind, type) and dataclasses.is_dataclass(kind):
+            out.update(descriptions(kind, f"{prefix}{f.name}."))
+        else:
+            out[prefix + f.name] = f.metadata.get("description", "")
+    return out
 
 
 def defaults(cls: type) -> dict[str, Any]:
-    """Parameter name -> default value (lists for tuples, as ROS parameters want)."""
+    """Parameter name -> default value (lists for tuples, as ROS parameters want); a nested
+    config's fields are `<field>.<name>`, as a ROS parameter file's nested mappings are."""
     out = {}
-    for k, v in dataclasses.asdict(cls()).items():
-        out[k] = list(v) if isinstance(v, tuple) else v
+
+    def add(prefix: str, values: dict[str, Any]) -> None:
+        for k, v in values.items():
+            if isinstance(v, dict):
+                add(f"{prefix}{k}.", v)
+            else:
+                out[prefix + k] = list(v) if isinstance(v, tuple) else v
+
+    add("", dataclasses.asdict(cls()))
+    return out
+
+
+def nested(values: dict[str, Any]) -> dict[str, Any]:
+    """Parameter values with dotted names (`intake.frozen_s`) as nested mappings."""
+    out: dict[str, Any] = {}
+    for name, value in values.items():
+        *parents, leaf = name.split(".")
+        node = out
+        for part in parents:
+            node = node.setdefault(part, {})
+        if isinstance(value, dict) and isinstance(node.get(leaf), dict):
+            node[leaf].update(value)
+        else:
+            node[leaf] = value
     return out
 
 
@@ -153,6 +187,7 @@ TOPIC_FIELDS = (
     "applied_phase_topic",
     "state_topic",
     "belief_topic",
+    "pose_topics",
 )
 
 
@@ -207,6 +242,23 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
         for name in ("taxonomy_config_file", "stream_config_file", "task_file"):
             value = getattr(cfg, name)
             _check(not value or Path(value).is_file(), name, f"no such file: {value}", path)
+        _check(
+            len(cfg.pose_topics) in (0, len(arms)),
+            "pose_topics",
+            f"expected none or one topic per arm ({len(arms)}), got {len(cfg.pose_topics)}",
+            path,
+        )
+        _check(
+            bool(cfg.pose_topics) == cfg.intake.compensates_gravity,
+            "pose_topics",
+            "gravity compensation needs both intake.tool_mass_kg > 0 and a pose topic per arm"
+            f" (tool_mass_kg {cfg.intake.tool_mass_kg}, pose_topics {list(cfg.pose_topics)})",
+            path,
+        )
+        try:
+            check_intake(cfg.intake)
+        except InputError as exc:
+            raise InputError(exc.message, path=path, field=f"intake.{exc.field}") from None
     if isinstance(cfg, ClassifierConfig):
         _check(cfg.window_s > 0, "window_s", f"must be > 0, got {cfg.window_s}", path)
         _check(
@@ -229,7 +281,7 @@ def config_from_parameters(
     cls: type[NodeConfig], values: dict[str, Any], path: Path | None = None
 ) -> NodeConfig:
     """Typed, validated config from parameter values (unknown names and bad types are errors)."""
-    return validate(from_mapping(cls, values, path=path), path)
+    return validate(from_mapping(cls, nested(values), path=path), path)
 
 
 NODE_NAMES = {SegmenterConfig: "segmenter_node", ClassifierConfig: "classifier_node"}

@@ -3,7 +3,8 @@
 Parameters: see config/segmenter.yaml (`ros2 param describe` shows each description). /task_phase
 events are placed on the stream clock, applied as sub-task boundaries and republished as
 rcbht_interfaces/Phase; an end event ("done") finishes the streams. Malformed samples are
-dropped and counted (Words.samples_rejected).
+dropped and counted (Words.samples_rejected). The sensor intake (parameters intake.*, live/intake.py)
+runs in the session; this node only subscribes the sensor poses and serves `~/tare`.
 """
 
 from __future__ import annotations
@@ -14,7 +15,9 @@ import time
 from collections.abc import Iterable
 from functools import partial
 
-from geometry_msgs.msg import WrenchStamped
+from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.srv import SelfTest
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from rclpy.event_handler import PublisherEventCallbacks
@@ -23,7 +26,15 @@ from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from rcbht_introspection.io.bags import decode_wrench_sample
-from rcbht_introspection.live.health import OK, ArmHealth, CounterWatch, Health, events_health
+from rcbht_introspection.live.gravity import rotation_from_quaternion
+from rcbht_introspection.live.health import (
+    OK,
+    WARN,
+    ArmHealth,
+    CounterWatch,
+    Health,
+    events_health,
+)
 from rcbht_introspection.live.join import Watermarks, batch_messages
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
@@ -37,6 +48,10 @@ from rcbht_introspection.taxonomy.words import LEVELS
 
 MAX_BURST = 1000
 """Most samples per arm taken in one executor wake-up."""
+TARE_SERVICE = "~/tare"
+"""Re-tare at the next samples. Type diagnostic_msgs/srv/SelfTest: std_srvs (Trigger) is not among
+the pinned PyPI ROS wheels; SelfTest has Trigger's empty request, and its response says whether
+the request was taken (`passed`) and why, in one DiagnosticStatus message."""
 
 
 class SegmenterNode(ManagedNode):
@@ -44,6 +59,9 @@ class SegmenterNode(ManagedNode):
 
     def __init__(self) -> None:
         super().__init__("segmenter_node", SegmenterConfig)
+        self.pose_subs: list = []
+        self.bad_poses = 0
+        self.create_service(SelfTest, TARE_SERVICE, self.on_tare)
 
     def configure(self, cfg: SegmenterConfig) -> None:
         self.cfg = cfg
@@ -63,6 +81,7 @@ class SegmenterNode(ManagedNode):
             load_task_file(cfg.task_file).subtasks if cfg.task_file else None,
             hold_s=cfg.event_hold_s,
             max_hold_s=cfg.event_max_hold_s,
+            intake=cfg.intake,
         )
         self.arm_health = {arm: ArmHealth(arm) for arm in cfg.arms}
         self.marks = Watermarks()
@@ -108,6 +127,16 @@ class SegmenterNode(ManagedNode):
             self.qos,
             callback_group=drained,
         )
+        # the latest pose is what counts: depth 1, served by the executor (at least every 20 ms)
+        self.pose_subs = [
+            self.create_subscription(
+                PoseStamped,
+                topic,
+                partial(self.on_pose, arm),
+                qos_profile(1, cfg.qos_reliability),
+            )
+            for arm, topic in zip(cfg.arms, cfg.pose_topics, strict=False)  # none, or one per arm
+        ]
         self.flush_timer = self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
         self.get_logger().info(
             f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
@@ -119,8 +148,11 @@ class SegmenterNode(ManagedNode):
         for _, sub in self.wrench_subs:
             self.destroy_subscription(sub)
         self.destroy_subscription(self.phase_sub)
+        for pose_sub in self.pose_subs:
+            self.destroy_subscription(pose_sub)
         self.destroy_timer(self.flush_timer)
         self.wrench_subs = []
+        self.pose_subs = []
         self.log_statistics()
 
     def cleanup(self) -> None:
@@ -171,6 +203,48 @@ class SegmenterNode(ManagedNode):
                 throttle_duration_sec=1.0,
             )
 
+    def on_pose(self, arm: str, msg: PoseStamped) -> None:
+        """The sensor's latest orientation in the world, for the gravity compensation."""
+        q = msg.pose.orientation
+        try:
+            rotation = rotation_from_quaternion(q.x, q.y, q.z, q.w)
+        except ValueError as exc:  # a zero quaternion
+            self.bad_poses += 1
+            self.get_logger().warning(
+                f"ignored a pose of arm {arm}: {exc}", throttle_duration_sec=1.0
+            )
+            return
+        self.session.pose(arm, rotation)  # subscribed only while active: the session exists
+
+    def pose_state(self, arm: str) -> str:
+        """For /diagnostics: whether the arm's gravity compensation has a pose ('' without one)."""
+        if not self.cfg.intake.compensates_gravity:
+            return ""
+        return "none yet" if self.session.rotations[arm] is None else "received"
+
+    def on_tare(self, request: SelfTest.Request, response: SelfTest.Response) -> SelfTest.Response:
+        """~/tare: measure each arm's tare over its next intake.tare_window_s seconds."""
+        response.id = f"{self.get_name()} tare"
+        taken = self.state_label == "active"
+        if not taken:
+            message = f"not active ({self.state_label}): no tare"
+        else:
+            self.session.tare()
+            message = (
+                f"tare of arms {list(self.cfg.arms)} over the next "
+                f"{self.cfg.intake.tare_window_s} s of samples"
+            )
+            self.get_logger().info(message)
+        response.passed = bytes([taken])  # a `byte` field
+        response.status = [
+            DiagnosticStatus(
+                level=bytes([OK if taken else WARN]),
+                name=f"{self.get_name()}: tare",
+                message=message,
+            )
+        ]
+        return response
+
     def on_phase(self, msg: String, info: dict) -> None:
         out = self.session.phase(msg.data, info.get("source_timestamp") or None)
         if out.unknown_phase is not None:
@@ -217,8 +291,13 @@ class SegmenterNode(ManagedNode):
     def log_statistics(self) -> None:
         """Log what the node did (samples, rejections, CPU time): its last line when it stops."""
         counts = {arm: (c.accepted, c.rejected_total) for arm, c in self.session.counts.items()}
+        intake = {
+            arm: (c.respaced, self.session.frozen[arm].episodes, self.session.tares[arm].completed)
+            for arm, c in self.session.counts.items()
+        }
         self.get_logger().info(
-            f"samples (accepted, rejected) per arm {counts}, unknown events "
+            f"samples (accepted, rejected) per arm {counts}, (respaced samples, frozen episodes, "
+            f"tares) per arm {intake}, unknown events "
             f"{self.session.unknown_phases}, late events {self.session.late_phases}, "
             f"CPU {time.process_time() - self.cpu_at_start:.2f} s after start-up"
         )
@@ -268,12 +347,17 @@ class SegmenterNode(ManagedNode):
                     intake,
                     st.last_t,
                     self.state_label == "active",
+                    self.session.frozen[arm] if self.cfg.intake.frozen_samples else None,
+                    self.session.tares[arm],
+                    counts.respaced,
+                    self.pose_state(arm),
                 )
             )
         events = {
             "unknown events": self.session.unknown_phases,
             "late events": self.session.late_phases,
             "pending events": len(self.session.pending),
+            "poses ignored": self.bad_poses,
         }
         out.append(events_health("segmenter_node", events, self.event_watch))
         out.append(outputs_health(self.word_pubs.values(), self.phase_pub))
