@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy
 from rcbht_introspection.errors import InputError
 
 if TYPE_CHECKING:
@@ -32,6 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="FILE.yaml")
     p.add_argument("--name", default=None, help="profile name (default: the --out file's stem)")
     p.add_argument("--report", type=Path, default=None, metavar="FILE.json")
+    add_repeated_stamps(p)
     p.set_defaults(func=run_calibrate)
 
 
@@ -44,7 +46,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if not name:
         raise InputError("empty profile name", field="--name")
     paths = find_inputs(args.inputs)
-    trials = [read_any_trial(p) for p in paths]
+    trials = [read_any_trial(p, repeated_policy(args)) for p in paths]
     if not any(len(t.time) > 1 for t in trials):
         raise InputError("no input has two samples or more", ", ".join(map(str, args.inputs)))
     calibration = calibrate_profile(trials, name)
