@@ -1,6 +1,7 @@
-"""Another task end to end: bags of the simulated peg-in-hole (its own four phase names, a noisy
-100 Hz sensor) through `rcbht train`, `rcbht evaluate` and `rcbht replay-eval`, whose two node
-processes run with their default parameters and publish the task's names on /task_state."""
+"""Another task end to end, as docs/your-robot.md walks it: bags of the simulated peg-in-hole (its
+own four phase names, a noisy 100 Hz sensor) through `rcbht calibrate`, `rcbht train`, `rcbht
+evaluate` and `rcbht replay-eval`, whose segmenter_node process loads the calibrated profile and
+whose classifier_node publishes the task's names on /task_state."""
 
 from __future__ import annotations
 
@@ -31,19 +32,26 @@ def peg_bags(tmp_path_factory: pytest.TempPathFactory) -> list[Path]:
     return bags
 
 
-def test_a_second_task_trains_evaluates_and_runs_live(peg_bags: list[Path], tmp_path: Path) -> None:
+def test_a_second_task_trains_evaluates_and_runs_live(
+    peg_bags: list[Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     require_ros()
     assert read_trial_bag(peg_bags[0]).phases == PEG
     train, held_out = peg_bags[:-HELD_OUT], peg_bags[-HELD_OUT:]
+    profile = tmp_path / "peg_sensor.yaml"
+    assert main(["calibrate", *map(str, train), "--out", str(profile)]) == 0
+    calibrated = ["--taxonomy-config", str(profile)]
     model = tmp_path / "peg.rcbht"
-    assert main(["train", *map(str, train), "--out", str(model)]) == 0
+    assert main(["train", *map(str, train), *calibrated, "--out", str(model)]) == 0
     from rcbht_introspection.learn.model_file import load_model
 
     trained = load_model(model)
     assert trained.task.subtasks == PEG and sorted(trained.classes_) == sorted(PEG)
+    assert trained.taxonomy_profile == "peg_sensor"
 
     report = tmp_path / "evaluate.json"
-    args = ["evaluate", *map(str, peg_bags), "--permutations", "2", "--validation-trials", "2"]
+    args = ["evaluate", *map(str, peg_bags), *calibrated, "--permutations", "2"]
+    args += ["--validation-trials", "2"]
     assert main([*args, "--no-variant", "--no-progress", "--json", str(report)]) == 0
     evaluated = json.loads(report.read_text())
     assert evaluated["confusion_labels"] == list(PEG) and evaluated["n_trials"] == TRIALS
@@ -51,6 +59,9 @@ def test_a_second_task_trains_evaluates_and_runs_live(peg_bags: list[Path], tmp_
 
     scores = tmp_path / "replay.json"
     bags = [str(b) for b in held_out]
+    # the calibrated model on reference-profile words is refused before any node starts
+    assert main(["replay-eval", *bags, "--model", str(model)]) == 2
+    assert "trained on words of taxonomy profile 'peg_sensor'" in capsys.readouterr().err
     assert (
         main(["replay-eval", *bags, "--model", str(model), "--rate", "2", "--json", str(scores)])
         == 0
@@ -59,6 +70,9 @@ def test_a_second_task_trains_evaluates_and_runs_live(peg_bags: list[Path], tmp_
     assert result["clean_shutdown"], (result["exit_codes"], result.get("shutdown_logs"))
     assert result["dropped_wrench"] == 0
     assert result["subtasks"] == len(PEG) * HELD_OUT
+    # the segmenter process labelled with the calibrated profile: its words equal the offline
+    # engine's under that profile, and the model (trained on it) gives the same verdicts
+    assert result["words_match_offline"], [b["words_mismatch"] for b in result["per_bag"]]
     assert result["verdicts_match_offline"], [
         (b["verdicts"], b["offline_verdicts"]) for b in result["per_bag"]
     ]

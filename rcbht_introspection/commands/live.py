@@ -58,8 +58,9 @@ def run_live_eval(args: argparse.Namespace) -> int:
         train_live_model,
         trial_live_samples,
     )
-    from rcbht_introspection.learn.model_file import load_model
+    from rcbht_introspection.learn.model_file import load_model, profile_mismatch
     from rcbht_introspection.live.replay import replay_beliefs, replay_summary, stream_trial
+    from rcbht_introspection.taxonomy.config import default_config
 
     paths = find_inputs(args.inputs)
     if not 1 <= args.held_out < len(paths) + (args.model is not None):
@@ -71,6 +72,9 @@ def run_live_eval(args: argparse.Namespace) -> int:
     models: dict[str, SubtaskModel] = {}
     if args.model is not None:
         models["model"] = load_model(args.model)
+        mismatch = profile_mismatch(models["model"], taxonomy or default_config())
+        if mismatch:
+            raise InputError(mismatch, args.model)
     else:
         trials = load_trials(train_paths, args.words, taxonomy)
         samples = [s for t in trials for s in t.samples]

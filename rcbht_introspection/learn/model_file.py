@@ -22,6 +22,7 @@ from rcbht_introspection.grammar.encoding.registry import encoding_from_state
 from rcbht_introspection.learn.models import SubtaskModel
 from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
 from rcbht_introspection.task import Task, task_of_names
+from rcbht_introspection.taxonomy.config import TaxonomyConfig, taxonomy_digest
 
 FORMAT = "rcbht-subtask-model"
 FORMAT_VERSION = 1
@@ -199,6 +200,19 @@ def model_summary(path: Path | str) -> dict[str, Any]:
     }
 
 
+def profile_mismatch(model: SubtaskModel, taxonomy: TaxonomyConfig) -> str:
+    """Why `model` must not classify words of `taxonomy` ('' when it may): a model trained on
+    another profile's words (its recorded digest differs) sees words it never learned."""
+    if not model.taxonomy_sha256 or model.taxonomy_sha256 == taxonomy_digest(taxonomy):
+        return ""
+    return (
+        f"the model was trained on words of taxonomy profile {model.taxonomy_profile!r} "
+        f"(sha256 {model.taxonomy_sha256[:12]}), not of {taxonomy.profile!r} "
+        f"(sha256 {taxonomy_digest(taxonomy)[:12]}); give the profile it was trained with "
+        "(--taxonomy-config / --profile, or the segmenter's taxonomy_config_file)"
+    )
+
+
 def load_subtask_model(path: str, expected_profile: str = "") -> tuple[SubtaskModel | None, str]:
     """(model, '') for a usable sub-task model file, else (None, why it cannot be used)."""
     if not path:
@@ -229,5 +243,6 @@ __all__ = [
     "load_model",
     "load_subtask_model",
     "model_summary",
+    "profile_mismatch",
     "save_model",
 ]

@@ -24,7 +24,7 @@ from rcbht_introspection.io.bags import (
     wrench_topic,
 )
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.learn.model_file import load_model
+from rcbht_introspection.learn.model_file import load_model, profile_mismatch
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.nodes.common import RosSession, qos_profile
@@ -124,6 +124,13 @@ def replay_eval(
         raise InputError("no such model file", model_path)
     if options.rate <= 0:
         raise InputError(f"rate must be > 0, got {options.rate}", field="rate")
+    if model_path is not None:
+        taxonomy = load_taxonomy_config(
+            options.profile or None, options.taxonomy_config_file or None
+        )
+        mismatch = profile_mismatch(load_model(model_path), taxonomy)
+        if mismatch:
+            raise InputError(mismatch, model_path)
     trials = [read_trial_bag(b) for b in bags]
     arms = trials[0].arms
     for b, t in zip(bags, trials, strict=True):
