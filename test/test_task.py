@@ -78,6 +78,35 @@ def test_bag_round_trip_keeps_any_names_and_repeats(tmp_path: Path) -> None:
     assert [s.subtask for s in samples] == list(repeated)  # a repeat is another sample
 
 
+def test_a_trial_folder_keeps_its_task_and_refuses_repeats(tmp_path: Path) -> None:
+    """write_trial stores the task the trial carries; a repeated sub-task needs a bag."""
+    trial = _pick_trial(3)
+    task = Task(PICK, ("finished",), "pick")
+    write_trial(replace(trial, metadata={"task": task.to_dict()}), tmp_path / "a")
+    assert load_task_file(tmp_path / "a" / "task.yaml") == task
+    with pytest.raises(InputError, match="cannot repeat a sub-task"):
+        write_trial(_pick_trial(4, ("reach", "grasp", "reach")), tmp_path / "b")
+
+
+def test_the_model_task_end_phases_end_the_live_task(tmp_path: Path) -> None:
+    """A model whose task ends with 'finished' ends a live task on 'finished' too."""
+    from rcbht_introspection.live.belief import BeliefTracker
+
+    task = Task(PICK, ("finished",))
+    trials = load_trials([_bag(tmp_path, s) for s in range(3)], "engine")
+    model = train_model([s for t in trials for s in t.samples], task=task)
+    tracker = BeliefTracker(model)
+    assert tracker.phase("reach", 0.0) and tracker.phase("finished", 1.0)
+    assert tracker.task_ended and tracker.end_phases == ("done", "finished")
+
+
+def _bag(tmp_path: Path, seed: int) -> Path:
+    """A pick trial written as a bag."""
+    path = tmp_path / f"pick-{seed}.mcap"
+    write_trial_bag(_pick_trial(seed), path)
+    return path
+
+
 def test_state_time_past_the_data_is_a_named_error(tmp_path: Path) -> None:
     trial = _pick_trial(2)
     late = replace(trial, state_times=(*trial.state_times[:-1], trial.end_time + 1.0))

@@ -181,12 +181,12 @@ class BagWriter:
             self.abort()
 
 
-def trial_phase_events(trial: Trial) -> list[tuple[float, str]]:
-    """(time, name) /task_phase events of a trial: each sub-task start, then END_PHASE at the end."""
+def trial_phase_events(trial: Trial, end_phase: str = END_PHASE) -> list[tuple[float, str]]:
+    """(time, name) /task_phase events of a trial: each sub-task start, then `end_phase` at the end."""
     events = [
         (float(t), name) for t, name in zip(trial.state_times, trial.phase_names, strict=False)
     ]
-    events.append((trial.end_time, END_PHASE))
+    events.append((trial.end_time, end_phase))
     return events
 
 
@@ -378,6 +378,7 @@ def read_trial_bag(
     names: list[str] = []
     after_end = 0
     for log_ns, sample_ns, phase in phases:
+        phase = phase.strip()
         if phase in end_phases or after_end:
             after_end += 1
             continue
@@ -385,7 +386,7 @@ def read_trial_bag(
         # there the event belongs to the last sample received before it
         t = log_ns if info else (sample_ns or int(ref[0]))
         state.append((t - origin) / _NS)
-        names.append(phase.strip())
+        names.append(phase)
     trial = Trial(
         name=str(info.get("name", path.name.split(".")[0])),
         time=time,

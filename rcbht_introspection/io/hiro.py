@@ -163,8 +163,15 @@ def write_trial(trial: Trial, folder: Path | str, task: Task | None = None) -> P
         (folder / f"{arm}_State.dat").write_text("".join(f"{t:.6g}\n" for t in trial.state_times))
     (folder / "outcome.txt").write_text(trial.outcome + "\n")
     names = trial.phase_names
+    stored = trial.metadata.get("task")
+    if task is None and isinstance(stored, dict):
+        task = Task.from_dict(stored)  # the task the trial was read or simulated with
     if task is None and trial.phases and names != HIRO_TASK.subtasks[: len(names)]:
         task = Task(names)
+        if len(set(names)) != len(names):
+            raise InputError(
+                f"a trial folder cannot repeat a sub-task ({list(names)}); write a bag"
+            )
     if task is not None and task != HIRO_TASK:
         if tuple(names) != task.subtasks[: len(names)]:
             raise InputError(

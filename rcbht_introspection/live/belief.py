@@ -80,12 +80,14 @@ class BeliefTracker:
         self.model = model
         self.mode = mode
         self.window_s = float(window_s)
+        task = getattr(model, "task", None)  # a SubtaskModel's; a stand-in: its classes
         if subtasks is None:
-            task = getattr(model, "task", None)  # a SubtaskModel's; a stand-in: its classes
             subtasks = task.subtasks if task is not None else getattr(model, "classes_", ())
         self.subtasks = tuple(subtasks)
         """Names that start a sub-task (the model's task); empty: every name but an end phase."""
-        self.end_phases = tuple(end_phases)
+        ends = [*end_phases, *(task.end_phases if task is not None else ())]
+        self.end_phases = tuple(dict.fromkeys(ends))
+        """The given end phases and the model's task's."""
         self.trial = trial
         self.classes: tuple[str, ...] = (
             tuple(str(c) for c in model.classes_) if model is not None else ()

@@ -74,11 +74,12 @@ class SegmenterNode(ManagedNode):
             stream_file=cfg.stream_config_file, stream_profile=cfg.stream_profile, taxonomy=taxonomy
         )
         self.last_sample = time.monotonic()
+        task = load_task_file(cfg.task_file) if cfg.task_file else None
         self.session = SegmenterSession(
             cfg.arms,
             factory,
-            cfg.end_phases,
-            load_task_file(cfg.task_file).subtasks if cfg.task_file else None,
+            tuple(dict.fromkeys([*cfg.end_phases, *(task.end_phases if task else ())])),
+            task.subtasks if task else None,
             hold_s=cfg.event_hold_s,
             max_hold_s=cfg.event_max_hold_s,
             intake=cfg.intake,
@@ -208,7 +209,7 @@ class SegmenterNode(ManagedNode):
         q = msg.pose.orientation
         try:
             rotation = rotation_from_quaternion(q.x, q.y, q.z, q.w)
-        except ValueError as exc:  # a zero quaternion
+        except ValueError as exc:  # a zero or non-finite quaternion
             self.bad_poses += 1
             self.get_logger().warning(
                 f"ignored a pose of arm {arm}: {exc}", throttle_duration_sec=1.0
