@@ -148,11 +148,11 @@ def _last_sample_before(events: list[tuple[float, str]], ns: np.ndarray) -> list
 
 def test_session_orders_events_by_source_time() -> None:
     """An event that arrives before samples published ahead of it still applies after them."""
-    from rcbht_introspection.io.bags import END_PHASE
-    from rcbht_introspection.live.offline import offline_stream_words, trial_events
+    from rcbht_introspection.io.bags import END_PHASE, trial_phase_events
+    from rcbht_introspection.live.offline import offline_stream_words
 
     trial, factory, session, ns = _session_with_stamps()
-    events = trial_events(trial, END_PHASE)
+    events = trial_phase_events(trial, END_PHASE)
     # the publisher sends sample i at source time 10*i and an event right after the last sample
     # before it (source 10*i + 5); the session receives each event two samples early
     follows = _last_sample_before(events, ns)
@@ -223,11 +223,11 @@ def test_end_event_waits_for_samples_still_in_flight() -> None:
 
 def test_late_events_give_the_offline_words() -> None:
     """Events delivered after later-published samples still give the offline stream's words."""
-    from rcbht_introspection.io.bags import END_PHASE
-    from rcbht_introspection.live.offline import offline_stream_words, trial_events
+    from rcbht_introspection.io.bags import END_PHASE, trial_phase_events
+    from rcbht_introspection.live.offline import offline_stream_words
 
     trial, factory, session, ns = _session_with_stamps()
-    events = [(t, name) for t, name in trial_events(trial, END_PHASE) if name != END_PHASE]
+    events = [(t, name) for t, name in trial_phase_events(trial, END_PHASE) if name != END_PHASE]
     follows = _last_sample_before(events, ns)
     got: list[Word] = []
     for i in range(len(ns)):

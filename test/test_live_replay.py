@@ -11,6 +11,7 @@ from conftest import SOURCES, trial_folders
 
 from rcbht_introspection.cli import main
 from rcbht_introspection.grammar.split import prefix_sample
+from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.hiro import read_trial
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn.data import load_samples, load_trials
@@ -57,7 +58,7 @@ def _independent_release(trial, factory):
     """(release time, word) by pushing ArmStream directly, sample by sample, as the test's reference."""
     stream = factory("R")
     t0 = float(trial.time[0])
-    events = offline.trial_events(trial)
+    events = trial_phase_events(trial)
     out, ev = [], 0
     for i, t in enumerate(trial.time):
         t = float(t) - t0

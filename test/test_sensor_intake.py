@@ -126,6 +126,20 @@ def test_arm_health_warns_while_the_sensor_is_frozen() -> None:
 # --------------------------------------------------------------------------- repeated stamps
 
 
+def test_session_counts_a_resent_rejected_sample_as_a_duplicate() -> None:
+    """Stamps 20, 20, 20 with values 2, 3, 3: a repeated stamp, then a re-sent copy of it, live
+    as in the batch rule (the copy is compared with the rejected sample, not the accepted one)."""
+    t = np.array([10, 20, 20, 20])
+    y = np.array([1.0, 2.0, 3.0, 3.0])[:, None].repeat(6, axis=1)
+    _, _, counts = resolve_repeated_stamps(t, y, "reject")
+    session = SegmenterSession(("R",), arm_stream_factory())
+    for stamp, row in zip(t, y, strict=True):
+        session.push("R", ORIGIN_NS + int(stamp) * 1_000_000, row.tolist())
+    rejected = session.counts["R"].rejected
+    assert rejected["duplicate_sample"] == counts["duplicate_sample"] == 1
+    assert rejected["repeated_stamp"] == counts["repeated_stamp"] == 1
+
+
 def test_repeated_stamps_by_hand() -> None:
     t = np.array([0, 10, 10, 10, 20, 30, 30])
     y = np.arange(7.0)[:, None].repeat(6, axis=1)
@@ -249,6 +263,8 @@ def test_gravity_compensation_against_hand_computed_values() -> None:
     np.testing.assert_allclose(stacked, -np.stack([level, rolled]), atol=1e-12)
     half = math.sqrt(0.5)
     np.testing.assert_allclose(rotation_from_quaternion(half, 0, 0, half), rot_x(90), atol=1e-12)
+    with pytest.raises(ValueError, match="not finite"):  # it would make every sample NaN
+        rotation_from_quaternion(math.inf, 0, 0, 1)
 
 
 def test_session_needs_a_pose_then_subtracts_the_tool_weight() -> None:

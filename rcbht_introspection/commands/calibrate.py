@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy
+from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy, warn
 from rcbht_introspection.errors import InputError
 
 if TYPE_CHECKING:
@@ -38,7 +38,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
+    from rcbht_introspection.io.sensor_checks import trial_findings
     from rcbht_introspection.learn.data import find_inputs, read_any_trial
+    from rcbht_introspection.live.intake import load_intake_config
     from rcbht_introspection.taxonomy.calibration import calibrate_profile, compare_profiles
     from rcbht_introspection.taxonomy.config import default_config, write_taxonomy_config
 
@@ -47,6 +49,10 @@ def run_calibrate(args: argparse.Namespace) -> int:
         raise InputError("empty profile name", field="--name")
     paths = find_inputs(args.inputs)
     trials = [read_any_trial(p, repeated_policy(args)) for p in paths]
+    checks = load_intake_config()
+    for path, trial in zip(paths, trials, strict=True):
+        # a frozen stretch drags the measured noise floor towards 0: the user must know
+        warn("calibrate", path.name, trial_findings(trial, checks.frozen_samples, checks.frozen_s))
     if not any(len(t.time) > 1 for t in trials):
         raise InputError("no input has two samples or more", ", ".join(map(str, args.inputs)))
     calibration = calibrate_profile(trials, name)

@@ -120,7 +120,8 @@ def run_train(args: argparse.Namespace) -> int:
     trials = load_checked(args, "train", taxonomy)
     samples = [s for t in trials for s in t.samples]
     model, n_live = live_training(
-        trials, args.live_augment, args.live_config, taxonomy, classifier=args.classifier,
+        trials, args.live_augment, args.live_config, taxonomy, repeated_policy(args),
+        classifier=args.classifier,
         encoding=args.encoding, random_state=args.seed,
         augment_prefixes=tuple(args.augment_prefixes),
     )  # fmt: skip
@@ -166,6 +167,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         live_augment=args.live_augment,
         live_score=args.live_score,
         taxonomy=taxonomy,
+        repeated=repeated_policy(args),
     )
     bar = None
     if not args.no_progress:

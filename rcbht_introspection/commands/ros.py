@@ -215,8 +215,18 @@ def cmd_import(args: argparse.Namespace) -> int:
         rate_hz=args.rate,
         task=task,
     )
+    from rcbht_introspection.commands.sensor import warn
+    from rcbht_introspection.io.bags import read_trial_bag
+    from rcbht_introspection.io.sensor_checks import trial_findings
+    from rcbht_introspection.live.intake import load_intake_config
+
+    checks = load_intake_config()
     for bag, out, report in import_bags(args.bags, args.out, options, f".{args.format}"):
         print(f"{bag} -> {out}: {report.summary()}", flush=True)
+        imported = read_trial_bag(out)  # as train will read it: a frozen sensor is warned about
+        warn(
+            "bag import", out.name, trial_findings(imported, checks.frozen_samples, checks.frozen_s)
+        )
     return 0
 
 

@@ -24,6 +24,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import EncodingName
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
+from rcbht_introspection.io.sensor_checks import RepeatedPolicy
 from rcbht_introspection.learn import ClassifierKind
 from rcbht_introspection.learn.data import TrialSamples, load_samples, task_of_trials
 from rcbht_introspection.learn.live import load_live_config, stream_factory, trial_live_samples
@@ -62,6 +63,8 @@ class Protocol:
     """Score the final model on the validation trials' live windows (live_accuracy)."""
     taxonomy: TaxonomyConfig | None = None
     """Profile of the live windows' words, as the trials' (None: config/live.yaml's)."""
+    repeated: RepeatedPolicy | None = None
+    """Repeated-stamp policy the live windows' trials are read with, as the trials were."""
 
 
 def default_validation(n_trials: int, two_arm: bool = False) -> int:
@@ -136,7 +139,7 @@ def evaluate(
     near_empty = lambda s: s.duration < protocol.near_empty_seconds  # noqa: E731
     n_near_empty = sum(near_empty(s) for t in complete for s in t.samples)
     live = (
-        _live_windows(complete, protocol.taxonomy)
+        _live_windows(complete, protocol.taxonomy, protocol.repeated)
         if protocol.live_augment or protocol.live_score
         else {}
     )
@@ -168,7 +171,7 @@ def evaluate(
                 variant = train_model(
                     kept, protocol.classifier, protocol.encoding,
                     random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
-                    augment_prefixes=protocol.augment_prefixes, cache=cache,
+                    augment_prefixes=protocol.augment_prefixes, cache=cache, task=task,
                 )  # fmt: skip
                 i = tail_steps.index(k)
                 variant_curve[perm, i] = _accuracy(variant.predict_samples(val_kept), val_kept)
@@ -200,7 +203,7 @@ def evaluate(
                     head = train_model(
                         live_train, protocol.classifier, protocol.encoding,
                         random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
-                        augment_prefixes=protocol.augment_prefixes, cache=cache,
+                        augment_prefixes=protocol.augment_prefixes, cache=cache, task=task,
                     )  # fmt: skip
                 windows = [s for t in validation for s in live[t.trial]]
                 live_acc.append(_accuracy(head.predict_samples(windows), windows))
@@ -272,12 +275,13 @@ def evaluate(
 
 
 def _live_windows(
-    trials: Sequence[TrialSamples], taxonomy: TaxonomyConfig | None = None
+    trials: Sequence[TrialSamples],
+    taxonomy: TaxonomyConfig | None = None,
+    repeated: RepeatedPolicy | None = None,
 ) -> dict[str, list[SubtaskSample]]:
     """Live-like windows of every trial (words final by t, learn/live.py), by trial name."""
     config = load_live_config()
     factory = stream_factory(config, taxonomy)
-    repeated = next((t.repeated for t in trials), None)  # as load_trials read them
     by_path = trial_live_samples([t.path for t in trials], config, factory, repeated=repeated)
     return {t.trial: by_path[str(t.path)] for t in trials}
 

@@ -196,12 +196,14 @@ def live_training(
     enabled: bool | None = None,
     config_file: Path | str | None = None,
     taxonomy: TaxonomyConfig | None = None,
+    repeated: RepeatedPolicy | None = None,
     **train_kwargs: Any,
 ) -> tuple[SubtaskModel, int]:
     """(model, number of live samples) for TrialSamples `trials`; `enabled` None = config's.
 
     `taxonomy`: the profile the trials' words came from, also used for the live windows
-    (None: reference, and config/live.yaml's taxonomy_profile for the live windows)."""
+    (None: reference, and config/live.yaml's taxonomy_profile for the live windows); `repeated`:
+    the repeated-stamp policy the live windows' trials are read with (as the trials were)."""
     config = load_live_config(config_file)
     use = config.enabled if enabled is None else enabled
     samples = [s for t in trials for s in t.samples]
@@ -209,7 +211,6 @@ def live_training(
     live: list[SubtaskSample] = []
     if use:
         factory = stream_factory(config, taxonomy)
-        repeated = next((t.repeated for t in trials), None)  # as load_trials read them
         paths = [t.path for t in trials]
         by_path = trial_live_samples(paths, config, factory, repeated=repeated)
         live = [s for v in by_path.values() for s in v]

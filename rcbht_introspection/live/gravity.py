@@ -39,5 +39,8 @@ def compensate_gravity(
 
 
 def rotation_from_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray:
-    """The (3, 3) rotation of a unit quaternion (geometry_msgs order x, y, z, w; normalised)."""
+    """The (3, 3) rotation of a unit quaternion (geometry_msgs order x, y, z, w; normalised);
+    ValueError for a zero or non-finite one (it would turn every compensated sample into NaN)."""
+    if not np.all(np.isfinite([x, y, z, w])):
+        raise ValueError(f"quaternion ({x}, {y}, {z}, {w}) is not finite")
     return Rotation.from_quat([x, y, z, w]).as_matrix()

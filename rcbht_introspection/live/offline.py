@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from rcbht_introspection.grammar.split import split_words
+from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.taxonomy.words import TrialWords, Word
 
@@ -22,19 +23,12 @@ if TYPE_CHECKING:
     from rcbht_introspection.taxonomy.stream import ArmStream
 
 
-def trial_events(trial: Trial, end_phase: str = "done") -> list[tuple[float, str]]:
-    """The /task_phase events of a trial bag: sub-task starts, then `end_phase` at the end."""
-    events = [(float(t), n) for t, n in zip(trial.state_times, trial.phase_names, strict=False)]
-    events.append((trial.end_time, end_phase))
-    return events
-
-
 def offline_stream_words(
     trial: Trial, stream_factory: Callable[[str], ArmStream], end_phase: str = "done"
 ) -> dict[str, list[Word]]:
     """Words per arm, in emission order, of ArmStream fed the trial as the segmenter node is."""
     out: dict[str, list[Word]] = {}
-    events = trial_events(trial, end_phase)
+    events = trial_phase_events(trial, end_phase)
     for arm in trial.arms:
         stream = stream_factory(arm)
         words: list[Word] = []

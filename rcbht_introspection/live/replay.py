@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live import BeliefMode, offline
 from rcbht_introspection.live.belief import (
@@ -75,7 +76,7 @@ def stream_trial(
     arms = trial.arms
     session = SegmenterSession(arms, stream_factory, end_phases=(end_phase,))
     ns = STAMP_ORIGIN_NS + np.rint(np.asarray(trial.time, dtype=float) * 1e9).astype(np.int64)
-    events = offline.trial_events(trial, end_phase)
+    events = trial_phase_events(trial, end_phase)
     event_ns = [STAMP_ORIGIN_NS + round(t * 1e9) for t, _ in events]
     steps: list[StreamStep] = []
     ev = 0

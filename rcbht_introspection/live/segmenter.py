@@ -234,10 +234,12 @@ class SegmenterSession:
             return "non_increasing_stamp"
         if list(map(float, wrench)) == list(map(float, st.last_wrench)):
             return "duplicate_sample"
+        st.last_wrench = (
+            wrench  # a re-sent copy of this sample is a duplicate, as in the batch rule
+        )
         if self.intake.repeated_stamps == "reject":
             return "repeated_stamp"
         st.held.append((wrench, source_ns))
-        st.last_wrench = wrench
         return None
 
     def _accept(
