@@ -62,10 +62,8 @@ def test_a_second_task_trains_evaluates_and_runs_live(
     # the calibrated model on reference-profile words is refused before any node starts
     assert main(["replay-eval", *bags, "--model", str(model)]) == 2
     assert "trained on words of taxonomy profile 'peg_sensor'" in capsys.readouterr().err
-    assert (
-        main(["replay-eval", *bags, "--model", str(model), "--rate", "2", "--json", str(scores)])
-        == 0
-    )
+    args = ["replay-eval", *bags, "--model", str(model), *calibrated, "--rate", "2"]
+    assert main([*args, "--json", str(scores)]) == 0
     result = json.loads(scores.read_text())
     assert result["clean_shutdown"], (result["exit_codes"], result.get("shutdown_logs"))
     assert result["dropped_wrench"] == 0
