@@ -14,9 +14,6 @@ from typing import TYPE_CHECKING
 from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_or_default
 from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy, warn
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.io.conformance import CONFORMANCE_LEVELS, compare_arms
-from rcbht_introspection.io.rcbht_format import write_trial_words
-from rcbht_introspection.io.words_jsonl import write_jsonl
 from rcbht_introspection.taxonomy.words import Level
 
 if TYPE_CHECKING:
@@ -89,6 +86,8 @@ def checked_reader(command: str, args: argparse.Namespace) -> Callable[[Path], T
 
 def run_label(args: argparse.Namespace) -> int:
     from rcbht_introspection.io.hiro import find_trials
+    from rcbht_introspection.io.rcbht_format import write_trial_words
+    from rcbht_introspection.io.words_jsonl import write_jsonl
 
     label = labeller(args.engine, taxonomy_or_default(args))
     read = checked_reader("label", args)
@@ -109,6 +108,7 @@ def run_label(args: argparse.Namespace) -> int:
 
 
 def run_conformance(args: argparse.Namespace) -> int:
+    from rcbht_introspection.io.conformance import CONFORMANCE_LEVELS, compare_arms
     from rcbht_introspection.io.hiro import find_trials
 
     config = taxonomy_or_default(args)
