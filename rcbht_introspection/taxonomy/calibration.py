@@ -15,6 +15,10 @@ every window and every gradient is noise. The calibration measures, over all inp
 * the moment-axis domain rule is off: it adapts the default spectrum to small moment signals,
   and a measured spectrum already has each axis's own scale.
 
+A group (forces, moments) that the base profile already fits keeps the base's spectra and domain
+rule: its segmentation is the base's (same window, no noise floor) and the base labels CONS_BAND
+of its primitives 'cons' on every axis. So a sensor like the base's gets the base's words.
+
 docs/taxonomy.md ("Calibrating for a new sensor") explains the rules and the table.
 """
 
@@ -53,6 +57,9 @@ IMPULSE_QUANTILE = 0.997
 at the 0.991-0.997 quantiles of Fx and Fz)."""
 AXIS_GROUPS: tuple[tuple[str, ...], ...] = (("Fx", "Fy", "Fz"), ("Mx", "My", "Mz"))
 """Axes that share one spectrum, as the default profile's force and moment axes do."""
+CONS_BAND = (0.35, 0.75)
+"""A base spectrum fits a group whose primitives it labels 'cons' in this share on every axis
+(REAL HIRO under the reference: 0.41-0.68 per axis); such a group keeps it."""
 
 Series = tuple[np.ndarray, np.ndarray]
 """(N,) time and (N, 6) wrench of one arm of one trial."""
@@ -254,12 +261,39 @@ def calibrate_profile(
                 f"{axis}: gradients give no spectrum (largest {pimp:.3g}, near-constant "
                 f"{pconst:.3g}); the base profile's thresholds are kept"
             )
-    config = dataclasses.replace(config, calibrated_thresholds=spectra, domain_axes=())
+    kept = _groups_the_base_fits(trials, base, window, factors)
+    for axis in kept:
+        del spectra[axis]
+    config = dataclasses.replace(
+        config,
+        calibrated_thresholds=spectra or None,
+        domain_axes=tuple(a for a in base.domain_axes if a in kept),
+    )
+    if kept:
+        notes.append(f"{', '.join(kept)}: the base profile fits; its spectra and domain rule kept")
     domains = {
         axis: _median_finite(np.array([axis_domain(y[:, a], base) for _, y in series]))
         for a, axis in enumerate(AXES)
     }
     return Calibration(config, rate, variance, factors, limits, domains, notes)
+
+
+def _groups_the_base_fits(
+    trials: Sequence[TrialLike],
+    base: TaxonomyConfig,
+    window: int,
+    factors: dict[str, float],
+) -> tuple[str, ...]:
+    """Axes of the groups whose segmentation is the base's and whose 'cons' share under the base
+    lies in CONS_BAND on every axis (they keep the base's spectra)."""
+    if window != base.window:
+        return ()
+    same = [g for g in AXIS_GROUPS if not any(factors[axis] for axis in g)]
+    if not same:
+        return ()
+    shares = profile_stats(trials, base).const_share
+    low, high = CONS_BAND
+    return tuple(a for g in same if all(low <= shares[a] <= high for a in g) for a in g)
 
 
 @dataclass(frozen=True)
