@@ -323,6 +323,27 @@ def test_rosbag2_with_a_string_phase_topic(tmp_path: Path) -> None:
     assert report2.samples == len(rec2.tags)
 
 
+def test_a_frozen_sensor_is_found_in_the_import_and_recorded(tmp_path: Path) -> None:
+    """With frozen thresholds the report names a frozen stretch, as train would warn of it."""
+    from rcbht_introspection.io.bag_import import ImportOptions, import_bag
+    from rcbht_introspection.io.bags import read_trial_bag
+    from rcbht_introspection.io.sensor_checks import trial_findings
+
+    rec = recording(4, n_end=10)
+    rec.wrench[100:200] = rec.wrench[100]  # ~1 s of one value
+    bag = write_ros2(tmp_path / "stuck", rec)
+    options = ImportOptions(phase="/state", end_phases=("finished",), frozen=(20, 0.5))
+    report = import_bag(bag, tmp_path / "stuck.mcap", options)
+    written = read_trial_bag(tmp_path / "stuck.mcap")
+    assert len(report.findings) == 1 and "frozen" in report.findings[0]
+    assert list(report.findings) == trial_findings(written, 20, 0.5)
+    assert written.metadata["import"]["findings"] == list(report.findings)
+    plain = import_bag(
+        bag, tmp_path / "plain.mcap", ImportOptions(phase="/state", end_phases=("finished",))
+    )
+    assert plain.findings == ()  # no thresholds: not checked
+
+
 def test_phase_csv_relative_and_absolute(tmp_path: Path) -> None:
     from rcbht_introspection.io.bag_import import ImportOptions, read_foreign_bag
 

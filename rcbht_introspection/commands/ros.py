@@ -195,11 +195,14 @@ def cmd_from_hiro(args: argparse.Namespace) -> int:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
+    from rcbht_introspection.commands.sensor import warn
     from rcbht_introspection.io.bag_import import ImportOptions, import_bags, parse_wrench_specs
     from rcbht_introspection.io.bags import END_PHASE
     from rcbht_introspection.io.phase_events import parse_phase_map
+    from rcbht_introspection.live.intake import load_intake_config
     from rcbht_introspection.task import load_task_file
 
+    checks = load_intake_config()
     task = load_task_file(args.task) if args.task is not None else None
     if args.end_phase is not None:
         end_phases: tuple[str, ...] = (args.end_phase,)
@@ -214,19 +217,11 @@ def cmd_import(args: argparse.Namespace) -> int:
         stamps=args.stamps,
         rate_hz=args.rate,
         task=task,
+        frozen=(checks.frozen_samples, checks.frozen_s),  # the thresholds train warns with
     )
-    from rcbht_introspection.commands.sensor import warn
-    from rcbht_introspection.io.bags import read_trial_bag
-    from rcbht_introspection.io.sensor_checks import trial_findings
-    from rcbht_introspection.live.intake import load_intake_config
-
-    checks = load_intake_config()
     for bag, out, report in import_bags(args.bags, args.out, options, f".{args.format}"):
         print(f"{bag} -> {out}: {report.summary()}", flush=True)
-        imported = read_trial_bag(out)  # as train will read it: a frozen sensor is warned about
-        warn(
-            "bag import", out.name, trial_findings(imported, checks.frozen_samples, checks.frozen_s)
-        )
+        warn("bag import", out.name, report.findings)
     return 0
 
 

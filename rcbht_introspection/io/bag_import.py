@@ -37,6 +37,7 @@ from rcbht_introspection.io.phase_events import (
     read_phase_csv,
     usable_phases,
 )
+from rcbht_introspection.io.sensor_checks import frozen_runs
 from rcbht_introspection.io.trial import Trial, check_phases
 from rcbht_introspection.io.wrench_samples import ArmCounts, WrenchSamples, align
 from rcbht_introspection.task import Task
@@ -69,6 +70,8 @@ class ImportOptions:
     """Resample every arm onto this fixed rate (linear interpolation); None keeps the samples."""
     task: Task | None = None
     """The task the trials belong to: stored in the bag; every phase must be one of its sub-tasks."""
+    frozen: tuple[int, float] | None = None
+    """Frozen-sensor thresholds (samples, seconds) of io/sensor_checks.frozen_runs; None: no check."""
 
     def check(self) -> None:
         """One named error for options that cannot work together."""
@@ -117,11 +120,14 @@ class ImportReport:
     rate_hz: float | None
     time_origin_ns: int
     """Stamp of the trial's first sample (the output bag keeps the input's stamps)."""
+    findings: tuple[str, ...] = ()
+    """Frozen-sensor runs of the written wrench (with ImportOptions.frozen), one line each."""
 
     def to_dict(self) -> dict[str, Any]:
         """Plain form for the trial info JSON."""
         out = asdict(self)
         out["subtasks"] = list(self.subtasks)
+        out["findings"] = list(self.findings)
         return out
 
     def summary(self) -> str:
@@ -347,6 +353,11 @@ def read_foreign_bag(path: Path | str, options: ImportOptions) -> tuple[Trial, I
         samples=len(time),
         rate_hz=options.rate_hz,
         time_origin_ns=origin,
+        findings=tuple(
+            run.describe(arm, len(time))
+            for arm in sorted(wrench)
+            for run in (frozen_runs(time, wrench[arm], *options.frozen) if options.frozen else ())
+        ),
     )
     metadata: dict[str, object] = {"import": report.to_dict()}
     if options.task is not None:
