@@ -51,7 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     ev.add_argument("inputs", nargs="+", type=Path, metavar="DATASET_DIR")
     _common(ev)
-    ev.set_defaults(classifier=None)
+    ev.set_defaults(classifier=None, encoding=None)  # per protocol: see run_evaluate
     ev.add_argument(
         "--protocol",
         choices=PROTOCOLS,
@@ -205,6 +205,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
                 f"--{option.replace('_', '-')} belongs to --protocol prequential", field=option
             )
     args.classifier = args.classifier or "svm"
+    args.encoding = args.encoding or "compact"
     args.permutations = args.permutations or 20
     taxonomy = taxonomy_from_args(args)
     trials = load_checked(args, "evaluate", taxonomy)
@@ -298,7 +299,7 @@ def run_prequential(args: argparse.Namespace) -> int:
     teach = load_teach_config(args.teach_config)
     teach = replace(
         teach,
-        encoding=args.encoding,
+        encoding=args.encoding or teach.encoding,
         n_estimators=teach.n_estimators if args.n_estimators is None else args.n_estimators,
         warmup_windows=teach.warmup_windows if args.warmup_windows is None else args.warmup_windows,
     )

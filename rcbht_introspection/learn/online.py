@@ -114,8 +114,9 @@ class OnlineLearner:
     @property
     def warming_up(self) -> bool:
         """True while the next teach refits from the kept windows (encoding not yet frozen)."""
-        fresh = self._working is None or bool(self._kept)
-        return fresh and self.taught_windows < self.config.warmup_windows
+        if self._working is None:
+            return True  # no model yet: the first teach fits one
+        return bool(self._kept) and self.taught_windows < self.config.warmup_windows
 
     def teach(self, samples: Sequence[SubtaskSample]) -> SubtaskModel:
         """Learn labelled windows (sample.subtask = the label, any new name accepted) and return a
@@ -126,7 +127,7 @@ class OnlineLearner:
         for s in samples:
             if not isinstance(s.subtask, str) or not s.subtask.strip():
                 raise InputError(f"a taught window of trial {s.trial!r} has no label")
-        if self._working is None or self.warming_up:
+        if self.warming_up:
             self._refit(samples)
         else:
             self._extend(samples)
@@ -157,10 +158,10 @@ class OnlineLearner:
 
     def _refit(self, samples: Sequence[SubtaskSample]) -> None:
         """Warm-up: encoding + forest from every window taught so far (= train_model on them)."""
-        self._kept.extend(samples)
+        kept = [*self._kept, *samples]
         encoding: EncodingName = "paper" if self.config.encoding == "paper" else "compact"
         self._working = train_model(
-            self._kept,
+            kept,
             "mondrian",
             encoding,
             random_state=self.random_state,
@@ -169,6 +170,7 @@ class OnlineLearner:
             cache=self._cache,
             task=self.task,
         )
+        self._kept = kept  # only once the refit succeeded: a failed teach changes nothing
         self.refits += 1
         self._shared = False
 

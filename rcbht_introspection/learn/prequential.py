@@ -173,6 +173,11 @@ def prequential(
     ):
         result[f"{key}_accuracy"] = _column_means(table)
         result[f"{key}_std"] = _column_stds(table)
+    result["per_order"] = {
+        "prequential": _rows(scores.online),
+        "batch": _rows(scores.batch),
+        "note": "rows = teaching orders (0 = recording order), columns = steps",
+    }
     result["test_then_train_accuracy"] = {
         "curve": _column_means(scores.running),
         "std": _column_stds(scores.running),
@@ -206,6 +211,10 @@ def _batch(
 
 def _mean(values: Sequence[float]) -> float:
     return float(np.mean(values)) if len(values) else math.nan
+
+
+def _rows(table: np.ndarray) -> list[list[float]]:
+    return [[float(v) for v in row] for row in table]
 
 
 def _column_means(table: np.ndarray) -> list[float]:
