@@ -1,0 +1,58 @@
+"""Teaching over real DDS: a classifier_node started without a model is taught ten REAL trials
+one by one through its ~/teach service, then classifies the held-out REAL 41-46; restarted from
+the model it saved, it gives the same verdicts (rcbht replay-eval --teach-first).
+
+The ten are S-31..40: the early recordings differ from the late ones (a batch Mondrian forest or
+SVM trained offline on S-01..10 or S-11..20 swaps rotation and insertion on S-41..46, accuracy
+0.25-0.5; on S-21..30 or S-31..40 it is 1.0), so S-01..10 would test the data, not teaching."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from ros_support import require_ros
+
+from rcbht_introspection.cli import main
+
+pytestmark = [pytest.mark.ros, pytest.mark.shared_data, pytest.mark.slow]
+
+TAUGHT = range(31, 41)
+HELD_OUT = range(41, 47)
+RATE = 10.0
+"""Playback speed: the verdicts wait for every word, so a fast replay scores as a real-time one
+(the replay harness compares them with the offline run of the saved model)."""
+
+
+def test_cold_started_classifier_learns_through_the_service(
+    hiro_data: Path, tmp_path: Path
+) -> None:
+    require_ros()
+    real = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS"
+    bags = []
+    for i in (*TAUGHT, *HELD_OUT):
+        bag = tmp_path / f"s{i:02d}.mcap"
+        assert main(["bag", "from-hiro", str(real / f"20121127-HIROSA-S-{i:02d}"), str(bag)]) == 0
+        bags.append(str(bag))
+    out = tmp_path / "eval.json"
+    saved = tmp_path / "taught.rcbht"
+    args = ["replay-eval", *bags, "--teach-first", str(len(TAUGHT)), "--teach-restart"]
+    args += ["--teach-file", str(saved), "--rate", str(RATE), "--json", str(out)]
+    assert main(args) == 0
+    result = json.loads(out.read_text())
+    teach = result["teach"]
+    assert teach["taught_trials"] == [f"20121127-HIROSA-S-{i:02d}" for i in TAUGHT]
+    assert teach["taught_windows"] == 4 * len(TAUGHT) and teach["errors"] == 0
+    assert result["clean_shutdown"], (result["exit_codes"], result.get("shutdown_logs"))
+    assert result["dropped_wrench"] == 0
+    assert result["subtasks"] == 4 * len(HELD_OUT)
+    assert result["subtask_accuracy"] >= 0.9, [b["verdicts"] for b in result["per_bag"]]
+    # the live verdicts are those of the saved model run offline on the same words
+    assert result["words_match_offline"], [b["words_mismatch"] for b in result["per_bag"]]
+    assert result["verdicts_match_offline"], [
+        (b["verdicts"], b["offline_verdicts"]) for b in result["per_bag"]
+    ]
+    # restarted from its file, the classifier continues with the taught model
+    assert result["restart"]["verdicts_equal"], result["restart"]
+    assert saved.is_file()
