@@ -65,14 +65,14 @@ def teach_latencies(streamed: list[StreamedTrial], config: TeachConfig) -> dict[
                 for name, start, end in windows:
                     before = len(teaching.latencies_s)
                     teaching.request(TeachRequest(name, False, start, end), tracker)
-                    wait_until(lambda b=before: len(teaching.latencies_s) > b, timeout=600)
+                    _wait_learned(teaching, before + 1)
                     single.append(teaching.latencies_s[-1])
             else:
                 before = len(teaching.latencies_s)
                 for name, start, end in windows:
                     teaching.request(TeachRequest(name, False, start, end), tracker)
                 n = len(windows)
-                wait_until(lambda b=before + n: len(teaching.latencies_s) >= b, timeout=600)
+                _wait_learned(teaching, before + n)
                 whole.append(max(list(teaching.latencies_s)[before:]))
         model = teaching.take_model() or tracker.model
     finally:
@@ -85,6 +85,11 @@ def teach_latencies(streamed: list[StreamedTrial], config: TeachConfig) -> dict[
         "model_versions": status.model_version,
         "model": model,
     }
+
+
+def _wait_learned(teaching: Teaching, jobs: int) -> None:
+    """Until `jobs` requests in all are in a model in the slot."""
+    wait_until(lambda: len(teaching.latencies_s) >= jobs, timeout=600)
 
 
 def _seconds(values: list[float]) -> dict[str, Any]:
