@@ -12,11 +12,12 @@ import json
 from pathlib import Path
 
 import pytest
-from ros_support import require_ros
+from ros_support import env, require_ros, start_node
 
 from rcbht_introspection.cli import main
 
-pytestmark = [pytest.mark.ros, pytest.mark.shared_data, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+__all__ = ["env"]  # the isolated-ROS fixture, used by name
 
 TAUGHT = range(31, 41)
 HELD_OUT = range(41, 47)
@@ -25,6 +26,7 @@ RATE = 10.0
 (the replay harness compares them with the offline run of the saved model)."""
 
 
+@pytest.mark.shared_data
 def test_cold_started_classifier_learns_through_the_service(
     hiro_data: Path, tmp_path: Path
 ) -> None:
@@ -56,3 +58,54 @@ def test_cold_started_classifier_learns_through_the_service(
     # restarted from its file, the classifier continues with the taught model
     assert result["restart"]["verdicts_equal"], result["restart"]
     assert saved.is_file()
+
+
+def test_cold_start_cli_and_topic_refusals(
+    tmp_path: Path,
+    env: dict[str, str],
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """No model file yet: info-level cold start; `rcbht teach` answers; bad labels are counted."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rcbht_interfaces.msg import TeachRequest
+
+    from rcbht_introspection.nodes.common import RosSession, qos_profile
+    from rcbht_introspection.replay.supervision import stop_process
+    from rcbht_introspection.waiting import wait_until
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", env["ROS_DOMAIN_ID"])  # the CLI's own session
+    model = tmp_path / "taught.rcbht"
+    params: dict[str, object] = {"teach_enabled": True, "model_file": str(model)}
+    log = tmp_path / "classifier.log"
+    proc = start_node("classifier_node", params, env, log)
+    refused: list[int] = []
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if "teach requests refused" in values:
+                refused.append(int(values["teach requests refused"]))
+
+    try:
+        with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
+            ros.node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
+            assert wait_until(lambda: refused, timeout=60), log.read_text()  # active, teaching
+            assert main(["teach", "--status"]) == 0
+            assert "accepted: status (pending 0, taught windows 0" in capsys.readouterr().out
+            assert main(["teach", "approach", "--last"]) == 1  # nothing has ended yet
+            assert "refused: unknown window" in capsys.readouterr().out
+            pub = ros.node.create_publisher(
+                TeachRequest, "rcbht/teach", qos_profile(100, "reliable")
+            )
+            assert wait_until(lambda: pub.get_subscription_count() > 0), log.read_text()
+            pub.publish(TeachRequest(label=""))  # fire and forget: an empty label is refused
+            assert wait_until(lambda: refused and refused[-1] >= 2, timeout=20), log.read_text()
+        assert proc.poll() is None
+    finally:
+        code = stop_process(proc, timeout=15)
+    text = log.read_text()
+    assert "cold start: no model yet" in text and "no usable model" not in text
+    assert "empty label" in text
+    assert code == 0, text
+    assert not model.exists()  # nothing taught, nothing saved
