@@ -192,6 +192,10 @@ def test_a_resent_request_is_taught_once(trials: list[Trial]) -> None:
     assert session.teach(req).accepted  # the client did not hear the first answer
     assert wait_until(lambda: teaching.status().pending == 0, timeout=60)
     assert teaching.status().taught_windows == 1
+    bad = TeachRequest("mating", last=False, start=3.0, end=1.0, request_id="def")
+    assert not session.teach(bad).accepted
+    assert not session.teach(bad).accepted  # refused again, counted once
+    assert teaching.counts["teach requests refused"] == 1
     teaching.close()
 
 

@@ -114,14 +114,15 @@ class Teaching:
     def request(self, req: TeachRequest, tracker: BeliefTracker) -> TeachStatus:
         """Take a request: its window's words now (or once final), or a one-line refusal."""
         if req.request_id and req.request_id in self._answers:
-            return replace(self.status(self._answers[req.request_id].message), accepted=True)
+            first = self._answers[req.request_id]  # a re-sent request: the same answer, now
+            return replace(self.status(first.message), accepted=first.accepted)
         if not req.label:
             return self.status("status")
         problem = self._refusal(req, tracker)
         if problem:
             self.counts["teach requests refused"] += 1
             self._notes.append(("warning", f"teach request refused: {problem}"))
-            return replace(self.status(problem), accepted=False)
+            return self._remember(req, replace(self.status(problem), accepted=False))
         start, end = self._window(req, tracker)
         job = _Job(req, start, end, accepted_at=time.perf_counter())
         with self._lock:
@@ -129,7 +130,7 @@ class Teaching:
         if tracker.complete(end):
             message = self._take_words(job, tracker)
             if message:
-                return replace(self.status(message), accepted=False)
+                return self._remember(req, replace(self.status(message), accepted=False))
         else:
             self.waiting.append(job)
             tracker.pinned_from = min(tracker.pinned_from, start)
@@ -137,6 +138,10 @@ class Teaching:
             f"{req.label!r} on [{start:.3f}, {end:.3f}] s "
             + ("queued" if job.sample is not None else "waits for its words to be final")
         )
+        return self._remember(req, answer)
+
+    def _remember(self, req: TeachRequest, answer: TeachStatus) -> TeachStatus:
+        """Keep the answer to a request with an id (a repeat gets it again); returns it."""
         if req.request_id:
             self._answers[req.request_id] = answer
             while len(self._answers) > REMEMBERED_IDS:
