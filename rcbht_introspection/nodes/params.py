@@ -117,6 +117,22 @@ class ClassifierConfig:
         10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
     )
     qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
+    teach_enabled: bool = _f(
+        False,
+        "learn labelled windows (service ~/teach, topic teach_topic) into the Mondrian model; "
+        "a model_file that does not exist yet is a cold start ('unknown' until the first taught "
+        "window)",
+    )
+    teach_file: str = _f(
+        "", "each taught model is saved here, atomically ('': to model_file; both '': not saved)"
+    )
+    teach_history_s: float = _f(
+        60.0,
+        "teaching: stream seconds of words kept for labels given after the fact (besides the last "
+        "finished sub-task)",
+    )
+    teach_topic: str = _f("rcbht/teach", "rcbht_interfaces/TeachRequest: fire-and-forget labels")
+    teach_config_file: str = _f("", "YAML file with a `teach` section ('': config/teach.yaml)")
 
 
 NodeConfig = TypeVar("NodeConfig", bound=SegmenterConfig | ClassifierConfig)
@@ -188,6 +204,7 @@ TOPIC_FIELDS = (
     "state_topic",
     "belief_topic",
     "pose_topics",
+    "teach_topic",
 )
 
 
@@ -274,6 +291,18 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
             path,
         )
         _check(bool(cfg.state_topic), "state_topic", "must not be empty", path)
+        _check(
+            0 <= cfg.teach_history_s <= 3600,
+            "teach_history_s",
+            f"must be in [0, 3600], got {cfg.teach_history_s}",
+            path,
+        )
+        _check(
+            not cfg.teach_config_file or Path(cfg.teach_config_file).is_file(),
+            "teach_config_file",
+            f"no such file: {cfg.teach_config_file}",
+            path,
+        )
     return cfg
 
 

@@ -8,7 +8,7 @@ Its dict is the JSON that `rcbht replay-eval` prints and writes.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -251,15 +251,19 @@ def score(
     arms: Sequence[str],
     mode: BeliefMode,
     reference: Reference | None = None,
+    accepted_before: Mapping[str, int] | None = None,
 ) -> dict[str, Any]:
-    """Scores over all bags plus a per-bag record (without a reference: no offline figures)."""
+    """Scores over all bags plus a per-bag record (without a reference: no offline figures).
+
+    `accepted_before`: per arm, the samples the segmenter accepted for bags played before these
+    (its counters are cumulative), e.g. the bags a teaching replay taught."""
     correct = total = 0
     verdicts_match = words_match = True
     dropped = rejected = state_changes = 0
     latencies = Latencies()
     time_acc: list[tuple[float, float]] = []
     bags_out = []
-    prev_accepted = dict.fromkeys(arms, 0)
+    prev_accepted = {arm: (accepted_before or {}).get(arm, 0) for arm in arms}
     for rec, trial in zip(records, trials, strict=True):
         truth = [s for s, _, _ in trial.subtask_bounds()]
         finals = [r.belief for r in rec.beliefs if r.belief.final]
@@ -340,6 +344,17 @@ def summary(result: dict[str, Any], timeline: bool = False) -> str:
             steps = ", ".join(f"{t:.2f}s {s}" for t, s in b["timeline"])
             lines.append(f"  /task_state: start {b['initial_state']}, {steps}")
     lat = result["latency_ms"]
+    teach = result.get("teach")
+    if teach:
+        lines.append(
+            f"taught {len(teach['taught_trials'])} trials ({teach['taught_windows']} windows, "
+            f"model version {teach['model_version']}, errors {teach['errors']}); learned in "
+            f"{teach['trial_latency_s']} s per trial"
+        )
+    if "restart" in result:
+        lines.append(
+            f"after a restart from the saved model: verdicts equal {result['restart']['verdicts_equal']}"
+        )
     lines.append(
         f"subtask_accuracy {result['subtask_accuracy']} ({result['subtasks_correct']}/{result['subtasks']}), "
         f"time_accuracy {result['time_accuracy']}, verdicts_match_offline {result['verdicts_match_offline']}, "
