@@ -44,7 +44,8 @@ def test_every_parameter_is_described(cls: type) -> None:
         (ClassifierConfig, {"mode": "psychic"}, "mode"),
         (ClassifierConfig, {"window_s": 0.0}, "window_s"),
         (ClassifierConfig, {"publish_rate_hz": -2.0}, "publish_rate_hz"),
-        (ClassifierConfig, {"state_hold_s": -0.1}, "state_hold_s"),
+        (ClassifierConfig, {"state.hold_s": -0.1}, "state.hold_s"),
+        (ClassifierConfig, {"state.min_probability": 2.0}, "state.min_probability"),
         (ClassifierConfig, {"state_topic": ""}, "state_topic"),
     ],
 )

@@ -2,7 +2,7 @@
 
 Parameters: see config/classifier.yaml. Without a usable model (missing, unreadable, wrong
 classes or taxonomy profile) it logs why once and publishes "unknown". /task_state is published
-when the belief changes (once held `state_hold_s`) and at `publish_rate_hz`; each verdict on a
+when it changes (a new sub-task once confident, parameters `state.*`) and at `publish_rate_hz`; each verdict on a
 finished sub-task is a Belief with final=true.
 """
 
@@ -19,12 +19,7 @@ from rcbht_interfaces.msg import Words as WordsMsg
 from std_msgs.msg import String
 
 from rcbht_introspection.learn.model_file import load_subtask_model
-from rcbht_introspection.live.belief import (
-    UNKNOWN,
-    Belief,
-    BeliefTracker,
-    StateFilter,
-)
+from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker
 from rcbht_introspection.live.classifier import ClassifierSession, PhaseInput, Step, WordsInput
 from rcbht_introspection.live.health import (
     CounterWatch,
@@ -33,6 +28,7 @@ from rcbht_introspection.live.health import (
     classifier_health,
     file_sha256,
 )
+from rcbht_introspection.live.state import StateFilter
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import belief_msg, phase_input, words_input
 from rcbht_introspection.nodes.draining import DrainedGroup, take
@@ -66,7 +62,7 @@ class ClassifierNode(ManagedNode):
                 f"no usable model, /task_state stays {UNKNOWN!r}: {self.model_problem}"
             )
         self.tracker = BeliefTracker(model, cfg.mode, cfg.window_s, end_phases=cfg.end_phases)
-        self.session = ClassifierSession(self.tracker, StateFilter(cfg.state_hold_s), self.counts)
+        self.session = ClassifierSession(self.tracker, StateFilter(cfg.state), self.counts)
         self.reported_error: str | None = None
         self.qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         self.state_pub = self.create_publisher(String, cfg.state_topic, self.qos)

@@ -9,6 +9,7 @@ in the bag and with the offline run of the same stream and model.
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 import time
 from dataclasses import dataclass
@@ -27,6 +28,7 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import load_model, profile_mismatch
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.segmenter import arm_stream_factory
+from rcbht_introspection.live.state import TaskStateConfig
 from rcbht_introspection.nodes.common import RosSession, qos_profile
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
 from rcbht_introspection.nodes.player import BagPlayer
@@ -63,8 +65,8 @@ class ReplayEvalOptions:
     taxonomy_config_file: str = ""
     """A file of taxonomy profiles, e.g. from `rcbht calibrate` (empty: config/rcbht.yaml)."""
     stream_profile: StreamProfile = "reference"
-    state_hold_s: float = 0.0
-    """classifier_node's state_hold_s (how long a new /task_state must hold)."""
+    state: TaskStateConfig | None = None
+    """classifier_node's `state.*` parameters (None: those of config/classifier.yaml)."""
     startup_timeout: float = 60.0
     drain_timeout: float = 60.0
     domain_id: int | None = None
@@ -107,7 +109,7 @@ def _params(
             "model_file": cls_cfg.model_file,
             "mode": options.mode,
             "arms": list(arms),
-            "state_hold_s": options.state_hold_s,
+            **({"state": dataclasses.asdict(options.state)} if options.state is not None else {}),
         },
     )
     return seg, cls_cfg, seg_params, cls_params
