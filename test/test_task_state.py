@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
@@ -122,3 +124,30 @@ def test_ece_equals_the_calibration_curve_reference() -> None:
 def test_top_label_confidence_and_correctness() -> None:
     conf, hit = top_label([[0.1, 0.7, 0.2], [0.5, 0.3, 0.2]], ["a", "b", "c"], ["b", "c"])
     assert conf.tolist() == [0.7, 0.5] and hit.tolist() == [True, False]
+
+
+def test_live_eval_reports_the_state_rule_and_calibration(
+    request: pytest.FixtureRequest, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`rcbht live-eval` on generated trials: the JSON keys of the state rule and calibration."""
+    from conftest import generated_trials
+
+    from rcbht_introspection.cli import main
+
+    inputs = [str(p) for p in generated_trials(request)[:4]]
+    out = tmp_path / "live.json"
+    args = ["live-eval", *inputs, "--held-out", "1", "--mode", "boundary", "--json", str(out)]
+    assert main([*args, "--state-min-probability", "0.7"]) == 0
+    result = json.loads(out.read_text())
+    assert result["state_rule"] == dataclasses.asdict(TaskStateConfig(min_probability=0.7))
+    assert result["commanded_phase"]["state_changes"] == 4  # 1 trial of 4 sub-tasks
+    for key in ("before/boundary", "after/boundary"):
+        r = result["results"][key]
+        assert r["subtasks"] == 4
+        assert r["state_changes_per_boundary"] == round(r["state_changes"] / 4, 3)
+        assert r["state_changes"] <= r["without_state_rule"]["state_changes"]
+        assert 0.0 <= r["expected_calibration_error"]["final"] <= 1.0
+        assert 0.0 <= r["expected_calibration_error"]["running"] <= 1.0
+        assert 0.0 <= r["time_accuracy"] <= 1.0
+    assert main([*args, "--state-hold-s", "-1"]) != 0
+    assert "field --state-hold-s: must be in [0, 10], got -1.0" in capsys.readouterr().err
