@@ -13,8 +13,9 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import load_model
 from rcbht_introspection.learn.online import TeachConfig
 from rcbht_introspection.learn.teaching import Teaching
-from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker, StateFilter
+from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker
 from rcbht_introspection.live.classifier import ClassifierSession, PhaseInput, WordsInput
+from rcbht_introspection.live.state import StateFilter
 from rcbht_introspection.live.teach import TeachRequest
 from rcbht_introspection.taxonomy.words import LEVELS, Word
 from rcbht_introspection.waiting import wait_until

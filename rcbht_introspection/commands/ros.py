@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 from typing import get_args
 
+from rcbht_introspection.commands.options import add_state_options, state_from_args
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.taxonomy import StreamProfile
@@ -81,12 +82,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="reference",
         help="stream profile of the segmenter (causal: moment-axis words without waiting)",
     )
-    p.add_argument(
-        "--state-hold-s",
-        type=float,
-        default=0.0,
-        help="classifier_node's state_hold_s: a new /task_state must hold this long (s)",
-    )
+    add_state_options(p)
     p.add_argument("--timeline", action="store_true", help="print the /task_state timeline")
     p.add_argument(
         "--teach-first",
@@ -335,7 +331,7 @@ def cmd_replay_eval(args: argparse.Namespace) -> int:
         if args.taxonomy_config
         else "",
         stream_profile=args.stream_profile,
-        state_hold_s=args.state_hold_s,
+        state=state_from_args(args),
         teach_first=args.teach_first,
         teach_restart=args.teach_restart,
         teach_file=args.teach_file.resolve() if args.teach_file else None,

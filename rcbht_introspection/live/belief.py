@@ -366,34 +366,3 @@ class BeliefTracker:
                     if seq and seq[0].end < before:
                         per_axis[axis] = [w for w in seq if w.end >= before]
         self._added = 0
-
-
-class StateFilter:
-    """/task_state from successive beliefs: a new sub-task passes once it held `hold_s` seconds.
-
-    Debounces the short-lived beliefs of a window with few words (stream time, so a replay
-    gives the node's states). "unknown" passes at once: it means no evidence yet, e.g. right
-    after a sub-task event. hold_s 0 passes every change.
-    """
-
-    def __init__(self, hold_s: float = 0.0) -> None:
-        self.hold_s = hold_s
-        self.state = UNKNOWN
-        self._candidate: str | None = None
-        self._since = 0.0
-
-    def update(self, t: float, subtask: str) -> bool:
-        """Feed the belief at stream time `t`; True when the state changed to it."""
-        if subtask == self.state:
-            self._candidate = None
-            return False
-        if subtask != self._candidate:
-            self._candidate, self._since = subtask, t
-        if subtask != UNKNOWN and t - self._since < self.hold_s:
-            return False
-        self.state, self._candidate = subtask, None
-        return True
-
-    def new_stream(self) -> None:
-        """A new stream restarts the clock: a pending candidate is dropped, the state is kept."""
-        self._candidate = None

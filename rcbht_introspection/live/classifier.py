@@ -4,7 +4,7 @@ The node takes whatever DDS delivered (a burst) and hands it here in publication
 publishes what comes back. Here live: stream switching (words of a new stream issue the previous
 stream's verdicts and start a new tracker session), the latched events of earlier streams
 (live/join.LatchedEvents), the Words messages of one wrench sample (a belief once all of them are
-in), proven word losses and /task_state (StateFilter).
+in), proven word losses and /task_state (live/state.py StateFilter).
 """
 
 from __future__ import annotations
@@ -12,8 +12,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from rcbht_introspection.live.belief import Belief, BeliefTracker, StateFilter
+from rcbht_introspection.live.belief import Belief, BeliefTracker
 from rcbht_introspection.live.join import LatchedEvents
+from rcbht_introspection.live.state import StateFilter
 from rcbht_introspection.live.teach import Teacher, TeachRequest, TeachStatus
 from rcbht_introspection.taxonomy.words import Level, Word
 
@@ -145,7 +146,7 @@ class ClassifierSession:
             self._emit(step, final, trigger)
         belief = self.tracker.current()
         self._emit(step, belief, trigger)
-        if self.state.update(self.tracker.now, belief.subtask):
+        if self.state.update(self.tracker.now, belief):
             step.state = self.state.state
         return step
 

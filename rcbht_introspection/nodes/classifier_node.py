@@ -2,10 +2,10 @@
 
 Parameters: see config/classifier.yaml. Without a usable model (missing, unreadable, wrong
 classes or taxonomy profile) it logs why once and publishes "unknown". /task_state is published
-when the belief changes (once held `state_hold_s`) and at `publish_rate_hz`; each verdict on a
-finished sub-task is a Belief with final=true. With `teach_enabled`, labels for windows (service
-~/teach, topic `teach_topic`) are learned beside the live path (learn/teaching.py); a missing
-model_file is then a cold start.
+when it changes (a new sub-task once confident, parameters `state.*`) and at
+`publish_rate_hz`; each verdict on a finished sub-task is a Belief with final=true. With
+`teach_enabled`, labels for windows (service ~/teach, topic `teach_topic`) are learned beside
+the live path (learn/teaching.py); a missing model_file is then a cold start.
 """
 
 from __future__ import annotations
@@ -27,12 +27,7 @@ from rcbht_introspection.learn.model_file import load_subtask_model
 from rcbht_introspection.learn.models import SubtaskModel
 from rcbht_introspection.learn.online import load_teach_config
 from rcbht_introspection.learn.teaching import Teaching
-from rcbht_introspection.live.belief import (
-    UNKNOWN,
-    Belief,
-    BeliefTracker,
-    StateFilter,
-)
+from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker
 from rcbht_introspection.live.classifier import ClassifierSession, PhaseInput, Step, WordsInput
 from rcbht_introspection.live.health import (
     CounterWatch,
@@ -41,6 +36,7 @@ from rcbht_introspection.live.health import (
     classifier_health,
     file_sha256,
 )
+from rcbht_introspection.live.state import StateFilter
 from rcbht_introspection.live.teach import TeachRequest, TeachStatus
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import belief_msg, phase_input, words_input
@@ -91,7 +87,7 @@ class ClassifierNode(ManagedNode):
             history_s=cfg.teach_history_s if cfg.teach_enabled else 0.0,
         )
         self.session = ClassifierSession(
-            self.tracker, StateFilter(cfg.state_hold_s), self.counts, self.teaching
+            self.tracker, StateFilter(cfg.state), self.counts, self.teaching
         )
         self.reported_error: str | None = None
         self.qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)

@@ -25,6 +25,7 @@ from rcbht_introspection.config_files import described as _f
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.intake import IntakeConfig, check_intake
+from rcbht_introspection.live.state import TaskStateConfig, check_task_state
 from rcbht_introspection.taxonomy import StreamProfile
 
 Reliability = Literal["reliable", "best_effort"]
@@ -101,11 +102,6 @@ class ClassifierConfig:
     publish_rate_hz: float = _f(
         10.0, "/task_state is also republished at this rate (0: only on change)"
     )
-    state_hold_s: float = _f(
-        0.0,
-        "a new sub-task reaches /task_state once the belief held it this long (stream seconds; "
-        "0: at once; 'unknown' always at once); fewer short-lived states, later changes",
-    )
     arms: tuple[str, ...] = _f(("R",), "arm names whose words are classified, as in the segmenter")
     words_namespace: str = _f("rcbht", "namespace of the word topics, as in the segmenter")
     phase_topic: str = _f("rcbht/phase", "rcbht_interfaces/Phase events from the segmenter")
@@ -133,6 +129,8 @@ class ClassifierConfig:
     )
     teach_topic: str = _f("rcbht/teach", "rcbht_interfaces/TeachRequest: fire-and-forget labels")
     teach_config_file: str = _f("", "YAML file with a `teach` section ('': config/teach.yaml)")
+    state: TaskStateConfig = field(default_factory=TaskStateConfig)
+    """Parameters `state.<name>`: when a new believed sub-task becomes /task_state."""
 
 
 NodeConfig = TypeVar("NodeConfig", bound=SegmenterConfig | ClassifierConfig)
@@ -284,12 +282,10 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
             f"must be >= 0, got {cfg.publish_rate_hz}",
             path,
         )
-        _check(
-            0 <= cfg.state_hold_s <= 10,
-            "state_hold_s",
-            f"must be in [0, 10], got {cfg.state_hold_s}",
-            path,
-        )
+        try:
+            check_task_state(cfg.state)
+        except InputError as exc:
+            raise InputError(exc.message, path=path, field=f"state.{exc.field}") from None
         _check(bool(cfg.state_topic), "state_topic", "must not be empty", path)
         _check(
             0 <= cfg.teach_history_s <= 3600,

@@ -17,6 +17,7 @@ played again: the verdicts must be the same.
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 import time
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import load_model, profile_mismatch
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.segmenter import arm_stream_factory
+from rcbht_introspection.live.state import TaskStateConfig
 from rcbht_introspection.nodes.common import RosSession, qos_profile
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
 from rcbht_introspection.nodes.player import BagPlayer
@@ -73,8 +75,8 @@ class ReplayEvalOptions:
     taxonomy_config_file: str = ""
     """A file of taxonomy profiles, e.g. from `rcbht calibrate` (empty: config/rcbht.yaml)."""
     stream_profile: StreamProfile = "reference"
-    state_hold_s: float = 0.0
-    """classifier_node's state_hold_s (how long a new /task_state must hold)."""
+    state: TaskStateConfig | None = None
+    """classifier_node's `state.*` parameters (None: those of config/classifier.yaml)."""
     startup_timeout: float = 60.0
     drain_timeout: float = 60.0
     domain_id: int | None = None
@@ -122,7 +124,7 @@ def _params(
         "model_file": cls_cfg.model_file,
         "mode": options.mode,
         "arms": list(arms),
-        "state_hold_s": options.state_hold_s,
+        **({"state": dataclasses.asdict(options.state)} if options.state is not None else {}),
     }
     if options.teach_first:
         values.update(

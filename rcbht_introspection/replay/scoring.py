@@ -18,7 +18,8 @@ import numpy as np
 from rcbht_introspection.io.bags import END_PHASE, WRENCH_TYPE, BagMessage, decode_wrench
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live import BeliefMode, offline
-from rcbht_introspection.live.belief import Belief
+from rcbht_introspection.live.belief import UNKNOWN, Belief
+from rcbht_introspection.live.reliability import expected_calibration_error, top_label
 from rcbht_introspection.nodes.params import LEVEL_TOPICS
 from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import LEVELS, Word
@@ -262,6 +263,10 @@ def score(
     dropped = rejected = state_changes = 0
     latencies = Latencies()
     time_acc: list[tuple[float, float]] = []
+    final_conf: list[float] = []
+    final_hit: list[bool] = []
+    running_conf: list[float] = []
+    running_hit: list[bool] = []
     bags_out = []
     prev_accepted = {arm: (accepted_before or {}).get(arm, 0) for arm in arms}
     for rec, trial in zip(records, trials, strict=True):
@@ -280,6 +285,21 @@ def score(
         bag_dropped = rec.playback.published - sum(accepted.values())
         dropped += bag_dropped
         latencies.add(rec)
+        for b, true in zip(finals, truth, strict=False):
+            if b.probabilities:
+                conf, hit = top_label([b.probabilities], b.classes, [true])
+                final_conf.append(float(conf[0]))
+                final_hit.append(bool(hit[0]))
+        running = [
+            r.belief
+            for r in rec.beliefs
+            if not r.belief.final and r.belief.probabilities and r.belief.subtask != UNKNOWN
+        ]
+        at = offline.truth_at(trial, np.asarray([b.end for b in running], dtype=float))
+        for b, true in zip(running, at, strict=True):
+            conf, hit = top_label([b.probabilities], b.classes, [str(true)])
+            running_conf.append(float(conf[0]))
+            running_hit.append(bool(hit[0]))
         changes = state_timeline(rec)
         acc_t = offline.time_accuracy(trial, changes, initial=rec.initial_state)
         state_changes += len(changes)
@@ -319,6 +339,11 @@ def score(
         "verdicts_match_offline": verdicts_match if reference is not None and boundary else None,
         "time_accuracy": round(sum(a * d for a, d in time_acc) / weight, 4),
         "state_changes": state_changes,
+        "state_changes_per_boundary": round(state_changes / total, 3) if total else None,
+        "expected_calibration_error": {
+            "final": _rounded(expected_calibration_error(final_conf, final_hit)),
+            "running": _rounded(expected_calibration_error(running_conf, running_hit)),
+        },
         "dropped_wrench": dropped,
         "rejected_wrench": rejected,
         "words_match_offline": words_match if reference is not None else None,
@@ -328,6 +353,10 @@ def score(
         "event_latency_ms": offline.percentiles_ms(latencies.event),
         "per_bag": bags_out,
     }
+
+
+def _rounded(value: float | None) -> float | None:
+    return None if value is None else round(value, 4)
 
 
 def summary(result: dict[str, Any], timeline: bool = False) -> str:
@@ -357,7 +386,10 @@ def summary(result: dict[str, Any], timeline: bool = False) -> str:
         )
     lines.append(
         f"subtask_accuracy {result['subtask_accuracy']} ({result['subtasks_correct']}/{result['subtasks']}), "
-        f"time_accuracy {result['time_accuracy']}, verdicts_match_offline {result['verdicts_match_offline']}, "
+        f"time_accuracy {result['time_accuracy']}, state changes {result['state_changes']} "
+        f"({result['state_changes_per_boundary']} per sub-task boundary), "
+        f"ECE final {result['expected_calibration_error']['final']} "
+        f"running {result['expected_calibration_error']['running']}, verdicts_match_offline {result['verdicts_match_offline']}, "
         f"words_match_offline {result['words_match_offline']}, dropped_wrench {result['dropped_wrench']}, "
         f"latency p50 {lat['p50']} ms p99 {lat['p99']} ms (n={lat['n']}), "
         f"clean_shutdown {result['clean_shutdown']}, rate {result['rate']}x, {result['wall_s']} s"
