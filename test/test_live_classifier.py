@@ -119,7 +119,7 @@ def test_an_unknown_event_is_reported_not_applied() -> None:
 def test_a_new_stream_reports_the_state_unknown_once() -> None:
     session = ClassifierSession(BeliefTracker(None), StateFilter())
     # the previous stream's state: a belief without probabilities counts as certain
-    assert session.state.update(9.0, Belief("approach", (), (), 0.0, 9.0, "boundary"))
+    assert session.state.update(9.0, Belief("approach", (), (), 0.0, 9.0, "boundary", n_words=5))
     session.receive([_phase("approach", 0.0), _words(Level.PRIMITIVE, [1], 1.0, batch_size=1)])
     step = session.classify()
     assert step is not None and step.state == UNKNOWN

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,7 @@ def belief(leading: str, p: float, blind: bool = False, **others: float) -> Beli
     rest = [c for c in CLASSES if c != leading and c not in others]
     share = (1 - p - sum(others.values())) / max(1, len(rest))
     probs = tuple(p if c == leading else others.get(c, share) for c in CLASSES)
-    return Belief(leading, CLASSES, probs, 0.0, 0.0, "boundary")
+    return Belief(leading, CLASSES, probs, 0.0, 0.0, "boundary", n_words=10)
 
 
 def states(f: StateFilter, beliefs: list[tuple[float, Belief]]) -> list[tuple[float, str]]:
@@ -151,3 +152,13 @@ def test_live_eval_reports_the_state_rule_and_calibration(
         assert 0.0 <= r["time_accuracy"] <= 1.0
     assert main([*args, "--state-hold-s", "-1"]) != 0
     assert "field --state-hold-s: must be in [0, 10], got -1.0" in capsys.readouterr().err
+
+
+def test_a_window_of_few_words_does_not_move_the_state() -> None:
+    """min_words: a confident belief from a window of fewer words keeps the state."""
+    f = StateFilter(TaskStateConfig(min_probability=0.6, min_words=3))
+    few = replace(belief("insertion", 0.9), n_words=2)
+    assert not f.update(0.1, few) and f.state == UNKNOWN
+    assert f.update(0.2, replace(few, n_words=3)) and f.state == "insertion"
+    assert not f.update(0.3, replace(belief("mating", 0.95), n_words=1))
+    assert f.state == "insertion"

@@ -51,19 +51,20 @@ STATE_OPTIONS = {
     "min_probability": "a new /task_state needs at least this probability",
     "min_log_ratio": "... and this log ratio over the current state's probability",
     "evidence_bound": "... and this sum of log-odds over the successive beliefs it leads",
+    "min_words": "... from a window of at least this many words",
     "hold_s": "... held this long (stream s)",
 }
 """The /task_state rule's fields (live/state.py TaskStateConfig) as --state-<name> options."""
 
 
 def add_state_options(parser: argparse.ArgumentParser) -> None:
-    """--state-min-probability, --state-min-log-ratio, --state-evidence-bound, --state-hold-s:
-    classifier_node's `state.*` parameters (default: TaskStateConfig's, as config/classifier.yaml)."""
+    """--state-min-probability, --state-min-log-ratio, --state-evidence-bound, --state-min-words,
+    --state-hold-s: classifier_node's `state.*` parameters (default: TaskStateConfig's, as config/classifier.yaml)."""
     for name, text in STATE_OPTIONS.items():
         parser.add_argument(
             "--state-" + name.replace("_", "-"),
             dest="state_" + name,
-            type=float,
+            type=int if name == "min_words" else float,
             default=None,
             help=f"classifier_node's state.{name}: {text} (default: docs/live-belief.md)",
         )

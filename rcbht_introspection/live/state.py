@@ -3,8 +3,8 @@
 A planner acts on every /task_state change, so the state moves to a new sub-task only when the
 running belief's leading class passes every test of `TaskStateConfig` (probability, log ratio
 over the current state, accumulated log-odds, hold). Before the first confident belief of a stream
-the state is "unknown"; a belief without evidence (an empty window right after a sub-task event)
-keeps the state; a blind belief (words proven lost, live/join.py) makes it "unknown" at once.
+the state is "unknown"; a belief without enough evidence (a window of fewer than `min_words` words,
+e.g. right after a sub-task event) keeps the state; a blind belief (words proven lost, live/join.py) makes it "unknown" at once.
 """
 
 from __future__ import annotations
@@ -37,6 +37,11 @@ class TaskStateConfig:
         "sequential test: the log-odds log(p/(1-p)) of the leading sub-task, summed over the "
         "successive beliefs it leads, must reach this (0: off)",
     )
+    min_words: int = described(
+        3,
+        "... and its window must hold at least this many words (a window of a few words is "
+        "over-confident; 0: any)",
+    )
     hold_s: float = described(
         0.0,
         "... and the belief must have passed the tests for this long (stream seconds; 0: at once)",
@@ -49,6 +54,7 @@ def check_task_state(config: TaskStateConfig) -> None:
         ("min_probability", 0 <= config.min_probability <= 1, "[0, 1]"),
         ("min_log_ratio", 0 <= config.min_log_ratio <= 50, "[0, 50]"),
         ("evidence_bound", 0 <= config.evidence_bound <= 1000, "[0, 1000]"),
+        ("min_words", 0 <= config.min_words <= 100000, "[0, 100000]"),
         ("hold_s", 0 <= config.hold_s <= 10, "[0, 10]"),
     )
     for name, ok, bounds in checks:
@@ -84,8 +90,8 @@ class StateFilter:
         if belief.blind:
             self._drop()
             self.state = UNKNOWN
-        elif belief.subtask == UNKNOWN or belief.subtask == self.state:
-            self._drop()  # no evidence (an empty window) keeps the state
+        elif belief.subtask in (UNKNOWN, self.state) or belief.n_words < self.config.min_words:
+            self._drop()  # no evidence (an empty window) or too little keeps the state
         elif not self.confident(belief):
             self._drop()
         else:
