@@ -132,10 +132,11 @@ def test_unseen_class_in_first_batch_is_handled_through_classes() -> None:
     for chunk in np.array_split(np.arange(150), 10):
         forest.partial_fit(X[chunk], labels[chunk])
     assert {"insertion", "mating"} <= set(forest.predict(X[150:]))
-    with pytest.raises(ValueError, match="classes"):
-        MondrianForestClassifier().partial_fit(X[:4], labels[:4])
+    with pytest.raises(ValueError, match="drop known classes"):
+        forest.partial_fit(X[:1], ["mating"], classes=["approach", "mating", "rotation"])
     with pytest.raises(ValueError, match="not in classes"):
-        forest.partial_fit(X[:1], ["grasp"])
+        forest.partial_fit(X[:1], ["grasp"], classes=labels)
+    assert forest.classes_.tolist() == ["approach", "insertion", "mating", "rotation"]
 
 
 def test_online_in_12_minibatches_matches_batch_accuracy_over_seeds() -> None:
@@ -170,6 +171,8 @@ def test_get_set_params_and_random_state() -> None:
         "n_estimators": 100,
         "discount_factor": 10.0,
         "random_state": None,
+        "max_nodes": None,
+        "max_points": None,
     }
     forest.set_params(n_estimators=7, random_state=4)
     X, y = make_classification(n_samples=40, n_features=4, random_state=0)
