@@ -37,7 +37,7 @@ TAUGHT = 10_000
 WINDOW = 16
 """Samples per partial_fit call: a taught window with its prefixes, the largest batch that still
 goes point by point (mondrian.POINTWISE_BATCH); 625 updates keep the unbounded run to minutes."""
-BUDGET = {"max_nodes": 20_000, "max_points": 2_000}
+BUDGET: dict[str, int | None] = {"max_nodes": 20_000, "max_points": 2_000}
 """The budget the memory figure is taken with (200 nodes per tree of 100)."""
 
 
@@ -177,8 +177,8 @@ def run_memory() -> dict[str, object]:
         "data": f"synthetic compact-like, 101 features, 6 classes, {TAUGHT} samples taught "
         f"{WINDOW} per partial_fit, 100 trees; accuracy on 2000 more",
     }
-    for name, budget in (("unbounded", {"max_nodes": None, "max_points": None}),
-                         ("budget", dict(BUDGET))):  # fmt: skip
+    unbounded: dict[str, int | None] = {"max_nodes": None, "max_points": None}
+    for name, budget in (("unbounded", unbounded), ("budget", {**BUDGET})):
         with ProcessPoolExecutor(max_workers=1, mp_context=spawn) as pool:
             figures[name] = pool.submit(forest_memory, budget).result()
     return figures
