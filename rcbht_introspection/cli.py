@@ -21,6 +21,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "rcbht_introspection.commands.live",  # live-eval (offline live /task_state replay)
     "rcbht_introspection.commands.sim",  # sim, sim-report
     "rcbht_introspection.commands.ros",  # bag, replay-eval
+    "rcbht_introspection.commands.teach",  # teach (a running classifier_node)
     "rcbht_introspection.commands.demo",  # demo
 )
 

@@ -20,6 +20,7 @@ from rcbht_introspection.config_files import (
 )
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.live import LiveAugmentConfig, load_live_config
+from rcbht_introspection.learn.online import TeachConfig, load_teach_config
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, load_node_config
 from rcbht_introspection.sim.config import SimConfig, load_sim_config
 from rcbht_introspection.sim.peg_config import PegConfig, load_peg_config
@@ -54,6 +55,7 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
     "sim.yaml": [(load_sim_config, SimConfig())],
     "sim_peg.yaml": [(load_peg_config, PegConfig())],
     "live.yaml": [(load_live_config, LiveAugmentConfig())],
+    "teach.yaml": [(load_teach_config, TeachConfig())],
     "segmenter.yaml": [(lambda p: load_node_config(SegmenterConfig, p), SegmenterConfig())],
     "classifier.yaml": [(lambda p: load_node_config(ClassifierConfig, p), ClassifierConfig())],
 }

@@ -11,7 +11,7 @@ import pytest
 from conftest import SOURCES, trial_folders
 
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.live.belief import UNKNOWN, BeliefTracker, StateFilter
+from rcbht_introspection.live.belief import UNKNOWN, BeliefTracker
 from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
 
 if TYPE_CHECKING:
@@ -90,31 +90,6 @@ def test_window_mode_and_no_model() -> None:
     assert tracker.take_finals() == []  # no sub-tasks in window mode
     with pytest.raises(ValueError, match="mode"):
         BeliefTracker(None, mode="psychic")
-
-
-def test_state_filter_passes_a_sub_task_once_it_held() -> None:
-    beliefs = [
-        (0.00, "insertion"),  # a few words: short-lived
-        (0.05, "approach"),
-        (0.12, "approach"),
-        (0.16, "approach"),  # held 0.11 s: passes
-        (5.00, UNKNOWN),  # new sub-task, no words yet: at once
-        (5.02, "rotation"),
-        (5.05, "insertion"),  # a new candidate restarts the clock
-        (5.10, "insertion"),
-        (5.16, "insertion"),
-    ]
-    states = StateFilter(0.1)
-    changes = [(t, states.state) for t, s in beliefs if states.update(t, s)]
-    assert changes == [(0.16, "approach"), (5.0, UNKNOWN), (5.16, "insertion")]
-    at_once = StateFilter(0.0)
-    assert [s for t, s in beliefs if at_once.update(t, s)] == [
-        "insertion", "approach", UNKNOWN, "rotation", "insertion",
-    ]  # fmt: skip
-    states.update(9.0, "mating")
-    states.new_stream()  # the clock restarts: the pending candidate is dropped
-    assert not states.update(0.0, "mating") and states.state == "insertion"
-    assert states.update(0.1, "mating")
 
 
 def _stream_trial() -> Trial:

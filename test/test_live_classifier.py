@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from rcbht_introspection.live.belief import UNKNOWN, BeliefTracker, StateFilter
+from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker
 from rcbht_introspection.live.classifier import ClassifierSession, PhaseInput, Step, WordsInput
+from rcbht_introspection.live.state import StateFilter
 from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
 
 ORIGIN = 1_000_000_000
@@ -115,9 +116,10 @@ def test_an_unknown_event_is_reported_not_applied() -> None:
     assert step.ignored_events == ["wobble"] and session.tracker.segments == []
 
 
-def test_the_state_changes_once_per_new_sub_task() -> None:
+def test_a_new_stream_reports_the_state_unknown_once() -> None:
     session = ClassifierSession(BeliefTracker(None), StateFilter())
-    session.state.state = "approach"  # a model-free tracker believes 'unknown'
+    # the previous stream's state: a belief without probabilities counts as certain
+    assert session.state.update(9.0, Belief("approach", (), (), 0.0, 9.0, "boundary"))
     session.receive([_phase("approach", 0.0), _words(Level.PRIMITIVE, [1], 1.0, batch_size=1)])
     step = session.classify()
     assert step is not None and step.state == UNKNOWN

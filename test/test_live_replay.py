@@ -91,6 +91,7 @@ def test_replay_state_equals_a_fresh_tracker_fed_everything_released_by_t(case: 
     assert rep.verdicts == offline.offline_verdicts(model, trial, words)
     assert 0.0 < rep.time_accuracy <= 1.0
     assert rep.time_accuracy == pytest.approx(offline.time_accuracy(trial, rep.changes))
+    assert len(rep.changes) <= len(rep.belief_changes)
     duration = float(trial.time[-1]) - t0
     for t in np.linspace(0.3, duration - 0.3, 9):
         step_t = max(s.t for s in case["streamed"].steps if s.t <= t)
@@ -103,8 +104,11 @@ def test_replay_state_equals_a_fresh_tracker_fed_everything_released_by_t(case: 
         for _, name in events:
             if phase_times[name] <= step_t and name != "done":
                 tracker.phase(name, phase_times[name])
-        state = [s for when, s in rep.changes if when <= step_t][-1]
-        assert tracker.current().subtask == state, f"t={t:.2f}"
+        belief = [s for when, s in rep.belief_changes if when <= step_t][-1]
+        assert tracker.current().subtask == belief, f"t={t:.2f}"
+        # /task_state moves only to a confident belief (live/state.py), never back to unknown
+        state = [s for when, s in rep.changes if when <= step_t]
+        assert not state or state[-1] != "unknown"
 
 
 def test_live_samples_hold_only_words_final_by_t_inside_the_window(case: dict) -> None:

@@ -44,8 +44,12 @@ def test_every_parameter_is_described(cls: type) -> None:
         (ClassifierConfig, {"mode": "psychic"}, "mode"),
         (ClassifierConfig, {"window_s": 0.0}, "window_s"),
         (ClassifierConfig, {"publish_rate_hz": -2.0}, "publish_rate_hz"),
-        (ClassifierConfig, {"state_hold_s": -0.1}, "state_hold_s"),
+        (ClassifierConfig, {"state.hold_s": -0.1}, "state.hold_s"),
+        (ClassifierConfig, {"state.min_probability": 2.0}, "state.min_probability"),
         (ClassifierConfig, {"state_topic": ""}, "state_topic"),
+        (ClassifierConfig, {"teach_history_s": -1.0}, "teach_history_s"),
+        (ClassifierConfig, {"teach_config_file": "/no/such.yaml"}, "teach_config_file"),
+        (ClassifierConfig, {"teach_topic": "not a topic"}, "teach_topic"),
     ],
 )
 def test_bad_values_name_the_parameter(cls: type, values: dict, field: str) -> None:

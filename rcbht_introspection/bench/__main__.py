@@ -2,8 +2,8 @@
 
 Each module in BENCHMARKS exposes `run(out_dir: Path) -> dict` returning its measured figures.
 Benchmarks are measurements, never pass/fail tests. The modules in OPTIONAL (the one-hour soak,
-the SIGINT stop loop) run only when named with --only, and write their own bench_out/<name>.json,
-so they neither slow `make bench` nor replace its results.json.
+the SIGINT stop loop, teaching) run only when named with --only, and write their own
+bench_out/<name>.json, so they neither slow `make bench` nor replace its results.json.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ BENCHMARKS: tuple[str, ...] = (
 OPTIONAL: tuple[str, ...] = (
     "rcbht_introspection.bench.soak",
     "rcbht_introspection.bench.stops",
+    "rcbht_introspection.bench.teach",
 )
 
 

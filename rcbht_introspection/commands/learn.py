@@ -1,4 +1,5 @@
-"""`rcbht train` (write a sub-task model) and `rcbht evaluate` (learning-curve protocol)."""
+"""`rcbht train` (write a sub-task model) and `rcbht evaluate` (learning-curve or prequential
+protocol)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_po
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
+
+PROTOCOLS = ("curve", "prequential")
 
 if TYPE_CHECKING:
     from rcbht_introspection.learn.data import TrialSamples
@@ -43,10 +46,48 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     train.set_defaults(func=run_train)
 
-    ev = subparsers.add_parser("evaluate", help="learning-curve evaluation of a classifier")
+    ev = subparsers.add_parser(
+        "evaluate", help="learning-curve or prequential (online teaching) evaluation"
+    )
     ev.add_argument("inputs", nargs="+", type=Path, metavar="DATASET_DIR")
     _common(ev)
-    ev.add_argument("--permutations", type=int, default=20)
+    ev.set_defaults(classifier=None, encoding=None)  # per protocol: see run_evaluate
+    ev.add_argument(
+        "--protocol",
+        choices=PROTOCOLS,
+        default="curve",
+        help="curve: learning curve over random splits; prequential: trials taught one by one "
+        "through the online learner (Mondrian), scored on the last --held-out trials",
+    )
+    ev.add_argument(
+        "--permutations",
+        type=int,
+        default=None,
+        help="random splits (curve, default 20) or shuffled teaching orders besides the "
+        "recording order (prequential, default 4)",
+    )
+    ev.add_argument(
+        "--held-out",
+        type=int,
+        default=None,
+        metavar="N",
+        help="prequential: score on the last N trials in recording order, never taught "
+        "(default: as --validation-trials' default)",
+    )
+    ev.add_argument(
+        "--teach-config",
+        type=Path,
+        default=None,
+        metavar="YAML",
+        help="prequential: teach settings (default config/teach.yaml)",
+    )
+    ev.add_argument(
+        "--warmup-windows",
+        type=int,
+        default=None,
+        metavar="N",
+        help="prequential: override the teach config's warmup_windows",
+    )
     ev.add_argument(
         "--validation-trials",
         type=int,
@@ -55,7 +96,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     ev.add_argument("--trials", type=int, default=None, help="use only the first N trials")
     ev.add_argument("--seed", type=int, default=0)
-    ev.add_argument("--n-estimators", type=int, default=100, help="Mondrian trees")
+    ev.add_argument(
+        "--n-estimators",
+        type=int,
+        default=None,
+        help="Mondrian trees (default 100; prequential: the teach config's)",
+    )
     ev.add_argument(
         "--no-variant", action="store_true", help="skip the variant without near-empty sub-tasks"
     )
@@ -181,10 +227,21 @@ def _clean(value: Any) -> Any:
 def run_evaluate(args: argparse.Namespace) -> int:
     from rcbht_introspection.learn.evaluate import Protocol, evaluate, total_steps
 
-    if args.permutations < 1:
+    if args.protocol == "prequential":
+        return run_prequential(args)
+    if args.permutations is not None and args.permutations < 1:
         raise InputError("--permutations must be at least 1", field="--permutations")
+    for option in ("held_out", "teach_config", "warmup_windows"):
+        if getattr(args, option) is not None:
+            raise InputError(
+                f"--{option.replace('_', '-')} belongs to --protocol prequential", field=option
+            )
+    args.classifier = args.classifier or "svm"
+    args.encoding = args.encoding or "compact"
+    args.permutations = args.permutations or 20
     taxonomy = taxonomy_from_args(args)
-    budget = forest_budget(args, args.n_estimators)
+    n_estimators = 100 if args.n_estimators is None else args.n_estimators
+    budget = forest_budget(args, n_estimators)
     trials = load_checked(args, "evaluate", taxonomy)
     if args.trials is not None:
         trials = trials[: args.trials]
@@ -194,7 +251,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         permutations=args.permutations,
         n_validation=args.validation_trials,
         seed=args.seed,
-        n_estimators=args.n_estimators,
+        n_estimators=n_estimators,
         max_nodes=budget["max_nodes"],
         max_points=budget["max_points"],
         variant=not args.no_variant,
@@ -243,3 +300,93 @@ def run_evaluate(args: argparse.Namespace) -> int:
 
         plot_learning_curve([result], args.plot, title=", ".join(p.name for p in args.inputs))
     return 0
+
+
+def run_prequential(args: argparse.Namespace) -> int:
+    """`rcbht evaluate --protocol prequential`: online teaching scored against batch models."""
+    from dataclasses import replace
+
+    from rcbht_introspection.learn.online import load_teach_config
+    from rcbht_introspection.learn.prequential import (
+        PERMUTATIONS,
+        PrequentialProtocol,
+        prequential,
+        total_teaches,
+    )
+
+    if args.classifier not in (None, "mondrian"):
+        raise InputError(
+            "the prequential protocol teaches the online Mondrian forest (and retrains the SVM "
+            "as its reference); drop --classifier",
+            field="--classifier",
+        )
+    refused = {
+        "--augment-prefixes (use the teach config's prefixes)": bool(args.augment_prefixes),
+        "--live-augment": args.live_augment,
+        "--live-score": args.live_score,
+        "--validation-trials (use --held-out)": args.validation_trials is not None,
+        "--plot": args.plot is not None,
+        "--no-variant": args.no_variant,
+        "--max-nodes/--max-points (the teach config has no forest budget yet)": (
+            args.max_nodes is not None or args.max_points is not None
+        ),
+    }
+    for option, given in refused.items():
+        if given:
+            raise InputError(f"{option} does not apply to --protocol prequential")
+    permutations = PERMUTATIONS if args.permutations is None else args.permutations
+    if permutations < 0:
+        raise InputError("--permutations must be at least 0", field="--permutations")
+    teach = load_teach_config(args.teach_config)
+    teach = replace(
+        teach,
+        encoding=args.encoding or teach.encoding,
+        n_estimators=teach.n_estimators if args.n_estimators is None else args.n_estimators,
+        warmup_windows=teach.warmup_windows if args.warmup_windows is None else args.warmup_windows,
+    )
+    taxonomy = taxonomy_from_args(args)
+    trials = load_checked(args, "evaluate", taxonomy)
+    if args.trials is not None:
+        trials = trials[: args.trials]
+    protocol = PrequentialProtocol(
+        teach=teach, permutations=permutations, held_out=args.held_out, seed=args.seed
+    )
+    bar = None
+    if not args.no_progress:
+        from tqdm import tqdm
+
+        bar = tqdm(
+            total=total_teaches(trials, protocol),
+            desc="prequential",
+            unit="teach",
+            file=sys.stderr,
+        )
+    try:
+        result = prequential(trials, protocol, progress=bar.update if bar else None)
+    finally:
+        if bar:
+            bar.close()
+    result["datasets"] = [str(p) for p in args.inputs]
+    result["words"] = args.words
+    result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"
+    result = _clean(result)
+    for j, step in enumerate(result["steps"]):
+        print(
+            f"after {step} trials: online {_show(result['prequential_accuracy'][j])}, "
+            f"batch {_show(result['batch_accuracy'][j])}, svm {_show(result['svm_accuracy'][j])}, "
+            f"duration only {_show(result['duration_accuracy'][j])}"
+        )
+    print(
+        f"held out: {len(result['held_out_trials'])} trials ({result['held_out_trials'][0]} .. "
+        f"{result['held_out_trials'][-1]}), {result['orders']} teaching orders, "
+        f"{result['seconds']:.1f} s"
+    )
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2))
+    return 0
+
+
+def _show(value: float | None) -> str:
+    """An accuracy for the console (None: not measured)."""
+    return "-" if value is None else f"{value:.4f}"

@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_from_args
+from rcbht_introspection.commands.options import (
+    add_state_options,
+    add_taxonomy_options,
+    state_from_args,
+    taxonomy_from_args,
+)
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
@@ -25,7 +31,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="replay held-out trials through the live segmenter + belief tracker offline",
         description="Train on all but the last --held-out trials (without and with live "
         "augmentation, or use --model), replay the held-out trials through SegmenterSession + "
-        "BeliefTracker exactly as the nodes run them, and report time_accuracy and the final "
+        "BeliefTracker + StateFilter exactly as the nodes run them, and report time_accuracy, state "
+        "changes per sub-task boundary, the expected calibration error and the final "
         "sub-task verdicts.",
     )
     p.add_argument("inputs", nargs="+", type=Path, metavar="TRIAL_OR_DATASET_DIR")
@@ -36,20 +43,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--words", choices=WORD_SOURCES, default="auto")
     p.add_argument("--mode", choices=(*MODES, "both"), default="both")
     p.add_argument("--window-s", type=float, default=2.0)
-    p.add_argument(
-        "--state-hold-s",
-        type=float,
-        default=0.0,
-        help="classifier_node's state_hold_s: a new /task_state must hold this long (s)",
-    )
     p.add_argument("--live-config", type=Path, default=None, metavar="YAML")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", type=Path, default=None, metavar="OUT")
     add_taxonomy_options(p)
+    add_state_options(p)
     p.set_defaults(func=run_live_eval)
 
 
 def run_live_eval(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from rcbht_introspection.grammar.encoding.cache import SampleCache
     from rcbht_introspection.learn.data import find_inputs, load_trials, read_any_trial
     from rcbht_introspection.learn.live import (
@@ -59,7 +63,12 @@ def run_live_eval(args: argparse.Namespace) -> int:
         trial_live_samples,
     )
     from rcbht_introspection.learn.model_file import load_model, profile_mismatch
-    from rcbht_introspection.live.replay import replay_beliefs, replay_summary, stream_trial
+    from rcbht_introspection.live.replay import (
+        commanded_phase,
+        replay_beliefs,
+        replay_summary,
+        stream_trial,
+    )
     from rcbht_introspection.taxonomy.config import default_config
 
     paths = find_inputs(args.inputs)
@@ -67,6 +76,7 @@ def run_live_eval(args: argparse.Namespace) -> int:
         raise InputError(f"--held-out must be 1..{len(paths) - 1}", field="--held-out")
     train_paths, held_paths = paths[: -args.held_out], paths[-args.held_out :]
     config = load_live_config(args.live_config)
+    state = state_from_args(args)
     taxonomy = taxonomy_from_args(args)
     factory = stream_factory(config, taxonomy)
     models: dict[str, SubtaskModel] = {}
@@ -95,15 +105,27 @@ def run_live_eval(args: argparse.Namespace) -> int:
         "train": [p.name for p in train_paths],
         "held_out": [p.name for p in held_paths],
         "stream_profile": config.stream_profile,
+        "state_rule": dataclasses.asdict(state),
         "results": {},
     }
+    phases = [commanded_phase(s, t) for s, t in zip(streamed, held, strict=True)]
+    weights = [float(t.time[-1] - t.time[0]) for t in held]
+    n_subtasks = sum(len(t.subtask_bounds()) for t in held)
+    result["commanded_phase"] = {
+        "time_accuracy": round(float(np.average([a for a, _ in phases], weights=weights)), 4),
+        "state_changes": sum(n for _, n in phases),
+        "state_changes_per_boundary": round(sum(n for _, n in phases) / max(1, n_subtasks), 3),
+    }
+    print(
+        f"baseline without words (/task_state = the commanded sub-task event): time_accuracy "
+        f"{result['commanded_phase']['time_accuracy']}  state changes "
+        f"{result['commanded_phase']['state_changes']}"
+    )
     for name, model in models.items():
         for mode in modes:
             began = time.perf_counter()
             reps = [
-                replay_beliefs(
-                    s, model, mode, args.window_s, trial=t, state_hold_s=args.state_hold_s
-                )
+                replay_beliefs(s, model, mode, args.window_s, trial=t, state_config=state)
                 for s, t in zip(streamed, held, strict=True)
             ]
             elapsed = time.perf_counter() - began
@@ -114,12 +136,16 @@ def run_live_eval(args: argparse.Namespace) -> int:
                 1000 * elapsed / max(1, sum(r.n_beliefs for r in reps)), 3
             )
             summary["timelines"] = {r.name: [(round(t, 3), s) for t, s in r.changes] for r in reps}
-            summary["state_changes"] = sum(len(r.changes) for r in reps)
             result["results"][f"{name}/{mode}"] = summary
+            raw, ece = summary["without_state_rule"], summary["expected_calibration_error"]
             print(
                 f"{name:7s} {mode:8s} time_accuracy {summary['time_accuracy']}"
-                f"  subtask_accuracy {summary['subtask_accuracy']}  ms/belief {summary['ms_per_belief']}"
                 f"  state changes {summary['state_changes']}"
+                f" ({summary['state_changes_per_boundary']} per boundary)"
+                f"  without state rule {raw['time_accuracy']} / {raw['state_changes']}"
+                f"  subtask_accuracy {summary['subtask_accuracy']}"
+                f"  ECE final {ece['final']} running {ece['running']}"
+                f"  ms/belief {summary['ms_per_belief']}"
                 f"  per trial {summary['per_trial']}"
             )
     if args.json:

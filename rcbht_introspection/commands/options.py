@@ -1,12 +1,15 @@
-"""Options several subcommands share: which taxonomy profile labels the trials."""
+"""Options several subcommands share: which taxonomy profile labels the trials, and the
+/task_state rule of the classifier (live-eval, replay-eval)."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from rcbht_introspection.live.state import TaskStateConfig
     from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
 
@@ -42,3 +45,41 @@ def taxonomy_or_default(args: argparse.Namespace) -> TaxonomyConfig:
     from rcbht_introspection.taxonomy.config import default_config
 
     return taxonomy_from_args(args) or default_config()
+
+
+STATE_OPTIONS = {
+    "min_probability": "a new /task_state needs at least this probability",
+    "min_log_ratio": "... and this log ratio over the current state's probability",
+    "evidence_bound": "... and this sum of log-odds over the successive beliefs it leads",
+    "hold_s": "... held this long (stream s)",
+}
+"""The /task_state rule's fields (live/state.py TaskStateConfig) as --state-<name> options."""
+
+
+def add_state_options(parser: argparse.ArgumentParser) -> None:
+    """--state-min-probability, --state-min-log-ratio, --state-evidence-bound, --state-hold-s:
+    classifier_node's `state.*` parameters (default: TaskStateConfig's, as config/classifier.yaml)."""
+    for name, text in STATE_OPTIONS.items():
+        parser.add_argument(
+            "--state-" + name.replace("_", "-"),
+            dest="state_" + name,
+            type=float,
+            default=None,
+            help=f"classifier_node's state.{name}: {text} (default: docs/live-belief.md)",
+        )
+
+
+def state_from_args(args: argparse.Namespace) -> TaskStateConfig:
+    """The /task_state rule: TaskStateConfig's defaults with the given --state-* options."""
+    from rcbht_introspection.errors import InputError
+    from rcbht_introspection.live.state import TaskStateConfig, check_task_state
+
+    given = {k: getattr(args, "state_" + k) for k in STATE_OPTIONS}
+    config = dataclasses.replace(
+        TaskStateConfig(), **{k: v for k, v in given.items() if v is not None}
+    )
+    try:
+        check_task_state(config)
+    except InputError as exc:
+        raise InputError(exc.message, field="--state-" + str(exc.field).replace("_", "-")) from None
+    return config

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 from typing import get_args
 
+from rcbht_introspection.commands.options import add_state_options, state_from_args
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.taxonomy import StreamProfile
@@ -54,7 +55,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="replay bags through segmenter_node and classifier_node (real DDS) and score them",
     )
     p.add_argument("bags", nargs="+", type=Path, help="trial bags (or folders of bags)")
-    p.add_argument("--model", type=Path, required=True, help="model file from `rcbht train`")
+    p.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        help="model file from `rcbht train` (not with --teach-first)",
+    )
     p.add_argument("--rate", type=float, default=1.0, help="playback speed factor")
     p.add_argument("--json", type=Path, default=None, help="write the scores here")
     p.add_argument("--mode", choices=get_args(BeliefMode), default="boundary")
@@ -76,13 +82,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="reference",
         help="stream profile of the segmenter (causal: moment-axis words without waiting)",
     )
-    p.add_argument(
-        "--state-hold-s",
-        type=float,
-        default=0.0,
-        help="classifier_node's state_hold_s: a new /task_state must hold this long (s)",
-    )
+    add_state_options(p)
     p.add_argument("--timeline", action="store_true", help="print the /task_state timeline")
+    p.add_argument(
+        "--teach-first",
+        type=int,
+        default=0,
+        metavar="K",
+        help="start the classifier without a model, teach it the first K bags' sub-tasks through "
+        "its ~/teach service (one bag at a time, in order), then score the others",
+    )
+    p.add_argument(
+        "--teach-restart",
+        action="store_true",
+        help="with --teach-first: restart the classifier from its saved model and replay the "
+        "scored bags again (the verdicts must not change)",
+    )
+    p.add_argument(
+        "--teach-file",
+        type=Path,
+        default=None,
+        help="with --teach-first: keep the taught model here (must not exist yet)",
+    )
     p.set_defaults(func=cmd_replay_eval)
 
 
@@ -310,8 +331,15 @@ def cmd_replay_eval(args: argparse.Namespace) -> int:
         if args.taxonomy_config
         else "",
         stream_profile=args.stream_profile,
-        state_hold_s=args.state_hold_s,
+        state=state_from_args(args),
+        teach_first=args.teach_first,
+        teach_restart=args.teach_restart,
+        teach_file=args.teach_file.resolve() if args.teach_file else None,
     )
+    if args.model is None and not args.teach_first:
+        raise InputError("give --model (or --teach-first K to teach the classifier)")
+    if (args.teach_restart or args.teach_file) and not args.teach_first:
+        raise InputError("--teach-restart and --teach-file need --teach-first")
     result = replay_eval(_bags(args.bags), args.model, options)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

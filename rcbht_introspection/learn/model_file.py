@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import threading
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -50,7 +52,10 @@ def _checksum(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
 
 
 def save_model(model: SubtaskModel, path: Path | str) -> Path:
-    """Write `model` as a safe .npz model file (no pickled objects)."""
+    """Write `model` as a safe .npz model file (no pickled objects).
+
+    Atomic: written to a temporary file beside `path`, then renamed over it, so a reader (a node
+    restarting while a taught model is saved) finds the old file or the new one, never a part."""
     path = Path(path)
     header, arrays = _model_parts(model)
     if model.live is not None:
@@ -59,10 +64,18 @@ def save_model(model: SubtaskModel, path: Path | str) -> Path:
     header["checksum"] = _checksum(header, arrays)
     payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("wb") as handle:
-        # numpy's stub has a bool `allow_pickle` keyword beside **arrays, so mypy takes any
-        # str-keyed ** dict as possibly feeding it; the keys here are array names
-        np.savez_compressed(handle, **payload)  # type: ignore[arg-type]
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+    try:
+        with tmp.open("wb") as handle:
+            # numpy's stub has a bool `allow_pickle` keyword beside **arrays, so mypy takes any
+            # str-keyed ** dict as possibly feeding it; the keys here are array names
+            np.savez_compressed(handle, **payload)  # type: ignore[arg-type]
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return path
 
 

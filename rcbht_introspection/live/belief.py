@@ -74,6 +74,7 @@ class BeliefTracker:
         subtasks: Sequence[str] | None = None,
         end_phases: Sequence[str] = ("done",),
         trial: str = "live",
+        history_s: float = 0.0,
     ) -> None:
         if mode not in MODES:
             raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
@@ -89,11 +90,29 @@ class BeliefTracker:
         self.end_phases = tuple(dict.fromkeys(ends))
         """The given end phases and the model's task's."""
         self.trial = trial
+        self.history_s = float(history_s)
+        """> 0 (teaching): also keep the words of the last history_s stream seconds and of the
+        last finished sub-task, so a label given after the fact finds its window's words."""
         self.classes: tuple[str, ...] = (
             tuple(str(c) for c in model.classes_) if model is not None else ()
         )
         self.last_error: str | None = None
         self.reset()
+
+    def set_model(self, model: SampleClassifier) -> None:
+        """Classify with `model` from now on (a taught model); the words and events stay.
+
+        Sub-task event names: an open vocabulary (none given) stays open, a closed one grows by
+        the new model's task."""
+        self.model = model
+        self.classes = tuple(str(c) for c in model.classes_)
+        task = getattr(model, "task", None)
+        if self.subtasks and task is not None:
+            self.subtasks = tuple(dict.fromkeys((*self.subtasks, *task.subtasks)))
+        if task is not None:
+            self.end_phases = tuple(dict.fromkeys((*self.end_phases, *task.end_phases)))
+        self._axis_memo = AxisMemo()  # features of the old encoding
+        self.last_error = None
 
     def reset(self) -> None:
         """Start a new stream: no words, no sub-task events."""
@@ -103,6 +122,10 @@ class BeliefTracker:
         self.ended_levels: set[tuple[str, Level]] = set()
         self.arms: set[str] = set()
         self.segments: list[_Segment] = []
+        self.kept_from = -np.inf
+        """Words ending before this stream time may have been dropped (pruning)."""
+        self.pinned_from = np.inf
+        """Words ending at or after this stream time are kept (a window waiting to be taught)."""
         self.task_ended = False
         self.now = 0.0
         self._issued = 0
@@ -157,7 +180,7 @@ class BeliefTracker:
         if now is not None:
             self.now = max(self.now, now)
         if self.mode == "window" and self._added > 2000:
-            self._prune(self.now - self.window_s)
+            self._prune(self.now - max(self.window_s, self.history_s))
 
     def end_of_stream(self, arm: str, level: Level | None = None) -> None:
         """`arm`'s stream finished on `level` (None: on every level): its words there are final."""
@@ -274,6 +297,20 @@ class BeliefTracker:
         start, end, phase = self.window()
         return self.classify(start, end, phase)
 
+    def complete(self, end: float) -> bool:
+        """Every word overlapping times up to `end` is final (each arm reached it or ended) and
+        none is missing that may still arrive."""
+        if any(ledger.has_gap for ledger in self.ledgers.values()):
+            return False
+        return self._complete(end)
+
+    def last_subtask(self) -> tuple[str, float, float] | None:
+        """(phase, start, end) of the sub-task that ended last in this stream, if any."""
+        for seg in reversed(self.segments):
+            if seg.end is not None:
+                return seg.phase, seg.start, seg.end
+        return None
+
     def _complete(self, end: float) -> bool:
         """Every word overlapping times up to `end` is final (each arm reached it or ended)."""
         if not self.arms:
@@ -309,6 +346,8 @@ class BeliefTracker:
             keep_from = out[-1].end
             if self._issued < len(self.segments):
                 keep_from = min(keep_from, self.segments[self._issued].start)
+            if self.history_s > 0:  # teaching: the last finished sub-task and recent history
+                keep_from = min(keep_from, out[-1].start, self.now - self.history_s)
             self._prune(keep_from)
         return out
 
@@ -319,40 +358,11 @@ class BeliefTracker:
 
     def _prune(self, before: float) -> None:
         """Drop words that end before `before` (no later window can overlap them)."""
+        before = min(before, self.pinned_from)
+        self.kept_from = max(self.kept_from, before)
         for per_level in self.words.words.values():
             for per_axis in per_level.values():
                 for axis, seq in per_axis.items():
                     if seq and seq[0].end < before:
                         per_axis[axis] = [w for w in seq if w.end >= before]
         self._added = 0
-
-
-class StateFilter:
-    """/task_state from successive beliefs: a new sub-task passes once it held `hold_s` seconds.
-
-    Debounces the short-lived beliefs of a window with few words (stream time, so a replay
-    gives the node's states). "unknown" passes at once: it means no evidence yet, e.g. right
-    after a sub-task event. hold_s 0 passes every change.
-    """
-
-    def __init__(self, hold_s: float = 0.0) -> None:
-        self.hold_s = hold_s
-        self.state = UNKNOWN
-        self._candidate: str | None = None
-        self._since = 0.0
-
-    def update(self, t: float, subtask: str) -> bool:
-        """Feed the belief at stream time `t`; True when the state changed to it."""
-        if subtask == self.state:
-            self._candidate = None
-            return False
-        if subtask != self._candidate:
-            self._candidate, self._since = subtask, t
-        if subtask != UNKNOWN and t - self._since < self.hold_s:
-            return False
-        self.state, self._candidate = subtask, None
-        return True
-
-    def new_stream(self) -> None:
-        """A new stream restarts the clock: a pending candidate is dropped, the state is kept."""
-        self._candidate = None

@@ -4,7 +4,7 @@ The node takes whatever DDS delivered (a burst) and hands it here in publication
 publishes what comes back. Here live: stream switching (words of a new stream issue the previous
 stream's verdicts and start a new tracker session), the latched events of earlier streams
 (live/join.LatchedEvents), the Words messages of one wrench sample (a belief once all of them are
-in), proven word losses and /task_state (StateFilter).
+in), proven word losses and /task_state (live/state.py StateFilter).
 """
 
 from __future__ import annotations
@@ -12,8 +12,10 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from rcbht_introspection.live.belief import Belief, BeliefTracker, StateFilter
+from rcbht_introspection.live.belief import Belief, BeliefTracker
 from rcbht_introspection.live.join import LatchedEvents
+from rcbht_introspection.live.state import StateFilter
+from rcbht_introspection.live.teach import Teacher, TeachRequest, TeachStatus
 from rcbht_introspection.taxonomy.words import Level, Word
 
 COUNTS = (
@@ -68,15 +70,23 @@ class Step:
     """Words newly proven lost (a late join or lost messages)."""
     ignored_events: list[str] = field(default_factory=list)
     """Sub-task event names the tracker does not know."""
+    model_swapped: bool = False
+    """A taught model was taken into use before these beliefs."""
 
 
 class ClassifierSession:
     """One classifier over successive streams: `receive` a burst, then `classify` once."""
 
     def __init__(
-        self, tracker: BeliefTracker, state: StateFilter, counts: dict[str, int] | None = None
+        self,
+        tracker: BeliefTracker,
+        state: StateFilter,
+        counts: dict[str, int] | None = None,
+        teaching: Teacher | None = None,
     ) -> None:
         self.tracker = tracker
+        self.teaching = teaching
+        """Labelled windows -> taught models (learn/teaching.py); None: teaching is off."""
         self.state = state
         self.history: LatchedEvents[PhaseInput] = LatchedEvents()
         self.stream: StreamKey | None = None
@@ -107,6 +117,12 @@ class ClassifierSession:
         self._stale = self.history.stale
         return step
 
+    def teach(self, request: TeachRequest) -> TeachStatus:
+        """A label for a window of the current stream (refused when teaching is off)."""
+        if self.teaching is None:
+            return TeachStatus(False, "teaching is off (parameter teach_enabled)", 0, 0, 0, 0)
+        return self.teaching.request(request, self.tracker)
+
     def classify(self) -> Step | None:
         """Verdicts, belief and state once every message of the newest sample's batch is in
         and there is new evidence; None otherwise."""
@@ -119,11 +135,18 @@ class ClassifierSession:
         trigger, self.trigger_ns = self.trigger_ns, None
         step = Step()
         self._count_losses(step)
+        if self.teaching is not None:
+            model = self.teaching.take_model()
+            if model is not None:  # a taught model: every belief from here on uses it
+                self.tracker.set_model(model)
+                step.model_swapped = True
+        if self.teaching is not None and self.teaching.waiting:
+            self.teaching.collect(self.tracker)  # before take_finals prunes words
         for final in self.tracker.take_finals():
             self._emit(step, final, trigger)
         belief = self.tracker.current()
         self._emit(step, belief, trigger)
-        if self.state.update(self.tracker.now, belief.subtask):
+        if self.state.update(self.tracker.now, belief):
             step.state = self.state.state
         return step
 
@@ -159,6 +182,8 @@ class ClassifierSession:
             self._count_losses(step)
             for final in self.tracker.take_finals():
                 self._emit(step, final, 0)
+        if self.teaching is not None and self.teaching.waiting:
+            self.teaching.collect(self.tracker, stream_ends=True)
         self.tracker.reset()
         self.state.new_stream()
         self.stream = key

@@ -8,7 +8,7 @@ A status is OK while nothing went wrong since the last report, WARN when a loss 
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -188,8 +188,10 @@ def classifier_health(
     latency: LatencyWindow,
     counts: Mapping[str, int],
     watch: CounterWatch,
+    extra: Sequence[tuple[str, str]] = (),
 ) -> Health:
-    """The classifier's status: model, belief-update latency of the period, word losses."""
+    """The classifier's status: model, belief-update latency of the period, word losses;
+    `extra` values (teaching) go after them."""
     n, p50, p99 = latency.take()
     moved = watch.moved(counts)
     values = (
@@ -200,6 +202,7 @@ def classifier_health(
         ("belief update latency p50 (ms)", f"{p50:.3f}"),
         ("belief update latency p99 (ms)", f"{p99:.3f}"),
         *((k, str(v)) for k, v in counts.items()),
+        *extra,
     )
     if model_problem:
         level, message = ERROR, f"no usable model, publishing 'unknown': {model_problem}"

@@ -5,8 +5,8 @@ sample, each /task_phase event applied right after the last sample before it, an
 that released words or applied an event, with its stream time: the exact release time of each
 word. `replay_beliefs` drives `BeliefTracker` (the classifier node's own state) with that log as
 the classifier node does (words, then events, then final verdicts, then the current belief; a
-/task_state change whenever the belief's sub-task changes) and scores the timeline with
-`offline.time_accuracy`. Differences from a DDS replay: no transport delays (a belief changes at
+/task_state change by the node's rule, live/state.py) and scores the timeline with
+`offline.time_accuracy`, the state changes per sub-task and the reliability of the probabilities. Differences from a DDS replay: no transport delays (a belief changes at
 the stream time of the sample that caused it) and one classification per step.
 """
 
@@ -14,20 +14,17 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live import BeliefMode, offline
-from rcbht_introspection.live.belief import (
-    UNKNOWN,
-    Belief,
-    BeliefTracker,
-    SampleClassifier,
-    StateFilter,
-)
+from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker, SampleClassifier
+from rcbht_introspection.live.reliability import expected_calibration_error, top_label
 from rcbht_introspection.live.segmenter import PhaseEvent, SegmenterSession, WordBatch
+from rcbht_introspection.live.state import StateFilter, TaskStateConfig
 from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import TrialWords, Word
 
@@ -116,6 +113,12 @@ class LiveReplay:
     time_accuracy: float = float("nan")
     n_beliefs: int = 0
     extra: dict[str, object] = field(default_factory=dict)
+    running: list[tuple[float, bool]] = field(default_factory=list)
+    belief_changes: list[tuple[float, str]] = field(default_factory=list)
+    """Every change of the running belief's sub-task ("unknown" included): /task_state without
+    a state rule, for comparison."""
+    belief_time_accuracy: float = float("nan")
+    """(confidence, correct at that time) of each running belief with evidence (with a trial)."""
 
     @property
     def verdicts(self) -> list[str]:
@@ -129,13 +132,16 @@ def replay_beliefs(
     window_s: float = 2.0,
     end_phase: str = "done",
     trial: Trial | None = None,
-    state_hold_s: float = 0.0,
+    state_config: TaskStateConfig | None = None,
 ) -> LiveReplay:
-    """Drive BeliefTracker with the segmenter's steps as classifier_node does; score vs `trial`."""
+    """Drive BeliefTracker with the segmenter's steps as classifier_node does (/task_state by
+    `state_config`, default TaskStateConfig()); score vs `trial`."""
     tracker = BeliefTracker(model, mode, window_s, end_phases=(end_phase,), trial=streamed.name)
-    state = StateFilter(state_hold_s)
+    state = StateFilter(state_config)
     changes: list[tuple[float, str]] = []
     finals: list[Belief] = []
+    running: list[tuple[float, Belief]] = []
+    belief_changes: list[tuple[float, str]] = []
     n = 0
     for step in streamed.steps:
         for batch in step.batches:
@@ -148,12 +154,29 @@ def replay_beliefs(
         finals.extend(tracker.take_finals())
         belief = tracker.current()
         n += 1
-        if state.update(tracker.now, belief.subtask):
+        if belief.subtask != UNKNOWN and belief.probabilities:
+            running.append((step.t, belief))
+        if belief.subtask != (belief_changes[-1][1] if belief_changes else UNKNOWN):
+            belief_changes.append((step.t, belief.subtask))
+        if state.update(tracker.now, belief):
             changes.append((step.t, state.state))
     out = LiveReplay(streamed.name, mode, changes, finals, UNKNOWN, n_beliefs=n)
+    out.belief_changes = belief_changes
     if trial is not None:
         out.time_accuracy = offline.time_accuracy(trial, changes, initial=UNKNOWN)
+        out.belief_time_accuracy = offline.time_accuracy(trial, belief_changes, initial=UNKNOWN)
+        truth = offline.truth_at(trial, np.asarray([t for t, _ in running], dtype=float))
+        for (_, b), true in zip(running, truth, strict=True):
+            conf, hit = top_label([b.probabilities], b.classes, [str(true)])
+            out.running.append((float(conf[0]), bool(hit[0])))
     return out
+
+
+def commanded_phase(streamed: StreamedTrial, trial: Trial) -> tuple[float, int]:
+    """(time_accuracy, state changes) of the baseline without words: /task_state = the name of
+    each sub-task event as it is applied (what the task's state machine commanded)."""
+    changes = [(start, name) for name, start, _ in streamed.subtask_windows()]
+    return offline.time_accuracy(trial, changes, initial=UNKNOWN), len(changes)
 
 
 def live_replay(
@@ -162,28 +185,62 @@ def live_replay(
     stream_factory: Callable[[str], ArmStream],
     mode: BeliefMode = "boundary",
     window_s: float = 2.0,
+    state_config: TaskStateConfig | None = None,
 ) -> LiveReplay:
     """stream_trial + replay_beliefs for one trial."""
-    return replay_beliefs(stream_trial(trial, stream_factory), model, mode, window_s, trial=trial)
+    streamed = stream_trial(trial, stream_factory)
+    return replay_beliefs(streamed, model, mode, window_s, trial=trial, state_config=state_config)
 
 
-def replay_summary(replays: Sequence[LiveReplay], trials: Sequence[Trial]) -> dict[str, object]:
-    """Duration-weighted time_accuracy and sub-task accuracy of final verdicts over trials."""
+def replay_summary(replays: Sequence[LiveReplay], trials: Sequence[Trial]) -> dict[str, Any]:
+    """Duration-weighted time_accuracy, state changes per sub-task boundary (each sub-task start,
+    the stream's first included), sub-task accuracy of final verdicts and the expected calibration
+    error of final and running probabilities, over trials."""
     weights = [float(t.time[-1] - t.time[0]) for t in trials]
     acc = [r.time_accuracy for r in replays]
     correct = total = 0
+    final_conf: list[float] = []
+    final_hit: list[bool] = []
     for r, t in zip(replays, trials, strict=True):
         truth = [s for s, _, _ in t.subtask_bounds()]
         total += len(truth)
         correct += sum(v == s for v, s in zip(r.verdicts, truth, strict=False))
+        for b, true in zip(r.finals, truth, strict=False):
+            if b.probabilities:
+                conf, hit = top_label([b.probabilities], b.classes, [true])
+                final_conf.append(float(conf[0]))
+                final_hit.append(bool(hit[0]))
+    changes = sum(len(r.changes) for r in replays)
+    belief_changes = sum(len(r.belief_changes) for r in replays)
+    running = [c for r in replays for c in r.running]
+    boundary = bool(replays) and replays[0].mode == "boundary"
+
+    def weighted(values: Sequence[float]) -> float | None:
+        return round(float(np.average(values, weights=weights)), 4) if replays else None
+
     return {
-        "time_accuracy": round(float(np.average(acc, weights=weights)), 4) if replays else None,
-        "subtask_accuracy": round(correct / total, 4)
-        if total and replays[0].mode == "boundary"
-        else None,
+        "time_accuracy": weighted(acc),
+        "subtask_accuracy": round(correct / total, 4) if total and boundary else None,
         "subtasks": total,
+        "state_changes": changes,
+        "state_changes_per_boundary": round(changes / total, 3) if total else None,
+        "without_state_rule": {
+            "time_accuracy": weighted([r.belief_time_accuracy for r in replays]),
+            "state_changes": belief_changes,
+            "state_changes_per_boundary": round(belief_changes / total, 3) if total else None,
+        },
+        "expected_calibration_error": {
+            "final": _rounded(expected_calibration_error(final_conf, final_hit)),
+            "running": _rounded(
+                expected_calibration_error([c for c, _ in running], [h for _, h in running])
+            ),
+        },
         "per_trial": {r.name: round(r.time_accuracy, 4) for r in replays},
     }
+
+
+def _rounded(value: float | None) -> float | None:
+    return None if value is None else round(value, 4)
 
 
 def words_until(released: Sequence[tuple[float, Word]], t: float, name: str = "") -> TrialWords:

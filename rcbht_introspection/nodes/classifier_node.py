@@ -2,8 +2,10 @@
 
 Parameters: see config/classifier.yaml. Without a usable model (missing, unreadable, wrong
 classes or taxonomy profile) it logs why once and publishes "unknown". /task_state is published
-when the belief changes (once held `state_hold_s`) and at `publish_rate_hz`; each verdict on a
-finished sub-task is a Belief with final=true.
+when it changes (a new sub-task once confident, parameters `state.*`) and at
+`publish_rate_hz`; each verdict on a finished sub-task is a Belief with final=true. With
+`teach_enabled`, labels for windows (service ~/teach, topic `teach_topic`) are learned beside
+the live path (learn/teaching.py); a missing model_file is then a cold start.
 """
 
 from __future__ import annotations
@@ -11,20 +13,21 @@ from __future__ import annotations
 import sys
 import time
 from functools import partial
+from pathlib import Path
 
 import sklearn
 from rcbht_interfaces.msg import Belief as BeliefMsg
 from rcbht_interfaces.msg import Phase as PhaseMsg
+from rcbht_interfaces.msg import TeachRequest as TeachRequestMsg
 from rcbht_interfaces.msg import Words as WordsMsg
+from rcbht_interfaces.srv import Teach
 from std_msgs.msg import String
 
 from rcbht_introspection.learn.model_file import load_subtask_model
-from rcbht_introspection.live.belief import (
-    UNKNOWN,
-    Belief,
-    BeliefTracker,
-    StateFilter,
-)
+from rcbht_introspection.learn.models import SubtaskModel
+from rcbht_introspection.learn.online import load_teach_config
+from rcbht_introspection.learn.teaching import Teaching
+from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker
 from rcbht_introspection.live.classifier import ClassifierSession, PhaseInput, Step, WordsInput
 from rcbht_introspection.live.health import (
     CounterWatch,
@@ -33,6 +36,8 @@ from rcbht_introspection.live.health import (
     classifier_health,
     file_sha256,
 )
+from rcbht_introspection.live.state import StateFilter
+from rcbht_introspection.live.teach import TeachRequest, TeachStatus
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import belief_msg, phase_input, words_input
 from rcbht_introspection.nodes.draining import DrainedGroup, take
@@ -50,6 +55,7 @@ class ClassifierNode(ManagedNode):
         self.counts: dict[str, int] = {}  # kept across reconfigures (live/classifier.COUNTS)
         self.watch = CounterWatch()
         self.latency = LatencyWindow()
+        self.teaching: Teaching | None = None
 
     def configure(self, cfg: ClassifierConfig) -> None:
         self.cfg = cfg
@@ -61,18 +67,53 @@ class ClassifierNode(ManagedNode):
             else ""
         )
         self.model_sha256 = file_sha256(cfg.model_file)
-        if model is None:
+        cold = cfg.teach_enabled and model is None and not Path(cfg.model_file).is_file()
+        if cold:
+            self.model_problem = ""
+            self.get_logger().info(
+                f"cold start: no model yet ({cfg.model_file or 'model_file not set'}), "
+                f"/task_state stays {UNKNOWN!r} until the first taught window"
+            )
+        elif model is None:
             self.get_logger().error(
                 f"no usable model, /task_state stays {UNKNOWN!r}: {self.model_problem}"
             )
-        self.tracker = BeliefTracker(model, cfg.mode, cfg.window_s, end_phases=cfg.end_phases)
-        self.session = ClassifierSession(self.tracker, StateFilter(cfg.state_hold_s), self.counts)
+        self.teaching = self.make_teaching(cfg, model, cold) if cfg.teach_enabled else None
+        self.tracker = BeliefTracker(
+            model,
+            cfg.mode,
+            cfg.window_s,
+            end_phases=cfg.end_phases,
+            history_s=cfg.teach_history_s if cfg.teach_enabled else 0.0,
+        )
+        self.session = ClassifierSession(
+            self.tracker, StateFilter(cfg.state), self.counts, self.teaching
+        )
         self.reported_error: str | None = None
         self.qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         self.state_pub = self.create_publisher(String, cfg.state_topic, self.qos)
         self.belief_pub = self.create_publisher(BeliefMsg, cfg.belief_topic, self.qos)
         self.cpu_at_start = time.process_time()
         self.beliefs = 0
+
+    def make_teaching(
+        self, cfg: ClassifierConfig, model: SubtaskModel | None, cold: bool
+    ) -> Teaching:
+        """The teach queue and worker; a model file that exists but is unusable is not
+        overwritten (teaching refuses, saying why)."""
+        config = load_teach_config(cfg.teach_config_file or None)
+        save = cfg.teach_file or cfg.model_file
+        teaching = Teaching(config, model, save, self.counts)
+        if model is None and not cold:
+            teaching.unavailable = (
+                f"model_file {cfg.model_file} exists but is not usable ({self.model_problem}); "
+                "teaching would overwrite it"
+            )
+        if teaching.unavailable:
+            self.get_logger().error(f"teaching is unavailable: {teaching.unavailable}")
+        elif not save:
+            self.get_logger().warning("teaching: taught models are not saved (no teach_file)")
+        return teaching
 
     def activate(self) -> None:
         cfg = self.cfg
@@ -99,6 +140,11 @@ class ClassifierNode(ManagedNode):
             phase_qos(cfg.qos_reliability),
             callback_group=drained,
         )
+        # labels are rare: served by the executor between drains (never inside one)
+        self.teach_srv = self.create_service(Teach, "~/teach", self.on_teach)
+        self.teach_sub = self.create_subscription(
+            TeachRequestMsg, cfg.teach_topic, self.on_teach_topic, qos_profile(100, "reliable")
+        )
         self.state_timer = (
             self.create_timer(1.0 / cfg.publish_rate_hz, self.publish_state)
             if cfg.publish_rate_hz > 0
@@ -114,6 +160,8 @@ class ClassifierNode(ManagedNode):
         for _, sub in self.word_subs:
             self.destroy_subscription(sub)
         self.destroy_subscription(self.phase_sub)
+        self.destroy_subscription(self.teach_sub)
+        self.destroy_service(self.teach_srv)
         if self.state_timer is not None:
             self.destroy_timer(self.state_timer)
         self.word_subs = []
@@ -125,9 +173,21 @@ class ClassifierNode(ManagedNode):
     def cleanup(self) -> None:
         self.destroy_publisher(self.state_pub)
         self.destroy_publisher(self.belief_pub)
+        if self.teaching is not None:
+            self.teaching.close()
+            self.log_teach_notes()
 
     def health(self, period_s: float) -> list[Health]:
-        """Model, belief-update latency of the period, words lost to a late join."""
+        """Model, belief-update latency of the period, words lost to a late join, teaching."""
+        extra: list[tuple[str, str]] = []
+        if self.teaching is not None:
+            self.log_teach_notes()
+            status = self.teaching.status()
+            extra = [
+                ("taught windows", str(status.taught_windows)),
+                ("teach requests pending", str(status.pending)),
+                ("taught model version", str(status.model_version)),
+            ]
         return [
             classifier_health(
                 state=self.state_label,
@@ -138,8 +198,49 @@ class ClassifierNode(ManagedNode):
                 latency=self.latency,
                 counts=self.counts,
                 watch=self.watch,
+                extra=extra,
             )
         ]
+
+    def on_teach(self, request: Teach.Request, response: Teach.Response) -> Teach.Response:
+        """The ~/teach service: take the window's words now, learn them in the worker."""
+        status = self.session.teach(
+            TeachRequest(
+                request.label, request.last, request.start, request.end, request.request_id
+            )
+        )
+        self.log_teach_notes()
+        response.accepted = status.accepted
+        response.message = status.message
+        response.pending = status.pending
+        response.taught_windows = status.taught_windows
+        response.model_version = status.model_version
+        response.errors = status.errors
+        return response
+
+    def on_teach_topic(self, msg: TeachRequestMsg) -> None:
+        """A fire-and-forget label: as the service, an empty label is refused (and counted)."""
+        if not msg.label:
+            self.counts.setdefault("teach requests refused", 0)
+            self.counts["teach requests refused"] += 1
+            self.get_logger().warning(
+                f"teach request refused: empty label on {self.cfg.teach_topic}"
+            )
+            return
+        status: TeachStatus = self.session.teach(
+            TeachRequest(msg.label, msg.last, msg.start, msg.end, msg.request_id)
+        )
+        self.log_teach_notes()
+        if not status.accepted and self.teaching is None:
+            self.get_logger().warning(f"teach request refused: {status.message}")
+
+    def log_teach_notes(self) -> None:
+        """Log what teaching did since the last call (each a line)."""
+        if self.teaching is None:
+            return
+        log = self.get_logger()
+        for level, line in self.teaching.notes():
+            {"info": log.info, "warning": log.warning}.get(level, log.error)(line)
 
     def on_words(self, arm: str, msg: WordsMsg, info: dict | None = None) -> None:
         """One Words message (the executor path; drain() takes bursts)."""

@@ -25,6 +25,7 @@ from rcbht_introspection.config_files import described as _f
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.intake import IntakeConfig, check_intake
+from rcbht_introspection.live.state import TaskStateConfig, check_task_state
 from rcbht_introspection.taxonomy import StreamProfile
 
 Reliability = Literal["reliable", "best_effort"]
@@ -101,11 +102,6 @@ class ClassifierConfig:
     publish_rate_hz: float = _f(
         10.0, "/task_state is also republished at this rate (0: only on change)"
     )
-    state_hold_s: float = _f(
-        0.0,
-        "a new sub-task reaches /task_state once the belief held it this long (stream seconds; "
-        "0: at once; 'unknown' always at once); fewer short-lived states, later changes",
-    )
     arms: tuple[str, ...] = _f(("R",), "arm names whose words are classified, as in the segmenter")
     words_namespace: str = _f("rcbht", "namespace of the word topics, as in the segmenter")
     phase_topic: str = _f("rcbht/phase", "rcbht_interfaces/Phase events from the segmenter")
@@ -117,6 +113,24 @@ class ClassifierConfig:
         10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
     )
     qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
+    teach_enabled: bool = _f(
+        False,
+        "learn labelled windows (service ~/teach, topic teach_topic) into the Mondrian model; "
+        "a model_file that does not exist yet is a cold start ('unknown' until the first taught "
+        "window)",
+    )
+    teach_file: str = _f(
+        "", "each taught model is saved here, atomically ('': to model_file; both '': not saved)"
+    )
+    teach_history_s: float = _f(
+        60.0,
+        "teaching: stream seconds of words kept for labels given after the fact (besides the last "
+        "finished sub-task)",
+    )
+    teach_topic: str = _f("rcbht/teach", "rcbht_interfaces/TeachRequest: fire-and-forget labels")
+    teach_config_file: str = _f("", "YAML file with a `teach` section ('': config/teach.yaml)")
+    state: TaskStateConfig = field(default_factory=TaskStateConfig)
+    """Parameters `state.<name>`: when a new believed sub-task becomes /task_state."""
 
 
 NodeConfig = TypeVar("NodeConfig", bound=SegmenterConfig | ClassifierConfig)
@@ -188,6 +202,7 @@ TOPIC_FIELDS = (
     "state_topic",
     "belief_topic",
     "pose_topics",
+    "teach_topic",
 )
 
 
@@ -267,13 +282,23 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
             f"must be >= 0, got {cfg.publish_rate_hz}",
             path,
         )
+        try:
+            check_task_state(cfg.state)
+        except InputError as exc:
+            raise InputError(exc.message, path=path, field=f"state.{exc.field}") from None
+        _check(bool(cfg.state_topic), "state_topic", "must not be empty", path)
         _check(
-            0 <= cfg.state_hold_s <= 10,
-            "state_hold_s",
-            f"must be in [0, 10], got {cfg.state_hold_s}",
+            0 <= cfg.teach_history_s <= 3600,
+            "teach_history_s",
+            f"must be in [0, 3600], got {cfg.teach_history_s}",
             path,
         )
-        _check(bool(cfg.state_topic), "state_topic", "must not be empty", path)
+        _check(
+            not cfg.teach_config_file or Path(cfg.teach_config_file).is_file(),
+            "teach_config_file",
+            f"no such file: {cfg.teach_config_file}",
+            path,
+        )
     return cfg
 
 

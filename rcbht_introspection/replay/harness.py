@@ -5,10 +5,19 @@ The two nodes run as separate processes over real DDS, isolated as supervision.p
 each bag with its recorded timing divided by `rate` and records /task_state, the beliefs, the
 applied sub-task events and the words (observer.py); scoring.py compares them with the truth
 in the bag and with the offline run of the same stream and model.
+
+Teaching (`teach_first` K): the classifier starts without a model (a cold start), the first K
+bags are played in order and after each one its sub-tasks are taught through the classifier's
+~/teach service with their true names and [start, end] (the windows of its verdicts, which the
+applied sub-task events bound), waiting until the node reports nothing pending; the other bags
+are then scored with the taught model (saved by the node, the offline reference). With
+`teach_restart` the classifier is restarted from the saved model and the scored bags are
+played again: the verdicts must be the same.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import tempfile
 import time
 from dataclasses import dataclass
@@ -27,9 +36,11 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import load_model, profile_mismatch
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.segmenter import arm_stream_factory
+from rcbht_introspection.live.state import TaskStateConfig
 from rcbht_introspection.nodes.common import RosSession, qos_profile
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
 from rcbht_introspection.nodes.player import BagPlayer
+from rcbht_introspection.nodes.teach_client import call_teach, teach_client, teach_request
 from rcbht_introspection.replay.observer import Observer, segmenter_matches
 from rcbht_introspection.replay.scoring import (
     BagRecord,
@@ -50,6 +61,7 @@ from rcbht_introspection.replay.supervision import (
 )
 from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.config import load_taxonomy_config
+from rcbht_introspection.waiting import wait_until
 
 
 @dataclass(frozen=True)
@@ -63,8 +75,8 @@ class ReplayEvalOptions:
     taxonomy_config_file: str = ""
     """A file of taxonomy profiles, e.g. from `rcbht calibrate` (empty: config/rcbht.yaml)."""
     stream_profile: StreamProfile = "reference"
-    state_hold_s: float = 0.0
-    """classifier_node's state_hold_s (how long a new /task_state must hold)."""
+    state: TaskStateConfig | None = None
+    """classifier_node's `state.*` parameters (None: those of config/classifier.yaml)."""
     startup_timeout: float = 60.0
     drain_timeout: float = 60.0
     domain_id: int | None = None
@@ -72,6 +84,14 @@ class ReplayEvalOptions:
     """Keep the node logs here (default: a temporary folder, removed afterwards)."""
     offline: bool = True
     """Also compute the offline references (words and verdicts)."""
+    teach_first: int = 0
+    """> 0: start without a model and teach the first this many bags (module doc)."""
+    teach_restart: bool = False
+    """After teaching: restart the classifier from the saved model, replay the scored bags."""
+    teach_file: Path | None = None
+    """Where the classifier saves the taught model (default: in the work folder)."""
+    teach_timeout: float = 600.0
+    """Longest wait for one bag's sub-tasks to be learned."""
 
 
 def _params(
@@ -100,17 +120,29 @@ def _params(
             "stream_profile": options.stream_profile,
         },
     )
-    cls_params = write_params(
-        work / "classifier.yaml",
-        ClassifierConfig,
-        {
-            "model_file": cls_cfg.model_file,
-            "mode": options.mode,
-            "arms": list(arms),
-            "state_hold_s": options.state_hold_s,
-        },
-    )
+    values: dict[str, Any] = {
+        "model_file": cls_cfg.model_file,
+        "mode": options.mode,
+        "arms": list(arms),
+        **({"state": dataclasses.asdict(options.state)} if options.state is not None else {}),
+    }
+    if options.teach_first:
+        values.update(
+            model_file=str(teach_path(work, options).resolve()),
+            teach_enabled=True,
+            teach_history_s=TEACH_HISTORY_S,
+        )
+    cls_params = write_params(work / "classifier.yaml", ClassifierConfig, values)
     return seg, cls_cfg, seg_params, cls_params
+
+
+TEACH_HISTORY_S = 600.0
+"""classifier_node's teach_history_s in a teaching replay: a whole trial's words stay."""
+
+
+def teach_path(work: Path, options: ReplayEvalOptions) -> Path:
+    """Where the classifier of a teaching replay saves its taught model."""
+    return Path(options.teach_file) if options.teach_file else work / "taught.rcbht"
 
 
 def replay_eval(
@@ -124,6 +156,22 @@ def replay_eval(
         raise InputError("no such model file", model_path)
     if options.rate <= 0:
         raise InputError(f"rate must be > 0, got {options.rate}", field="rate")
+    if options.teach_first:
+        if model_path is not None:
+            raise InputError("teaching starts without a model: give no --model")
+        if not 0 < options.teach_first < len(bags):
+            raise InputError(
+                f"teach_first must be in [1, {len(bags) - 1}] (bags left to score), "
+                f"got {options.teach_first}",
+                field="teach_first",
+            )
+        if options.mode != "boundary":
+            raise InputError("teaching needs boundary mode (sub-task verdicts)", field="mode")
+        if options.teach_file is not None and Path(options.teach_file).exists():
+            raise InputError(
+                "the taught model's file exists already (a cold start needs none)",
+                options.teach_file,
+            )
     if model_path is not None:
         taxonomy = load_taxonomy_config(
             options.profile or None, options.taxonomy_config_file or None
@@ -181,10 +229,49 @@ def replay_eval(
 
                 wait_for_nodes(ready, options.startup_timeout, procs, "the nodes to connect")
                 result["startup_s"] = round(time.monotonic() - started, 2)
+                plays = list(zip(bags, all_messages, strict=True))
+                accepted_before: dict[str, int] = {}
+                k = options.teach_first
+                if k:
+                    client = teach_client(ros.node)
+                    taught = []
+                    for stream_id, (bag, msgs) in enumerate(plays[:k]):
+                        rec = _play_one(
+                            bag, msgs, stream_id, player, observer, procs, options, arms
+                        )
+                        taught.append(_teach_bag(client, rec, trials[stream_id], options))
+                        accepted_before = {
+                            a: rec.ends.get((a, "primitives"), (0, 0))[0] for a in arms
+                        }
+                    result["teach"] = _teach_summary(taught)
                 records = [
                     _play_one(bag, msgs, stream_id, player, observer, procs, options, arms)
-                    for stream_id, (bag, msgs) in enumerate(zip(bags, all_messages, strict=True))
+                    for stream_id, (bag, msgs) in enumerate(plays[k:], start=k)
                 ]
+                if k and options.teach_restart:
+                    procs[1].interrupt()
+                    codes["classifier_node (taught)"] = procs[1].stop()
+                    # the graph and the segmenter's diagnostics must first see it gone
+                    wait_for_nodes(
+                        lambda: (
+                            matched() < 2
+                            and all(ros.node.count_subscribers(t) < 2 for t in classifier_inputs)
+                        ),
+                        options.startup_timeout,
+                        procs[:1],
+                        "the classifier to leave the graph",
+                    )
+                    procs[1] = NodeProcess(
+                        "classifier_node", cls_params, env, work / "classifier_node_restarted.log"
+                    )
+                    wait_for_nodes(
+                        ready, options.startup_timeout, procs, "the restarted classifier"
+                    )
+                    again = [
+                        _play_one(bag, msgs, stream_id, player, observer, procs, options, arms)
+                        for stream_id, (bag, msgs) in enumerate(plays[k:], start=len(plays))
+                    ]
+                    result["restart"] = _restart_summary(records, again)
         finally:
             for p in procs:  # both stop at once: a Ctrl-C of the harness ends within seconds
                 p.interrupt()
@@ -199,7 +286,10 @@ def replay_eval(
                         p.proc.kill()
                 if not options.domain_id:
                     release_domain(domain_id)  # its nodes are gone
-    result.update(_score(records, trials, model_path, options, arms))
+    scored_trials = trials[options.teach_first :]
+    if options.teach_first:
+        model_path = teach_path(work, options)
+    result.update(_score(records, scored_trials, model_path, options, arms, accepted_before))
     result.update(
         {
             "bags": [str(b) for b in bags],
@@ -208,6 +298,7 @@ def replay_eval(
             "profile": options.profile,
             "stream_profile": options.stream_profile,
             "model": str(model_path),
+            "teach_first": options.teach_first,
             "domain_id": domain_id,
             "exit_codes": codes,
             "clean_shutdown": all(c == 0 for c in codes.values()),
@@ -216,6 +307,70 @@ def replay_eval(
     )
     tmp.cleanup()
     return result
+
+
+def _teach_bag(
+    client: Any, rec: BagRecord, trial: Trial, options: ReplayEvalOptions
+) -> dict[str, Any]:
+    """Teach the sub-tasks of a played bag (true names, its verdicts' windows); wait until
+    the classifier has learned them. Returns the latencies."""
+    truth = [s for s, _, _ in trial.subtask_bounds()]
+    finals = [r.belief for r in rec.beliefs if r.belief.final]
+    if len(finals) != len(truth):
+        raise InputError(f"{len(finals)} verdicts for {len(truth)} sub-tasks", rec.playback.bag)
+    t0 = time.monotonic()
+    calls = []
+    for label, belief in zip(truth, finals, strict=True):
+        sent = time.monotonic()
+        response = call_teach(client, teach_request(label, belief.start, belief.end))
+        calls.append(round(time.monotonic() - sent, 4))
+        if not response.accepted:
+            raise InputError(f"teaching {label!r} refused: {response.message}", rec.playback.bag)
+    status = None
+
+    def learned() -> bool:
+        nonlocal status
+        status = call_teach(client, teach_request(""))
+        return status.pending == 0
+
+    if not wait_until(learned, options.teach_timeout, poll=0.05):
+        raise InputError(f"not learned within {options.teach_timeout} s", rec.playback.bag)
+    assert status is not None
+    return {
+        "name": trial.name,
+        "subtasks": truth,
+        "call_s": calls,
+        "learned_s": round(time.monotonic() - t0, 3),
+        "taught_windows": status.taught_windows,
+        "model_version": status.model_version,
+        "errors": status.errors,
+    }
+
+
+def _teach_summary(taught: list[dict[str, Any]]) -> dict[str, Any]:
+    """The teaching part of the report."""
+    learned = [t["learned_s"] for t in taught]
+    return {
+        "taught_trials": [t["name"] for t in taught],
+        "taught_windows": taught[-1]["taught_windows"],
+        "model_version": taught[-1]["model_version"],
+        "errors": taught[-1]["errors"],
+        "trial_latency_s": learned,
+        "trial_latency_max_s": max(learned),
+        "per_trial": taught,
+    }
+
+
+def _restart_summary(first: list[BagRecord], again: list[BagRecord]) -> dict[str, Any]:
+    """Verdicts of the scored bags before and after the classifier restarted from its file."""
+
+    def verdicts(records: list[BagRecord]) -> list[list[str]]:
+        return [[r.belief.subtask for r in rec.beliefs if r.belief.final] for rec in records]
+
+    return {
+        "verdicts_equal": verdicts(first) == verdicts(again),
+        "verdicts_after_restart": verdicts(again),
+    }
 
 
 def load_reference(model_path: Path, options: ReplayEvalOptions) -> Reference:
@@ -231,12 +386,13 @@ def _score(
     model_path: Path | None,
     options: ReplayEvalOptions,
     arms: tuple[str, ...],
+    accepted_before: dict[str, int] | None = None,
 ) -> dict[str, Any]:
     """The scores, with the offline reference when asked for and a model was given."""
     reference = None
     if options.offline and model_path is not None:
         reference = load_reference(model_path, options)
-    return score(records, trials, arms, options.mode, reference)
+    return score(records, trials, arms, options.mode, reference, accepted_before)
 
 
 def _play_one(

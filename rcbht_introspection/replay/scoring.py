@@ -8,7 +8,7 @@ Its dict is the JSON that `rcbht replay-eval` prints and writes.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -18,7 +18,8 @@ import numpy as np
 from rcbht_introspection.io.bags import END_PHASE, WRENCH_TYPE, BagMessage, decode_wrench
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live import BeliefMode, offline
-from rcbht_introspection.live.belief import Belief
+from rcbht_introspection.live.belief import UNKNOWN, Belief
+from rcbht_introspection.live.reliability import expected_calibration_error, top_label
 from rcbht_introspection.nodes.params import LEVEL_TOPICS
 from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import LEVELS, Word
@@ -251,15 +252,23 @@ def score(
     arms: Sequence[str],
     mode: BeliefMode,
     reference: Reference | None = None,
+    accepted_before: Mapping[str, int] | None = None,
 ) -> dict[str, Any]:
-    """Scores over all bags plus a per-bag record (without a reference: no offline figures)."""
+    """Scores over all bags plus a per-bag record (without a reference: no offline figures).
+
+    `accepted_before`: per arm, the samples the segmenter accepted for bags played before these
+    (its counters are cumulative), e.g. the bags a teaching replay taught."""
     correct = total = 0
     verdicts_match = words_match = True
     dropped = rejected = state_changes = 0
     latencies = Latencies()
     time_acc: list[tuple[float, float]] = []
+    final_conf: list[float] = []
+    final_hit: list[bool] = []
+    running_conf: list[float] = []
+    running_hit: list[bool] = []
     bags_out = []
-    prev_accepted = dict.fromkeys(arms, 0)
+    prev_accepted = {arm: (accepted_before or {}).get(arm, 0) for arm in arms}
     for rec, trial in zip(records, trials, strict=True):
         truth = [s for s, _, _ in trial.subtask_bounds()]
         finals = [r.belief for r in rec.beliefs if r.belief.final]
@@ -276,6 +285,21 @@ def score(
         bag_dropped = rec.playback.published - sum(accepted.values())
         dropped += bag_dropped
         latencies.add(rec)
+        for b, true in zip(finals, truth, strict=False):
+            if b.probabilities:
+                conf, hit = top_label([b.probabilities], b.classes, [true])
+                final_conf.append(float(conf[0]))
+                final_hit.append(bool(hit[0]))
+        running = [
+            r.belief
+            for r in rec.beliefs
+            if not r.belief.final and r.belief.probabilities and r.belief.subtask != UNKNOWN
+        ]
+        at = offline.truth_at(trial, np.asarray([b.end for b in running], dtype=float))
+        for b, true in zip(running, at, strict=True):
+            conf, hit = top_label([b.probabilities], b.classes, [str(true)])
+            running_conf.append(float(conf[0]))
+            running_hit.append(bool(hit[0]))
         changes = state_timeline(rec)
         acc_t = offline.time_accuracy(trial, changes, initial=rec.initial_state)
         state_changes += len(changes)
@@ -315,6 +339,11 @@ def score(
         "verdicts_match_offline": verdicts_match if reference is not None and boundary else None,
         "time_accuracy": round(sum(a * d for a, d in time_acc) / weight, 4),
         "state_changes": state_changes,
+        "state_changes_per_boundary": round(state_changes / total, 3) if total else None,
+        "expected_calibration_error": {
+            "final": _rounded(expected_calibration_error(final_conf, final_hit)),
+            "running": _rounded(expected_calibration_error(running_conf, running_hit)),
+        },
         "dropped_wrench": dropped,
         "rejected_wrench": rejected,
         "words_match_offline": words_match if reference is not None else None,
@@ -324,6 +353,10 @@ def score(
         "event_latency_ms": offline.percentiles_ms(latencies.event),
         "per_bag": bags_out,
     }
+
+
+def _rounded(value: float | None) -> float | None:
+    return None if value is None else round(value, 4)
 
 
 def summary(result: dict[str, Any], timeline: bool = False) -> str:
@@ -340,9 +373,23 @@ def summary(result: dict[str, Any], timeline: bool = False) -> str:
             steps = ", ".join(f"{t:.2f}s {s}" for t, s in b["timeline"])
             lines.append(f"  /task_state: start {b['initial_state']}, {steps}")
     lat = result["latency_ms"]
+    teach = result.get("teach")
+    if teach:
+        lines.append(
+            f"taught {len(teach['taught_trials'])} trials ({teach['taught_windows']} windows, "
+            f"model version {teach['model_version']}, errors {teach['errors']}); learned in "
+            f"{teach['trial_latency_s']} s per trial"
+        )
+    if "restart" in result:
+        lines.append(
+            f"after a restart from the saved model: verdicts equal {result['restart']['verdicts_equal']}"
+        )
     lines.append(
         f"subtask_accuracy {result['subtask_accuracy']} ({result['subtasks_correct']}/{result['subtasks']}), "
-        f"time_accuracy {result['time_accuracy']}, verdicts_match_offline {result['verdicts_match_offline']}, "
+        f"time_accuracy {result['time_accuracy']}, state changes {result['state_changes']} "
+        f"({result['state_changes_per_boundary']} per sub-task boundary), "
+        f"ECE final {result['expected_calibration_error']['final']} "
+        f"running {result['expected_calibration_error']['running']}, verdicts_match_offline {result['verdicts_match_offline']}, "
         f"words_match_offline {result['words_match_offline']}, dropped_wrench {result['dropped_wrench']}, "
         f"latency p50 {lat['p50']} ms p99 {lat['p99']} ms (n={lat['n']}), "
         f"clean_shutdown {result['clean_shutdown']}, rate {result['rate']}x, {result['wall_s']} s"

@@ -1,0 +1,237 @@
+"""Online teaching: the one path by which labelled windows reach a sub-task model (node, CLI,
+prequential evaluation).
+
+Cold start (the compact encoding is fitted on data, and a growing Mondrian forest needs fixed
+feature bounds): while fewer than `warmup_windows` windows were taught, the learner keeps every
+taught window and refits encoding + forest from all of them at each teach (exactly train_model,
+batch training); after that the encoding is frozen, the kept windows are dropped and the forest
+is only extended with partial_fit. A model given to the learner (e.g. loaded from a file)
+continues with partial_fit. Each teach returns a new snapshot; a snapshot is never changed.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from rcbht_introspection.config_files import config_path, load_config
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar import ENCODINGS, EncodingName
+from rcbht_introspection.grammar.encoding.cache import SampleCache
+from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
+from rcbht_introspection.learn.models import SubtaskModel, train_model
+from rcbht_introspection.task import Task
+
+TEACH_CONFIG_FILE = "teach.yaml"
+ONLINE_KEY = "online"
+"""Key of the model's `training` header that records the teaching state."""
+
+
+@dataclass(frozen=True)
+class TeachConfig:
+    """How taught windows become a model (config/teach.yaml, section teach)."""
+
+    warmup_windows: int = 40
+    """Teaches refit encoding + forest from all taught windows until this many were taught;
+    then the encoding is frozen and the forest grows with partial_fit only."""
+    prefixes: tuple[float, ...] = (0.25, 0.5, 0.75)
+    """Also teach these first fractions of each window (what a live classifier sees early)."""
+    n_estimators: int = 100
+    """Mondrian trees."""
+    encoding: str = "compact"
+    """Encoding fitted during warm-up ('compact' or 'paper')."""
+
+
+def _check(cfg: TeachConfig) -> None:
+    """Ranges beyond the field types (the loader adds file and line to the error)."""
+    if cfg.warmup_windows < 0:
+        raise InputError(f"must be >= 0, got {cfg.warmup_windows}", field="warmup_windows")
+    if cfg.n_estimators < 1:
+        raise InputError(f"must be >= 1, got {cfg.n_estimators}", field="n_estimators")
+    if cfg.encoding not in ENCODINGS:
+        raise InputError(
+            f"unknown encoding {cfg.encoding!r} (known: {', '.join(ENCODINGS)})", field="encoding"
+        )
+    for i, f in enumerate(cfg.prefixes):
+        if not 0 < f <= 1:
+            raise InputError(f"must be in (0, 1], got {f}", field=f"prefixes[{i}]")
+
+
+def load_teach_config(path: Path | str | None = None) -> TeachConfig:
+    """The teach section of config/teach.yaml (or of `path`)."""
+    file = Path(path) if path is not None else config_path(TEACH_CONFIG_FILE)
+    return load_config(TeachConfig, file, section=("teach",), check=_check)
+
+
+class OnlineLearner:
+    """Teaches labelled windows to a Mondrian sub-task model and hands out snapshots.
+
+    Not thread-safe itself: one teaching thread calls `teach`; any number of threads may
+    predict with snapshots it returned (they share nothing the learner changes later).
+    """
+
+    def __init__(
+        self,
+        config: TeachConfig,
+        model: SubtaskModel | None = None,
+        task: Task | None = None,
+        random_state: int = 0,
+    ) -> None:
+        _check(config)
+        self.config = config
+        self.task = task
+        self.random_state = random_state
+        self.taught_windows = 0
+        """Windows taught so far (prefix windows not counted), including those of a given model."""
+        self.refits = 0
+        """Teaches that refitted encoding + forest from the kept windows (warm-up)."""
+        self.last_copy_s = 0.0
+        """Seconds the last teach spent copying the forest so the previous snapshot stays intact."""
+        self._kept: list[SubtaskSample] = []
+        self._cache = SampleCache()
+        self._working: SubtaskModel | None = None
+        self._shared = False
+        """The working forest is also the latest snapshot's: copy it before changing it."""
+        self._snapshot: SubtaskModel | None = None
+        if model is not None:
+            _require_mondrian(model)
+            state = model.training.get(ONLINE_KEY) or {}
+            self.taught_windows = int(state.get("taught_windows", 0))
+            self.task = task or model.task
+            self._working = model
+            self._snapshot = model
+            self._shared = True
+
+    @property
+    def model(self) -> SubtaskModel | None:
+        """The latest snapshot (None before the first teach of a learner without a model)."""
+        return self._snapshot
+
+    @property
+    def warming_up(self) -> bool:
+        """True while the next teach refits from the kept windows (encoding not yet frozen)."""
+        if self._working is None:
+            return True  # no model yet: the first teach fits one
+        return bool(self._kept) and self.taught_windows < self.config.warmup_windows
+
+    def teach(self, samples: Sequence[SubtaskSample]) -> SubtaskModel:
+        """Learn labelled windows (sample.subtask = the label, any new name accepted) and return a
+        NEW model object (a snapshot the caller may swap in; never mutates a model already returned)."""
+        samples = list(samples)
+        if not samples:
+            raise InputError("nothing to teach: no windows")
+        for s in samples:
+            if not isinstance(s.subtask, str) or not s.subtask.strip():
+                raise InputError(f"a taught window of trial {s.trial!r} has no label")
+        if self.warming_up:
+            self._refit(samples)
+        else:
+            self._extend(samples)
+        self.taught_windows += len(samples)
+        if self.taught_windows >= self.config.warmup_windows and self._kept:
+            self._freeze()
+        working = self._working
+        assert working is not None
+        working.training = {**working.training, ONLINE_KEY: self.state()}
+        self._snapshot = self._snapshot_of(working)
+        self._shared = True
+        return self._snapshot
+
+    def state(self) -> dict[str, Any]:
+        """The teaching state as stored in the model header (a restarted node continues from it)."""
+        return {
+            "taught_windows": self.taught_windows,
+            "warmup_windows": self.config.warmup_windows,
+            "prefixes": list(self.config.prefixes),
+            "frozen": not self.warming_up,
+        }
+
+    # ------------------------------------------------------------------ internals
+    def _taught_samples(self, samples: Sequence[SubtaskSample]) -> list[SubtaskSample]:
+        """The windows and their prefixes, as train_model's augment_prefixes makes them."""
+        windows = list(samples)
+        return windows + [prefix_sample(s, f) for f in self.config.prefixes for s in windows]
+
+    def _refit(self, samples: Sequence[SubtaskSample]) -> None:
+        """Warm-up: encoding + forest from every window taught so far (= train_model on them)."""
+        kept = [*self._kept, *samples]
+        encoding: EncodingName = "paper" if self.config.encoding == "paper" else "compact"
+        self._working = train_model(
+            kept,
+            "mondrian",
+            encoding,
+            random_state=self.random_state,
+            n_estimators=self.config.n_estimators,
+            augment_prefixes=self.config.prefixes,
+            cache=self._cache,
+            task=self.task,
+        )
+        self._kept = kept  # only once the refit succeeded: a failed teach changes nothing
+        self.refits += 1
+        self._shared = False
+
+    def _extend(self, samples: Sequence[SubtaskSample]) -> None:
+        """After warm-up: the frozen encoding, the forest extended with partial_fit (+ live head)."""
+        assert self._working is not None
+        if self._shared:
+            began = time.perf_counter()
+            self._working = _copy_model(self._working)
+            self.last_copy_s = time.perf_counter() - began
+            self._shared = False
+        taught = self._taught_samples(samples)
+        for model in (self._working, self._working.live):
+            if model is None:
+                continue
+            features = model.encoder.transform(taught)
+            try:
+                model.estimator.partial_fit(features, [s.subtask for s in taught])
+            except ValueError as exc:
+                raise InputError(f"the forest cannot learn these windows: {exc}") from None
+        for s in taught:
+            self._working.encoder.cache.forget(s)
+            if self._working.live is not None:
+                self._working.live.encoder.cache.forget(s)
+
+    def _freeze(self) -> None:
+        """End of warm-up: drop the kept windows and their cached features."""
+        self._kept = []
+        self._cache = SampleCache()
+        if self._working is not None:
+            self._working.encoder = replace(self._working.encoder, cache=SampleCache())
+
+    def _snapshot_of(self, working: SubtaskModel) -> SubtaskModel:
+        """A model sharing the (from now on unchanged) forest, with encoders of its own cache."""
+        return replace(
+            working,
+            encoder=replace(working.encoder, cache=SampleCache()),
+            training=copy.deepcopy(working.training),
+            live=None if working.live is None else self._snapshot_of(working.live),
+        )
+
+
+def _require_mondrian(model: SubtaskModel) -> None:
+    """Only a Mondrian forest (and a Mondrian live head) can be taught online."""
+    for part, name in ((model, "model"), (model.live, "live head")):
+        if part is not None and part.classifier != "mondrian":
+            raise InputError(
+                f"cannot teach a {part.classifier} {name}: online teaching needs the mondrian "
+                "classifier (retrain with --classifier mondrian)"
+            )
+
+
+def _copy_model(model: SubtaskModel) -> SubtaskModel:
+    """The model with copies of its forests (copy-on-write before partial_fit)."""
+    return replace(
+        model,
+        estimator=copy.deepcopy(model.estimator),
+        encoder=replace(model.encoder, cache=SampleCache()),
+        training=copy.deepcopy(model.training),
+        live=None if model.live is None else _copy_model(model.live),
+    )
+
+
+__all__ = ["OnlineLearner", "TeachConfig", "load_teach_config"]

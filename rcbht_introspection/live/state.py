@@ -1,0 +1,120 @@
+"""/task_state from successive beliefs: a new sub-task becomes the state only when it is confident.
+
+A planner acts on every /task_state change, so the state moves to a new sub-task only when the
+running belief's leading class passes every test of `TaskStateConfig` (probability, log ratio
+over the current state, accumulated log-odds, hold). Before the first confident belief of a stream
+the state is "unknown"; a belief without evidence (an empty window right after a sub-task event)
+keeps the state; a blind belief (words proven lost, live/join.py) makes it "unknown" at once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from rcbht_introspection.config_files import described
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.live.belief import UNKNOWN, Belief
+
+TINY = 1e-9
+"""Floor of a probability in a log ratio (a class the model rules out entirely)."""
+
+
+@dataclass(frozen=True)
+class TaskStateConfig:
+    """When a new believed sub-task becomes /task_state (classifier_node parameters `state.*`)."""
+
+    min_probability: float = described(
+        0.6, "the new sub-task's probability must be at least this (0: any)"
+    )
+    min_log_ratio: float = described(
+        0.0,
+        "... and its log ratio over the current state's probability at least this "
+        "(0: leading is enough; no test while the state is unknown)",
+    )
+    evidence_bound: float = described(
+        0.0,
+        "sequential test: the log-odds log(p/(1-p)) of the leading sub-task, summed over the "
+        "successive beliefs it leads, must reach this (0: off)",
+    )
+    hold_s: float = described(
+        0.0,
+        "... and the belief must have passed the tests for this long (stream seconds; 0: at once)",
+    )
+
+
+def check_task_state(config: TaskStateConfig) -> None:
+    """Ranges of the fields; InputError names the field."""
+    checks = (
+        ("min_probability", 0 <= config.min_probability <= 1, "[0, 1]"),
+        ("min_log_ratio", 0 <= config.min_log_ratio <= 50, "[0, 50]"),
+        ("evidence_bound", 0 <= config.evidence_bound <= 1000, "[0, 1000]"),
+        ("hold_s", 0 <= config.hold_s <= 10, "[0, 10]"),
+    )
+    for name, ok, bounds in checks:
+        if not ok:
+            raise InputError(f"must be in {bounds}, got {getattr(config, name)}", field=name)
+
+
+class StateFilter:
+    """/task_state of one classifier: `update` with each running belief, `new_stream` per stream."""
+
+    def __init__(self, config: TaskStateConfig | None = None) -> None:
+        self.config = config if config is not None else TaskStateConfig()
+        check_task_state(self.config)
+        self.state = UNKNOWN
+        self._reported = UNKNOWN
+        self._candidate: str | None = None
+        self._since = 0.0
+        self._evidence = 0.0
+
+    def confident(self, belief: Belief) -> bool:
+        """The belief's sub-task passes the probability and log-ratio tests (not the sequential
+        test or the hold, which need the beliefs before it)."""
+        p = _probability(belief, belief.subtask)
+        if p < self.config.min_probability:
+            return False
+        if self.state == UNKNOWN or self.config.min_log_ratio <= 0:
+            return True
+        ratio = math.log(max(p, TINY) / max(_probability(belief, self.state), TINY))
+        return ratio >= self.config.min_log_ratio
+
+    def update(self, t: float, belief: Belief) -> bool:
+        """Feed the running belief at stream time `t`; True when /task_state changed."""
+        if belief.blind:
+            self._drop()
+            self.state = UNKNOWN
+        elif belief.subtask == UNKNOWN or belief.subtask == self.state:
+            self._drop()  # no evidence (an empty window) keeps the state
+        elif not self.confident(belief):
+            self._drop()
+        else:
+            if belief.subtask != self._candidate:
+                self._candidate, self._since, self._evidence = belief.subtask, t, 0.0
+            p = min(max(_probability(belief, belief.subtask), TINY), 1 - TINY)
+            self._evidence += math.log(p / (1 - p))
+            if (
+                self._evidence >= self.config.evidence_bound
+                and t - self._since >= self.config.hold_s
+            ):
+                self.state = belief.subtask
+                self._drop()
+        changed = self.state != self._reported
+        self._reported = self.state
+        return changed
+
+    def new_stream(self) -> None:
+        """A new stream: "unknown" until its first confident belief (the next update reports it)."""
+        self._drop()
+        self.state = UNKNOWN
+
+    def _drop(self) -> None:
+        self._candidate, self._evidence = None, 0.0
+
+
+def _probability(belief: Belief, subtask: str) -> float:
+    """The belief's probability of `subtask` (1 for the believed one of a model without
+    probabilities, 0 for a name it does not know)."""
+    if subtask in belief.classes and belief.probabilities:
+        return float(belief.probabilities[belief.classes.index(subtask)])
+    return 1.0 if subtask == belief.subtask and not belief.probabilities else 0.0
