@@ -90,13 +90,23 @@ def test_train_writes_a_loadable_model(
     else:
         trials = generated_trials(request)[:4]
     out = tmp_path / "model.npz"
-    assert main(["train", *map(str, trials), "--out", str(out), "--classifier", "mondrian"]) == 0
+    budget = ["--max-nodes", "300", "--max-points", "10"]
+    assert main(["train", *map(str, trials), "--out", str(out), "--classifier", "mondrian",
+                 *budget]) == 0  # fmt: skip
     assert "16 samples" in capsys.readouterr().out
     model = load_model(out, expect_encoding="compact")
     assert model.classifier == "mondrian" and len(model.classes_) == 4
+    for head in (model, model.live or model):
+        forest = head.estimator
+        assert (forest.max_nodes, forest.max_points) == (300, 10)
+        assert forest.n_nodes_ <= 300 and forest.n_stored_points_ <= 10
 
 
 def test_bad_inputs_are_one_line_errors(tmp_path: Path, capsys) -> None:
     assert main(["evaluate", str(tmp_path / "none"), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("rcbht evaluate: error:") and err.count("\n") == 1
+    for option in (["--max-nodes", "500"], ["--classifier", "mondrian", "--max-nodes", "50"]):
+        assert main(["evaluate", str(tmp_path), "--no-progress", *option]) == 2
+        err = capsys.readouterr().err
+        assert "--max-nodes" in err and err.count("\n") == 1

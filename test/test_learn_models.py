@@ -4,6 +4,7 @@ updates, and the near-empty rotation sub-task (REAL only)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.io.hiro import find_trials
 from rcbht_introspection.learn.data import load_samples, load_trials
-from rcbht_introspection.learn.model_file import load_model, save_model
+from rcbht_introspection.learn.model_file import _checksum, load_model, save_model
 from rcbht_introspection.learn.models import train_model
 
 REAL = "REAL_HIRO_ONE_SA_SUCCESS"
@@ -108,6 +109,41 @@ def test_online_update_continues_from_a_loaded_forest(samples: Samples, tmp_path
     )
     with pytest.raises(InputError, match="mondrian"):
         train_model(train, "svm", "compact").partial_fit_samples(train[:4])
+
+
+def test_a_budgeted_forest_with_a_grown_class_set_round_trips(
+    samples: Samples, tmp_path: Path
+) -> None:
+    """The budget and classes learned online survive the model file; the loaded forest keeps
+    learning exactly as the saved one; a file written before budgets loads unbounded."""
+    train, valid = samples
+    model = train_model(train[:8], "mondrian", "compact", max_nodes=400, max_points=12)
+    regrasp = [dataclasses.replace(s, subtask="regrasp") for s in valid[:2]]
+    model.partial_fit_samples(regrasp)  # a name the model was not trained with
+    assert "regrasp" in model.classes_
+    loaded = load_model(save_model(model, tmp_path / "mf.npz"))
+    assert loaded.classes_ == model.classes_
+    assert (loaded.estimator.max_nodes, loaded.estimator.max_points) == (400, 12)
+    assert loaded.estimator.get_params() == model.estimator.get_params()
+    for model_ in (model, loaded):
+        for start in range(8, len(train), 4):
+            model_.partial_fit_samples(train[start : start + 4])
+        assert model_.estimator.n_nodes_ <= 400 and model_.estimator.n_stored_points_ <= 12
+    np.testing.assert_array_equal(
+        model.predict_proba_samples(valid), loaded.predict_proba_samples(valid)
+    )
+
+    def before_budgets(header: dict, arrays: dict) -> None:
+        del header["mondrian"]["max_nodes"], header["mondrian"]["max_points"]
+        header["checksum"] = _checksum(header, {k: v for k, v in arrays.items() if k != "header"})
+
+    unbounded = train_model(train[:8], "mondrian", "compact")
+    path = save_model(unbounded, tmp_path / "old.npz")
+    old = load_model(_rewrite(path, tmp_path / "old_rewritten.npz", before_budgets))
+    assert (old.estimator.max_nodes, old.estimator.max_points) == (None, None)
+    np.testing.assert_array_equal(
+        old.predict_proba_samples(valid), unbounded.predict_proba_samples(valid)
+    )
 
 
 def _rewrite(path: Path, out: Path, edit) -> Path:

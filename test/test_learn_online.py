@@ -149,12 +149,6 @@ def test_a_new_label_during_warmup_joins_the_classes(request: pytest.FixtureRequ
     assert "jamming" in model.classes_
 
 
-@pytest.mark.xfail(
-    reason="MondrianForestClassifier.partial_fit cannot grow its class set yet "
-    "(wt-forest adds it); OnlineLearner already calls partial_fit(X, y) with the new label",
-    raises=InputError,
-    strict=False,
-)
 def test_a_new_label_after_warmup_joins_the_classes(request: pytest.FixtureRequest) -> None:
     trials = _trials(request, "sim")
     learner = OnlineLearner(SMALL)

@@ -1,6 +1,6 @@
 """Our Mondrian forest: the NIPS-2014 behaviour on hand-checkable cases, a slow reference of the
-predictive posterior, online vs batch equivalence, classes= for an incomplete first batch, and
-scikit-learn's estimator checks."""
+predictive posterior, online vs batch equivalence, classes= for an incomplete first batch, a
+class set grown online, the memory budget, and scikit-learn's estimator checks."""
 
 from __future__ import annotations
 
@@ -8,7 +8,9 @@ import math
 
 import numpy as np
 import pytest
-from sklearn.datasets import make_classification
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from sklearn.datasets import make_blobs, make_classification
 from sklearn.utils.estimator_checks import check_estimator
 
 from rcbht_introspection.learn.mondrian import NO_NODE, MondrianForestClassifier
@@ -132,10 +134,11 @@ def test_unseen_class_in_first_batch_is_handled_through_classes() -> None:
     for chunk in np.array_split(np.arange(150), 10):
         forest.partial_fit(X[chunk], labels[chunk])
     assert {"insertion", "mating"} <= set(forest.predict(X[150:]))
-    with pytest.raises(ValueError, match="classes"):
-        MondrianForestClassifier().partial_fit(X[:4], labels[:4])
+    with pytest.raises(ValueError, match="drop known classes"):
+        forest.partial_fit(X[:1], ["mating"], classes=["approach", "mating", "rotation"])
     with pytest.raises(ValueError, match="not in classes"):
-        forest.partial_fit(X[:1], ["grasp"])
+        forest.partial_fit(X[:1], ["grasp"], classes=labels)
+    assert forest.classes_.tolist() == ["approach", "insertion", "mating", "rotation"]
 
 
 def test_online_in_12_minibatches_matches_batch_accuracy_over_seeds() -> None:
@@ -170,6 +173,8 @@ def test_get_set_params_and_random_state() -> None:
         "n_estimators": 100,
         "discount_factor": 10.0,
         "random_state": None,
+        "max_nodes": None,
+        "max_points": None,
     }
     forest.set_params(n_estimators=7, random_state=4)
     X, y = make_classification(n_samples=40, n_features=4, random_state=0)
@@ -188,3 +193,158 @@ def test_passes_sklearn_estimator_checks() -> None:
     skipped = {r["check_name"] for r in results if r["status"] == "skipped"}
     # only environment-dependent checks may skip (array API, pandas not installed)
     assert skipped <= {"check_array_api_input", "check_classifier_data_not_an_array"}
+
+
+NAMES = np.array(["mating", "rotation", "approach", "regrasp", "insertion"])
+"""Blob labels: the first batch sees only mating and rotation, later names sort before,
+between and after them, so growth moves count columns."""
+
+
+def _blobs(n: int, seed: int = 0, std: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    X, y = make_blobs(n_samples=n, centers=5, n_features=6, cluster_std=std, random_state=seed)
+    return X, NAMES[y]
+
+
+def test_a_grown_class_set_gives_the_forest_told_every_class_up_front() -> None:
+    """Nothing random depends on the number of classes, so with one seed a forest that meets
+    names as they come equals one told them all at the first call, bit for bit."""
+    X, labels = _blobs(400)
+    first = np.flatnonzero(np.isin(labels, ["mating", "rotation"]))[:30]
+    rest = np.setdiff1d(np.arange(400), first)
+    told = MondrianForestClassifier(n_estimators=10, random_state=3)
+    grown = MondrianForestClassifier(n_estimators=10, random_state=3)
+    told.partial_fit(X[first], labels[first], classes=NAMES)
+    grown.partial_fit(X[first], labels[first])  # cold start: no classes=
+    assert grown.classes_.tolist() == ["mating", "rotation"]
+    seen = []
+    for i in rest[:60]:  # one at a time (the vectorised path), then blocks
+        told.partial_fit(X[i : i + 1], labels[i : i + 1])
+        grown.partial_fit(X[i : i + 1], labels[i : i + 1])
+        seen.append(labels[i])
+        assert grown.classes_.tolist() == sorted({"mating", "rotation", *seen})
+    for chunk in np.array_split(rest[60:], 8):
+        told.partial_fit(X[chunk], labels[chunk])
+        grown.partial_fit(X[chunk], labels[chunk])
+    assert grown.classes_.tolist() == told.classes_.tolist() == sorted(NAMES)
+    probe = np.vstack([X, X[:20] * 4.0])
+    np.testing.assert_array_equal(grown.predict_proba(probe), told.predict_proba(probe))
+    size = told.n_nodes_
+    np.testing.assert_array_equal(grown._pool.counts[:size], told._pool.counts[:size])
+    # the names learned late are predicted for their own blobs
+    X_new, labels_new = _blobs(200, seed=0)
+    assert np.mean(grown.predict(X_new) == labels_new) > 0.9
+
+
+def test_classes_may_grow_through_classes_but_never_drop_one() -> None:
+    X, labels = _blobs(60)
+    forest = MondrianForestClassifier(n_estimators=4, random_state=0)
+    forest.partial_fit(X[:10], labels[:10], classes=["approach", *labels[:10]])
+    forest.partial_fit(X[10:12], labels[10:12], classes=[*NAMES, "grasp"])
+    assert forest.classes_.tolist() == sorted([*NAMES, "grasp"])
+    assert forest.predict_proba(X[:3]).shape == (3, 6)
+    with pytest.raises(ValueError, match="drop known classes"):
+        forest.partial_fit(X[:1], labels[:1], classes=NAMES)
+    with pytest.raises(ValueError, match="not in classes"):
+        forest.partial_fit(X[:1], ["slip"], classes=[*NAMES, "grasp"])
+    with pytest.raises(ValueError, match="kind"):
+        forest.partial_fit(X[:1], [7])
+
+
+def _check_within_budget(forest: MondrianForestClassifier) -> None:
+    """Nodes and stored points within the budget, no unreachable node, leaves consistent."""
+    share = forest.max_nodes // forest.n_estimators
+    per_tree = [forest._count_nodes(int(root)) for root in forest._roots]
+    assert max(per_tree) <= share
+    assert sum(per_tree) == forest.n_nodes_ <= forest.max_nodes  # nothing leaked
+    if forest.max_points is not None:
+        assert forest.n_stored_points_ <= forest.max_points
+    pool = forest._pool
+    for node in range(pool.size):
+        stored = pool.points[node]
+        assert (stored is None) == (pool.left[node] != NO_NODE)
+        if stored is not None:
+            assert len(stored) <= pool.counts[node].sum()
+            assert len(stored) == 0 or stored.max() < forest.n_stored_points_
+            np.testing.assert_array_equal(
+                np.bincount(forest._y[stored], minlength=len(forest.classes_)) <= pool.counts[node],
+                True,
+            )
+
+
+def test_the_budget_holds_over_thousands_of_single_sample_updates() -> None:
+    X, labels = _blobs(2000, seed=1, std=1.5)
+    forest = MondrianForestClassifier(n_estimators=5, random_state=0, max_nodes=120, max_points=150)
+    for i in range(2000):
+        forest.partial_fit(X[i : i + 1], labels[i : i + 1])
+        assert forest.n_nodes_ <= 120 and forest.n_stored_points_ <= 150
+        if i % 50 == 49:
+            _check_within_budget(forest)
+    assert forest.n_nodes_ > 100  # the budget was reached, not merely respected
+    X_test, labels_test = _blobs(300, seed=1, std=1.5)
+    assert np.mean(forest.predict(X_test) == labels_test) > 0.9
+    np.testing.assert_allclose(forest.predict_proba(X_test).sum(axis=1), 1.0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    max_nodes=st.integers(4, 150),
+    max_points=st.none() | st.integers(0, 120),
+    batches=st.lists(st.integers(1, 40), min_size=1, max_size=30),
+    seed=st.integers(0, 1000),
+)
+def test_the_budget_holds_for_any_batches(
+    max_nodes: int, max_points: int | None, batches: list[int], seed: int
+) -> None:
+    X, labels = _blobs(sum(batches), seed=seed, std=2.0)
+    forest = MondrianForestClassifier(
+        n_estimators=4, random_state=seed, max_nodes=max_nodes, max_points=max_points
+    )
+    start = 0
+    for size in batches:
+        forest.partial_fit(X[start : start + size], labels[start : start + size])
+        start += size
+        _check_within_budget(forest)
+    proba = forest.predict_proba(X)
+    np.testing.assert_allclose(proba.sum(axis=1), 1.0)
+
+
+def test_a_budget_never_reached_changes_nothing() -> None:
+    """Budgets far above the need (the stored data is re-indexed once past 1024 new rows)
+    give the unbounded forest bit for bit."""
+    X, labels = _blobs(1300, seed=2, std=2.0)
+    unbounded = MondrianForestClassifier(n_estimators=5, random_state=1)
+    roomy = MondrianForestClassifier(
+        n_estimators=5, random_state=1, max_nodes=10**9, max_points=10**9
+    )
+    for forest in (unbounded, roomy):
+        forest.partial_fit(X[:100], labels[:100])
+        for i in range(100, 200):
+            forest.partial_fit(X[i : i + 1], labels[i : i + 1])
+        for chunk in np.array_split(np.arange(200, 1300), 10):
+            forest.partial_fit(X[chunk], labels[chunk])
+    assert roomy.n_nodes_ == unbounded.n_nodes_
+    assert roomy.n_stored_points_ == unbounded.n_stored_points_ == 1300
+    np.testing.assert_array_equal(roomy.predict_proba(X), unbounded.predict_proba(X))
+
+
+def test_forgetting_keeps_counts_and_seals_the_leaf() -> None:
+    """A pure leaf that forgot its oldest points keeps their counts and never regrows from
+    the rest: it takes impure counts instead of splitting."""
+    forest = MondrianForestClassifier(n_estimators=2, random_state=0, max_points=8)
+    forest.partial_fit(np.arange(12.0)[:, None], ["a"] * 12)
+    assert forest.n_stored_points_ <= 8
+    assert forest.n_nodes_ == 2 and forest._pool.counts[forest._roots, 0].tolist() == [12, 12]
+    forest.partial_fit([[20.0]], ["b"])
+    assert forest.n_nodes_ == 2  # sealed: counts only
+    np.testing.assert_array_equal(forest._pool.counts[forest._roots], [[12, 1], [12, 1]])
+    fresh = MondrianForestClassifier(n_estimators=2, random_state=0)
+    fresh.partial_fit(np.arange(12.0)[:, None], ["a"] * 12)
+    fresh.partial_fit([[20.0]], ["b"])
+    assert fresh.n_nodes_ > 2  # unbounded, the same leaf splits
+
+
+def test_budget_parameters_are_checked() -> None:
+    X, labels = _blobs(20)
+    for bad in ({"max_nodes": 3}, {"max_nodes": 2.5}, {"max_points": -1}):
+        with pytest.raises(ValueError, match="max_"):
+            MondrianForestClassifier(n_estimators=4, **bad).fit(X, labels)

@@ -138,8 +138,39 @@ def _common(parser: argparse.ArgumentParser) -> None:
         metavar="F",
         help="also train on these fractions of each sub-task (e.g. 0.25 0.5 0.75)",
     )
+    parser.add_argument(
+        "--max-nodes",
+        type=int,
+        default=None,
+        metavar="N",
+        help="Mondrian memory budget: nodes of the whole forest (default unbounded; "
+        "docs/learning.md)",
+    )
+    parser.add_argument(
+        "--max-points",
+        type=int,
+        default=None,
+        metavar="N",
+        help="Mondrian memory budget: stored training points (default unbounded)",
+    )
     add_taxonomy_options(parser)
     add_repeated_stamps(parser)
+
+
+def forest_budget(args: argparse.Namespace, n_estimators: int = 100) -> dict[str, int | None]:
+    """--max-nodes / --max-points as train_model keywords; a budget for another classifier or
+    out of range is an InputError."""
+    budget = {"max_nodes": args.max_nodes, "max_points": args.max_points}
+    if args.classifier != "mondrian" and any(v is not None for v in budget.values()):
+        raise InputError("--max-nodes/--max-points need --classifier mondrian", field="--max-nodes")
+    if args.max_nodes is not None and args.max_nodes < n_estimators:
+        raise InputError(
+            f"--max-nodes must be at least the number of trees ({n_estimators})",
+            field="--max-nodes",
+        )
+    if args.max_points is not None and args.max_points < 0:
+        raise InputError("--max-points must be >= 0", field="--max-points")
+    return budget
 
 
 def load_checked(
@@ -163,13 +194,14 @@ def run_train(args: argparse.Namespace) -> int:
     from rcbht_introspection.learn.model_file import save_model
 
     taxonomy = taxonomy_from_args(args)
+    budget = forest_budget(args)
     trials = load_checked(args, "train", taxonomy)
     samples = [s for t in trials for s in t.samples]
     model, n_live = live_training(
         trials, args.live_augment, args.live_config, taxonomy, repeated_policy(args),
         classifier=args.classifier,
         encoding=args.encoding, random_state=args.seed,
-        augment_prefixes=tuple(args.augment_prefixes),
+        augment_prefixes=tuple(args.augment_prefixes), **budget,
     )  # fmt: skip
     save_model(model, args.out)
     print(
@@ -208,6 +240,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
     args.encoding = args.encoding or "compact"
     args.permutations = args.permutations or 20
     taxonomy = taxonomy_from_args(args)
+    n_estimators = 100 if args.n_estimators is None else args.n_estimators
+    budget = forest_budget(args, n_estimators)
     trials = load_checked(args, "evaluate", taxonomy)
     if args.trials is not None:
         trials = trials[: args.trials]
@@ -217,7 +251,9 @@ def run_evaluate(args: argparse.Namespace) -> int:
         permutations=args.permutations,
         n_validation=args.validation_trials,
         seed=args.seed,
-        n_estimators=100 if args.n_estimators is None else args.n_estimators,
+        n_estimators=n_estimators,
+        max_nodes=budget["max_nodes"],
+        max_points=budget["max_points"],
         variant=not args.no_variant,
         augment_prefixes=tuple(args.augment_prefixes),
         live_augment=args.live_augment,
@@ -242,6 +278,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
             bar.close()
     result["datasets"] = [str(p) for p in args.inputs]
     result["words"] = args.words
+    if args.classifier == "mondrian":
+        result["forest_budget"] = budget
     result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"
     result = _clean(result)
     ss, base = result["steady_state_accuracy"], result["duration_baseline"]
@@ -289,6 +327,9 @@ def run_prequential(args: argparse.Namespace) -> int:
         "--validation-trials (use --held-out)": args.validation_trials is not None,
         "--plot": args.plot is not None,
         "--no-variant": args.no_variant,
+        "--max-nodes/--max-points (the teach config has no forest budget yet)": (
+            args.max_nodes is not None or args.max_points is not None
+        ),
     }
     for option, given in refused.items():
         if given:

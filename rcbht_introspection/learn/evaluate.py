@@ -50,6 +50,10 @@ class Protocol:
     start_trials: int | None = None
     seed: int = 0
     n_estimators: int = 100
+    max_nodes: int | None = None
+    """Mondrian memory budget: nodes of the whole forest (None: unbounded)."""
+    max_points: int | None = None
+    """Mondrian memory budget: stored training points (None: unbounded)."""
     near_empty_seconds: float = NEAR_EMPTY_SECONDS
     variant: bool = True
     """Also run the variant without near-empty sub-tasks."""
@@ -158,6 +162,7 @@ def evaluate(
             model = train_model(
                 train_samples, protocol.classifier, protocol.encoding,
                 random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
+                max_nodes=protocol.max_nodes, max_points=protocol.max_points,
                 augment_prefixes=protocol.augment_prefixes, cache=cache, task=task,
             )  # fmt: skip
             elapsed = time.perf_counter() - began
@@ -171,6 +176,7 @@ def evaluate(
                 variant = train_model(
                     kept, protocol.classifier, protocol.encoding,
                     random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
+                    max_nodes=protocol.max_nodes, max_points=protocol.max_points,
                     augment_prefixes=protocol.augment_prefixes, cache=cache, task=task,
                 )  # fmt: skip
                 i = tail_steps.index(k)
@@ -203,6 +209,7 @@ def evaluate(
                     head = train_model(
                         live_train, protocol.classifier, protocol.encoding,
                         random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
+                        max_nodes=protocol.max_nodes, max_points=protocol.max_points,
                         augment_prefixes=protocol.augment_prefixes, cache=cache, task=task,
                     )  # fmt: skip
                 windows = [s for t in validation for s in live[t.trial]]

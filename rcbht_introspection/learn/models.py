@@ -98,12 +98,15 @@ def train_model(
     cache: SampleCache | None = None,
     task: Task | None = None,
     taxonomy_sha256: str = "",
+    max_nodes: int | None = None,
+    max_points: int | None = None,
 ) -> SubtaskModel:
     """Fit the encoding and the classifier on `samples` (training data only).
 
     `augment_prefixes` (e.g. (0.25, 0.5, 0.75)) also trains on those first fractions of every
     sub-task, so a live classifier is not surprised by a sub-task that has only just begun.
     `cache`: a SampleCache shared by models trained on the same samples (else the encoding's own).
+    `max_nodes`, `max_points`: the Mondrian forest's memory budget (None: unbounded).
     """
     if classifier not in CLASSIFIERS:
         raise InputError(f"unknown classifier {classifier!r} (known: {', '.join(CLASSIFIERS)})")
@@ -123,7 +126,12 @@ def train_model(
         estimator: Any = fit_svm(svm, X, y)
     else:
         classes = sorted(set(task.subtasks) | set(y))
-        estimator = MondrianForestClassifier(n_estimators=n_estimators, random_state=random_state)
+        estimator = MondrianForestClassifier(
+            n_estimators=n_estimators,
+            random_state=random_state,
+            max_nodes=max_nodes,
+            max_points=max_points,
+        )
         estimator.partial_fit(X, y, classes=classes)
     return SubtaskModel(
         classifier,

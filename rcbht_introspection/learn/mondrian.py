@@ -4,11 +4,14 @@ Our own NumPy implementation of the reference algorithm: lifetime = infinity, di
 gamma = 10 * D, uniform base measure, leaves pause when pure, no bagging; the forest averages
 the trees' hierarchically smoothed predictive distributions. All trees share one flat node pool
 (structure-of-arrays), so prediction walks every tree of the forest at once with NumPy.
+The class set grows when partial_fit meets a new label, and an optional memory budget
+(max_nodes, max_points) bounds the node pool and the stored training points (docs/learning.md).
 """
 
 from __future__ import annotations
 
 import numbers
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +26,9 @@ larger ones block by block per tree (fewer passes)."""
 FEATURE_DTYPE = np.float32
 """Training data and node boxes are stored in float32 (half the memory of the wide paper
 encoding); test points are cast the same way, so boxes and points compare exactly."""
+COMPACT_EVERY = 1024
+"""With a budget set, the stored data drops the rows no leaf keeps at least this often (in new
+rows), and at once when max_points is exceeded."""
 
 
 class NodePool:
@@ -31,8 +37,12 @@ class NodePool:
     Public for the model file (learn/mondrian_state.py), which stores and rebuilds it.
     """
 
-    def __init__(self, n_features: int, n_classes: int, capacity: int = 256) -> None:
+    def __init__(
+        self, n_features: int, n_classes: int, capacity: int = 256, limit: int | None = None
+    ) -> None:
         self.size = 0
+        self.limit = limit
+        """Capacity never grows past this (the forest's max_nodes); None: doubling only."""
         self.left = np.full(capacity, NO_NODE, dtype=np.int32)
         self.right = np.full(capacity, NO_NODE, dtype=np.int32)
         self.parent = np.full(capacity, NO_NODE, dtype=np.int32)
@@ -55,8 +65,21 @@ class NodePool:
         self.points[index] = None
         return index
 
+    def add_classes(self, position: np.ndarray, n_classes: int) -> None:
+        """Widen the class counts to `n_classes` columns; old column j moves to position[j]."""
+        counts = np.zeros((len(self.counts), n_classes))
+        counts[:, position] = self.counts
+        self.counts = counts
+
+    def nbytes(self) -> int:
+        """Bytes of the node arrays as allocated (capacity, not only the used size)."""
+        names = ("left", "right", "parent", "feature", "threshold", "tau", "lower", "upper")
+        return sum(getattr(self, n).nbytes for n in names) + self.counts.nbytes
+
     def _grow(self) -> None:
         capacity = 2 * len(self.left)
+        if self.limit is not None:
+            capacity = max(len(self.left) + 1, min(capacity, self.limit))
         for name in ("left", "right", "parent"):
             old = getattr(self, name)
             new = np.full(capacity, NO_NODE, dtype=old.dtype)
@@ -93,19 +116,29 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
     """Online random forest whose trees are Mondrian processes (NIPS 2014).
 
     Parameters: n_estimators (trees, 100 as in the seed paper), discount_factor (gamma = this
-    times the number of features), random_state. `partial_fit` extends every tree with a
-    mini-batch so that batch and online training give the same distribution of forests.
+    times the number of features), random_state, and the memory budget: max_nodes (nodes of
+    the whole forest, an equal share max_nodes // n_estimators per tree) and max_points
+    (training points kept for regrowing leaves); None = unbounded. `partial_fit` extends every
+    tree with a mini-batch so that batch and online training give the same distribution of
+    forests, and adds labels it has not seen to classes_ (kept sorted).
     """
+
+    _X: np.ndarray
+    _y: np.ndarray
 
     def __init__(
         self,
         n_estimators: int = 100,
         discount_factor: float = 10.0,
         random_state: int | np.random.RandomState | None = None,
+        max_nodes: int | None = None,
+        max_points: int | None = None,
     ) -> None:
         self.n_estimators = n_estimators
         self.discount_factor = discount_factor
         self.random_state = random_state
+        self.max_nodes = max_nodes
+        self.max_points = max_points
 
     # ---------------------------------------------------------------- sklearn plumbing
     def __sklearn_tags__(self):
@@ -119,6 +152,21 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             raise ValueError(f"n_estimators must be a positive integer, got {self.n_estimators!r}")
         if not isinstance(self.discount_factor, numbers.Real) or self.discount_factor <= 0:
             raise ValueError(f"discount_factor must be > 0, got {self.discount_factor!r}")
+        if self.max_nodes is not None and (
+            not isinstance(self.max_nodes, numbers.Integral)
+            or isinstance(self.max_nodes, bool)
+            or self.max_nodes < self.n_estimators
+        ):
+            raise ValueError(
+                f"max_nodes must be None or an integer >= n_estimators (one root per tree), "
+                f"got {self.max_nodes!r}"
+            )
+        if self.max_points is not None and (
+            not isinstance(self.max_points, numbers.Integral)
+            or isinstance(self.max_points, bool)
+            or self.max_points < 0
+        ):
+            raise ValueError(f"max_points must be None or an integer >= 0, got {self.max_points!r}")
 
     def fit(self, X, y) -> MondrianForestClassifier:
         """Grow n_estimators Mondrian trees on (X, y) from scratch."""
@@ -130,34 +178,47 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self._start(X.shape[1])
         self._add_data(X, y_index)
         for tree in range(self.n_estimators):
-            self._roots[tree] = self._grow(np.arange(len(y_index)), NO_NODE, 0.0)
+            self._roots[tree] = self._grow(np.arange(len(y_index)), NO_NODE, 0.0, tree)
+        self._forget()
         self._update_posterior()
         return self
 
     def partial_fit(self, X, y, classes=None) -> MondrianForestClassifier:
-        """Extend every tree with a mini-batch; `classes` (all labels) is required on the first call."""
+        """Extend every tree with a mini-batch; labels not yet known join classes_.
+
+        `classes` may name labels before they are taught (e.g. a first mini-batch that misses
+        one); it may add to the known classes but never drop one (ValueError). Without it, the
+        first call starts from the labels it sees (cold start).
+        """
         first = not hasattr(self, "classes_")
         if first:
             self._check_params()
-            if classes is None:
-                raise ValueError("classes must be passed on the first call to partial_fit")
         X, y = validate_data(self, X, y, dtype=np.float64, reset=first)
         X = X.astype(FEATURE_DTYPE)
         check_classification_targets(y)
+        declared = None if classes is None else np.unique(np.asarray(classes))
+        if declared is not None:
+            missing = np.setdiff1d(np.unique(y), declared)
+            if len(missing):
+                raise ValueError(
+                    f"labels {missing.tolist()} are not in classes {declared.tolist()}"
+                )
+        wanted = np.unique(y) if declared is None else declared
         if first:
-            self.classes_ = np.unique(np.asarray(classes))
+            self.classes_ = wanted
             self._start(X.shape[1])
-        elif classes is not None and not np.array_equal(np.unique(classes), self.classes_):
-            raise ValueError("classes differ from those of the first call to partial_fit")
-        lookup = {c: i for i, c in enumerate(self.classes_.tolist())}
-        try:
-            y_index = np.array([lookup[c] for c in y.tolist()], dtype=np.intp)
-        except KeyError as exc:
-            raise ValueError(f"label {exc.args[0]!r} is not in classes {self.classes_}") from None
+        else:
+            if declared is not None and len(np.setdiff1d(self.classes_, declared)):
+                raise ValueError(
+                    f"classes {declared.tolist()} drop known classes "
+                    f"{np.setdiff1d(self.classes_, declared).tolist()}"
+                )
+            self._add_classes(wanted)
+        y_index = np.searchsorted(self.classes_, y).astype(np.intp)
         new = self._add_data(X, y_index)
         if (self._roots == NO_NODE).all():
             for tree in range(self.n_estimators):
-                self._roots[tree] = self._grow(new, NO_NODE, 0.0)
+                self._roots[tree] = self._grow(new, NO_NODE, 0.0, tree)
         elif len(new) <= POINTWISE_BATCH:
             # one point at a time through all trees at once (Mondrian trees are projective:
             # extending point by point has the same distribution as extending by the batch)
@@ -166,8 +227,24 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         else:
             for tree in range(self.n_estimators):
                 self._extend(tree, int(self._roots[tree]), new)
+        self._forget()
         self._update_posterior()
         return self
+
+    def _add_classes(self, labels: np.ndarray) -> None:
+        """Grow classes_ (sorted) by the new ones among `labels`: count columns and stored
+        labels move to the new column order; structure and random stream are untouched."""
+        if (self.classes_.dtype.kind in "biuf") != (labels.dtype.kind in "biuf"):
+            raise ValueError(
+                f"labels {labels} are not of the kind of the known classes {self.classes_}"
+            )
+        merged = np.union1d(self.classes_, labels)
+        if len(merged) == len(self.classes_):
+            return
+        position = np.searchsorted(merged, self.classes_)
+        self._pool.add_classes(position, len(merged))
+        self._y = position[self._y]
+        self.classes_ = merged
 
     # ---------------------------------------------------------------- model files
     def learned_state(self) -> LearnedState:
@@ -179,16 +256,30 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self, classes: np.ndarray, n_features: int, state: LearnedState
     ) -> MondrianForestClassifier:
         """Become the fitted forest `state` describes (a loaded model file); returns self."""
+        self._check_params()
         self.classes_ = classes
         self.n_features_in_ = n_features
         self._rng = state.rng
         self._pool = state.pool
+        self._pool.limit = self.max_nodes
         self._roots = state.roots
         self._X = state.X
         self._y = state.y
         self.gamma_ = self.discount_factor * n_features
+        self._tree_nodes = np.array([self._count_nodes(int(r)) for r in self._roots])
+        self._new_rows = 0
         self._update_posterior()
         return self
+
+    def _count_nodes(self, root: int) -> int:
+        """Nodes in the tree below `root` (root included)."""
+        left, right = self._pool.left, self._pool.right
+        frontier, total = np.array([root]), 0
+        while len(frontier):
+            total += len(frontier)
+            inner = frontier[left[frontier] != NO_NODE]
+            frontier = np.concatenate([left[inner], right[inner]])
+        return total
 
     # ---------------------------------------------------------------- training
     def _start(self, n_features: int) -> None:
@@ -196,10 +287,15 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self._rng = np.random.default_rng(
             check_random_state(self.random_state).randint(np.iinfo(np.int32).max)
         )
-        self._pool = NodePool(n_features, len(self.classes_), capacity=32 * self.n_estimators)
+        capacity = 32 * self.n_estimators
+        if self.max_nodes is not None:
+            capacity = min(capacity, self.max_nodes)
+        self._pool = NodePool(n_features, len(self.classes_), capacity, limit=self.max_nodes)
         self._roots = np.full(self.n_estimators, NO_NODE, dtype=np.int32)
+        self._tree_nodes = np.zeros(self.n_estimators, dtype=np.int64)
         self._X = np.empty((0, n_features), dtype=FEATURE_DTYPE)
         self._y = np.empty(0, dtype=np.intp)
+        self._new_rows = 0
         self.gamma_ = self.discount_factor * n_features
 
     def _add_data(self, X: np.ndarray, y_index: np.ndarray) -> np.ndarray:
@@ -207,7 +303,72 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         start = len(self._y)
         self._X = np.concatenate([self._X, X]) if start else np.array(X, dtype=FEATURE_DTYPE)
         self._y = np.concatenate([self._y, y_index])
+        self._new_rows += len(y_index)
         return np.arange(start, len(self._y))
+
+    # ---------------------------------------------------------------- memory budget
+    def _room(self, tree: int, n_nodes: int) -> bool:
+        """Whether `tree` may add `n_nodes` nodes within its share of max_nodes."""
+        if self.max_nodes is None:
+            return True
+        share = self.max_nodes // self.n_estimators
+        return bool(self._tree_nodes[tree] + n_nodes <= share)
+
+    def _new_node(self, tree: int) -> int:
+        """A fresh node of `tree` in the shared pool."""
+        self._tree_nodes[tree] += 1
+        return self._pool.new()
+
+    def _sealed(self, node: int) -> bool:
+        """A leaf that has lost stored points (forgotten) counts more than it stores: its
+        counts stay, but it never regrows from a partial set of points."""
+        stored = self._pool.points[node]
+        return bool(self._pool.counts[node].sum() > (0 if stored is None else len(stored)))
+
+    def _forget(self) -> None:
+        """Apply the point budget: forget the oldest stored points beyond max_points (down to
+        7/8 of it, so the re-indexing runs once per max_points/8 new points) and drop the rows
+        no leaf keeps any more; the forgetting leaves keep their counts (they become sealed)."""
+        if self.max_nodes is None and self.max_points is None:
+            return
+        n = len(self._y)
+        over = self.max_points is not None and n > self.max_points
+        if not over and self._new_rows < COMPACT_EVERY:
+            return
+        cut = 0
+        if over and self.max_points is not None:
+            cut = n - (self.max_points - self.max_points // 8)
+        points = self._pool.points
+        kept: dict[int, np.ndarray] = {}
+        for i in range(self._pool.size):
+            stored = points[i]
+            if stored is not None:  # a leaf
+                kept[i] = stored[stored >= cut] if cut else stored
+        keep = np.zeros(n, dtype=bool)
+        if kept:
+            keep[np.concatenate(list(kept.values()))] = True
+        remap = np.cumsum(keep) - 1
+        for i, stored in kept.items():
+            points[i] = remap[stored]
+        self._X = self._X[keep]
+        self._y = self._y[keep]
+        self._new_rows = 0
+
+    @property
+    def n_stored_points_(self) -> int:
+        """Training points the forest keeps (rows of its stored data)."""
+        check_is_fitted(self, "classes_")
+        return len(self._y)
+
+    def memory_bytes(self) -> dict[str, int]:
+        """Bytes held by the node pool (as allocated) and by the stored points (data, labels
+        and the leaves' point lists)."""
+        check_is_fitted(self, "classes_")
+        lists = sum(p.nbytes for p in self._pool.points[: self._pool.size] if p is not None)
+        return {
+            "nodes": self._pool.nbytes(),
+            "points": int(self._X.nbytes + self._y.nbytes + lists),
+        }
 
     def _paused(
         self, counts: np.ndarray, n_points: int, lower: np.ndarray, upper: np.ndarray
@@ -215,14 +376,21 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         """A block pauses when its labels are all equal, it has < 2 points or zero volume."""
         return bool(np.count_nonzero(counts) <= 1 or n_points < 2 or not np.any(upper > lower))
 
-    def _grow(self, points: np.ndarray, parent: int, tau_parent: float) -> int:
-        """Sample a Mondrian block on `points` below `parent` (batch growth); return its node."""
+    def _grow(
+        self, points: np.ndarray, parent: int, tau_parent: float, tree: int, node: int | None = None
+    ) -> int:
+        """Sample a Mondrian block on `points` below `parent` (batch growth) in node `node`
+        (a fresh one when None); return it. Out of node budget, a block stays a leaf that keeps
+        counts only."""
         pool, X, y = self._pool, self._X, self._y
         n_classes = pool.counts.shape[1]
-        root = pool.new()
-        stack = [(root, points, parent, tau_parent)]
+        root = self._new_node(tree) if node is None else node
+        stack = deque([(root, points, parent, tau_parent)])
+        # breadth-first when the node budget may run out inside this block (the cut-off then
+        # falls level by level, not down one branch); else depth-first
+        take = stack.popleft if not self._room(tree, 2 * len(points)) else stack.pop
         while stack:
-            node, idx, par, tau_par = stack.pop()
+            node, idx, par, tau_par = take()
             data = X[idx]
             lower, upper = data.min(axis=0), data.max(axis=0)
             counts = np.bincount(y[idx], minlength=n_classes).astype(np.float64)
@@ -230,9 +398,10 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             pool.lower[node], pool.upper[node] = lower, upper
             pool.counts[node] = counts
             extent = upper - lower
-            if self._paused(counts, len(idx), lower, upper):
+            if self._paused(counts, len(idx), lower, upper) or not self._room(tree, 2):
                 pool.tau[node] = np.inf
-                pool.points[node] = idx
+                # a block that may regrow keeps its points; out of budget none can regrow
+                pool.points[node] = idx if self._room(tree, 2) else idx[:0]
                 continue
             rate = extent.sum()
             pool.tau[node] = tau_par + self._rng.exponential(1.0 / rate)
@@ -242,7 +411,8 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
                 dim -= 1
             cut = np.float64(self._rng.uniform(lower[dim], upper[dim]))  # float64: never rounded
             go_left = data[:, dim] <= cut
-            left, right = pool.new(), pool.new()
+            left, right = self._new_node(tree), self._new_node(tree)
+            pool.points[node] = None
             pool.feature[node], pool.threshold[node] = dim, cut
             pool.left[node], pool.right[node] = left, right
             stack.append((left, idx[go_left], node, pool.tau[node]))
@@ -271,9 +441,12 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             parent = int(pool.parent[node])
             tau_parent = 0.0 if parent == NO_NODE else float(pool.tau[parent])
             if pool.left[node] == NO_NODE:  # paused leaf: absorb, regrow if no longer pure
+                sealed = self._sealed(node)
                 np.minimum(lower, low, out=lower)
                 np.maximum(upper, high, out=upper)
                 pool.counts[node] += new_counts
+                if sealed or not self._room(tree, 2):
+                    continue  # it can never regrow: counts only, the points are not kept
                 points = np.concatenate([pool.points[node], idx])
                 if self._paused(pool.counts[node], len(points), lower, upper):
                     pool.points[node] = points
@@ -286,7 +459,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             np.maximum(e_upper, 0.0, out=e_upper)
             rate = float(e_lower.sum()) + float(e_upper.sum())
             split_time = tau_parent + self._rng.exponential(1.0 / rate) if rate > 0 else np.inf
-            if split_time < pool.tau[node]:
+            if split_time < pool.tau[node] and self._room(tree, 2):
                 extent = e_lower.astype(np.float64) + e_upper
                 dim = int(
                     np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right")
@@ -301,7 +474,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
                 else:
                     cut = np.float64(self._rng.uniform(upper[dim], high[dim]))
                     old_is_left = True
-                new_parent = pool.new()
+                new_parent = self._new_node(tree)
                 pool.parent[new_parent] = parent
                 pool.lower[new_parent] = np.minimum(pool.lower[node], low)
                 pool.upper[new_parent] = np.maximum(pool.upper[node], high)
@@ -316,7 +489,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
                     if old_is_left
                     else (idx[~left_side], idx[left_side])
                 )
-                sibling = self._grow(far, new_parent, split_time)
+                sibling = self._grow(far, new_parent, split_time, tree)
                 if old_is_left:
                     pool.left[new_parent], pool.right[new_parent] = node, sibling
                 else:
@@ -359,6 +532,9 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             with np.errstate(divide="ignore"):
                 split_time = np.where(rate > 0, tau_parent[active] + draw / rate, np.inf)
             split = ~leaf & (split_time < pool.tau[nd])
+            if self.max_nodes is not None:  # out of node budget: widen and descend instead
+                share = self.max_nodes // self.n_estimators
+                split &= self._tree_nodes[active] + 2 <= share
             descend = ~leaf & ~split
             dn = nd[descend]
             pool.lower[dn] = np.minimum(lower[descend], x)
@@ -394,7 +570,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             cut = np.float64(self._rng.uniform(x[dim], pool.lower[node, dim]))
         else:
             cut = np.float64(self._rng.uniform(pool.upper[node, dim], x[dim]))
-        new_parent = pool.new()
+        new_parent = self._new_node(tree)
         pool.parent[new_parent] = parent
         pool.lower[new_parent] = np.minimum(pool.lower[node], x)
         pool.upper[new_parent] = np.maximum(pool.upper[node], x)
@@ -404,7 +580,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         pool.feature[new_parent], pool.threshold[new_parent] = dim, cut
         self._replace_child(tree, parent, node, new_parent)
         pool.parent[node] = new_parent
-        sibling = self._grow(idx, new_parent, split_time)
+        sibling = self._grow(idx, new_parent, split_time, tree)
         if lower_side:
             pool.left[new_parent], pool.right[new_parent] = sibling, node
         else:
@@ -423,10 +599,8 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
     def _regrow(
         self, tree: int, node: int, points: np.ndarray, parent: int, tau_parent: float
     ) -> None:
-        """Replace the leaf `node` by a freshly grown block on `points` (an unpaused leaf)."""
-        fresh = self._grow(points, parent, tau_parent)
-        self._replace_child(tree, parent, node, fresh)
-        self._pool.points[node] = None
+        """Regrow the leaf `node` in place as a fresh block on `points` (an unpaused leaf)."""
+        self._grow(points, parent, tau_parent, tree, node=node)
 
     # ---------------------------------------------------------------- posterior
     def _update_posterior(self) -> None:

@@ -1,7 +1,7 @@
 """A fitted Mondrian forest as plain parameters and arrays, and back (for the safe model file).
 
-Everything is stored, online state included (node pool, stored points, random stream), so a
-loaded forest predicts the same and continues online training where it stopped.
+Everything is stored, online state included (node pool, stored points, random stream, memory
+budget), so a loaded forest predicts the same and continues online training where it stopped.
 """
 
 from __future__ import annotations
@@ -52,6 +52,8 @@ def forest_arrays(
         "n_estimators": int(forest.n_estimators),
         "discount_factor": float(forest.discount_factor),
         "random_state": forest.random_state if isinstance(forest.random_state, int) else None,
+        "max_nodes": None if forest.max_nodes is None else int(forest.max_nodes),
+        "max_points": None if forest.max_points is None else int(forest.max_points),
         "n_features_in": int(forest.n_features_in_),
         "rng_state": state.rng.bit_generator.state,
     }
@@ -76,6 +78,8 @@ def forest_from_arrays(
         n_estimators=int(params["n_estimators"]),
         discount_factor=float(params["discount_factor"]),
         random_state=params["random_state"],
+        max_nodes=params.get("max_nodes"),  # files written before the budget: unbounded
+        max_points=params.get("max_points"),
     )
     classes = arrays["mf_classes"]
     size = len(arrays["mf_left"])
