@@ -15,7 +15,7 @@ from conftest import REAL, SOURCES, dataset_root, generated_trials, golden_or_en
 from rcbht_introspection.cli import main
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.data import TrialSamples, load_trials
-from rcbht_introspection.learn.model_file import load_model, save_model
+from rcbht_introspection.learn.model_file import load_model, load_subtask_model, save_model
 from rcbht_introspection.learn.models import SubtaskModel, train_model
 from rcbht_introspection.learn.online import OnlineLearner, TeachConfig, load_teach_config
 
@@ -149,15 +149,26 @@ def test_a_new_label_during_warmup_joins_the_classes(request: pytest.FixtureRequ
     assert "jamming" in model.classes_
 
 
-def test_a_new_label_after_warmup_joins_the_classes(request: pytest.FixtureRequest) -> None:
+def test_a_new_label_after_warmup_joins_the_classes(
+    request: pytest.FixtureRequest, tmp_path: Path
+) -> None:
     trials = _trials(request, "sim")
     learner = OnlineLearner(SMALL)
     for trial in trials[:2]:
         learner.teach(trial.samples)
+    before = learner.model
+    assert before is not None and not learner.warming_up
     jammed = [replace(s, subtask="jamming") for s in trials[2].samples]
     model = learner.teach(jammed)
     assert "jamming" in model.classes_
     assert "jamming" in model.predict_samples(jammed)
+    # the task names it too (a saved model whose classes its task lacks is refused on load),
+    # and the snapshot handed out before did not change
+    assert model.task.subtasks[-1] == "jamming" and "jamming" not in before.task.subtasks
+    path = save_model(model, tmp_path / "taught.rcbht")
+    loaded, problem = load_subtask_model(str(path))
+    assert loaded is not None, problem
+    assert loaded.classes_ == model.classes_
 
 
 def test_bad_teaching_input_is_a_one_line_input_error(

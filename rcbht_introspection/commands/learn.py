@@ -327,9 +327,6 @@ def run_prequential(args: argparse.Namespace) -> int:
         "--validation-trials (use --held-out)": args.validation_trials is not None,
         "--plot": args.plot is not None,
         "--no-variant": args.no_variant,
-        "--max-nodes/--max-points (the teach config has no forest budget yet)": (
-            args.max_nodes is not None or args.max_points is not None
-        ),
     }
     for option, given in refused.items():
         if given:
@@ -343,6 +340,8 @@ def run_prequential(args: argparse.Namespace) -> int:
         encoding=args.encoding or teach.encoding,
         n_estimators=teach.n_estimators if args.n_estimators is None else args.n_estimators,
         warmup_windows=teach.warmup_windows if args.warmup_windows is None else args.warmup_windows,
+        max_nodes=teach.max_nodes if args.max_nodes is None else args.max_nodes,
+        max_points=teach.max_points if args.max_points is None else args.max_points,
     )
     taxonomy = taxonomy_from_args(args)
     trials = load_checked(args, "evaluate", taxonomy)

@@ -44,6 +44,11 @@ class TeachConfig:
     """Mondrian trees."""
     encoding: str = "compact"
     """Encoding fitted during warm-up ('compact' or 'paper')."""
+    max_nodes: int | None = 20000
+    """Memory budget of the taught forest: nodes of all trees (None: unbounded; docs/learning.md,
+    "Memory budget of the Mondrian forest")."""
+    max_points: int | None = 2000
+    """... and training points it stores for regrowing leaves (None: unbounded)."""
 
 
 def _check(cfg: TeachConfig) -> None:
@@ -56,6 +61,13 @@ def _check(cfg: TeachConfig) -> None:
         raise InputError(
             f"unknown encoding {cfg.encoding!r} (known: {', '.join(ENCODINGS)})", field="encoding"
         )
+    if cfg.max_nodes is not None and cfg.max_nodes < cfg.n_estimators:
+        raise InputError(
+            f"must be >= n_estimators ({cfg.n_estimators}: one root per tree), got {cfg.max_nodes}",
+            field="max_nodes",
+        )
+    if cfg.max_points is not None and cfg.max_points < 0:
+        raise InputError(f"must be >= 0, got {cfg.max_points}", field="max_points")
     for i, f in enumerate(cfg.prefixes):
         if not 0 < f <= 1:
             raise InputError(f"must be in (0, 1], got {f}", field=f"prefixes[{i}]")
@@ -127,10 +139,13 @@ class OnlineLearner:
         for s in samples:
             if not isinstance(s.subtask, str) or not s.subtask.strip():
                 raise InputError(f"a taught window of trial {s.trial!r} has no label")
+        self._grow_task(samples)
         if self.warming_up:
             self._refit(samples)
         else:
             self._extend(samples)
+        if self.task is None:
+            self.task = self._working.task if self._working is not None else None
         self.taught_windows += len(samples)
         if self.taught_windows >= self.config.warmup_windows and self._kept:
             self._freeze()
@@ -151,6 +166,15 @@ class OnlineLearner:
         }
 
     # ------------------------------------------------------------------ internals
+    def _grow_task(self, samples: Sequence[SubtaskSample]) -> None:
+        """A label the task does not name (e.g. a failure class taught later) joins its names,
+        after the known ones, so the saved model's task covers every class of its forest."""
+        if self.task is None:
+            return
+        new = [n for n in dict.fromkeys(s.subtask for s in samples) if n not in self.task.subtasks]
+        if new:
+            self.task = replace(self.task, subtasks=(*self.task.subtasks, *new))
+
     def _taught_samples(self, samples: Sequence[SubtaskSample]) -> list[SubtaskSample]:
         """The windows and their prefixes, as train_model's augment_prefixes makes them."""
         windows = list(samples)
@@ -169,6 +193,8 @@ class OnlineLearner:
             augment_prefixes=self.config.prefixes,
             cache=self._cache,
             task=self.task,
+            max_nodes=self.config.max_nodes,
+            max_points=self.config.max_points,
         )
         self._kept = kept  # only once the refit succeeded: a failed teach changes nothing
         self.refits += 1
@@ -182,6 +208,8 @@ class OnlineLearner:
             self._working = _copy_model(self._working)
             self.last_copy_s = time.perf_counter() - began
             self._shared = False
+        if self.task is not None:
+            self._working.task = self.task  # a copy, never the last snapshot's
         taught = self._taught_samples(samples)
         for model in (self._working, self._working.live):
             if model is None:
