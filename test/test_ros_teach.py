@@ -21,7 +21,7 @@ __all__ = ["env"]  # the isolated-ROS fixture, used by name
 
 TAUGHT = range(31, 41)
 HELD_OUT = range(41, 47)
-RATE = 10.0
+RATE = 20.0
 """Playback speed: the verdicts wait for every word, so a fast replay scores as a real-time one
 (the replay harness compares them with the offline run of the saved model)."""
 

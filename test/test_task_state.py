@@ -162,3 +162,9 @@ def test_a_window_of_few_words_does_not_move_the_state() -> None:
     assert f.update(0.2, replace(few, n_words=3)) and f.state == "insertion"
     assert not f.update(0.3, replace(belief("mating", 0.95), n_words=1))
     assert f.state == "insertion"
+
+
+def test_an_evidence_bound_of_zero_is_off() -> None:
+    """min_probability 0 and evidence_bound 0: a leading belief below 0.5 moves the state too."""
+    f = StateFilter(TaskStateConfig(min_probability=0.0, evidence_bound=0.0, min_words=0))
+    assert f.update(0.1, belief("insertion", 0.45)) and f.state == "insertion"

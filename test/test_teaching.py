@@ -239,3 +239,17 @@ def test_tracker_keeps_the_last_subtask_and_recent_words_for_teaching(
     _feed(short, trial, 0)
     assert words_in(short.tracker, start, end) > 0
     assert words_in(short.tracker, first_start, first_end) < first / 10
+
+
+def test_the_last_subtask_is_refused_once_its_words_are_pruned(trials: list[Trial]) -> None:
+    """teach_history_s 0: the words of a finished sub-task go with its verdict, so `last` no
+    longer names a whole window and is refused (not taught from what is left)."""
+    teaching = Teaching(CONFIG)
+    session = ClassifierSession(
+        BeliefTracker(None, history_s=0.0), StateFilter(), teaching=teaching
+    )
+    _feed(session, trials[0], 0)
+    status = session.teach(TeachRequest("mating", last=True))
+    assert not status.accepted and "no longer kept" in status.message
+    assert teaching.counts["teach requests refused"] == 1
+    teaching.close()

@@ -22,6 +22,7 @@ from rcbht_introspection.grammar.encoding.compact import CompactEncoding
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 from rcbht_introspection.learn.mondrian_state import forest_arrays
+from rcbht_introspection.learn.online import load_teach_config
 
 if TYPE_CHECKING:
     from rcbht_introspection.grammar.split import SubtaskSample
@@ -37,8 +38,6 @@ TAUGHT = 10_000
 WINDOW = 16
 """Samples per partial_fit call: a taught window with its prefixes, the largest batch that still
 goes point by point (mondrian.POINTWISE_BATCH); 625 updates keep the unbounded run to minutes."""
-BUDGET: dict[str, int | None] = {"max_nodes": 20_000, "max_points": 2_000}
-"""The budget the memory figure is taken with (200 nodes per tree of 100)."""
 
 
 def _median_ms(times: list[float]) -> float:
@@ -170,15 +169,17 @@ def forest_memory(budget: dict[str, int | None]) -> dict[str, object]:
 
 
 def run_memory() -> dict[str, object]:
-    """Forest memory after TAUGHT taught samples, unbounded and with BUDGET (each in its own
-    process)."""
+    """Forest memory after TAUGHT taught samples, unbounded and with config/teach.yaml's
+    budget (each in its own process)."""
     spawn = multiprocessing.get_context("spawn")
     figures: dict[str, object] = {
         "data": f"synthetic compact-like, 101 features, 6 classes, {TAUGHT} samples taught "
         f"{WINDOW} per partial_fit, 100 trees; accuracy on 2000 more",
     }
+    teach = load_teach_config()  # the budget a taught node's forest has
+    budget_of_teaching = {"max_nodes": teach.max_nodes, "max_points": teach.max_points}
     unbounded: dict[str, int | None] = {"max_nodes": None, "max_points": None}
-    for name, budget in (("unbounded", unbounded), ("budget", {**BUDGET})):
+    for name, budget in (("unbounded", unbounded), ("budget", budget_of_teaching)):
         with ProcessPoolExecutor(max_workers=1, mp_context=spawn) as pool:
             figures[name] = pool.submit(forest_memory, budget).result()
     return figures

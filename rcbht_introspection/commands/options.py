@@ -59,7 +59,7 @@ STATE_OPTIONS = {
 
 def add_state_options(parser: argparse.ArgumentParser) -> None:
     """--state-min-probability, --state-min-log-ratio, --state-evidence-bound, --state-min-words,
-    --state-hold-s: classifier_node's `state.*` parameters (default: TaskStateConfig's, as config/classifier.yaml)."""
+    --state-hold-s: classifier_node's `state.*` parameters (default: config/classifier.yaml's)."""
     for name, text in STATE_OPTIONS.items():
         parser.add_argument(
             "--state-" + name.replace("_", "-"),
@@ -71,13 +71,16 @@ def add_state_options(parser: argparse.ArgumentParser) -> None:
 
 
 def state_from_args(args: argparse.Namespace) -> TaskStateConfig:
-    """The /task_state rule: TaskStateConfig's defaults with the given --state-* options."""
+    """The /task_state rule: config/classifier.yaml's `state` (the node's own defaults) with the
+    given --state-* options."""
     from rcbht_introspection.errors import InputError
-    from rcbht_introspection.live.state import TaskStateConfig, check_task_state
+    from rcbht_introspection.live.state import check_task_state
+    from rcbht_introspection.nodes.params import ClassifierConfig, load_node_config
 
     given = {k: getattr(args, "state_" + k) for k in STATE_OPTIONS}
     config = dataclasses.replace(
-        TaskStateConfig(), **{k: v for k, v in given.items() if v is not None}
+        load_node_config(ClassifierConfig).state,
+        **{k: v for k, v in given.items() if v is not None},
     )
     try:
         check_task_state(config)

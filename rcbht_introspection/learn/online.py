@@ -44,10 +44,10 @@ class TeachConfig:
     """Mondrian trees."""
     encoding: str = "compact"
     """Encoding fitted during warm-up ('compact' or 'paper')."""
-    max_nodes: int | None = 20000
+    max_nodes: int | None = 50000
     """Memory budget of the taught forest: nodes of all trees (None: unbounded; docs/learning.md,
     "Memory budget of the Mondrian forest")."""
-    max_points: int | None = 2000
+    max_points: int | None = 5000
     """... and training points it stores for regrowing leaves (None: unbounded)."""
 
 
@@ -92,8 +92,13 @@ class OnlineLearner:
         model: SubtaskModel | None = None,
         task: Task | None = None,
         random_state: int = 0,
+        taxonomy_profile: str = "reference",
+        taxonomy_sha256: str = "",
     ) -> None:
         _check(config)
+        self.taxonomy_profile = taxonomy_profile
+        self.taxonomy_sha256 = taxonomy_sha256
+        """The profile (and digest) the taught words come from: recorded in a cold-started model."""
         self.config = config
         self.task = task
         self.random_state = random_state
@@ -114,6 +119,8 @@ class OnlineLearner:
             state = model.training.get(ONLINE_KEY) or {}
             self.taught_windows = int(state.get("taught_windows", 0))
             self.task = task or model.task
+            self.taxonomy_profile = model.taxonomy_profile
+            self.taxonomy_sha256 = model.taxonomy_sha256
             self._working = model
             self._snapshot = model
             self._shared = True
@@ -139,11 +146,20 @@ class OnlineLearner:
         for s in samples:
             if not isinstance(s.subtask, str) or not s.subtask.strip():
                 raise InputError(f"a taught window of trial {s.trial!r} has no label")
+        task_before = self.task
         self._grow_task(samples)
-        if self.warming_up:
-            self._refit(samples)
-        else:
-            self._extend(samples)
+        try:
+            if self.warming_up:
+                self._refit(samples)
+            else:
+                self._extend(samples)
+        except Exception:
+            # a failed teach changes nothing: the working model goes back to the last snapshot
+            # (the next teach copies it before changing it)
+            self.task = task_before
+            if self._snapshot is not None and not self._kept:
+                self._working, self._shared = self._snapshot, True
+            raise
         if self.task is None:
             self.task = self._working.task if self._working is not None else None
         self.taught_windows += len(samples)
@@ -195,6 +211,8 @@ class OnlineLearner:
             task=self.task,
             max_nodes=self.config.max_nodes,
             max_points=self.config.max_points,
+            taxonomy_profile=self.taxonomy_profile,
+            taxonomy_sha256=self.taxonomy_sha256,
         )
         self._kept = kept  # only once the refit succeeded: a failed teach changes nothing
         self.refits += 1

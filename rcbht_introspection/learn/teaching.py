@@ -27,6 +27,7 @@ from rcbht_introspection.learn.model_file import save_model
 from rcbht_introspection.learn.models import SubtaskModel
 from rcbht_introspection.learn.online import OnlineLearner, TeachConfig
 from rcbht_introspection.live.belief import UNKNOWN, BeliefTracker
+from rcbht_introspection.live.health import file_sha256
 from rcbht_introspection.live.teach import TeachRequest, TeachStatus
 
 TEACH_COUNTS = ("teach requests refused", "teach updates failed")
@@ -78,11 +79,14 @@ class Teaching:
         save_path: str | Path = "",
         counts: dict[str, int] | None = None,
         random_state: int = 0,
+        taxonomy_profile: str = "reference",
     ) -> None:
         self.save_path = Path(save_path) if save_path else None
         self.counts = counts if counts is not None else {}
         for name in TEACH_COUNTS:
             self.counts.setdefault(name, 0)
+        self.saved_sha256 = ""
+        """SHA-256 of the last saved model file (for /diagnostics), '' before the first save."""
         self.unavailable = ""
         """Why nothing can be taught (a model that is not a Mondrian forest), else ''."""
         self.learner: OnlineLearner | None = None
@@ -91,7 +95,11 @@ class Teaching:
         else:
             try:
                 self.learner = OnlineLearner(
-                    config, model, model.task if model else None, random_state
+                    config,
+                    model,
+                    model.task if model else None,
+                    random_state,
+                    taxonomy_profile=taxonomy_profile,
                 )
             except InputError as exc:
                 self.unavailable = str(exc)
@@ -179,9 +187,23 @@ class Teaching:
         return out
 
     def close(self, timeout: float = 10.0) -> None:
-        """Stop the worker after the update it is learning (queued jobs are dropped)."""
+        """Stop the worker once the queued jobs are learned; jobs still waiting for their words
+        are dropped, counted (`teach requests dropped at shutdown`) and noted."""
+        if self.waiting:
+            dropped = len(self.waiting)
+            self.counts["teach requests dropped at shutdown"] = (
+                self.counts.get("teach requests dropped at shutdown", 0) + dropped
+            )
+            with self._lock:
+                self._pending -= dropped
+            self._notes.append(
+                ("warning", f"{dropped} teach request(s) still waiting for their words dropped")
+            )
+            self.waiting = []
         self._queue.put(None)
         self._worker.join(timeout)
+        if self._worker.is_alive():
+            self._notes.append(("warning", f"the teach worker did not stop within {timeout} s"))
 
     def _refusal(self, req: TeachRequest, tracker: BeliefTracker) -> str:
         """Why `req` cannot be taught, or ''."""
@@ -191,8 +213,14 @@ class Teaching:
         if label != label.strip() or label == UNKNOWN or label in tracker.end_phases:
             return f"not a usable label: {label!r}"
         if req.last:
-            if tracker.last_subtask() is None:
+            last = tracker.last_subtask()
+            if last is None:
                 return "unknown window: no sub-task has ended in this stream"
+            if last[1] < tracker.kept_from:
+                return (
+                    f"unknown window: the last sub-task starts at {last[1]:.3f} s, the words "
+                    f"before {tracker.kept_from:.3f} s are no longer kept (teach_history_s)"
+                )
             return ""
         if not (math.isfinite(req.start) and math.isfinite(req.end)) or req.start > req.end:
             return f"unknown window: [{req.start}, {req.end}] is not a time interval"
@@ -265,6 +293,7 @@ class Teaching:
         if self.save_path is not None:
             try:
                 save_model(model, self.save_path)
+                self.saved_sha256 = file_sha256(str(self.save_path))
                 saved = f", saved to {self.save_path}"
             except OSError as exc:  # the live path still gets the model; the file is as it was
                 self.counts["teach updates failed"] += 1

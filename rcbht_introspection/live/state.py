@@ -100,9 +100,8 @@ class StateFilter:
             p = min(max(_probability(belief, belief.subtask), TINY), 1 - TINY)
             self._evidence += math.log(p / (1 - p))
             if (
-                self._evidence >= self.config.evidence_bound
-                and t - self._since >= self.config.hold_s
-            ):
+                self.config.evidence_bound <= 0 or self._evidence >= self.config.evidence_bound
+            ) and t - self._since >= self.config.hold_s:
                 self.state = belief.subtask
                 self._drop()
         changed = self.state != self._reported

@@ -59,19 +59,22 @@ class ClassifierNode(ManagedNode):
 
     def configure(self, cfg: ClassifierConfig) -> None:
         self.cfg = cfg
-        model, self.model_problem = load_subtask_model(cfg.model_file, cfg.expected_profile)
+        # a teaching node continues from the model it saved (teach_file), else model_file
+        taught = cfg.teach_enabled and cfg.teach_file and Path(cfg.teach_file).is_file()
+        self.model_source = cfg.teach_file if taught else cfg.model_file
+        model, self.model_problem = load_subtask_model(self.model_source, cfg.expected_profile)
         self.model_taxonomy = (
             f", taxonomy profile {model.taxonomy_profile} "
             f"(sha256 {model.taxonomy_sha256[:12] or 'not recorded'})"
             if model is not None
             else ""
         )
-        self.model_sha256 = file_sha256(cfg.model_file)
-        cold = cfg.teach_enabled and model is None and not Path(cfg.model_file).is_file()
+        self.model_sha256 = file_sha256(self.model_source)
+        cold = cfg.teach_enabled and model is None and not Path(self.model_source).is_file()
         if cold:
             self.model_problem = ""
             self.get_logger().info(
-                f"cold start: no model yet ({cfg.model_file or 'model_file not set'}), "
+                f"cold start: no model yet ({self.model_source or 'model_file not set'}), "
                 f"/task_state stays {UNKNOWN!r} until the first taught window"
             )
         elif model is None:
@@ -102,11 +105,12 @@ class ClassifierNode(ManagedNode):
         """The teach queue and worker; a model file that exists but is unusable is not
         overwritten (teaching refuses, saying why)."""
         config = load_teach_config(cfg.teach_config_file or None)
-        save = cfg.teach_file or cfg.model_file
-        teaching = Teaching(config, model, save, self.counts)
+        save = self.teaching_file()
+        profile = cfg.expected_profile or "reference"  # what a cold-started model records
+        teaching = Teaching(config, model, save, self.counts, taxonomy_profile=profile)
         if model is None and not cold:
             teaching.unavailable = (
-                f"model_file {cfg.model_file} exists but is not usable ({self.model_problem}); "
+                f"model file {self.model_source} exists but is not usable ({self.model_problem}); "
                 "teaching would overwrite it"
             )
         if teaching.unavailable:
@@ -114,6 +118,10 @@ class ClassifierNode(ManagedNode):
         elif not save:
             self.get_logger().warning("teaching: taught models are not saved (no teach_file)")
         return teaching
+
+    def teaching_file(self) -> str:
+        """Where taught models are saved ('' when they are not)."""
+        return self.cfg.teach_file or self.cfg.model_file
 
     def activate(self) -> None:
         cfg = self.cfg
@@ -191,7 +199,7 @@ class ClassifierNode(ManagedNode):
         return [
             classifier_health(
                 state=self.state_label,
-                model_file=self.cfg.model_file,
+                model_file=self.model_source,
                 model_sha256=self.model_sha256,
                 model_problem=self.model_problem,
                 prediction_error=self.tracker.last_error,
@@ -298,6 +306,10 @@ class ClassifierNode(ManagedNode):
             self.publish_belief(belief, trigger_ns)
         if step.state is not None:
             self.publish_state()
+        if step.model_swapped and self.teaching is not None and self.teaching.saved_sha256:
+            # /diagnostics names the file of the model in use (hashed by the teach worker)
+            self.model_source = self.teaching_file()
+            self.model_sha256 = self.teaching.saved_sha256
 
     def publish_belief(self, belief: Belief, trigger_ns: int) -> None:
         self.beliefs += 1
