@@ -37,8 +37,9 @@ def expected_calibration_error(
     if conf.shape != hit.shape or n_bins < 1:
         raise ValueError("confidences and correct must have one shape, n_bins >= 1")
     edges = np.linspace(0.0, 1.0, n_bins + 1)
-    # calibration_curve's binning: right-open bins, the last one closed at 1
-    idx = np.searchsorted(edges[1:-1], conf, side="right")
+    # calibration_curve's binning (searchsorted on the inner edges, side "left": a confidence
+    # on an edge belongs to the bin below it)
+    idx = np.searchsorted(edges[1:-1], conf, side="left")
     counts = np.bincount(idx, minlength=n_bins)
     gap = np.abs(
         np.bincount(idx, weights=hit, minlength=n_bins)
