@@ -88,8 +88,14 @@ def teach_latencies(streamed: list[StreamedTrial], config: TeachConfig) -> dict[
 
 
 def _wait_learned(teaching: Teaching, jobs: int) -> None:
-    """Until `jobs` requests in all are in a model in the slot."""
-    wait_until(lambda: len(teaching.latencies_s) >= jobs, timeout=600)
+    """Until `jobs` requests in all are in a model in the slot (an update that failed, or none in
+    600 s, ends the benchmark: its latency would be wrong)."""
+    learned = wait_until(
+        lambda: len(teaching.latencies_s) >= jobs or teaching.counts["teach updates failed"] > 0,
+        timeout=600,
+    )
+    if not learned or teaching.counts["teach updates failed"]:
+        raise RuntimeError(f"teaching did not learn {jobs} requests: {teaching.notes()}")
 
 
 def _seconds(values: list[float]) -> dict[str, Any]:
