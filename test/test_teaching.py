@@ -10,9 +10,10 @@ import pytest
 from conftest import generated_trials
 
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.learn.live import sample_word_count
 from rcbht_introspection.learn.model_file import load_model
 from rcbht_introspection.learn.online import TeachConfig
-from rcbht_introspection.learn.teaching import Teaching
+from rcbht_introspection.learn.teaching import Teaching, _Job
 from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker
 from rcbht_introspection.live.classifier import ClassifierSession, PhaseInput, WordsInput
 from rcbht_introspection.live.state import StateFilter
@@ -252,4 +253,34 @@ def test_the_last_subtask_is_refused_once_its_words_are_pruned(trials: list[Tria
     status = session.teach(TeachRequest("mating", last=True))
     assert not status.accepted and "no longer kept" in status.message
     assert teaching.counts["teach requests refused"] == 1
+    teaching.close()
+
+
+def test_live_like_windows_hold_only_words_final_by_their_time(trials: list[Trial]) -> None:
+    """With live_windows, a taught window also teaches what its running window held at times
+    inside it: the words final by then (as learn/live.py's live_samples), never a later one."""
+    from rcbht_introspection.learn.live import LiveAugmentConfig
+
+    teaching = Teaching(CONFIG, live_windows=LiveAugmentConfig())
+    session = _session(teaching)
+    trial = trials[0]
+    _feed(session, trial, 0)
+    name, start, end = max(trial.subtask_bounds(), key=lambda b: b[2] - b[1])
+    job_live = teaching._live_samples(  # what the request below queues
+        _Job(TeachRequest(name, False, start, end), start, end), session.tracker
+    )
+    assert len(job_live) >= 3
+    for sample in job_live:
+        assert sample.subtask == name and sample.start == start
+        arrived = session.tracker.words_final_by(sample.end, start)
+        for level in sample.words.words.get("R", {}).values():
+            for axis, words in level.items():
+                assert all(w.end <= sample.end + 1e-9 for w in words), axis
+        assert sample_word_count(sample) <= sum(
+            len(ws) for lv in arrived.words.values() for ax in lv.values() for ws in ax.values()
+        )
+    status = session.teach(TeachRequest(name, last=False, start=start, end=end))
+    assert status.accepted, status.message
+    assert wait_until(lambda: teaching.status().pending == 0, timeout=120)
+    assert teaching.learner is not None and teaching.learner.taught_live == len(job_live)
     teaching.close()

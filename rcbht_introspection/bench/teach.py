@@ -24,7 +24,7 @@ import numpy as np
 from rcbht_introspection.bench.belief import HIRO, REAL, TEST_TRIALS, _stats, timed_updates
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.hiro import read_trial
-from rcbht_introspection.learn.live import LiveAugmentConfig, stream_factory
+from rcbht_introspection.learn.live import LiveAugmentConfig, load_live_config, stream_factory
 from rcbht_introspection.learn.online import OnlineLearner, TeachConfig, load_teach_config
 from rcbht_introspection.learn.teaching import Teaching
 from rcbht_introspection.live.belief import BeliefTracker
@@ -53,7 +53,7 @@ def _fed(tracker: BeliefTracker, streamed: StreamedTrial, teaching: Teaching) ->
 
 def teach_latencies(streamed: list[StreamedTrial], config: TeachConfig) -> dict[str, Any]:
     """One-sub-task and whole-trial latencies of a cold-started Teaching (module doc)."""
-    teaching = Teaching(config)
+    teaching = Teaching(config, live_windows=load_live_config())
     tracker = BeliefTracker(None, history_s=600.0)
     single: list[float] = []
     whole: list[float] = []

@@ -23,7 +23,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS, EncodingName
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
-from rcbht_introspection.learn.models import SubtaskModel, train_model
+from rcbht_introspection.learn.models import SubtaskModel, task_of_samples, train_model
 from rcbht_introspection.task import Task
 
 TEACH_CONFIG_FILE = "teach.yaml"
@@ -105,10 +105,13 @@ class OnlineLearner:
         self.taught_windows = 0
         """Windows taught so far (prefix windows not counted), including those of a given model."""
         self.refits = 0
+        self.taught_live = 0
+        """Live-like windows taught beside the windows (learn/teaching.py takes them)."""
         """Teaches that refitted encoding + forest from the kept windows (warm-up)."""
         self.last_copy_s = 0.0
         """Seconds the last teach spent copying the forest so the previous snapshot stays intact."""
         self._kept: list[SubtaskSample] = []
+        self._kept_live: list[SubtaskSample] = []
         self._cache = SampleCache()
         self._working: SubtaskModel | None = None
         self._shared = False
@@ -137,10 +140,17 @@ class OnlineLearner:
             return True  # no model yet: the first teach fits one
         return bool(self._kept) and self.taught_windows < self.config.warmup_windows
 
-    def teach(self, samples: Sequence[SubtaskSample]) -> SubtaskModel:
+    def teach(
+        self, samples: Sequence[SubtaskSample], live: Sequence[SubtaskSample] = ()
+    ) -> SubtaskModel:
         """Learn labelled windows (sample.subtask = the label, any new name accepted) and return a
-        NEW model object (a snapshot the caller may swap in; never mutates a model already returned)."""
+        NEW model object (a snapshot the caller may swap in; never mutates a model already returned).
+
+        `live`: live-like windows of the same sub-tasks (the words final at times inside them,
+        learn/teaching.py), learned beside the windows and their prefixes.
+        """
         samples = list(samples)
+        live = list(live)
         if not samples:
             raise InputError("nothing to teach: no windows")
         for s in samples:
@@ -150,9 +160,9 @@ class OnlineLearner:
         self._grow_task(samples)
         try:
             if self.warming_up:
-                self._refit(samples)
+                self._refit(samples, live)
             else:
-                self._extend(samples)
+                self._extend(samples, live)
         except Exception:
             # a failed teach changes nothing: the working model goes back to the last snapshot
             # (the next teach copies it before changing it)
@@ -163,6 +173,7 @@ class OnlineLearner:
         if self.task is None:
             self.task = self._working.task if self._working is not None else None
         self.taught_windows += len(samples)
+        self.taught_live += len(live)
         if self.taught_windows >= self.config.warmup_windows and self._kept:
             self._freeze()
         working = self._working
@@ -196,29 +207,31 @@ class OnlineLearner:
         windows = list(samples)
         return windows + [prefix_sample(s, f) for f in self.config.prefixes for s in windows]
 
-    def _refit(self, samples: Sequence[SubtaskSample]) -> None:
-        """Warm-up: encoding + forest from every window taught so far (= train_model on them)."""
+    def _refit(self, samples: Sequence[SubtaskSample], live: Sequence[SubtaskSample]) -> None:
+        """Warm-up: encoding + forest from every window taught so far (= train_model on them,
+        their prefixes and the live-like windows)."""
         kept = [*self._kept, *samples]
+        kept_live = [*self._kept_live, *live]
         encoding: EncodingName = "paper" if self.config.encoding == "paper" else "compact"
         self._working = train_model(
-            kept,
+            [*self._taught_samples(kept), *kept_live],
             "mondrian",
             encoding,
             random_state=self.random_state,
             n_estimators=self.config.n_estimators,
-            augment_prefixes=self.config.prefixes,
             cache=self._cache,
-            task=self.task,
+            task=self.task or task_of_samples(kept),
             max_nodes=self.config.max_nodes,
             max_points=self.config.max_points,
             taxonomy_profile=self.taxonomy_profile,
             taxonomy_sha256=self.taxonomy_sha256,
         )
         self._kept = kept  # only once the refit succeeded: a failed teach changes nothing
+        self._kept_live = kept_live
         self.refits += 1
         self._shared = False
 
-    def _extend(self, samples: Sequence[SubtaskSample]) -> None:
+    def _extend(self, samples: Sequence[SubtaskSample], live: Sequence[SubtaskSample]) -> None:
         """After warm-up: the frozen encoding, the forest extended with partial_fit (+ live head)."""
         assert self._working is not None
         if self._shared:
@@ -228,7 +241,7 @@ class OnlineLearner:
             self._shared = False
         if self.task is not None:
             self._working.task = self.task  # a copy, never the last snapshot's
-        taught = self._taught_samples(samples)
+        taught = [*self._taught_samples(samples), *live]
         for model in (self._working, self._working.live):
             if model is None:
                 continue
@@ -245,6 +258,7 @@ class OnlineLearner:
     def _freeze(self) -> None:
         """End of warm-up: drop the kept windows and their cached features."""
         self._kept = []
+        self._kept_live = []
         self._cache = SampleCache()
         if self._working is not None:
             self._working.encoder = replace(self._working.encoder, cache=SampleCache())

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
-from rcbht_introspection.learn.live import sample_word_count
+from rcbht_introspection.learn.live import LiveAugmentConfig, sample_times, sample_word_count
 from rcbht_introspection.learn.model_file import save_model
 from rcbht_introspection.learn.models import SubtaskModel
 from rcbht_introspection.learn.online import OnlineLearner, TeachConfig
@@ -44,6 +44,8 @@ class _Job:
     start: float
     end: float
     sample: SubtaskSample | None = None
+    live: tuple[SubtaskSample, ...] = ()
+    """Live-like windows [start, t] of the words final by t, labelled as the window."""
     accepted_at: float = 0.0
 
 
@@ -80,8 +82,11 @@ class Teaching:
         counts: dict[str, int] | None = None,
         random_state: int = 0,
         taxonomy_profile: str = "reference",
+        live_windows: LiveAugmentConfig | None = None,
     ) -> None:
         self.save_path = Path(save_path) if save_path else None
+        self.live_windows = live_windows
+        """When live-like windows of a taught window are taken (config/live.yaml; None: none)."""
         self.counts = counts if counts is not None else {}
         for name in TEACH_COUNTS:
             self.counts.setdefault(name, 0)
@@ -255,8 +260,25 @@ class Teaching:
             self._notes.append(("warning", f"teach request refused: {message}"))
             return message
         job.sample = sample
+        job.live = self._live_samples(job, tracker)
         self._queue.put(job)
         return ""
+
+    def _live_samples(self, job: _Job, tracker: BeliefTracker) -> tuple[SubtaskSample, ...]:
+        """What the running window of the job's sub-task held at times inside it (the words
+        final by then, as learn/live.py's live_samples): the classifier's running beliefs
+        learn from these, not only from complete windows and their prefixes."""
+        if self.live_windows is None:
+            return ()
+        out = []
+        for t in sample_times(job.start, job.end, self.live_windows):
+            words = tracker.words_final_by(t, job.start)
+            sample = window_sample(
+                words, job.start, t, subtask=job.request.label, trial=tracker.trial
+            )
+            if sample_word_count(sample):
+                out.append(sample)
+        return tuple(out)
 
     # --- the worker --------------------------------------------------------------------------
     def _work(self) -> None:
@@ -280,9 +302,10 @@ class Teaching:
     def _learn(self, jobs: list[_Job]) -> None:
         assert self.learner is not None
         samples = [j.sample for j in jobs if j.sample is not None]
+        live = [s for j in jobs for s in j.live]
         t0 = time.perf_counter()
         try:
-            model = self.learner.teach(samples)
+            model = self.learner.teach(samples, live)
         except Exception as exc:  # a failed update must not stop the worker or the node
             self.counts["teach updates failed"] += 1
             self._notes.append(("error", f"teach update failed: {type(exc).__name__}: {exc}"))

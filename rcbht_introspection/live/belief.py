@@ -117,6 +117,9 @@ class BeliefTracker:
     def reset(self) -> None:
         """Start a new stream: no words, no sub-task events."""
         self.words = TrialWords(name=self.trial)
+        self.arrivals: dict[tuple[str, Level, str], list[float]] = {}
+        """Per word sequence, the stream time each kept word became final (for teaching live-like
+        windows: what the classifier knew at a time t inside a sub-task)."""
         self.watermark: dict[tuple[str, Level, str], float] = {}
         self.ended_arms: set[str] = set()
         self.ended_levels: set[tuple[str, Level]] = set()
@@ -173,6 +176,7 @@ class BeliefTracker:
                 self._ordered = False
             seq.append(w)
             key = (w.arm, w.level, w.axis)
+            self.arrivals.setdefault(key, []).append(max(self.now if now is None else now, w.end))
             if w.end > self.watermark.get(key, -np.inf):
                 self.watermark[key] = w.end
             self.now = max(self.now, w.end)
@@ -360,9 +364,29 @@ class BeliefTracker:
         """Drop words that end before `before` (no later window can overlap them)."""
         before = min(before, self.pinned_from)
         self.kept_from = max(self.kept_from, before)
-        for per_level in self.words.words.values():
-            for per_axis in per_level.values():
+        for arm, per_level in self.words.words.items():
+            for level, per_axis in per_level.items():
                 for axis, seq in per_axis.items():
                     if seq and seq[0].end < before:
-                        per_axis[axis] = [w for w in seq if w.end >= before]
+                        key = (arm, level, axis)
+                        kept = [
+                            (w, a)
+                            for w, a in zip(seq, self.arrivals[key], strict=False)
+                            if w.end >= before
+                        ]
+                        per_axis[axis] = [w for w, _ in kept]
+                        self.arrivals[key] = [a for _, a in kept]
         self._added = 0
+
+    def words_final_by(self, t: float, start: float = -np.inf) -> TrialWords:
+        """The kept words overlapping [start, t] that were final at stream time `t` (what a
+        running window from `start` saw at `t`)."""
+        out = TrialWords(name=self.trial)
+        for arm, per_level in self.words.words.items():
+            for level, per_axis in per_level.items():
+                for axis, seq in per_axis.items():
+                    arrived = self.arrivals[(arm, level, axis)]
+                    out.words.setdefault(arm, {}).setdefault(level, {})[axis] = [
+                        w for w, a in zip(seq, arrived, strict=False) if a <= t and w.end >= start
+                    ]
+        return out

@@ -23,6 +23,7 @@ from rcbht_interfaces.msg import Words as WordsMsg
 from rcbht_interfaces.srv import Teach
 from std_msgs.msg import String
 
+from rcbht_introspection.learn.live import load_live_config
 from rcbht_introspection.learn.model_file import load_subtask_model
 from rcbht_introspection.learn.models import SubtaskModel
 from rcbht_introspection.learn.online import load_teach_config
@@ -107,7 +108,14 @@ class ClassifierNode(ManagedNode):
         config = load_teach_config(cfg.teach_config_file or None)
         save = self.teaching_file()
         profile = cfg.expected_profile or "reference"  # what a cold-started model records
-        teaching = Teaching(config, model, save, self.counts, taxonomy_profile=profile)
+        teaching = Teaching(
+            config,
+            model,
+            save,
+            self.counts,
+            taxonomy_profile=profile,
+            live_windows=load_live_config(),  # running windows are taught too (config/live.yaml)
+        )
         if model is None and not cold:
             teaching.unavailable = (
                 f"model file {self.model_source} exists but is not usable ({self.model_problem}); "
