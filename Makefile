@@ -38,7 +38,7 @@ demo: setup
 	$(VENV)/bin/rcbht demo --out demo_out
 
 test: lint
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q --durations=25
 
 bench: setup
 	$(PY) -m rcbht_introspection.bench --out bench_out
