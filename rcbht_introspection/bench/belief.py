@@ -32,6 +32,18 @@ REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 TEST_TRIALS = ("20121127-HIROSA-S-45", "20121127-HIROSA-S-46")
 
 
+def feed_step(tracker: BeliefTracker, step: Any) -> None:
+    """One segmenter step of a streamed trial into `tracker`, as the classifier node takes it:
+    its words, end markers and sub-task events, then the finished sub-tasks' verdicts."""
+    for batch in step.batches:
+        tracker.add_words(batch.arm, batch.words, (batch.stamp_ns - batch.origin_ns) / 1e9)
+        if batch.end_of_stream:
+            tracker.end_of_stream(batch.arm)
+    for p in step.phases:
+        tracker.phase(p.name, p.time)
+    tracker.take_finals()
+
+
 def timed_updates(
     streamed: Any, model: SampleClassifier, mode: BeliefMode
 ) -> tuple[list[float], list[str]]:
@@ -43,13 +55,7 @@ def timed_updates(
     clock = time.perf_counter
     for step in streamed.steps:
         began = clock()
-        for batch in step.batches:
-            tracker.add_words(batch.arm, batch.words, (batch.stamp_ns - batch.origin_ns) / 1e9)
-            if batch.end_of_stream:
-                tracker.end_of_stream(batch.arm)
-        for p in step.phases:
-            tracker.phase(p.name, p.time)
-        tracker.take_finals()
+        feed_step(tracker, step)
         states.append(tracker.current().subtask)
         times.append(clock() - began)
     return times, states

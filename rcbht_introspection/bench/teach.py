@@ -21,7 +21,14 @@ from typing import Any
 
 import numpy as np
 
-from rcbht_introspection.bench.belief import HIRO, REAL, TEST_TRIALS, _stats, timed_updates
+from rcbht_introspection.bench.belief import (
+    HIRO,
+    REAL,
+    TEST_TRIALS,
+    _stats,
+    feed_step,
+    timed_updates,
+)
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.hiro import read_trial
 from rcbht_introspection.learn.live import LiveAugmentConfig, load_live_config, stream_factory
@@ -42,13 +49,7 @@ def _fed(tracker: BeliefTracker, streamed: StreamedTrial, teaching: Teaching) ->
         model = teaching.take_model()
         if model is not None:
             tracker.set_model(model)
-        for batch in step.batches:
-            tracker.add_words(batch.arm, batch.words, (batch.stamp_ns - batch.origin_ns) / 1e9)
-            if batch.end_of_stream:
-                tracker.end_of_stream(batch.arm)
-        for p in step.phases:
-            tracker.phase(p.name, p.time)
-        tracker.take_finals()
+        feed_step(tracker, step)
 
 
 def teach_latencies(streamed: list[StreamedTrial], config: TeachConfig) -> dict[str, Any]:

@@ -19,6 +19,8 @@ from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
 PROTOCOLS = ("curve", "prequential")
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from rcbht_introspection.learn.data import TrialSamples
     from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
@@ -261,21 +263,13 @@ def run_evaluate(args: argparse.Namespace) -> int:
         taxonomy=taxonomy,
         repeated=repeated_policy(args),
     )
-    bar = None
-    if not args.no_progress:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=total_steps(trials, protocol),
-            desc=f"{args.classifier}/{args.encoding}",
-            unit="step",
-            file=sys.stderr,
-        )
-    try:
-        result = evaluate(trials, protocol, progress=bar.update if bar else None)
-    finally:
-        if bar:
-            bar.close()
+    result = _with_progress(
+        args,
+        total_steps(trials, protocol),
+        f"{args.classifier}/{args.encoding}",
+        "step",
+        lambda progress: evaluate(trials, protocol, progress=progress),
+    )
     result["datasets"] = [str(p) for p in args.inputs]
     result["words"] = args.words
     if args.classifier == "mondrian":
@@ -350,21 +344,13 @@ def run_prequential(args: argparse.Namespace) -> int:
     protocol = PrequentialProtocol(
         teach=teach, permutations=permutations, held_out=args.held_out, seed=args.seed
     )
-    bar = None
-    if not args.no_progress:
-        from tqdm import tqdm
-
-        bar = tqdm(
-            total=total_teaches(trials, protocol),
-            desc="prequential",
-            unit="teach",
-            file=sys.stderr,
-        )
-    try:
-        result = prequential(trials, protocol, progress=bar.update if bar else None)
-    finally:
-        if bar:
-            bar.close()
+    result = _with_progress(
+        args,
+        total_teaches(trials, protocol),
+        "prequential",
+        "teach",
+        lambda progress: prequential(trials, protocol, progress=progress),
+    )
     result["datasets"] = [str(p) for p in args.inputs]
     result["words"] = args.words
     result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"
@@ -384,6 +370,30 @@ def run_prequential(args: argparse.Namespace) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))
     return 0
+
+
+def _with_progress(
+    args: argparse.Namespace,
+    total: int,
+    desc: str,
+    unit: str,
+    run: Callable[[Callable[[int], None] | None], dict[str, Any]],
+) -> dict[str, Any]:
+    """`run(progress)` with a tqdm bar on stderr (none with --no-progress), closed however it
+    ends."""
+    if args.no_progress:
+        return run(None)
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr)
+
+    def tick(n: int) -> None:
+        bar.update(n)
+
+    try:
+        return run(tick)
+    finally:
+        bar.close()
 
 
 def _show(value: float | None) -> str:

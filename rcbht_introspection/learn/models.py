@@ -113,7 +113,7 @@ def train_model(
     if not samples:
         raise InputError("no training samples")
     task = task or task_of_samples(samples)
-    samples = list(samples) + [prefix_sample(s, f) for f in augment_prefixes for s in samples]
+    samples = with_prefixes(samples, augment_prefixes)
     encoder = make_encoding(encoding, cache).fit(samples)
     X = encoder.transform(samples)
     y = [s.subtask for s in samples]
@@ -144,6 +144,15 @@ def train_model(
     )
 
 
+def with_prefixes(
+    samples: Sequence[SubtaskSample], fractions: Sequence[float]
+) -> list[SubtaskSample]:
+    """The samples, then their first `fractions` of each (fraction by fraction): what a model
+    that must recognise a sub-task that has only just begun is trained on."""
+    samples = list(samples)
+    return samples + [prefix_sample(s, f) for f in fractions for s in samples]
+
+
 def task_of_samples(samples: Sequence[SubtaskSample]) -> Task:
     """The task the samples show: their sub-task names, in the order the trials run them."""
     per_trial: dict[str, list[str]] = {}
@@ -152,4 +161,4 @@ def task_of_samples(samples: Sequence[SubtaskSample]) -> Task:
     return task_of_names(per_trial.values())
 
 
-__all__ = ["SubtaskModel", "task_of_samples", "train_model"]
+__all__ = ["SubtaskModel", "task_of_samples", "train_model", "with_prefixes"]

@@ -22,8 +22,13 @@ from rcbht_introspection.config_files import config_path, load_config
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS, EncodingName
 from rcbht_introspection.grammar.encoding.cache import SampleCache
-from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
-from rcbht_introspection.learn.models import SubtaskModel, task_of_samples, train_model
+from rcbht_introspection.grammar.split import SubtaskSample
+from rcbht_introspection.learn.models import (
+    SubtaskModel,
+    task_of_samples,
+    train_model,
+    with_prefixes,
+)
 from rcbht_introspection.task import Task
 
 TEACH_CONFIG_FILE = "teach.yaml"
@@ -204,8 +209,7 @@ class OnlineLearner:
 
     def _taught_samples(self, samples: Sequence[SubtaskSample]) -> list[SubtaskSample]:
         """The windows and their prefixes, as train_model's augment_prefixes makes them."""
-        windows = list(samples)
-        return windows + [prefix_sample(s, f) for f in self.config.prefixes for s in windows]
+        return with_prefixes(samples, self.config.prefixes)
 
     def _refit(self, samples: Sequence[SubtaskSample], live: Sequence[SubtaskSample]) -> None:
         """Warm-up: encoding + forest from every window taught so far (= train_model on them,
