@@ -51,16 +51,9 @@ def _checksum(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
     return digest.hexdigest()
 
 
-def save_model(model: SubtaskModel, path: Path | str) -> Path:
-    """Write `model` as a safe .npz model file (no pickled objects).
-
-    Atomic: written to a temporary file beside `path`, then renamed over it, so a reader (a node
-    restarting while a taught model is saved) finds the old file or the new one, never a part."""
-    path = Path(path)
-    header, arrays = _model_parts(model)
-    if model.live is not None:
-        header["live"], live_arrays = _model_parts(model.live)
-        arrays.update({LIVE_PREFIX + k: v for k, v in live_arrays.items()})
+def write_safe_npz(path: Path, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+    """Write a JSON header (with the checksum added) and plain arrays as .npz, atomically: to a
+    temporary file beside `path`, then renamed over it."""
     header["checksum"] = _checksum(header, arrays)
     payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -76,6 +69,48 @@ def save_model(model: SubtaskModel, path: Path | str) -> Path:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def read_safe_npz(path: Path, kind: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """(header, arrays) of a file written by write_safe_npz, without its format check; any
+    unreadable, header-less or non-JSON file is a one-line InputError naming `kind`."""
+    try:
+        with np.load(path, allow_pickle=False) as npz:
+            arrays = {name: npz[name] for name in npz.files}
+    except FileNotFoundError:
+        raise InputError(f"{kind} file not found", path) from None
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise InputError(f"not a readable {kind} file ({type(exc).__name__})", path) from None
+    if "header" not in arrays:
+        raise InputError(f"not an rcbht {kind} file (no header)", path)
+    try:
+        header = json.loads(arrays.pop("header").tobytes().decode())
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        raise InputError(f"{kind} header is not valid JSON", path, field="header") from None
+    if not isinstance(header, dict):
+        raise InputError(f"{kind} header is not a mapping", path, field="header")
+    return header, arrays
+
+
+def check_checksum(header: dict[str, Any], arrays: dict[str, np.ndarray], path: Path, kind: str) -> None:
+    """One-line InputError when the file's content does not match its checksum."""
+    if header.get("checksum") != _checksum(header, arrays):
+        raise InputError(
+            f"checksum mismatch: the {kind} file is corrupt or was modified", path, field="checksum"
+        )
+
+
+def save_model(model: SubtaskModel, path: Path | str) -> Path:
+    """Write `model` as a safe .npz model file (no pickled objects).
+
+    Atomic: written to a temporary file beside `path`, then renamed over it, so a reader (a node
+    restarting while a taught model is saved) finds the old file or the new one, never a part."""
+    path = Path(path)
+    header, arrays = _model_parts(model)
+    if model.live is not None:
+        header["live"], live_arrays = _model_parts(model.live)
+        arrays.update({LIVE_PREFIX + k: v for k, v in live_arrays.items()})
+    write_safe_npz(path, header, arrays)
     return path
 
 
@@ -104,20 +139,8 @@ def _model_parts(model: SubtaskModel) -> tuple[dict[str, Any], dict[str, np.ndar
 def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskModel:
     """Read a model file; a corrupt, tampered, foreign or wrong-version file is a one-line InputError."""
     path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            arrays = {name: npz[name] for name in npz.files}
-    except FileNotFoundError:
-        raise InputError("model file not found", path) from None
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise InputError(f"not a readable model file ({type(exc).__name__})", path) from None
-    if "header" not in arrays:
-        raise InputError("not an rcbht model file (no header)", path)
-    try:
-        header = json.loads(arrays.pop("header").tobytes().decode())
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        raise InputError("model header is not valid JSON", path, field="header") from None
-    if not isinstance(header, dict) or header.get("format") != FORMAT:
+    header, arrays = read_safe_npz(path, "model")
+    if header.get("format") != FORMAT:
         raise InputError("not an rcbht sub-task model file", path, field="format")
     if header.get("format_version") != FORMAT_VERSION:
         raise InputError(
@@ -126,10 +149,7 @@ def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskM
             path,
             field="format_version",
         )
-    if header.get("checksum") != _checksum(header, arrays):
-        raise InputError(
-            "checksum mismatch: the model file is corrupt or was modified", path, field="checksum"
-        )
+    check_checksum(header, arrays, path, "model")
     main = {k: v for k, v in arrays.items() if not k.startswith(LIVE_PREFIX)}
     model = _model_from_parts(header, main, path, expect_encoding)
     if isinstance(header.get("live"), dict):

@@ -1,0 +1,53 @@
+"""The verifier's constants in one typed object, loaded from config/verify.yaml."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from rcbht_introspection.config_files import config_path, load_config
+from rcbht_introspection.errors import InputError
+
+VERIFY_CONFIG_FILE = "verify.yaml"
+
+
+@dataclass(frozen=True)
+class VerifyConfig:
+    """Feature, envelope, calibration and characterisation constants (docs/verification.md)."""
+
+    step_s: float = 0.05
+    window_s: float = 0.2
+    baseline_s: float = 0.1
+    elapsed_bin_s: float = 0.1
+    elapsed_tolerance_s: float = 0.3
+    scale_floor: float = 0.05
+    top_k: int = 3
+    false_alarm_rate: float = 0.05
+    calibration_folds: int = 5
+    onset_fraction: float = 0.5
+    evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
+
+
+def _check(cfg: VerifyConfig) -> None:
+    """Ranges beyond the field types (the loader adds file and line to the error)."""
+    for name in ("step_s", "window_s", "baseline_s", "elapsed_bin_s", "scale_floor"):
+        if getattr(cfg, name) <= 0:
+            raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)
+    if cfg.elapsed_tolerance_s < 0:
+        raise InputError(f"must be >= 0, got {cfg.elapsed_tolerance_s}", field="elapsed_tolerance_s")
+    if cfg.top_k < 1:
+        raise InputError(f"must be >= 1, got {cfg.top_k}", field="top_k")
+    if not 0 < cfg.false_alarm_rate < 1:
+        raise InputError(f"must be in (0, 1), got {cfg.false_alarm_rate}", field="false_alarm_rate")
+    if cfg.calibration_folds < 2:
+        raise InputError(f"must be >= 2, got {cfg.calibration_folds}", field="calibration_folds")
+    if not 0 <= cfg.onset_fraction < 1:
+        raise InputError(f"must be in [0, 1), got {cfg.onset_fraction}", field="onset_fraction")
+    if not cfg.evidence_s or any(e <= 0 for e in cfg.evidence_s):
+        raise InputError("needs at least one span, all > 0", field="evidence_s")
+
+
+def load_verify_config(path: Path | str | None = None) -> VerifyConfig:
+    """The verify section of config/verify.yaml (or of `path`)."""
+    file = Path(path) if path is not None else config_path(VERIFY_CONFIG_FILE)
+    return load_config(VerifyConfig, file, section=("verify",), check=_check)

@@ -1,0 +1,148 @@
+"""The verifier model file: detection and characterisation heads as a safe .npz (JSON header and
+plain arrays, checksummed, written atomically; loading executes no code)."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.learn.model_file import check_checksum, read_safe_npz, write_safe_npz
+from rcbht_introspection.verify.characterise import Characteriser, LinearHead
+from rcbht_introspection.verify.config import VerifyConfig
+from rcbht_introspection.verify.detector import Detector, SignalModels
+from rcbht_introspection.verify.novelty import EnvelopeModel, TimingModel
+
+FORMAT = "rcbht-verifier"
+FORMAT_VERSION = 1
+KIND = "verifier"
+
+
+@dataclass
+class VerifierModel:
+    """What the verifier node runs: the detector (signals, thresholds) and the characteriser."""
+
+    arms: tuple[str, ...]
+    detector: Detector
+    characteriser: Characteriser | None
+    trained_on: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    @property
+    def config(self) -> VerifyConfig:
+        return self.detector.config
+
+
+def _head_parts(prefix: str, head: LinearHead) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    arrays = {
+        f"{prefix}.mean": head.mean,
+        f"{prefix}.scale": head.scale,
+        f"{prefix}.coef": head.coef,
+        f"{prefix}.intercept": head.intercept,
+    }
+    return {"classes": list(head.classes)}, arrays
+
+
+def _head(prefix: str, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> LinearHead:
+    return LinearHead(
+        tuple(str(c) for c in header["classes"]),
+        arrays[f"{prefix}.mean"],
+        arrays[f"{prefix}.scale"],
+        arrays[f"{prefix}.coef"],
+        arrays[f"{prefix}.intercept"],
+    )
+
+
+def save_verifier(model: VerifierModel, path: Path | str) -> Path:
+    """Write `model` as a safe verifier file."""
+    path = Path(path)
+    d = model.detector
+    header: dict[str, Any] = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "arms": list(model.arms),
+        "config": dataclasses.asdict(d.config),
+        "signals": list(d.signals),
+        "trained_on": model.trained_on,
+    }
+    arrays: dict[str, np.ndarray] = {"thresholds": d.thresholds}
+    env = d.models.envelope
+    if env is not None:
+        header["envelope"] = {"phases": list(env.phases), "bin_s": env.bin_s, "top_k": env.top_k}
+        for i, (m, s) in enumerate(zip(env.median, env.scale, strict=True)):
+            arrays[f"envelope.{i}.median"] = m
+            arrays[f"envelope.{i}.scale"] = s
+    tm = d.models.timing
+    if tm is not None:
+        header["timing"] = {"phases": list(tm.phases)}
+        arrays.update({"timing.low": tm.low, "timing.high": tm.high, "timing.scale": tm.scale})
+    ch = model.characteriser
+    if ch is not None:
+        failure_header, failure_arrays = _head_parts("failure", ch.failure)
+        header["characteriser"] = {"phases": list(ch.phases), "failure": failure_header, "directions": {}}
+        arrays.update(failure_arrays)
+        for axis, head in ch.directions.items():
+            h, a = _head_parts(f"direction.{axis}", head)
+            header["characteriser"]["directions"][axis] = h
+            arrays.update(a)
+    write_safe_npz(path, header, arrays)
+    return path
+
+
+def load_verifier(path: Path | str) -> VerifierModel:
+    """Read a verifier file; a corrupt, tampered, foreign or wrong-version file is a one-line error."""
+    path = Path(path)
+    header, arrays = read_safe_npz(path, KIND)
+    if header.get("format") != FORMAT:
+        raise InputError("not an rcbht verifier file", path, field="format")
+    if header.get("format_version") != FORMAT_VERSION:
+        raise InputError(
+            f"verifier format version {header.get('format_version')!r} is not supported "
+            f"(this version reads {FORMAT_VERSION}); retrain with `rcbht verify-train`",
+            path,
+            field="format_version",
+        )
+    check_checksum(header, arrays, path, KIND)
+    try:
+        raw = dict(header["config"])
+        raw["evidence_s"] = tuple(raw["evidence_s"])
+        config = VerifyConfig(**raw)
+        env = None
+        if "envelope" in header:
+            e = header["envelope"]
+            n = len(e["phases"])
+            env = EnvelopeModel(
+                tuple(e["phases"]),
+                [arrays[f"envelope.{i}.median"] for i in range(n)],
+                [arrays[f"envelope.{i}.scale"] for i in range(n)],
+                float(e["bin_s"]),
+                int(e["top_k"]),
+            )
+        timing = None
+        if "timing" in header:
+            timing = TimingModel(
+                tuple(header["timing"]["phases"]),
+                arrays["timing.low"],
+                arrays["timing.high"],
+                arrays["timing.scale"],
+            )
+        detector = Detector(
+            tuple(header["signals"]),
+            SignalModels(envelope=env, timing=timing),
+            arrays["thresholds"],
+            config,
+        )
+        ch = None
+        if "characteriser" in header:
+            c = header["characteriser"]
+            ch = Characteriser(
+                tuple(c["phases"]),
+                _head("failure", c["failure"], arrays),
+                {a: _head(f"direction.{a}", h, arrays) for a, h in c["directions"].items()},
+            )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"inconsistent verifier content: {exc}", path) from None
+    return VerifierModel(tuple(header["arms"]), detector, ch, dict(header.get("trained_on") or {}))

@@ -1,0 +1,171 @@
+"""The live verifier: wrench samples and sub-task events in, one verdict per tick out.
+
+The verifier node's state without ROS. Each tick (every step_s of stream time, once every arm's
+samples have passed it) gets the detector's signals against their thresholds; the first tick
+above threshold raises the alarm, which latches until the stream ends. From then on each verdict
+carries the failure class, its probabilities and the deviation directions, refined as evidence
+grows. The same numbers as the offline `Detector.run` on the whole trial (tested).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rcbht_introspection.verify.features import ArmFeatures, TrialFeatures
+from rcbht_introspection.verify.model_file import VerifierModel
+
+NOMINAL = "nominal"
+ANOMALY = "anomaly"
+HISTORY_TICKS = 20_000
+"""Ticks of evidence kept for the characterisation (1000 s at 20 Hz); older ones are dropped."""
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The verifier's judgement at one tick."""
+
+    time: float
+    phase: str
+    """The commanded sub-task running at this tick ('' before the first event)."""
+    score: float
+    """Largest signal over its threshold (> 1: above threshold)."""
+    signals: dict[str, float]
+    """Each signal over its threshold."""
+    alarm: bool
+    """Latched: the alarm has fired in this stream."""
+    alarm_time: float | None = None
+    onset: float | None = None
+    failure_class: str = ""
+    class_probabilities: dict[str, float] = field(default_factory=dict)
+    directions: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def health(self) -> str:
+        """What a planner switches on: 'nominal', 'anomaly' (alarm, no class yet) or the class."""
+        if not self.alarm:
+            return NOMINAL
+        return self.failure_class or ANOMALY
+
+
+class VerifierSession:
+    """One stream's verifier state; `reset` starts the next stream."""
+
+    def __init__(self, model: VerifierModel) -> None:
+        self.model = model
+        self.reset()
+
+    def reset(self) -> None:
+        cfg = self.model.config
+        self.arms = {a: ArmFeatures(cfg) for a in self.model.arms}
+        self.pending: dict[str, dict[int, tuple[float, np.ndarray]]] = {a: {} for a in self.arms}
+        self.phases: list[tuple[str, float]] = []
+        self.alarm_time: float | None = None
+        self.onset: float | None = None
+        self._excursion: float | None = None
+        """First tick of the running excursion above onset_fraction (the onset estimate)."""
+        self._prev_below = False
+        self.tick = 0
+        self.history: list[tuple[float, int, float, np.ndarray]] = []
+        """(time, phase index, elapsed, envelope z) per tick: the characterisation's evidence."""
+        self.ended = False
+
+    def phase(self, name: str, t: float) -> None:
+        """A sub-task event at stream time t (applies to samples after it)."""
+        self.phases.append((name, t))
+        for feats in self.arms.values():
+            feats.phase(t)
+
+    def push(self, arm: str, t: float, wrench: Sequence[float] | np.ndarray) -> list[Verdict]:
+        """One wrench sample of `arm`; returns the verdicts of the ticks now complete on all arms."""
+        if arm not in self.arms or self.ended:
+            return []
+        feats = self.arms[arm]
+        for g, row in feats.push(float(t), np.asarray(wrench, dtype=float)):
+            self.pending[arm][round(g / self.model.config.step_s)] = (g, row)
+        return self._complete()
+
+    def end(self) -> list[Verdict]:
+        """The stream ended (the end event): the last rows, with the last sub-task's duration."""
+        if self.ended:
+            return []
+        for arm, feats in self.arms.items():
+            for g, row in feats.flush():
+                self.pending[arm][-1] = (g, row)
+        self.ended = True
+        return self._complete(final=True)
+
+    def _complete(self, final: bool = False) -> list[Verdict]:
+        out = []
+        while all(self.tick in p for p in self.pending.values()):
+            rows = [self.pending[a].pop(self.tick) for a in self.arms]
+            self.tick += 1
+            out.append(self._verdict(rows[0][0], np.concatenate([r for _, r in rows]), False))
+        if final and all(-1 in p for p in self.pending.values()):
+            rows = [self.pending[a].pop(-1) for a in self.arms]
+            out.append(self._verdict(rows[0][0], np.concatenate([r for _, r in rows]), True))
+        return out
+
+    def _verdict(self, g: float, features: np.ndarray, last: bool) -> Verdict:
+        d = self.model.detector
+        starts = [s for _, s in self.phases]
+        i = int(np.searchsorted(starts, g, side="right")) - 1
+        name = self.phases[i][0] if i >= 0 else ""
+        elapsed = g - self.phases[i][1] if i >= 0 else 0.0
+        scores = []
+        z = np.full(len(features), np.nan)
+        for s in d.signals:
+            if s == "wrench" and d.models.envelope is not None:
+                z = d.models.envelope.z_row(name, elapsed, features) if i >= 0 else z
+                scores.append(float(d.models.envelope.score_z(z[None, :])[0]) if i >= 0 else 0.0)
+            elif s == "timing" and d.models.timing is not None:
+                tm = d.models.timing
+                v = tm.running(name, elapsed) if i >= 0 else 0.0
+                if i > 0:
+                    v = max(v, tm.ended(self.phases[i - 1][0], starts[i] - starts[i - 1]))
+                if last and i >= 0:
+                    v = max(v, tm.ended(name, g - starts[i]))
+                scores.append(v)
+            else:
+                scores.append(0.0)
+        normalised = np.asarray(scores) / d.thresholds
+        combined = float(np.nan_to_num(normalised.max(), posinf=1e6)) if len(scores) else 0.0
+        self.history.append((g, i, elapsed, z))
+        if len(self.history) > HISTORY_TICKS:
+            del self.history[: len(self.history) - HISTORY_TICKS]
+        if self.alarm_time is None:
+            if self._excursion is None or self._prev_below:
+                self._excursion = g  # a tick below onset_fraction ended the previous excursion
+            if combined > 1.0:
+                self.alarm_time = g
+                self.onset = self._excursion
+            self._prev_below = combined < d.config.onset_fraction
+        verdict = Verdict(
+            time=g,
+            phase=name,
+            score=combined,
+            signals={s: float(v) for s, v in zip(d.signals, normalised, strict=True)},
+            alarm=self.alarm_time is not None,
+            alarm_time=self.alarm_time,
+            onset=self.onset,
+        )
+        if self.alarm_time is None or self.model.characteriser is None or self.onset is None:
+            return verdict
+        cls, probs, dirs = self.model.characteriser.predict(*self._evidence(), self.onset, g)
+        return Verdict(**{**verdict.__dict__, "failure_class": cls, "class_probabilities": probs, "directions": dirs})
+
+    def _evidence(self) -> tuple[TrialFeatures, np.ndarray]:
+        times = np.array([h[0] for h in self.history])
+        tf = TrialFeatures(
+            trial="live",
+            phases=tuple(n for n, _ in self.phases),
+            starts=np.array([s for _, s in self.phases]),
+            times=times,
+            phase_index=np.array([h[1] for h in self.history]),
+            elapsed=np.array([h[2] for h in self.history]),
+            features=np.zeros((len(times), 0)),
+            end=float(times[-1]),
+        )
+        return tf, np.vstack([h[3] for h in self.history])

@@ -1,0 +1,167 @@
+"""How far a running sub-task is from the successful trials: a nominal envelope of the features
+per sub-task and elapsed time, and the nominal range of each sub-task's duration.
+
+Both are fitted on successful trials only. `EnvelopeModel.z` gives each feature's signed distance
+from the nominal median in nominal spreads; the novelty of a tick is the mean of its `top_k`
+largest |z|. `TimingModel` scores a sub-task that has lasted longer than any nominal one, or that
+ended sooner or later than the nominal range.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from rcbht_introspection.verify.config import VerifyConfig
+from rcbht_introspection.verify.features import TrialFeatures
+
+
+@dataclass
+class EnvelopeModel:
+    """Per sub-task: median and spread per bin of time into the sub-task; `phase_free`: one
+    envelope over time into the trial (no state machine: the raw-wrench baseline)."""
+
+    phases: tuple[str, ...]
+    median: list[np.ndarray]
+    """Per phase, (bins, features)."""
+    scale: list[np.ndarray]
+    bin_s: float
+    top_k: int
+    phase_free: bool = False
+
+    @classmethod
+    def fit(
+        cls, trials: Sequence[TrialFeatures], config: VerifyConfig, phase_free: bool = False
+    ) -> EnvelopeModel:
+        names: list[str] = []
+        rows: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+        for tf in trials:
+            for i, name in enumerate(("all",) if phase_free else tf.phases):
+                sel = tf.phase_index >= 0 if phase_free else tf.phase_index == i
+                if not np.any(sel):
+                    continue
+                if name not in rows:
+                    names.append(name)
+                    rows[name] = []
+                elapsed = tf.times[sel] if phase_free else tf.elapsed[sel]
+                rows[name].append((elapsed, tf.features[sel]))
+        bin_s = config.elapsed_bin_s
+        medians, scales = [], []
+        for name in names:
+            elapsed = np.concatenate([e for e, _ in rows[name]])
+            feats = np.vstack([f for _, f in rows[name]])
+            floor = config.scale_floor
+            n_bins = int(np.ceil((elapsed.max() + 1e-9) / bin_s)) + 1
+            med = np.empty((n_bins, feats.shape[1]))
+            scale = np.empty_like(med)
+            half = config.elapsed_tolerance_s + bin_s / 2
+            for b in range(n_bins):
+                centre = (b + 0.5) * bin_s
+                near = np.abs(elapsed - centre) <= half
+                if not np.any(near):
+                    near = np.abs(elapsed - centre) <= np.min(np.abs(elapsed - centre)) + 1e-9
+                part = feats[near]
+                med[b] = np.median(part, axis=0)
+                scale[b] = np.maximum(1.4826 * np.median(np.abs(part - med[b]), axis=0), floor)
+            medians.append(med)
+            scales.append(scale)
+        return cls(tuple(names), medians, scales, bin_s, config.top_k, phase_free)
+
+    def z(self, tf: TrialFeatures) -> np.ndarray:
+        """(ticks, features) signed z of every tick; NaN rows for ticks of unknown sub-tasks."""
+        out = np.full(tf.features.shape, np.nan)
+        for t in range(len(tf.times)):
+            elapsed = tf.times[t] if self.phase_free else tf.elapsed[t]
+            out[t] = self.z_row(self._phase_name(tf, t), float(elapsed), tf.features[t])
+        return out
+
+    def _phase_name(self, tf: TrialFeatures, tick: int) -> str:
+        i = int(tf.phase_index[tick])
+        if i < 0:
+            return ""
+        return "all" if self.phase_free else tf.phases[i]
+
+    def z_row(self, phase: str, elapsed: float, features: np.ndarray) -> np.ndarray:
+        """Signed z of one tick's features; NaN when the sub-task has no envelope."""
+        if phase not in self.phases:
+            return np.full(len(features), np.nan)
+        p = self.phases.index(phase)
+        b = min(int(elapsed / self.bin_s), len(self.median[p]) - 1)
+        return (features - self.median[p][b]) / self.scale[p][b]
+
+    def score_z(self, z: np.ndarray) -> np.ndarray:
+        """Novelty per tick: the mean of the top_k largest |z| (NaN rows: +inf, an unknown sub-task)."""
+        a = np.abs(np.atleast_2d(z))
+        k = min(self.top_k, a.shape[1])
+        top = -np.sort(-np.nan_to_num(a, nan=np.inf), axis=1)[:, :k]
+        return top.mean(axis=1)
+
+
+@dataclass
+class TimingModel:
+    """Nominal duration range of each sub-task, with a spread to score excursions in."""
+
+    phases: tuple[str, ...]
+    low: np.ndarray
+    high: np.ndarray
+    scale: np.ndarray
+
+    @classmethod
+    def fit(cls, trials: Sequence[TrialFeatures], config: VerifyConfig) -> TimingModel:
+        durations: dict[str, list[float]] = {}
+        for tf in trials:
+            ends = [*tf.starts[1:], tf.end]
+            for name, s, e in zip(tf.phases, tf.starts, ends, strict=True):
+                durations.setdefault(name, []).append(float(e - s))
+        names = tuple(durations)
+        d = [np.asarray(durations[n]) for n in names]
+        return cls(
+            names,
+            np.array([x.min() for x in d]),
+            np.array([x.max() for x in d]),
+            np.array([max(float(x.std()), config.step_s) for x in d]),
+        )
+
+    def running(self, phase: str, elapsed: float) -> float:
+        """Score of a sub-task still running after `elapsed` s (>0 once past the nominal longest)."""
+        if phase not in self.phases:
+            return np.inf
+        p = self.phases.index(phase)
+        return max(0.0, (elapsed - self.high[p]) / self.scale[p])
+
+    def ended(self, phase: str, duration: float) -> float:
+        """Score of a sub-task that ended after `duration` s (>0 outside the nominal range)."""
+        if phase not in self.phases:
+            return np.inf
+        p = self.phases.index(phase)
+        return max(0.0, (self.low[p] - duration) / self.scale[p], (duration - self.high[p]) / self.scale[p])
+
+    def z(self, tf: TrialFeatures) -> np.ndarray:
+        """(ticks, sub-tasks) signed duration so far of each nominal sub-task, from the middle of
+        its nominal range in spreads (0 before it starts): the timing view of a trial."""
+        out = np.zeros((len(tf.times), len(self.phases)))
+        mid = (self.low + self.high) / 2
+        for t in range(len(tf.times)):
+            for i in range(int(tf.phase_index[t]) + 1):
+                if tf.phases[i] in self.phases:
+                    p = self.phases.index(tf.phases[i])
+                    end = tf.starts[i + 1] if i + 1 < len(tf.starts) else tf.times[t]
+                    out[t, p] = (min(float(end), float(tf.times[t])) - tf.starts[i] - mid[p]) / self.scale[p]
+        return out
+
+    def scores(self, tf: TrialFeatures) -> np.ndarray:
+        """Timing score per tick: the running sub-task's overrun, or the last ended one's excursion."""
+        out = np.zeros(len(tf.times))
+        for t in range(len(tf.times)):
+            i = int(tf.phase_index[t])
+            if i < 0:
+                continue
+            s = self.running(tf.phases[i], float(tf.elapsed[t]))
+            if i > 0:
+                s = max(s, self.ended(tf.phases[i - 1], float(tf.starts[i] - tf.starts[i - 1])))
+            if t == len(tf.times) - 1 and i >= 0:  # the trial ended: so did its last sub-task
+                s = max(s, self.ended(tf.phases[i], tf.end - float(tf.starts[i])))
+            out[t] = s
+        return out

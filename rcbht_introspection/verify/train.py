@@ -1,0 +1,68 @@
+"""Train a verifier from labelled trials: the detector on the successes, the characteriser on
+the failures (from their labelled onset, else the start of their first failing sub-task)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.verify.characterise import Characteriser
+from rcbht_introspection.verify.config import VerifyConfig
+from rcbht_introspection.verify.detector import Detector
+from rcbht_introspection.verify.features import TrialFeatures, trial_features
+from rcbht_introspection.verify.labels import TrialLabel
+from rcbht_introspection.verify.model_file import VerifierModel
+from rcbht_introspection.verify.novelty import TimingModel
+
+MAIN_SIGNALS = ("wrench", "timing")
+
+
+def fallback_onset(tf: TrialFeatures, timing: TimingModel) -> float:
+    """Start of the first failing sub-task: the first whose duration lies outside the nominal
+    range (the last running one when none does)."""
+    ends = [*tf.starts[1:], tf.end]
+    for name, s, e in zip(tf.phases, tf.starts, ends, strict=True):
+        if timing.ended(name, float(e - s)) > 0:
+            return float(s)
+    return float(tf.starts[-1]) if len(tf.starts) else 0.0
+
+
+def onset_for(label: TrialLabel, tf: TrialFeatures, timing: TimingModel) -> tuple[float, str]:
+    """(onset, where it came from) of a failed trial."""
+    if label.onset is not None:
+        return label.onset, "label"
+    return fallback_onset(tf, timing), "first failing sub-task"
+
+
+def train_verifier(
+    trials: Sequence[Trial],
+    labels: Mapping[str, TrialLabel],
+    config: VerifyConfig,
+    seed: int = 0,
+) -> VerifierModel:
+    """A verifier for the arms of `trials` (all must have the same arms)."""
+    arms = {t.arms for t in trials}
+    if len(arms) != 1:
+        raise ValueError(f"trials mix arm sets {sorted(arms)}")
+    feats = {t.name: trial_features(t, config) for t in trials}
+    successes = [feats[t.name] for t in trials if not labels[t.name].failed]
+    detector = Detector.fit(successes, config, MAIN_SIGNALS, seed=seed)
+    failed = [t.name for t in trials if labels[t.name].failed]
+    characteriser = None
+    if failed and detector.models.envelope is not None:
+        timing = detector.models.timing or TimingModel.fit(successes, config)
+        characteriser = Characteriser.fit(
+            [(feats[n], labels[n], onset_for(labels[n], feats[n], timing)[0]) for n in failed],
+            detector.models.envelope,
+            config,
+        )
+    return VerifierModel(
+        arms=arms.pop(),
+        detector=detector,
+        characteriser=characteriser,
+        trained_on={
+            "successes": len(successes),
+            "failures": len(failed),
+            "classes": sorted({labels[n].failure_class for n in failed}),
+        },
+    )
