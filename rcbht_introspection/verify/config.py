@@ -8,6 +8,9 @@ from pathlib import Path
 from rcbht_introspection.config_files import config_path, load_config
 from rcbht_introspection.errors import InputError
 
+KINDS = ("mean", "std", "change", "change_max", "change_min")
+"""Feature kinds of an arm (verify/features.py), six axes each."""
+
 VERIFY_CONFIG_FILE = "verify.yaml"
 
 
@@ -19,7 +22,10 @@ class VerifyConfig:
     window_s: float = 0.2
     baseline_s: float = 0.1
     elapsed_bin_s: float = 0.1
-    elapsed_tolerance_s: float = 0.3
+    elapsed_tolerance_s: float = 0.5
+    elapsed_relative: float = 0.25
+    neighbours: int = 1
+    novelty_features: tuple[str, ...] = ("mean", "change")
     scale_floor: float = 0.05
     top_k: int = 3
     false_alarm_rate: float = 0.05
@@ -35,6 +41,15 @@ def _check(cfg: VerifyConfig) -> None:
             raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)
     if cfg.elapsed_tolerance_s < 0:
         raise InputError(f"must be >= 0, got {cfg.elapsed_tolerance_s}", field="elapsed_tolerance_s")
+    if cfg.elapsed_relative < 0:
+        raise InputError(f"must be >= 0, got {cfg.elapsed_relative}", field="elapsed_relative")
+    if cfg.neighbours < 1:
+        raise InputError(f"must be >= 1, got {cfg.neighbours}", field="neighbours")
+    for i, k in enumerate(cfg.novelty_features):
+        if k not in KINDS:
+            raise InputError(f"unknown feature kind {k!r} (known: {', '.join(KINDS)})", field=f"novelty_features[{i}]")
+    if not cfg.novelty_features:
+        raise InputError("needs at least one feature kind", field="novelty_features")
     if cfg.top_k < 1:
         raise InputError(f"must be >= 1, got {cfg.top_k}", field="top_k")
     if not 0 < cfg.false_alarm_rate < 1:

@@ -1,14 +1,17 @@
 """Failure detection: per-tick signals, thresholds calibrated on held-out successes, one alarm.
 
 Signals (each a score per tick, higher = less nominal):
-* `wrench`: the sub-task envelope's novelty (novelty.EnvelopeModel, per sub-task and elapsed time);
+* `wrench`: distance to the nearest successful trials at the same sub-task and elapsed time
+  (novelty.NeighbourModel);
 * `timing`: a sub-task running longer, or ending sooner or later, than any nominal one;
-* `wrench_global`: one envelope for the whole trial (the raw-wrench baseline, no state machine).
-Each signal's threshold is the conformal quantile of its run maximum over successes held out by
-cross-fitting, at level 1 - false_alarm_rate / (number of signals) (Bonferroni), so that the
-combined alarm - the first tick at which any signal exceeds its threshold - fires on at most
-`false_alarm_rate` of nominal runs. With too few successes for that quantile the threshold is
-the largest held-out run maximum.
+* `wrench_global`: the same distance by time into the trial (the raw-wrench baseline: no state
+  machine).
+Each signal has a threshold per sub-task. Calibration scores successes held out by cross-fitting:
+each (signal, sub-task) maximum is divided by the upper quartile of its held-out maxima, and the
+run's largest such ratio is its combined score; the thresholds are those quartiles times the
+conformal (1 - false_alarm_rate) quantile of the combined scores, so the alarm - the first tick
+at which any signal exceeds its threshold - fires on at most about `false_alarm_rate` of nominal
+runs (1 / (n + 1) with n successes when n is too small for the quantile: the largest is used).
 """
 
 from __future__ import annotations
@@ -21,9 +24,13 @@ import numpy as np
 
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.features import TrialFeatures
-from rcbht_introspection.verify.novelty import EnvelopeModel, TimingModel
+from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, TimingModel
 
 SIGNALS = ("wrench", "timing", "wrench_global")
+SCALE_QUANTILE = 0.75
+"""Each (signal, sub-task) is first scaled by this quantile of its held-out maxima."""
+SCORE_CAP = 1e6
+"""Scores are capped here, so an unknown sub-task (infinite novelty) still compares and sorts."""
 
 
 @dataclass
@@ -31,37 +38,41 @@ class SignalModels:
     """The fitted models behind the signals (a detector fits the ones it uses)."""
 
     envelope: EnvelopeModel | None = None
+    """The characteriser's view (fitted with the `wrench` signal)."""
+    neighbours: NeighbourModel | None = None
     timing: TimingModel | None = None
     global_envelope: EnvelopeModel | None = None
+    """The raw-wrench baseline's characteriser view."""
+    global_neighbours: NeighbourModel | None = None
 
     @classmethod
     def fit(
         cls, trials: Sequence[TrialFeatures], config: VerifyConfig, signals: Sequence[str]
     ) -> SignalModels:
+        wrench, whole = "wrench" in signals, "wrench_global" in signals
         return cls(
-            envelope=EnvelopeModel.fit(trials, config) if "wrench" in signals else None,
+            envelope=EnvelopeModel.fit(trials, config) if wrench else None,
+            neighbours=NeighbourModel.fit(trials, config) if wrench else None,
             timing=TimingModel.fit(trials, config) if "timing" in signals else None,
-            global_envelope=(
-                EnvelopeModel.fit(trials, config, phase_free=True)
-                if "wrench_global" in signals
-                else None
-            ),
+            global_envelope=EnvelopeModel.fit(trials, config, phase_free=True) if whole else None,
+            global_neighbours=NeighbourModel.fit(trials, config, phase_free=True) if whole else None,
         )
 
     def scores(self, tf: TrialFeatures, signals: Sequence[str]) -> np.ndarray:
         """(ticks, signals) raw scores."""
         cols = []
         for s in signals:
-            if s == "wrench" and self.envelope is not None:
-                cols.append(self.envelope.score_z(self.envelope.z(tf)))
+            if s == "wrench" and self.neighbours is not None:
+                cols.append(self.neighbours.scores(tf))
             elif s == "timing" and self.timing is not None:
                 cols.append(self.timing.scores(tf))
-            elif s == "wrench_global" and self.global_envelope is not None:
-                g = self.global_envelope
-                cols.append(g.score_z(g.z(tf)))
+            elif s == "wrench_global" and self.global_neighbours is not None:
+                cols.append(self.global_neighbours.scores(tf))
             else:
                 raise ValueError(f"signal {s!r} is not fitted")
-        return np.column_stack(cols) if cols else np.zeros((len(tf.times), 0))
+        if not cols:
+            return np.zeros((len(tf.times), 0))
+        return np.minimum(np.column_stack(cols), SCORE_CAP)  # inf (unknown sub-task) -> the cap
 
 
 def conformal_threshold(run_maxima: Sequence[float], level: float) -> float:
@@ -102,7 +113,9 @@ class Detector:
     signals: tuple[str, ...]
     models: SignalModels
     thresholds: np.ndarray
+    """(signals, phases): each signal's threshold per sub-task."""
     config: VerifyConfig
+    phases: tuple[str, ...] = ()
     calibration: dict[str, object] = field(default_factory=dict)
 
     @classmethod
@@ -118,31 +131,51 @@ class Detector:
         folds = min(config.calibration_folds, n)
         if folds < 2:
             raise ValueError(f"need at least 2 successful trials to calibrate, got {n}")
+        phases = tuple(dict.fromkeys(p for tf in successes for p in tf.phases))
         order = np.random.default_rng(seed).permutation(n)
-        maxima = np.zeros((n, len(signals)))
+        maxima = np.zeros((n, len(signals), len(phases)))
         for k in range(folds):
-            held = order[k::folds]
-            rest = [successes[i] for i in order if i not in set(held)]
-            models = SignalModels.fit(rest, config, signals)
+            held = set(order[k::folds].tolist())
+            models = SignalModels.fit([successes[i] for i in order if i not in held], config, signals)
             for i in held:
-                s = models.scores(successes[i], signals)
-                maxima[i] = np.nan_to_num(s.max(axis=0), posinf=1e6) if len(s) else 0.0
-        level = 1.0 - config.false_alarm_rate / max(len(signals), 1)
-        thresholds = np.array(
-            [max(conformal_threshold(maxima[:, j], level), 1e-9) for j in range(len(signals))]
-        )
+                tf = successes[i]
+                s = np.nan_to_num(models.scores(tf, signals), posinf=1e6)
+                for j, name in enumerate(tf.phases):
+                    sel = tf.phase_index == j
+                    if np.any(sel) and name in phases:
+                        p = phases.index(name)
+                        maxima[i, :, p] = np.maximum(maxima[i, :, p], s[sel].max(axis=0))
+        # each (signal, sub-task) in units of its held-out maxima's upper quartile, then one
+        # conformal threshold on the run maximum over all of them
+        scale = np.maximum(np.quantile(maxima, SCALE_QUANTILE, axis=0), 1e-9)
+        combined = (maxima / scale[None, :, :]).reshape(n, -1).max(axis=1)
+        level = 1.0 - config.false_alarm_rate
+        thresholds = scale * conformal_threshold(combined, level)
         return cls(
             signals,
             SignalModels.fit(successes, config, signals),
             thresholds,
             config,
-            {"successes": n, "folds": folds, "level": level, "run_maxima": maxima.tolist()},
+            phases,
+            {"successes": n, "folds": folds, "level": level},
         )
+
+    def threshold_of(self, phase: str) -> np.ndarray:
+        """Each signal's threshold in sub-task `phase` (the largest for a sub-task no success had)."""
+        if phase in self.phases:
+            return self.thresholds[:, self.phases.index(phase)]
+        return self.thresholds.max(axis=1) if self.thresholds.size else np.ones(len(self.signals))
 
     def run(self, tf: TrialFeatures) -> Detection:
         """Score every tick of a trial and find its first alarm."""
-        normalised = self.models.scores(tf, self.signals) / self.thresholds[None, :]
-        return detection_of(tf.times, normalised, self.signals, self.config.onset_fraction)
+        raw = self.models.scores(tf, self.signals)
+        thr = np.array(
+            [
+                self.threshold_of(tf.phases[i] if i >= 0 else "")
+                for i in tf.phase_index.astype(int)
+            ]
+        ).reshape(len(tf.times), len(self.signals))
+        return detection_of(tf.times, raw / thr, self.signals, self.config.onset_fraction)
 
 
 def detection_of(

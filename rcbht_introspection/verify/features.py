@@ -18,16 +18,26 @@ import numpy as np
 
 from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.verify.config import VerifyConfig
+from rcbht_introspection.verify.config import KINDS, VerifyConfig
 
 PER_ARM = 30
 """Features per arm: window mean (6), window std (6), change since baseline (6), its max (6), min (6)."""
 
 
+
+
+def kind_columns(kinds: Sequence[str], n_arms: int) -> np.ndarray:
+    """Column indices of the given feature kinds for every arm."""
+    return np.array(
+        [a * PER_ARM + KINDS.index(k) * 6 + x for a in range(n_arms) for k in KINDS if k in kinds for x in range(6)],
+        dtype=int,
+    )
+
+
 def feature_names(arms: Sequence[str]) -> list[str]:
     """Names of the feature columns, arms in the given order."""
     axes = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
-    kinds = ("mean", "std", "change", "change_max", "change_min")
+    kinds = KINDS
     return [f"{arm}.{k}.{a}" for arm in arms for k in kinds for a in axes]
 
 

@@ -15,7 +15,7 @@ from rcbht_introspection.learn.model_file import check_checksum, read_safe_npz, 
 from rcbht_introspection.verify.characterise import Characteriser, LinearHead
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detector, SignalModels
-from rcbht_introspection.verify.novelty import EnvelopeModel, TimingModel
+from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, TimingModel
 
 FORMAT = "rcbht-verifier"
 FORMAT_VERSION = 1
@@ -66,6 +66,7 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
         "arms": list(model.arms),
         "config": dataclasses.asdict(d.config),
         "signals": list(d.signals),
+        "phases": list(d.phases),
         "trained_on": model.trained_on,
     }
     arrays: dict[str, np.ndarray] = {"thresholds": d.thresholds}
@@ -75,6 +76,21 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
         for i, (m, s) in enumerate(zip(env.median, env.scale, strict=True)):
             arrays[f"envelope.{i}.median"] = m
             arrays[f"envelope.{i}.scale"] = s
+    nb = d.models.neighbours
+    if nb is not None:
+        header["neighbours"] = {
+            "phases": list(nb.phases),
+            "n_trials": nb.n_trials,
+            "tolerance_s": nb.tolerance_s,
+            "relative": nb.relative,
+            "k": nb.k,
+        }
+        for i in range(len(nb.phases)):
+            arrays[f"neighbours.{i}.elapsed"] = nb.elapsed[i]
+            arrays[f"neighbours.{i}.points"] = nb.points[i]
+            arrays[f"neighbours.{i}.trial_ids"] = nb.trial_ids[i]
+            arrays[f"neighbours.{i}.scale"] = nb.scale[i]
+        arrays["neighbours.columns"] = nb.columns
     tm = d.models.timing
     if tm is not None:
         header["timing"] = {"phases": list(tm.phases)}
@@ -109,6 +125,7 @@ def load_verifier(path: Path | str) -> VerifierModel:
     try:
         raw = dict(header["config"])
         raw["evidence_s"] = tuple(raw["evidence_s"])
+        raw["novelty_features"] = tuple(raw["novelty_features"])
         config = VerifyConfig(**raw)
         env = None
         if "envelope" in header:
@@ -121,6 +138,22 @@ def load_verifier(path: Path | str) -> VerifierModel:
                 float(e["bin_s"]),
                 int(e["top_k"]),
             )
+        neighbours = None
+        if "neighbours" in header:
+            nh = header["neighbours"]
+            n = len(nh["phases"])
+            neighbours = NeighbourModel(
+                tuple(nh["phases"]),
+                [arrays[f"neighbours.{i}.elapsed"] for i in range(n)],
+                [arrays[f"neighbours.{i}.points"] for i in range(n)],
+                [arrays[f"neighbours.{i}.trial_ids"] for i in range(n)],
+                [arrays[f"neighbours.{i}.scale"] for i in range(n)],
+                int(nh["n_trials"]),
+                float(nh["tolerance_s"]),
+                float(nh["relative"]),
+                int(nh["k"]),
+                arrays["neighbours.columns"],
+            )
         timing = None
         if "timing" in header:
             timing = TimingModel(
@@ -131,9 +164,10 @@ def load_verifier(path: Path | str) -> VerifierModel:
             )
         detector = Detector(
             tuple(header["signals"]),
-            SignalModels(envelope=env, timing=timing),
+            SignalModels(envelope=env, neighbours=neighbours, timing=timing),
             arrays["thresholds"],
             config,
+            tuple(header["phases"]),
         )
         ch = None
         if "characteriser" in header:

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rcbht_introspection.verify.detector import SCORE_CAP
 from rcbht_introspection.verify.features import ArmFeatures, TrialFeatures
 from rcbht_introspection.verify.model_file import VerifierModel
 
@@ -115,11 +116,12 @@ class VerifierSession:
         name = self.phases[i][0] if i >= 0 else ""
         elapsed = g - self.phases[i][1] if i >= 0 else 0.0
         scores = []
-        z = np.full(len(features), np.nan)
+        env = d.models.envelope
+        z = env.z_row(name, elapsed, features) if env is not None and i >= 0 else np.full(0, np.nan)
         for s in d.signals:
-            if s == "wrench" and d.models.envelope is not None:
-                z = d.models.envelope.z_row(name, elapsed, features) if i >= 0 else z
-                scores.append(float(d.models.envelope.score_z(z[None, :])[0]) if i >= 0 else 0.0)
+            if s == "wrench" and d.models.neighbours is not None:
+                v = d.models.neighbours.score_row(name, elapsed, features) if i >= 0 else 0.0
+                scores.append(min(v, SCORE_CAP))
             elif s == "timing" and d.models.timing is not None:
                 tm = d.models.timing
                 v = tm.running(name, elapsed) if i >= 0 else 0.0
@@ -127,10 +129,10 @@ class VerifierSession:
                     v = max(v, tm.ended(self.phases[i - 1][0], starts[i] - starts[i - 1]))
                 if last and i >= 0:
                     v = max(v, tm.ended(name, g - starts[i]))
-                scores.append(v)
+                scores.append(min(v, SCORE_CAP))
             else:
-                scores.append(0.0)
-        normalised = np.asarray(scores) / d.thresholds
+                raise ValueError(f"signal {s!r} is not in the verifier model")
+        normalised = np.asarray(scores) / d.threshold_of(name)
         combined = float(np.nan_to_num(normalised.max(), posinf=1e6)) if len(scores) else 0.0
         self.history.append((g, i, elapsed, z))
         if len(self.history) > HISTORY_TICKS:

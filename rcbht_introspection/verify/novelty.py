@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rcbht_introspection.verify.config import VerifyConfig
-from rcbht_introspection.verify.features import TrialFeatures
+from rcbht_introspection.verify.features import PER_ARM, TrialFeatures, kind_columns
 
 
 @dataclass
@@ -52,7 +52,8 @@ class EnvelopeModel:
         for name in names:
             elapsed = np.concatenate([e for e, _ in rows[name]])
             feats = np.vstack([f for _, f in rows[name]])
-            floor = config.scale_floor
+            phase_mad = 1.4826 * np.median(np.abs(feats - np.median(feats, axis=0)), axis=0)
+            floor = np.maximum(config.scale_floor, 0.25 * phase_mad)
             n_bins = int(np.ceil((elapsed.max() + 1e-9) / bin_s)) + 1
             med = np.empty((n_bins, feats.shape[1]))
             scale = np.empty_like(med)
@@ -164,4 +165,107 @@ class TimingModel:
             if t == len(tf.times) - 1 and i >= 0:  # the trial ended: so did its last sub-task
                 s = max(s, self.ended(tf.phases[i], tf.end - float(tf.starts[i])))
             out[t] = s
+        return out
+
+
+@dataclass
+class NeighbourModel:
+    """The successful trials' ticks per sub-task; a tick's novelty is its distance to the
+    `k`-th nearest successful trial among ticks of the same sub-task at a similar elapsed time
+    (within max(tolerance, relative * elapsed)): "did any success look like this, about now?".
+    Distances are root-mean-square over features in units of each feature's spread in the
+    sub-task. `phase_free`: one pool over time into the trial (the raw-wrench baseline)."""
+
+    phases: tuple[str, ...]
+    elapsed: list[np.ndarray]
+    """Per phase, the pooled ticks' elapsed times, sorted."""
+    points: list[np.ndarray]
+    """Per phase, (ticks, features) in the same order, divided by `scale`."""
+    trial_ids: list[np.ndarray]
+    scale: list[np.ndarray]
+    n_trials: int
+    tolerance_s: float
+    relative: float
+    k: int
+    columns: np.ndarray
+    """The feature columns compared (config.novelty_features of every arm)."""
+    phase_free: bool = False
+
+    @classmethod
+    def fit(
+        cls,
+        trials: Sequence[TrialFeatures],
+        config: VerifyConfig,
+        phase_free: bool = False,
+    ) -> NeighbourModel:
+        n_arms = trials[0].features.shape[1] // PER_ARM if trials else 1
+        columns = kind_columns(config.novelty_features, n_arms)
+        names: list[str] = []
+        pools: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
+        for j, tf in enumerate(trials):
+            for i, name in enumerate(("all",) if phase_free else tf.phases):
+                sel = tf.phase_index >= 0 if phase_free else tf.phase_index == i
+                if not np.any(sel):
+                    continue
+                if name not in pools:
+                    names.append(name)
+                    pools[name] = []
+                el = tf.times[sel] if phase_free else tf.elapsed[sel]
+                pools[name].append((el, tf.features[sel][:, columns], np.full(int(np.sum(sel)), j)))
+        elapsed, points, ids, scales = [], [], [], []
+        for name in names:
+            el = np.concatenate([p[0] for p in pools[name]])
+            pts = np.vstack([p[1] for p in pools[name]])
+            tid = np.concatenate([p[2] for p in pools[name]])
+            med = np.median(pts, axis=0)
+            scale = np.maximum(1.4826 * np.median(np.abs(pts - med), axis=0), config.scale_floor)
+            order = np.argsort(el, kind="stable")
+            elapsed.append(el[order])
+            points.append(pts[order] / scale)
+            ids.append(tid[order])
+            scales.append(scale)
+        return cls(
+            tuple(names),
+            elapsed,
+            points,
+            ids,
+            scales,
+            len(trials),
+            config.elapsed_tolerance_s,
+            config.elapsed_relative,
+            config.neighbours,
+            columns,
+            phase_free,
+        )
+
+    def score_row(self, phase: str, elapsed: float, features: np.ndarray) -> float:
+        """Novelty of one tick (inf for a sub-task no success had)."""
+        if phase not in self.phases:
+            return float("inf")
+        p = self.phases.index(phase)
+        el = self.elapsed[p]
+        tol = max(self.tolerance_s, self.relative * elapsed)
+        lo = int(np.searchsorted(el, elapsed - tol, side="left"))
+        hi = int(np.searchsorted(el, elapsed + tol, side="right"))
+        if hi <= lo:  # beyond every success's elapsed time: compare with their last ticks
+            lo, hi = max(len(el) - 1 - int(self.n_trials), 0), len(el)
+        diff = self.points[p][lo:hi] - features[self.columns] / self.scale[p]
+        dist = np.sqrt(np.mean(diff * diff, axis=1))
+        best = np.full(self.n_trials, np.inf)
+        np.minimum.at(best, self.trial_ids[p][lo:hi], dist)
+        k = min(self.k, int(np.sum(np.isfinite(best))))
+        if k < 1:
+            return float("inf")
+        return float(np.partition(best, k - 1)[k - 1])
+
+    def scores(self, tf: TrialFeatures) -> np.ndarray:
+        """Novelty per tick (0 before the first sub-task)."""
+        out = np.zeros(len(tf.times))
+        for t in range(len(tf.times)):
+            i = int(tf.phase_index[t])
+            if i < 0:
+                continue
+            name = "all" if self.phase_free else tf.phases[i]
+            elapsed = float(tf.times[t] if self.phase_free else tf.elapsed[t])
+            out[t] = self.score_row(name, elapsed, tf.features[t])
         return out
