@@ -55,6 +55,11 @@ class RunResult:
     class_by_evidence: dict[str, str]
     class_given_onset: str
     directions: dict[str, str]
+    times: np.ndarray
+    """Tick times and the combined score (largest signal over its threshold) per tick."""
+    score: np.ndarray
+    classes_over_time: list[tuple[float, str]]
+    """(tick time, class) after the alarm, as the live verifier would publish them."""
 
 
 def view_of(detector: Detector, view: str) -> EvidenceView:
@@ -100,6 +105,7 @@ def _fold_results(
             d = detector.run(tf)
             predicted, given, dirs = "", "", {}
             by_evidence: dict[str, str] = {}
+            over_time: list[tuple[float, str]] = []
             if char is not None and label.failed:
                 z = ev.z(tf)
                 if d.alarm is not None and d.onset is not None:
@@ -108,6 +114,9 @@ def _fold_results(
                         by_evidence[str(span)] = char.predict(
                             tf, z, d.onset, min(d.alarm + span, tf.end)
                         )[0]
+                    ticks = tf.times[tf.times >= d.alarm]
+                    for g in ticks[:: max(1, len(ticks) // 40)]:
+                        over_time.append((float(g), char.predict(tf, z, d.onset, float(g))[0]))
                 if onset is not None:
                     given = char.predict(tf, z, onset, tf.end)[0]
             results.append(
@@ -124,6 +133,9 @@ def _fold_results(
                     class_by_evidence=by_evidence,
                     class_given_onset=given,
                     directions=dirs,
+                    times=d.times,
+                    score=d.score,
+                    classes_over_time=over_time,
                 )
             )
         out[method] = results
@@ -217,7 +229,7 @@ def _auc(nominal: Sequence[RunResult], failed: Sequence[RunResult]) -> float | N
     return float(roc_auc_score(y, s))
 
 
-def verify_eval(
+def verify_runs(
     trials: Sequence[Trial],
     labels: Mapping[str, TrialLabel],
     config: VerifyConfig,
@@ -225,10 +237,8 @@ def verify_eval(
     seed: int = 0,
     train: Sequence[Trial] = (),
     progress: Callable[[str], None] | None = None,
-) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """Score the verifier and its baselines; returns (summary, per-run records).
-
-    folds None: leave one trial out. `train` given: fit on it, test on `trials` (transfer)."""
+) -> dict[str, list[RunResult]]:
+    """Every test run of every method (see verify_eval)."""
     feats = {t.name: trial_features(t, config) for t in [*trials, *train]}
     names = [t.name for t in trials]
     splits: list[tuple[list[str], list[str]]]
@@ -250,12 +260,19 @@ def verify_eval(
             progress(f"fold {k + 1}/{len(splits)}")
         for method, res in _fold_results(tr, te, feats, labels, config, seed).items():
             runs[method].extend(res)
+    return runs
+
+
+def summarise(
+    runs: Mapping[str, Sequence[RunResult]], config: VerifyConfig, protocol: str
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The JSON summary (the verifier's numbers, the baselines beside) and per-run records."""
     main = metrics(runs["verifier"])
     sources = [r.onset_source for r in runs["verifier"] if r.label.failed]
     summary: dict[str, Any] = {
         **main,
         "protocol": {
-            "folds": "transfer" if train else ("leave-one-trial-out" if folds is None else folds),
+            "folds": protocol,
             "gate_s": GATE_S,
             "false_alarm_rate_target": config.false_alarm_rate,
             "onset_source": {s: sources.count(s) for s in sorted(set(sources))},
@@ -281,3 +298,20 @@ def verify_eval(
         for r in runs[m]
     ]
     return summary, records
+
+
+def verify_eval(
+    trials: Sequence[Trial],
+    labels: Mapping[str, TrialLabel],
+    config: VerifyConfig,
+    folds: int | None = 5,
+    seed: int = 0,
+    train: Sequence[Trial] = (),
+    progress: Callable[[str], None] | None = None,
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """Score the verifier and its baselines; returns (summary, per-run records).
+
+    folds None: leave one trial out. `train` given: fit on it, test on `trials` (transfer)."""
+    runs = verify_runs(trials, labels, config, folds, seed, train, progress)
+    protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
+    return summarise(runs, config, protocol)

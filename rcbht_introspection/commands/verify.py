@@ -1,0 +1,159 @@
+"""`rcbht verify-train` and `rcbht verify-eval`: failure detection and characterisation."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from rcbht_introspection.errors import InputError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the `verify-train` and `verify-eval` subcommands."""
+    tr = subparsers.add_parser(
+        "verify-train",
+        help="train a verifier (failure detector + characteriser) from labelled trials",
+        description="Fit the detector on the successful trials and the failure characteriser on "
+        "the failed ones (docs/verification.md); writes a safe verifier file.",
+    )
+    _common(tr)
+    tr.add_argument("--out", type=Path, required=True, help="verifier file to write")
+    tr.set_defaults(func=cmd_verify_train)
+    ev = subparsers.add_parser(
+        "verify-eval",
+        help="score failure detection and characterisation (alarm gate, false alarms, classes)",
+        description="Grouped k-fold (or leave-one-trial-out, or train-on/test-on) evaluation of "
+        "the verifier beside a raw-wrench and a timing-only baseline; an alarm counts only "
+        "within 1 s after the labelled onset, any alarm on a nominal run is a false positive.",
+    )
+    _common(ev)
+    ev.add_argument("--json", type=Path, default=None, metavar="OUT", help="write the results")
+    ev.add_argument("--folds", type=int, default=5, help="stratified folds over trials (default 5)")
+    ev.add_argument("--loo", action="store_true", help="leave one trial out instead of folds")
+    ev.add_argument(
+        "--train", nargs="+", default=[], metavar="DATA", help="train on these, test on DATA"
+    )
+    ev.add_argument("--plots", type=Path, default=None, metavar="DIR", help="failure timelines")
+    ev.add_argument("--seed", type=int, default=0)
+    ev.set_defaults(func=cmd_verify_eval)
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("data", nargs="+", help="trial folders, dataset folders or bags")
+    p.add_argument("--labels", type=Path, default=None, help="labels CSV (docs/verification.md)")
+    p.add_argument("--config", type=Path, default=None, help="verify config (config/verify.yaml)")
+
+
+def _load(paths: list[str], labels_file: Path | None) -> tuple[list[Any], dict[str, Any]]:
+    from rcbht_introspection.learn.data import find_inputs, read_any_trial
+    from rcbht_introspection.verify.labels import label_of, read_labels
+
+    trials = [read_any_trial(p) for p in find_inputs(paths)]
+    given = read_labels(labels_file) if labels_file is not None else {}
+    labels = {t.name: given.get(t.name) or label_of(t) for t in trials}
+    names = [t.name for t in trials]
+    if len(set(names)) != len(names):
+        raise InputError("two trials have the same name", ", ".join(paths))
+    return trials, labels
+
+
+def cmd_verify_train(args: argparse.Namespace) -> int:
+    from rcbht_introspection.verify.config import load_verify_config
+    from rcbht_introspection.verify.model_file import save_verifier
+    from rcbht_introspection.verify.train import train_verifier
+
+    trials, labels = _load(args.data, args.labels)
+    if sum(not lb.failed for lb in labels.values()) < 2:
+        raise InputError("need at least 2 successful trials to calibrate the detector")
+    try:
+        model = train_verifier(trials, labels, load_verify_config(args.config))
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
+    save_verifier(model, args.out)
+    print(f"{args.out}: {json.dumps(model.trained_on)}")
+    return 0
+
+
+def cmd_verify_eval(args: argparse.Namespace) -> int:
+    from rcbht_introspection.verify.config import load_verify_config
+    from rcbht_introspection.verify.evaluate import summarise, verify_runs
+
+    config = load_verify_config(args.config)
+    trials, labels = _load(args.data, args.labels)
+    train, train_labels = _load(args.train, args.labels) if args.train else ([], {})
+    folds = None if args.loo else args.folds
+    n_nominal = sum(not labels[t.name].failed for t in (train or trials))
+    if n_nominal < 3:
+        raise InputError("need at least 3 successful trials to train and calibrate on")
+    runs = verify_runs(
+        trials,
+        {**labels, **train_labels},
+        config,
+        folds,
+        args.seed,
+        train,
+        progress=lambda s: print(s, file=sys.stderr),
+    )
+    protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
+    summary, records = summarise(runs, config, protocol)
+    _print(summary)
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({**summary, "runs": records}, indent=2))
+    if args.plots:
+        _plots(args.plots, trials, labels, runs["verifier"])
+    return 0
+
+
+def _fmt(v: Any) -> str:
+    return "-" if v is None else f"{v:.3f}" if isinstance(v, float) else str(v)
+
+
+def _print(summary: dict[str, Any]) -> None:
+    rows = [("verifier", summary), *summary["baselines"].items()]
+    keys = (
+        "roc_auc",
+        "detection_accuracy",
+        "precision",
+        "recall",
+        "false_alarms_per_nominal_run",
+        "class_accuracy",
+    )
+    print("method        " + "  ".join(f"{k[:18]:>18}" for k in (*keys, "delay p50 (s)")))
+    for name, m in rows:
+        cells = [_fmt(m.get(k)) for k in keys] + [_fmt(m["detection_delay_s"]["p50"])]
+        print(f"{name:<13} " + "  ".join(f"{c:>18}" for c in cells))
+    src = summary["protocol"]["onset_source"]
+    print(f"runs {summary['runs']} ({summary['nominal_runs']} nominal); onsets from: {src}")
+
+
+def _plots(out: Path, trials: list[Any], labels: dict[str, Any], runs: list[Any]) -> None:
+    """A timeline for two nominal runs and the first run of each failure class."""
+    from rcbht_introspection.plots.failure_timeline import plot_failure_timeline
+    from rcbht_introspection.taxonomy.batch import label_trial
+
+    by_name = {t.name: t for t in trials}
+    chosen: list[tuple[str, Any]] = []
+    for r in runs:
+        key = r.label.failure_class if r.label.failed else "success"
+        if sum(k == key for k, _ in chosen) < (2 if key == "success" else 1):
+            chosen.append((key, r))
+    for key, r in chosen:
+        trial = by_name[r.trial]
+        path = plot_failure_timeline(
+            trial,
+            label_trial(trial),
+            r.times,
+            r.score,
+            r.alarm,
+            r.onset_estimate,
+            r.classes_over_time,
+            r.label.failure_class or "success",
+            r.onset,
+            out / f"{r.trial}.png",
+        )
+        print(f"wrote {path}")
+
