@@ -11,7 +11,6 @@ import math
 from dataclasses import dataclass
 
 import mujoco
-import numpy as np
 
 from rcbht_introspection.sim.config import GeometryConfig
 from rcbht_introspection.sim.model import SIDES
@@ -90,9 +89,3 @@ def feature_name(feature: Feature) -> str:
     region, side = feature
     return region if side < 0 else f"{region}{('+x', '+y', '-x', '-y')[side]}"
 
-
-def as_array(features: set[Feature]) -> np.ndarray:
-    """Features as a sorted (n, 2) array of (region index, side), for compact storage."""
-    order = ("top", "chamfer", "face", "beam", "hook", "floor")
-    rows = sorted((order.index(r), s) for r, s in features)
-    return np.array(rows, dtype=int).reshape(-1, 2)

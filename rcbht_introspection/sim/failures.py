@@ -79,7 +79,9 @@ def draw_deviation(failures: FailureConfig, dirs: str, rng: np.random.Generator)
     """Sizes of a deviation class drawn uniformly in the configured ranges, with its signs."""
     signs = deviation_signs(dirs)
     size = {
-        axis: float(rng.uniform(*(failures.deviation_yaw if axis == "r" else failures.deviation_xy)))
+        axis: float(
+            rng.uniform(*(failures.deviation_yaw if axis == "r" else failures.deviation_xy))
+        )
         for axis in DEVIATION_AXES
     }
     return PartDeviation(

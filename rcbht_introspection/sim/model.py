@@ -115,8 +115,12 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
     beam_mass = 0.004
     for i, yaw in enumerate(SIDES):
         q = f'euler="0 0 {yaw}"'
-        wall_geoms.append(f'<geom name="wall{i}_lo" class="female" type="mesh" mesh="wall_lo" {q}/>')
-        wall_geoms.append(f'<geom name="wall{i}_hi" class="female" type="mesh" mesh="wall_hi" {q}/>')
+        wall_geoms.append(
+            f'<geom name="wall{i}_lo" class="female" type="mesh" mesh="wall_lo" {q}/>'
+        )
+        wall_geoms.append(
+            f'<geom name="wall{i}_hi" class="female" type="mesh" mesh="wall_hi" {q}/>'
+        )
         ang = np.deg2rad(yaw)
         r = a + bt / 2
         beams.append(

@@ -225,9 +225,7 @@ def failure_onset(
     if log is None:
         return Onset(state.stroke_time, STROKE_END)
     watch = TwinWatch(config, log)
-    return contact_onset(
-        lambda: run_physics(config, draw.twin, draw.plan, two_arm, observer=watch)
-    )
+    return contact_onset(lambda: run_physics(config, draw.twin, draw.plan, two_arm, observer=watch))
 
 
 def simulate_trial(
@@ -271,11 +269,7 @@ def simulate_trial(
     else:
         outcome = failure if not latched else "success"
     failed = failure is not None and not latched
-    onset = (
-        None
-        if not failed
-        else failure_onset(config, draw, scen.two_arm, result.state, log)
-    )
+    onset = None if not failed else failure_onset(config, draw, scen.two_arm, result.state, log)
     metadata: dict[str, object] = {
         "seed": int(seed),
         "scenario": scenario,
