@@ -88,4 +88,3 @@ def feature_name(feature: Feature) -> str:
     """Readable name of a feature, e.g. `chamfer+x`, `top-y`, `floor`."""
     region, side = feature
     return region if side < 0 else f"{region}{('+x', '+y', '-x', '-y')[side]}"
-
