@@ -14,6 +14,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import read_trial_bag
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim import SimConfig, load_sim_config, simulate_trial, write_dataset
+from rcbht_introspection.sim.contacts import feature_name
 from rcbht_introspection.sim.dataset import trial_plan
 from rcbht_introspection.sim.failures import deviation_signs, failure_classes
 from rcbht_introspection.sim.onset import NOVEL_CONTACT, STROKE_END, ContactLog
@@ -108,8 +109,7 @@ def test_the_onset_is_a_contact_of_the_failure_trial(config: SimConfig, deviated
     assert isinstance(record, dict)
     assert record["onset"] >= first_contact - 0.005
     at_onset = log.features[round(record["onset"] / 0.005) - 1]
-    names = {f"{region}{('+x', '+y', '-x', '-y')[side]}" for region, side in at_onset}
-    assert record["onset_contact"] in names | {"floor"}
+    assert record["onset_contact"] in {feature_name(f) for f in at_onset}
 
 
 def test_missed_snap_onset_is_the_stroke_end_and_successes_have_none(config: SimConfig) -> None:
