@@ -39,7 +39,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--failures",
         action="store_true",
-        help="make every second trial a failure (misalignment, jamming, missed_snap; "
+        help="make every second trial a failure, cycling through the failure classes "
+        "(misalignment, jamming, missed_snap, deviation_<dirs> per configured deviation class; "
         "snap-assembly only)",
     )
     p.add_argument(

@@ -49,9 +49,10 @@ END_PHASE = "done"
 TIME_ORIGIN_NS = 1_700_000_000 * 10**9
 """Absolute stamp of trial time 0 in written bags (a zero stamp means 'unset' in ROS)."""
 BAG_SUFFIXES = (".mcap", ".db3")
-INFO_RECORDS = ("task", "import")
-"""Trial metadata records that the trial info carries as JSON objects: the trial's task and, for
-an imported bag, what the import read and dropped (io/bag_import.py)."""
+INFO_RECORDS = ("task", "import", "failure")
+"""Trial metadata records that the trial info carries as JSON objects: the trial's task, for
+an imported bag what the import read and dropped (io/bag_import.py), and for a simulated failure
+its class, onset and deviation (sim/simulate.py)."""
 _NS = 10**9
 
 
@@ -210,7 +211,7 @@ def write_trial_bag(trial: Trial, path: Path | str, time_origin_ns: int = TIME_O
             "time_origin_ns": int(time_origin_ns),
             "arms": list(trial.arms),
         }
-        for key in INFO_RECORDS:  # task: Task.to_dict; import: bag_import.ImportReport.to_dict
+        for key in INFO_RECORDS:  # task: Task.to_dict; import: ImportReport.to_dict; failure: sim
             if isinstance(trial.metadata.get(key), dict):
                 info[key] = trial.metadata[key]
         bag.write(TRIAL_INFO_TOPIC, String(data=json.dumps(info)), int(t_ns[0]))

@@ -10,8 +10,10 @@ from typing import Literal
 from rcbht_introspection.config_files import config_path, load_config
 
 Range = tuple[float, float]
-FailureType = Literal["misalignment", "jamming", "missed_snap"]
-"""The failures the simulator can produce (each by its offset range in FailureConfig)."""
+FailureFamily = Literal["misalignment", "jamming", "missed_snap", "deviation"]
+"""The failure families the simulator can produce (each by its offset range in FailureConfig)."""
+FailureType = str
+"""A failure class: a family other than deviation, or `deviation_<dirs>` (sim/failures.py)."""
 
 
 @dataclass(frozen=True)
@@ -164,13 +166,21 @@ class VariationConfig:
 class FailureConfig:
     """Offsets that produce each failure type (sampled uniformly in the ranges)."""
 
-    types: tuple[FailureType, ...] = ("misalignment", "jamming", "missed_snap")
+    types: tuple[FailureFamily, ...] = ("misalignment", "jamming", "missed_snap", "deviation")
+    """Families that `--failures` cycles through; `deviation` stands for each deviation class."""
     misalignment_xy: Range = (0.004, 0.007)
     """Lateral offset (m) beyond the chamfer's capture range: the male lands on the housing top."""
     jamming_yaw: Range = (0.12, 0.2)
     """Yaw offset (rad) that wedges the male's corners on the housing walls."""
     missed_snap_z: Range = (0.004, 0.007)
     """Housing lower than believed (m): the insertion stroke ends before the hooks engage."""
+    deviation_classes: tuple[str, ...] = ("x+", "x-", "y+", "y-", "r+", "r-", "x+y+", "x-y-")
+    """Deviation classes: signed directions of the held part's slip in the hand, axes in the
+    order x, y, r (yaw); each is its own failure class `deviation_<dirs>`."""
+    deviation_xy: Range = (0.0015, 0.0025)
+    """Size (m) of the part's slip in x or y along each deviated axis."""
+    deviation_yaw: Range = (0.04, 0.08)
+    """Size (rad) of the part's yaw slip about the tool axis."""
     max_attempts: int = 4
 
 
@@ -213,4 +223,7 @@ class SimConfig:
 
 def load_sim_config(path: Path | str | None = None) -> SimConfig:
     """Load config/sim.yaml (or `path`); unknown keys and wrong types give one-line errors."""
-    return load_config(SimConfig, path if path is not None else config_path("sim.yaml"))
+    from rcbht_introspection.sim.failures import check_failures  # it imports this module
+
+    path = path if path is not None else config_path("sim.yaml")
+    return load_config(SimConfig, path, check=check_failures)

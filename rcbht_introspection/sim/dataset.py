@@ -1,7 +1,7 @@
 """Write a simulated data set: one folder per trial in the HIRO layout, or one rosbag2 per trial.
 
 Trial i of a set uses seed `seed * 1000 + i`; with failures on, every second trial is a failure,
-cycling through the configured failure types. A dataset-level sim_meta.json lists every trial's
+cycling through the configured failure classes (each deviation class is one). A dataset-level sim_meta.json lists every trial's
 outcome and variation; each HIRO trial folder also gets outcome.txt and meta.json, and task.yaml
 when its task is not the snap assembly (bags carry the task in their trial info).
 """
@@ -19,6 +19,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import write_trial
 from rcbht_introspection.sim.config import FailureType, SimConfig
+from rcbht_introspection.sim.failures import failure_classes
 from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
 from rcbht_introspection.sim.tasks import (
     SimTaskName,
@@ -122,7 +123,7 @@ def write_dataset(
     out = Path(out_dir)
     _clear_previous_set(out)
     out.mkdir(parents=True, exist_ok=True)
-    types = config.failures.types if isinstance(config, SimConfig) else ()
+    types = failure_classes(config.failures) if isinstance(config, SimConfig) else ()
     plan = trial_plan(n_trials, seed, failures, types)
     items = enumerate(plan)
     if progress:

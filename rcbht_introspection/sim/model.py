@@ -10,6 +10,7 @@ by a second (left) servo arm with its own sensor site; otherwise it is fixed to 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -36,6 +37,9 @@ class TrialPhysics:
     stiffness_scale: float = 1.0
     start_pose: tuple[float, float, float] = (0.0, 0.0, 0.05)
     """Initial tool centre point x, y, z (m); the initial pitch is set on the arm's joint."""
+    part_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """The held part's displacement in the hand: x, y (m) and yaw (rad) about the tool axis; the
+    controller does not know it (a deviation failure: the part slipped in the gripper)."""
 
 
 def prism_vertices(points_xz: list[tuple[float, float]], y0: float, y1: float) -> str:
@@ -111,8 +115,12 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
     beam_mass = 0.004
     for i, yaw in enumerate(SIDES):
         q = f'euler="0 0 {yaw}"'
-        wall_geoms.append(f'<geom class="female" type="mesh" mesh="wall_lo" {q}/>')
-        wall_geoms.append(f'<geom class="female" type="mesh" mesh="wall_hi" {q}/>')
+        wall_geoms.append(
+            f'<geom name="wall{i}_lo" class="female" type="mesh" mesh="wall_lo" {q}/>'
+        )
+        wall_geoms.append(
+            f'<geom name="wall{i}_hi" class="female" type="mesh" mesh="wall_hi" {q}/>'
+        )
         ang = np.deg2rad(yaw)
         r = a + bt / 2
         beams.append(
@@ -121,12 +129,12 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
             f'damping="{p.beam_damping:.6g}" armature="{p.beam_armature:.6g}" '
             'range="-0.05 0.3" limited="true"/>'
             f'<inertial pos="0 0 {h / 2:.6g}" mass="{beam_mass}" diaginertia="2e-7 2e-7 2e-8"/>'
-            '<geom class="female" type="mesh" mesh="beam"/>'
-            '<geom class="female" type="mesh" mesh="hook"/>'
+            f'<geom name="beam{i}" class="female" type="mesh" mesh="beam"/>'
+            f'<geom name="hook{i}" class="female" type="mesh" mesh="hook"/>'
             "</body>"
         )
     base = (
-        f'<geom class="female" type="box" size="{g.base_half:.6g} {g.base_half:.6g} '
+        f'<geom name="floor" class="female" type="box" size="{g.base_half:.6g} {g.base_half:.6g} '
         f'{g.base_thickness / 2:.6g}" pos="0 0 {-g.base_thickness / 2:.6g}"/>'
     )
     ox, oy, oz = physics.female_offset
@@ -155,16 +163,21 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
     hl = g.male_lower_height
     n = g.male_neck_half
     hn = g.male_neck_height
+    dx, dy, dyaw = physics.part_offset
+    turn = f' euler="0 0 {math.degrees(dyaw):.6g}"' if dyaw else ""  # no attribute when centred
     male = (
         f'<body name="r_hand" pos="{sx:.6g} {sy:.6g} {sz:.6g}" gravcomp="1">'
         f'<inertial pos="0 0 0" mass="{p.arm_link_mass:.6g}" '
         f'diaginertia="{p.arm_link_inertia:.6g} {p.arm_link_inertia:.6g} {p.arm_link_inertia:.6g}"/>'
         f"{arm_joints_xml('r', p.arm_kd_lin, p.arm_kd_rot)}"
         '<body name="male" pos="0 0 0">'
-        f'<inertial pos="0 0 {hl:.6g}" mass="{p.male_mass + p.hand_mass:.6g}" diaginertia="2e-4 2e-4 2e-4"/>'
+        f'<inertial pos="{dx:.6g} {dy:.6g} {hl:.6g}" mass="{p.male_mass + p.hand_mass:.6g}" '
+        'diaginertia="2e-4 2e-4 2e-4"/>'
         f'<site name="r_ft" pos="0 0 {g.sensor_height:.6g}"/>'
-        f'<geom class="male" type="box" size="{m:.6g} {m:.6g} {hl / 2:.6g}" pos="0 0 {hl / 2:.6g}"/>'
-        f'<geom class="male" type="box" size="{n:.6g} {n:.6g} {hn / 2:.6g}" pos="0 0 {hl + hn / 2:.6g}"/>'
+        f'<geom name="male_block" class="male" type="box" size="{m:.6g} {m:.6g} {hl / 2:.6g}" '
+        f'pos="{dx:.6g} {dy:.6g} {hl / 2:.6g}"{turn}/>'
+        f'<geom name="male_neck" class="male" type="box" size="{n:.6g} {n:.6g} {hn / 2:.6g}" '
+        f'pos="{dx:.6g} {dy:.6g} {hl + hn / 2:.6g}"{turn}/>'
         f'<geom type="cylinder" size="0.02 0.02" pos="0 0 {g.sensor_height + 0.02:.6g}" '
         'contype="0" conaffinity="0" rgba=".6 .6 .6 1"/>'
         "</body></body>"

@@ -8,7 +8,8 @@ whose physical outcome contradicts the requested one is redrawn (counted in meta
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -22,7 +23,20 @@ from rcbht_introspection.sim.controller import (
     HolderController,
     SnapController,
 )
+from rcbht_introspection.sim.failures import (
+    PartDeviation,
+    deviation_dirs,
+    draw_deviation,
+    failure_classes,
+)
 from rcbht_introspection.sim.model import ARM_JOINTS, TrialPhysics, build_model
+from rcbht_introspection.sim.onset import (
+    STROKE_END,
+    ContactLog,
+    Onset,
+    TwinWatch,
+    contact_onset,
+)
 from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
 from rcbht_introspection.sim.sensor import (
     SensorDraw,
@@ -38,6 +52,10 @@ MAX_DURATION = 80.0
 """Upper bound (s) on one trial; the controller's own time-outs end every trial well before."""
 
 
+Observer = Callable[[float, str, mujoco.MjModel, mujoco.MjData], None]
+"""Called after every physics step with the trial time, the controller's phase, model and data."""
+
+
 @dataclass(frozen=True)
 class PhysicsRun:
     """One physics run: tared tool-frame wrench per step (R columns 0-5, L 6-11), events, outcome."""
@@ -51,24 +69,39 @@ def _uniform(rng: np.random.Generator, r: tuple[float, float]) -> float:
     return float(rng.uniform(r[0], r[1]))
 
 
+@dataclass(frozen=True)
+class TrialDraw:
+    """One draw of a trial: its physics, its nominal twin's (the same draw without the failure's
+    offset), the controller's set-points, the sensor's errors and the part's deviation."""
+
+    physics: TrialPhysics
+    twin: TrialPhysics
+    plan: ControlPlan
+    sensor: SensorDraw
+    deviation: PartDeviation
+
+
 def draw_trial(
     config: SimConfig, rng: np.random.Generator, failure: FailureType | None
-) -> tuple[TrialPhysics, ControlPlan, SensorDraw]:
+) -> TrialDraw:
     """Sample one trial's physical variation, controller set-points and sensor errors."""
     g, var, fc, cc = config.geometry, config.variation, config.failures, config.controller
     ox, oy, oz = (float(v) for v in rng.normal(0.0, [var.offset_xy, var.offset_xy, var.offset_z]))
     yaw = float(rng.normal(0.0, var.offset_yaw))
     sign = 1.0 if rng.random() < 0.5 else -1.0
+    deviation = PartDeviation()
+    nominal = (ox, oy, oz, yaw)
     if failure == "misalignment":
         oy = sign * _uniform(rng, fc.misalignment_xy)
     elif failure == "jamming":
         yaw = sign * _uniform(rng, fc.jamming_yaw)
     elif failure == "missed_snap":
         oz = -_uniform(rng, fc.missed_snap_z)
+    elif failure is not None and (dirs := deviation_dirs(failure)) is not None:
+        deviation = draw_deviation(fc, dirs, rng)
     elif failure is not None:
-        raise InputError(
-            f"unknown failure type {failure!r} (known: {', '.join(fc.types)})", field="failure"
-        )
+        known = ", ".join(failure_classes(fc))
+        raise InputError(f"unknown failure type {failure!r} (known: {known})", field="failure")
     tilt = _uniform(rng, cc.tilt)
     a = g.male_half + g.clearance
     start_x = a + 0.5 * g.chamfer - g.male_half * math.cos(tilt)
@@ -79,6 +112,7 @@ def draw_trial(
         friction_scale=_uniform(rng, var.friction_scale),
         stiffness_scale=_uniform(rng, var.stiffness_scale),
         start_pose=(start_x, 0.0, start_z),
+        part_offset=(deviation.x, deviation.y, deviation.yaw),
     )
     plan = ControlPlan(
         start=(start_x, 0.0, start_z),
@@ -94,7 +128,13 @@ def draw_trial(
         ripple_seed=int(rng.integers(0, 2**31)),
     )
     sensor = draw_sensor(config.sensor, rng, var.bias_force, var.bias_torque, var.noise_scale)
-    return physics, plan, sensor
+    twin = replace(
+        physics,
+        female_offset=nominal[:3],
+        female_yaw=math.degrees(nominal[3]),
+        part_offset=(0.0, 0.0, 0.0),
+    )
+    return TrialDraw(physics, twin, plan, sensor, deviation)
 
 
 def run_physics(
@@ -103,6 +143,7 @@ def run_physics(
     plan: ControlPlan,
     two_arm: bool,
     trace: list[tuple[float, ...]] | None = None,
+    observer: Observer | None = None,
 ) -> PhysicsRun:
     """Run the controller on the model; return the tared wrench per physics step and the events."""
     model = build_model(config, physics, two_arm)
@@ -152,6 +193,8 @@ def run_physics(
             ctrl[l_act[2]] = lu[2]
         mujoco.mj_step(model, data)
         raw[step] = sensordata
+        if observer is not None:
+            observer(t + dt, controller.state.phase, model, data)
         step += 1
     raw = raw[:step]
     # tool-frame convention: the wrench the part exerts on the sensor (compression: +Fz), tared
@@ -170,6 +213,21 @@ def _latched(config: SimConfig, model: mujoco.MjModel, data: mujoco.MjData) -> b
     return bool(shoulder < hook - 1e-4 and lateral < g.hook_depth)
 
 
+def failure_onset(
+    config: SimConfig,
+    draw: TrialDraw,
+    two_arm: bool,
+    state: ControllerState,
+    log: ContactLog | None,
+) -> Onset:
+    """The failure's onset (sim/onset.py): the stroke end of a missed snap, else the first
+    contact the nominal twin does not have (the twin runs up to that moment)."""
+    if log is None:
+        return Onset(state.stroke_time, STROKE_END)
+    watch = TwinWatch(config, log)
+    return contact_onset(lambda: run_physics(config, draw.twin, draw.plan, two_arm, observer=watch))
+
+
 def simulate_trial(
     config: SimConfig,
     seed: int,
@@ -182,15 +240,18 @@ def simulate_trial(
     scen = get_scenario(scenario)
     k = decimation(rate_hz, config.physics.timestep)
     attempts = 0
+    watched = failure is not None and failure != "missed_snap"
     while True:
         rng = np.random.default_rng([int(seed), attempts])
-        physics, plan, sensor = draw_trial(config, rng, failure)
-        result = run_physics(config, physics, plan, scen.two_arm)
+        draw = draw_trial(config, rng, failure)
+        log = ContactLog(config) if watched else None
+        result = run_physics(config, draw.physics, draw.plan, scen.two_arm, observer=log)
         attempts += 1
         latched = result.latched
         consistent = latched if failure is None else not latched
         if consistent or attempts >= config.failures.max_attempts:
             break
+    sensor = draw.sensor
     state = result.state
     raw = result.wrench
     samples = resample(raw, k)
@@ -200,13 +261,15 @@ def simulate_trial(
     sensor_rng = np.random.default_rng([int(seed), attempts, 7])
     for arm in scen.arms:
         cols = slice(0, 6) if arm == "R" else slice(6, 12)
-        draw = sensor if arm == "R" else _other_sensor(sensor, config.sensor, sensor_rng)
-        wrench[arm] = measure(samples[:, cols], time, config.sensor, draw, sensor_rng)
+        errors = sensor if arm == "R" else _other_sensor(sensor, config.sensor, sensor_rng)
+        wrench[arm] = measure(samples[:, cols], time, config.sensor, errors, sensor_rng)
     state_times = tuple(round(round(t / period) * period, 9) for t in state.switch_times)
     if failure is None:
         outcome = "success" if latched else "failure"
     else:
         outcome = failure if not latched else "success"
+    failed = failure is not None and not latched
+    onset = None if not failed else failure_onset(config, draw, scen.two_arm, result.state, log)
     metadata: dict[str, object] = {
         "seed": int(seed),
         "scenario": scenario,
@@ -217,12 +280,20 @@ def simulate_trial(
         "snap_time": state.snap_time,
         "peak_force": round(float(state.peak_force), 4),
         "aborted": state.aborted,
-        "female_offset": [round(v, 6) for v in physics.female_offset],
-        "female_yaw_deg": round(physics.female_yaw, 4),
-        "friction_scale": round(physics.friction_scale, 4),
-        "stiffness_scale": round(physics.stiffness_scale, 4),
-        "tilt": round(plan.tilt, 5),
+        "female_offset": [round(v, 6) for v in draw.physics.female_offset],
+        "female_yaw_deg": round(draw.physics.female_yaw, 4),
+        "friction_scale": round(draw.physics.friction_scale, 4),
+        "stiffness_scale": round(draw.physics.stiffness_scale, 4),
+        "tilt": round(draw.plan.tilt, 5),
     }
+    if failure is not None and onset is not None:
+        metadata["failure"] = {
+            "class": failure,
+            "onset": None if onset.time is None else round(round(onset.time / period) * period, 9),
+            "onset_rule": onset.rule,
+            "onset_contact": onset.contact,
+            "deviation": draw.deviation.to_dict() if deviation_dirs(failure) else None,
+        }
     return Trial(
         name=name or f"sim-{scenario}-{seed}",
         time=time,

@@ -1,0 +1,103 @@
+"""Onset of a simulated failure: the first contact that the nominal task would not have.
+
+Every failure trial has a nominal twin: the same draw (start pose, speeds, friction, sensor)
+without the failure's offset. Both runs name the housing features the part touches
+(sim/contacts.py) every CONTACT_CHECK seconds; the onset is the first check at which the
+failure trial touches a feature its twin does not touch at that moment. The twin runs only
+until then. A missed snap never touches anything new: its onset is the moment the planned
+stroke ends with no snap (a nominal insertion snaps before it gets there).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import mujoco
+
+from rcbht_introspection.sim.config import SimConfig
+from rcbht_introspection.sim.contacts import (
+    Feature,
+    HousingGeoms,
+    contact_features,
+    feature_name,
+    housing_geoms,
+)
+
+CONTACT_CHECK = 0.005
+"""Seconds between two contact checks (the 200 Hz output grid)."""
+NOVEL_CONTACT = "novel_contact"
+"""Onset rule: first contact with a housing feature the nominal twin does not touch then."""
+STROKE_END = "stroke_end_without_snap"
+"""Onset rule of missed_snap: the planned insertion stroke ends and no snap was felt."""
+
+
+@dataclass
+class ContactLog:
+    """Observer of sim.simulate.run_physics: the features touched at every contact check."""
+
+    config: SimConfig
+    features: list[frozenset[Feature]] = field(default_factory=list)
+    _geoms: HousingGeoms | None = None
+    _next: int = 1
+
+    def __call__(self, t: float, phase: str, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        if t + 1e-9 < self._next * CONTACT_CHECK:
+            return
+        self._next += 1
+        if self._geoms is None:
+            self._geoms = housing_geoms(model)
+        self.features.append(frozenset(contact_features(self.config.geometry, self._geoms, data)))
+
+
+class Diverged(Exception):
+    """Raised by TwinWatch to stop the nominal twin at the failure's onset."""
+
+    def __init__(self, time: float, feature: Feature) -> None:
+        super().__init__(time, feature)
+        self.time = time
+        self.feature = feature
+
+
+@dataclass
+class TwinWatch:
+    """Observer of the nominal twin: raises Diverged at the first check where the failure trial
+    (its ContactLog) touches a feature the twin does not."""
+
+    config: SimConfig
+    failure: ContactLog
+    _geoms: HousingGeoms | None = None
+    _check: int = 0
+
+    def __call__(self, t: float, phase: str, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        if t + 1e-9 < (self._check + 1) * CONTACT_CHECK:
+            return
+        if self._geoms is None:
+            self._geoms = housing_geoms(model)
+        i = self._check
+        self._check += 1
+        if i >= len(self.failure.features):
+            raise Diverged(float("nan"), ("none", -1))  # the failure trial has ended
+        twin = contact_features(self.config.geometry, self._geoms, data)
+        novel = self.failure.features[i] - twin
+        if novel:
+            raise Diverged((i + 1) * CONTACT_CHECK, min(novel))
+
+
+@dataclass(frozen=True)
+class Onset:
+    """A failure's onset: trial time (s, physics grid), the rule that found it, the contact."""
+
+    time: float | None
+    rule: str
+    contact: str | None = None
+
+
+def contact_onset(run_twin: Callable[[], object]) -> Onset:
+    """Run the nominal twin (physics observed by a TwinWatch) up to its divergence."""
+    try:
+        run_twin()
+    except Diverged as d:
+        if d.time == d.time:  # not nan
+            return Onset(d.time, NOVEL_CONTACT, feature_name(d.feature))
+    return Onset(None, NOVEL_CONTACT)

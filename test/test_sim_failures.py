@@ -1,0 +1,135 @@
+"""Simulated failure labels: the deviation classes, the cycle of `--failures`, the onset rules
+(first contact the nominal twin does not have; a missed snap's stroke end), determinism, and the
+failure record in meta.json, sim_meta.json and a bag's trial info."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.bags import read_trial_bag
+from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.sim import SimConfig, load_sim_config, simulate_trial, write_dataset
+from rcbht_introspection.sim.contacts import feature_name
+from rcbht_introspection.sim.dataset import trial_plan
+from rcbht_introspection.sim.failures import deviation_signs, failure_classes
+from rcbht_introspection.sim.onset import NOVEL_CONTACT, STROKE_END, ContactLog
+from rcbht_introspection.sim.simulate import draw_trial, run_physics
+
+DEVIATION_SEED = 7
+DEVIATION_CLASS = "deviation_x-y-"
+
+
+@pytest.fixture(scope="module")
+def config() -> SimConfig:
+    return load_sim_config()
+
+
+@pytest.fixture(scope="module")
+def deviated(config: SimConfig) -> Trial:
+    return simulate_trial(config, DEVIATION_SEED, failure=DEVIATION_CLASS)
+
+
+def test_the_cycle_covers_every_class_once_per_two_rounds(config: SimConfig) -> None:
+    classes = failure_classes(config.failures)
+    dirs = config.failures.deviation_classes
+    assert classes == (
+        "misalignment",
+        "jamming",
+        "missed_snap",
+        *(f"deviation_{d}" for d in dirs),
+    )
+    assert 6 <= len(dirs) <= 10
+    plan = trial_plan(2 * len(classes), 3, True, classes)
+    failures = [f for _, f in plan if f is not None]
+    assert sorted(failures) == sorted(classes)  # every class exactly once
+    assert [f for _, f in plan[::2]] == [None] * len(classes)
+
+
+def test_deviation_class_names() -> None:
+    assert deviation_signs("x+") == {"x": 1}
+    assert deviation_signs("x-y+r-") == {"x": -1, "y": 1, "r": -1}
+    for bad in ("", "y+x+", "x", "x+x-", "z+"):
+        with pytest.raises(InputError, match="bad deviation class"):
+            deviation_signs(bad)
+
+
+def test_a_bad_deviation_class_in_the_config_names_file_line_and_field(tmp_path: Path) -> None:
+    path = tmp_path / "sim.yaml"
+    path.write_text("failures:\n  deviation_classes: [x+, q-]\n")
+    with pytest.raises(InputError) as info:
+        load_sim_config(path)
+    assert info.value.field == "failures.deviation_classes[1]" and info.value.line == 2
+    assert str(path) in str(info.value)
+
+
+def test_second_deviation_family_overrides_only_the_sizes(config: SimConfig) -> None:
+    root = Path(__file__).resolve().parents[1]
+    other = load_sim_config(root / "config" / "sim_deviation_b.yaml")
+    assert other.failures.deviation_classes == config.failures.deviation_classes
+    assert other.geometry == config.geometry and other.controller == config.controller
+    a, b = config.failures, other.failures
+    assert (a.deviation_xy, a.deviation_yaw) != (b.deviation_xy, b.deviation_yaw)
+
+
+def test_a_deviation_trial_carries_class_onset_and_signed_offsets(
+    config: SimConfig, deviated: Trial
+) -> None:
+    assert deviated.outcome == DEVIATION_CLASS and deviated.metadata["latched"] is False
+    record = deviated.metadata["failure"]
+    assert isinstance(record, dict)
+    assert record["class"] == DEVIATION_CLASS and record["onset_rule"] == NOVEL_CONTACT
+    offsets = record["deviation"]
+    lo, hi = config.failures.deviation_xy
+    assert -hi <= offsets["x"] <= -lo and -hi <= offsets["y"] <= -lo and offsets["yaw"] == 0.0
+    onset = record["onset"]
+    period = 1.0 / deviated.metadata["rate_hz"]
+    assert onset == pytest.approx(round(onset / period) * period, abs=1e-9)  # on the sample grid
+    assert 0.0 < onset < deviated.end_time
+    # same seed, same label
+    again = simulate_trial(config, DEVIATION_SEED, failure=DEVIATION_CLASS)
+    assert again.metadata["failure"] == record
+    np.testing.assert_array_equal(again.wrench["R"], deviated.wrench["R"])
+
+
+def test_the_onset_is_a_contact_of_the_failure_trial(config: SimConfig, deviated: Trial) -> None:
+    """Rerun the accepted draw's physics: the onset lies at or after its first contact, and the
+    part touches the named feature at the onset."""
+    attempt = int(deviated.metadata["attempts"]) - 1  # type: ignore[call-overload]
+    draw = draw_trial(config, np.random.default_rng([DEVIATION_SEED, attempt]), DEVIATION_CLASS)
+    log = ContactLog(config)
+    run_physics(config, draw.physics, draw.plan, False, observer=log)
+    touching = [i for i, f in enumerate(log.features) if f]
+    first_contact = (touching[0] + 1) * 0.005
+    record = deviated.metadata["failure"]
+    assert isinstance(record, dict)
+    assert record["onset"] >= first_contact - 0.005
+    at_onset = log.features[round(record["onset"] / 0.005) - 1]
+    assert record["onset_contact"] in {feature_name(f) for f in at_onset}
+
+
+def test_missed_snap_onset_is_the_stroke_end_and_successes_have_none(config: SimConfig) -> None:
+    missed = simulate_trial(config, 5, failure="missed_snap")
+    record = missed.metadata["failure"]
+    assert isinstance(record, dict) and record["onset_rule"] == STROKE_END
+    insertion, mating = missed.state_times[2], missed.state_times[3]
+    assert insertion < record["onset"] < mating  # the controller then believes it is done
+    assert record["deviation"] is None
+    success = simulate_trial(config, 5)
+    assert success.outcome == "success" and "failure" not in success.metadata
+
+
+def test_failure_record_in_bags_and_sim_meta(tmp_path: Path) -> None:
+    paths = write_dataset(tmp_path, 2, seed=4, failures=True, fmt="bag")
+    index = json.loads((tmp_path / "sim_meta.json").read_text())["trials"]
+    assert "failure" not in index[0]
+    record = index[1]["failure"]
+    assert record["class"] == "misalignment" == index[1]["outcome"]
+    assert record["onset_rule"] == NOVEL_CONTACT and record["deviation"] is None
+    back = read_trial_bag(paths[1])
+    assert back.outcome == "misalignment" and back.metadata["failure"] == record
+    assert "failure" not in read_trial_bag(paths[0]).metadata
