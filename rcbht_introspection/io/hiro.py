@@ -6,6 +6,7 @@ Malformed input raises InputError naming file, line and field (the CLI prints it
 from __future__ import annotations
 
 import io
+import json
 import math
 import os
 import warnings
@@ -22,6 +23,11 @@ from rcbht_introspection.io.sensor_checks import (
 )
 from rcbht_introspection.io.trial import AXES, Trial, check_phases
 from rcbht_introspection.task import HIRO_TASK, TASK_FILE, Task, task_of_folder
+
+META_FILE = "meta.json"
+"""A trial folder's metadata (the simulator's draw); read_trial takes its failure record."""
+FAILURE_RECORD = "failure"
+"""Metadata key of a failed trial's class, onset and deviation (verify/labels.py)."""
 
 COLUMNS: tuple[str, ...] = ("t", *AXES)
 ARMS: tuple[str, ...] = ("L", "R")
@@ -147,9 +153,26 @@ def read_trial(folder: Path | str, repeated: RepeatedPolicy | None = None) -> Tr
         state = state[: len(task.subtasks)]
         phases = task.subtasks[: len(state)]
         metadata["task"] = task.to_dict()  # a bag written from the trial keeps its task
+    failure = _failure_record(folder / META_FILE)
+    if failure is not None:
+        metadata[FAILURE_RECORD] = failure
     trial = Trial(folder.name, time, wrench, state, outcome, metadata, phases)
     check_phases(trial, folder / ("R_State.dat" if "R" in wrench else "L_State.dat"))
     return trial
+
+
+def _failure_record(path: Path) -> dict[str, object] | None:
+    """The failure record (class, onset, deviation: verify/labels.py) of a trial's meta.json."""
+    if not path.is_file():
+        return None
+    try:
+        meta = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"not readable JSON ({type(exc).__name__})", path) from None
+    record = meta.get(FAILURE_RECORD) if isinstance(meta, dict) else None
+    if record is not None and not isinstance(record, dict):
+        raise InputError("must be a mapping", path, field=FAILURE_RECORD)
+    return record
 
 
 def write_trial(trial: Trial, folder: Path | str, task: Task | None = None) -> Path:
@@ -162,6 +185,9 @@ def write_trial(trial: Trial, folder: Path | str, task: Task | None = None) -> P
         np.savetxt(folder / f"{arm}_Torques.dat", table, fmt="%.9g", delimiter="\t")
         (folder / f"{arm}_State.dat").write_text("".join(f"{t:.6g}\n" for t in trial.state_times))
     (folder / "outcome.txt").write_text(trial.outcome + "\n")
+    if isinstance(trial.metadata.get(FAILURE_RECORD), dict):
+        record = {FAILURE_RECORD: trial.metadata[FAILURE_RECORD]}
+        (folder / META_FILE).write_text(json.dumps(record, indent=1) + "\n")
     names = trial.phase_names
     stored = trial.metadata.get("task")
     if task is None and isinstance(stored, dict):

@@ -52,9 +52,9 @@ def plot_failure_timeline(
                 ax_l.text((w.start + w.end) / 2, row, w.label, ha="center", va="center", fontsize=6)
     ax_l.set_yticks(range(len(AXES)), AXES, fontsize=7)
     ax_l.set_ylabel("LLB words")
-    ax_s.plot(times, score, color="black", lw=1.0, label="score / threshold")
+    ax_s.plot(times, np.maximum(score, 1e-3), color="black", lw=1.0, label="score / threshold")
     ax_s.axhline(1.0, color="#c44e52", ls="--", lw=1.0, label="threshold")
-    ax_s.set_yscale("symlog", linthresh=1.0)
+    ax_s.set_yscale("log")
     ax_s.set_ylabel("novelty")
     for ax in (ax_w, ax_l, ax_s, ax_c):
         if onset is not None:

@@ -8,7 +8,7 @@ from pathlib import Path
 from rcbht_introspection.config_files import config_path, load_config
 from rcbht_introspection.errors import InputError
 
-KINDS = ("mean", "std", "change", "change_max", "change_min")
+KINDS = ("mean", "std", "change", "change_max", "change_min", "ratio")
 """Feature kinds of an arm (verify/features.py), six axes each."""
 
 VERIFY_CONFIG_FILE = "verify.yaml"
@@ -26,9 +26,11 @@ class VerifyConfig:
     elapsed_relative: float = 0.25
     neighbours: int = 1
     novelty_features: tuple[str, ...] = ("mean", "change")
-    scale_floor: float = 0.05
+    scale_floor_force: float = 0.02
+    scale_floor_torque: float = 0.001
     top_k: int = 3
     false_alarm_rate: float = 0.05
+    threshold_segments_s: tuple[float, ...] = (1.0, 3.0)
     calibration_folds: int = 5
     onset_fraction: float = 0.5
     evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
@@ -36,7 +38,14 @@ class VerifyConfig:
 
 def _check(cfg: VerifyConfig) -> None:
     """Ranges beyond the field types (the loader adds file and line to the error)."""
-    for name in ("step_s", "window_s", "baseline_s", "elapsed_bin_s", "scale_floor"):
+    for name in (
+        "step_s",
+        "window_s",
+        "baseline_s",
+        "elapsed_bin_s",
+        "scale_floor_force",
+        "scale_floor_torque",
+    ):
         if getattr(cfg, name) <= 0:
             raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)
     if cfg.elapsed_tolerance_s < 0:
@@ -54,6 +63,9 @@ def _check(cfg: VerifyConfig) -> None:
         raise InputError(f"must be >= 1, got {cfg.top_k}", field="top_k")
     if not 0 < cfg.false_alarm_rate < 1:
         raise InputError(f"must be in (0, 1), got {cfg.false_alarm_rate}", field="false_alarm_rate")
+    seg = cfg.threshold_segments_s
+    if any(b <= a for a, b in zip(seg, seg[1:], strict=False)) or any(x <= 0 for x in seg):
+        raise InputError(f"must be positive and increasing, got {list(seg)}", field="threshold_segments_s")
     if cfg.calibration_folds < 2:
         raise InputError(f"must be >= 2, got {cfg.calibration_folds}", field="calibration_folds")
     if not 0 <= cfg.onset_fraction < 1:

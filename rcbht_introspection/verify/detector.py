@@ -6,8 +6,9 @@ Signals (each a score per tick, higher = less nominal):
 * `timing`: a sub-task running longer, or ending sooner or later, than any nominal one;
 * `wrench_global`: the same distance by time into the trial (the raw-wrench baseline: no state
   machine).
-Each signal has a threshold per sub-task. Calibration scores successes held out by cross-fitting:
-each (signal, sub-task) maximum is divided by the upper quartile of its held-out maxima, and the
+Each signal has a threshold per sub-task and span of time into it (threshold_segments_s: the
+first contact of a sub-task varies less than its end). Calibration scores successes held out by
+cross-fitting: each (signal, sub-task, span) maximum is divided by the upper quartile of its held-out maxima, and the
 run's largest such ratio is its combined score; the thresholds are those quartiles times the
 conformal (1 - false_alarm_rate) quantile of the combined scores, so the alarm - the first tick
 at which any signal exceeds its threshold - fires on at most about `false_alarm_rate` of nominal
@@ -29,6 +30,10 @@ from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, Ti
 SIGNALS = ("wrench", "timing", "wrench_global")
 SCALE_QUANTILE = 0.75
 """Each (signal, sub-task) is first scaled by this quantile of its held-out maxima."""
+SIGNAL_FLOOR = {"wrench": 0.1, "wrench_global": 0.1, "timing": 0.5}
+"""Smallest scale of a signal's maxima (a sub-task whose held-out maxima are all about 0 - a
+duration always inside the nominal range - would otherwise turn any excursion into an alarm
+threshold of millions)."""
 SCORE_CAP = 1e6
 """Scores are capped here, so an unknown sub-task (infinite novelty) still compares and sorts."""
 
@@ -113,7 +118,8 @@ class Detector:
     signals: tuple[str, ...]
     models: SignalModels
     thresholds: np.ndarray
-    """(signals, phases): each signal's threshold per sub-task."""
+    """(signals, phases, segments): each signal's threshold per sub-task and span of time into
+    it (config.threshold_segments_s)."""
     config: VerifyConfig
     phases: tuple[str, ...] = ()
     calibration: dict[str, object] = field(default_factory=dict)
@@ -132,47 +138,55 @@ class Detector:
         if folds < 2:
             raise ValueError(f"need at least 2 successful trials to calibrate, got {n}")
         phases = tuple(dict.fromkeys(p for tf in successes for p in tf.phases))
+        edges = np.asarray(config.threshold_segments_s, dtype=float)
+        n_seg = len(edges) + 1
         order = np.random.default_rng(seed).permutation(n)
-        maxima = np.zeros((n, len(signals), len(phases)))
+        maxima = np.zeros((n, len(signals), len(phases), n_seg))
         for k in range(folds):
             held = set(order[k::folds].tolist())
             models = SignalModels.fit([successes[i] for i in order if i not in held], config, signals)
             for i in held:
                 tf = successes[i]
-                s = np.nan_to_num(models.scores(tf, signals), posinf=1e6)
+                s = models.scores(tf, signals)
+                seg = np.searchsorted(edges, tf.elapsed, side="right")
                 for j, name in enumerate(tf.phases):
-                    sel = tf.phase_index == j
-                    if np.any(sel) and name in phases:
-                        p = phases.index(name)
-                        maxima[i, :, p] = np.maximum(maxima[i, :, p], s[sel].max(axis=0))
-        # each (signal, sub-task) in units of its held-out maxima's upper quartile, then one
-        # conformal threshold on the run maximum over all of them
-        scale = np.maximum(np.quantile(maxima, SCALE_QUANTILE, axis=0), 1e-9)
-        combined = (maxima / scale[None, :, :]).reshape(n, -1).max(axis=1)
-        level = 1.0 - config.false_alarm_rate
-        thresholds = scale * conformal_threshold(combined, level)
+                    if name not in phases:
+                        continue
+                    p = phases.index(name)
+                    for g in range(n_seg):
+                        sel = (tf.phase_index == j) & (seg == g)
+                        if np.any(sel):
+                            maxima[i, :, p, g] = np.maximum(maxima[i, :, p, g], s[sel].max(axis=0))
+        # each (signal, sub-task, segment) in units of its held-out maxima's upper quartile,
+        # then one conformal threshold on the run maximum over all of them
+        floor = np.array([SIGNAL_FLOOR[s] for s in signals])[:, None, None]
+        scale = np.maximum(np.quantile(maxima, SCALE_QUANTILE, axis=0), floor)
+        combined = (maxima / scale[None]).reshape(n, -1).max(axis=1)
+        thresholds = scale * conformal_threshold(combined, 1.0 - config.false_alarm_rate)
         return cls(
             signals,
             SignalModels.fit(successes, config, signals),
             thresholds,
             config,
             phases,
-            {"successes": n, "folds": folds, "level": level},
+            {"successes": n, "folds": folds, "level": 1.0 - config.false_alarm_rate},
         )
 
-    def threshold_of(self, phase: str) -> np.ndarray:
-        """Each signal's threshold in sub-task `phase` (the largest for a sub-task no success had)."""
+    def threshold_of(self, phase: str, elapsed: float) -> np.ndarray:
+        """Each signal's threshold at `elapsed` s into sub-task `phase` (the largest of any
+        sub-task for one no success had)."""
+        seg = int(np.searchsorted(self.config.threshold_segments_s, elapsed, side="right"))
         if phase in self.phases:
-            return self.thresholds[:, self.phases.index(phase)]
-        return self.thresholds.max(axis=1) if self.thresholds.size else np.ones(len(self.signals))
+            return self.thresholds[:, self.phases.index(phase), seg]
+        return self.thresholds.max(axis=(1, 2)) if self.thresholds.size else np.ones(len(self.signals))
 
     def run(self, tf: TrialFeatures) -> Detection:
         """Score every tick of a trial and find its first alarm."""
         raw = self.models.scores(tf, self.signals)
         thr = np.array(
             [
-                self.threshold_of(tf.phases[i] if i >= 0 else "")
-                for i in tf.phase_index.astype(int)
+                self.threshold_of(tf.phases[i] if i >= 0 else "", float(e))
+                for i, e in zip(tf.phase_index.astype(int), tf.elapsed, strict=True)
             ]
         ).reshape(len(tf.times), len(self.signals))
         return detection_of(tf.times, raw / thr, self.signals, self.config.onset_fraction)

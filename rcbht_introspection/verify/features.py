@@ -20,8 +20,11 @@ from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.verify.config import KINDS, VerifyConfig
 
-PER_ARM = 30
-"""Features per arm: window mean (6), window std (6), change since baseline (6), its max (6), min (6)."""
+PER_ARM = 36
+"""Features per arm: window mean (6), window std (6), change since baseline (6), its max (6),
+min (6), and the mean's ratios to the pressing force (6)."""
+RATIO_MIN_FORCE = 1.0
+"""|Fz| (N) below which the ratios are 0: in free motion they are noise over noise."""
 
 
 
@@ -34,11 +37,26 @@ def kind_columns(kinds: Sequence[str], n_arms: int) -> np.ndarray:
     )
 
 
+def scale_floors(config: VerifyConfig, n_columns: int) -> np.ndarray:
+    """The smallest spread of each feature column: forces and moments have their own floor."""
+    axis = np.arange(n_columns) % 6
+    return np.where(axis < 3, config.scale_floor_force, config.scale_floor_torque)
+
+
 def feature_names(arms: Sequence[str]) -> list[str]:
     """Names of the feature columns, arms in the given order."""
     axes = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
     kinds = KINDS
     return [f"{arm}.{k}.{a}" for arm in arms for k in kinds for a in axes]
+
+
+def ratios(mean: np.ndarray) -> np.ndarray:
+    """Fx/Fz, Fy/Fz, Fz, Mx/Fz, My/Fz, Mz/Fz of a mean wrench: where and how the part touches
+    (the moment ratios are lever arms, m), independent of how hard it presses."""
+    fz = mean[2]
+    if abs(fz) < RATIO_MIN_FORCE:
+        return np.array([0.0, 0.0, fz, 0.0, 0.0, 0.0])
+    return np.array([mean[0] / fz, mean[1] / fz, fz, mean[3] / fz, mean[4] / fz, mean[5] / fz])
 
 
 class ArmFeatures:
@@ -105,7 +123,7 @@ class ArmFeatures:
         change = mean - base
         self._hi = np.maximum(self._hi, change)
         self._lo = np.minimum(self._lo, change)
-        return np.concatenate([mean, std, change, self._hi, self._lo])
+        return np.concatenate([mean, std, change, self._hi, self._lo, ratios(mean)])
 
 
 @dataclass(frozen=True)

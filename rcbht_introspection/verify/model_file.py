@@ -81,6 +81,7 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
         header["neighbours"] = {
             "phases": list(nb.phases),
             "n_trials": nb.n_trials,
+            "bin_s": nb.bin_s,
             "tolerance_s": nb.tolerance_s,
             "relative": nb.relative,
             "k": nb.k,
@@ -126,6 +127,7 @@ def load_verifier(path: Path | str) -> VerifierModel:
         raw = dict(header["config"])
         raw["evidence_s"] = tuple(raw["evidence_s"])
         raw["novelty_features"] = tuple(raw["novelty_features"])
+        raw["threshold_segments_s"] = tuple(raw["threshold_segments_s"])
         config = VerifyConfig(**raw)
         env = None
         if "envelope" in header:
@@ -148,6 +150,7 @@ def load_verifier(path: Path | str) -> VerifierModel:
                 [arrays[f"neighbours.{i}.points"] for i in range(n)],
                 [arrays[f"neighbours.{i}.trial_ids"] for i in range(n)],
                 [arrays[f"neighbours.{i}.scale"] for i in range(n)],
+                float(nh["bin_s"]),
                 int(nh["n_trials"]),
                 float(nh["tolerance_s"]),
                 float(nh["relative"]),

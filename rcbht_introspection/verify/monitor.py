@@ -132,7 +132,7 @@ class VerifierSession:
                 scores.append(min(v, SCORE_CAP))
             else:
                 raise ValueError(f"signal {s!r} is not in the verifier model")
-        normalised = np.asarray(scores) / d.threshold_of(name)
+        normalised = np.asarray(scores) / d.threshold_of(name, elapsed)
         combined = float(np.nan_to_num(normalised.max(), posinf=1e6)) if len(scores) else 0.0
         self.history.append((g, i, elapsed, z))
         if len(self.history) > HISTORY_TICKS:

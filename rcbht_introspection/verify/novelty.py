@@ -15,7 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from rcbht_introspection.verify.config import VerifyConfig
-from rcbht_introspection.verify.features import PER_ARM, TrialFeatures, kind_columns
+from rcbht_introspection.verify.features import (
+    PER_ARM,
+    TrialFeatures,
+    kind_columns,
+    scale_floors,
+)
 
 
 @dataclass
@@ -53,7 +58,7 @@ class EnvelopeModel:
             elapsed = np.concatenate([e for e, _ in rows[name]])
             feats = np.vstack([f for _, f in rows[name]])
             phase_mad = 1.4826 * np.median(np.abs(feats - np.median(feats, axis=0)), axis=0)
-            floor = np.maximum(config.scale_floor, 0.25 * phase_mad)
+            floor = np.maximum(scale_floors(config, feats.shape[1]), 0.25 * phase_mad)
             n_bins = int(np.ceil((elapsed.max() + 1e-9) / bin_s)) + 1
             med = np.empty((n_bins, feats.shape[1]))
             scale = np.empty_like(med)
@@ -173,16 +178,20 @@ class NeighbourModel:
     """The successful trials' ticks per sub-task; a tick's novelty is its distance to the
     `k`-th nearest successful trial among ticks of the same sub-task at a similar elapsed time
     (within max(tolerance, relative * elapsed)): "did any success look like this, about now?".
-    Distances are root-mean-square over features in units of each feature's spread in the
-    sub-task. `phase_free`: one pool over time into the trial (the raw-wrench baseline)."""
+    Distances are root-mean-square over features in units of each feature's spread among those
+    successes' ticks at that elapsed time (one spread per `bin_s`), so the tight first contact
+    and the loose end of a sub-task are each measured by their own variation. `phase_free`: one
+    pool over time into the trial (the raw-wrench baseline)."""
 
     phases: tuple[str, ...]
     elapsed: list[np.ndarray]
     """Per phase, the pooled ticks' elapsed times, sorted."""
     points: list[np.ndarray]
-    """Per phase, (ticks, features) in the same order, divided by `scale`."""
+    """Per phase, (ticks, features) in the same order."""
     trial_ids: list[np.ndarray]
     scale: list[np.ndarray]
+    """Per phase, (bins, features): the spread of each feature around each bin's elapsed time."""
+    bin_s: float
     n_trials: int
     tolerance_s: float
     relative: float
@@ -190,6 +199,16 @@ class NeighbourModel:
     columns: np.ndarray
     """The feature columns compared (config.novelty_features of every arm)."""
     phase_free: bool = False
+
+    def window(self, p: int, elapsed: float) -> tuple[int, int]:
+        """Index range of phase p's ticks within the tolerance of `elapsed`."""
+        el = self.elapsed[p]
+        tol = max(self.tolerance_s, self.relative * elapsed)
+        lo = int(np.searchsorted(el, elapsed - tol, side="left"))
+        hi = int(np.searchsorted(el, elapsed + tol, side="right"))
+        if hi <= lo:  # beyond every success's elapsed time: compare with their last ticks
+            lo, hi = max(len(el) - 1 - int(self.n_trials), 0), len(el)
+        return lo, hi
 
     @classmethod
     def fit(
@@ -200,6 +219,7 @@ class NeighbourModel:
     ) -> NeighbourModel:
         n_arms = trials[0].features.shape[1] // PER_ARM if trials else 1
         columns = kind_columns(config.novelty_features, n_arms)
+        floors = scale_floors(config, n_arms * PER_ARM)[columns]
         names: list[str] = []
         pools: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
         for j, tf in enumerate(trials):
@@ -212,24 +232,13 @@ class NeighbourModel:
                     pools[name] = []
                 el = tf.times[sel] if phase_free else tf.elapsed[sel]
                 pools[name].append((el, tf.features[sel][:, columns], np.full(int(np.sum(sel)), j)))
-        elapsed, points, ids, scales = [], [], [], []
-        for name in names:
-            el = np.concatenate([p[0] for p in pools[name]])
-            pts = np.vstack([p[1] for p in pools[name]])
-            tid = np.concatenate([p[2] for p in pools[name]])
-            med = np.median(pts, axis=0)
-            scale = np.maximum(1.4826 * np.median(np.abs(pts - med), axis=0), config.scale_floor)
-            order = np.argsort(el, kind="stable")
-            elapsed.append(el[order])
-            points.append(pts[order] / scale)
-            ids.append(tid[order])
-            scales.append(scale)
-        return cls(
+        model = cls(
             tuple(names),
-            elapsed,
-            points,
-            ids,
-            scales,
+            [],
+            [],
+            [],
+            [],
+            config.elapsed_bin_s,
             len(trials),
             config.elapsed_tolerance_s,
             config.elapsed_relative,
@@ -237,19 +246,28 @@ class NeighbourModel:
             columns,
             phase_free,
         )
+        for p, name in enumerate(names):
+            el = np.concatenate([q[0] for q in pools[name]])
+            order = np.argsort(el, kind="stable")
+            model.elapsed.append(el[order])
+            model.points.append(np.vstack([q[1] for q in pools[name]])[order])
+            model.trial_ids.append(np.concatenate([q[2] for q in pools[name]])[order])
+            n_bins = int(np.ceil((el.max() + 1e-9) / model.bin_s)) + 1
+            scale = np.empty((n_bins, len(columns)))
+            for b in range(n_bins):
+                lo, hi = model.window(p, (b + 0.5) * model.bin_s)
+                scale[b] = np.maximum(model.points[p][lo:hi].std(axis=0), floors)
+            model.scale.append(scale)
+        return model
 
     def score_row(self, phase: str, elapsed: float, features: np.ndarray) -> float:
         """Novelty of one tick (inf for a sub-task no success had)."""
         if phase not in self.phases:
             return float("inf")
         p = self.phases.index(phase)
-        el = self.elapsed[p]
-        tol = max(self.tolerance_s, self.relative * elapsed)
-        lo = int(np.searchsorted(el, elapsed - tol, side="left"))
-        hi = int(np.searchsorted(el, elapsed + tol, side="right"))
-        if hi <= lo:  # beyond every success's elapsed time: compare with their last ticks
-            lo, hi = max(len(el) - 1 - int(self.n_trials), 0), len(el)
-        diff = self.points[p][lo:hi] - features[self.columns] / self.scale[p]
+        lo, hi = self.window(p, elapsed)
+        scale = self.scale[p][min(int(elapsed / self.bin_s), len(self.scale[p]) - 1)]
+        diff = (self.points[p][lo:hi] - features[self.columns]) / scale
         dist = np.sqrt(np.mean(diff * diff, axis=1))
         best = np.full(self.n_trials, np.inf)
         np.minimum.at(best, self.trial_ids[p][lo:hi], dist)

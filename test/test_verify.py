@@ -1,0 +1,217 @@
+"""Verification core: live session == batch detector, safe verifier file, conformal thresholds,
+the protocol's scoring rules, labels files, and detection of an injected contact anomaly."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from conftest import SIM_SUCCESS
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.bags import trial_phase_events
+from rcbht_introspection.io.hiro import find_trials, read_trial
+from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.sim import load_sim_config, simulate_trial
+from rcbht_introspection.verify.config import load_verify_config
+from rcbht_introspection.verify.detector import Detector, conformal_threshold
+from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
+from rcbht_introspection.verify.features import trial_features
+from rcbht_introspection.verify.labels import TrialLabel, label_of, read_labels
+from rcbht_introspection.verify.model_file import load_verifier, save_verifier
+from rcbht_introspection.verify.monitor import NOMINAL, VerifierSession
+from rcbht_introspection.verify.train import train_verifier
+
+FAILURES = ("deviation_r+", "deviation_y-", "misalignment")
+
+
+@pytest.fixture(scope="module")
+def trials(sim_data: Path) -> list[Trial]:
+    """The session's 8 simulated successes and three labelled failure trials."""
+    successes = [read_trial(p) for p in find_trials([sim_data / SIM_SUCCESS])]
+    config = load_sim_config()
+    failed = [
+        simulate_trial(config, 7000 + i, failure=f, name=f"F-{f}") for i, f in enumerate(FAILURES)
+    ]
+    return successes + failed
+
+
+@pytest.fixture(scope="module")
+def labels(trials: list[Trial]) -> dict[str, TrialLabel]:
+    return {t.name: label_of(t) for t in trials}
+
+
+def replay(session: VerifierSession, trial: Trial) -> list:
+    """Feed a trial to the live session as the verifier node is fed a replayed bag."""
+    t0 = float(trial.time[0])
+    events = [(t - t0, n) for t, n in trial_phase_events(trial) if n != "done"]
+    out, k = [], 0
+    for i, t in enumerate(np.asarray(trial.time) - t0):
+        while k < len(events) and events[k][0] <= t:
+            session.phase(events[k][1], events[k][0])
+            k += 1
+        for arm in trial.arms:
+            out += session.push(arm, float(t), trial.wrench[arm][i])
+    return out + session.end()
+
+
+def test_failure_labels_come_from_the_simulator(labels: dict[str, TrialLabel]) -> None:
+    failed = [lb for lb in labels.values() if lb.failed]
+    assert [lb.failure_class for lb in failed] == list(FAILURES)
+    assert all(lb.onset is not None and lb.onset > 0 for lb in failed)
+    assert failed[0].directions() == {"x": "0", "y": "0", "r": "+"}
+    assert failed[1].directions() == {"x": "0", "y": "-", "r": "0"}
+    assert failed[2].directions() is None
+
+
+def test_live_session_equals_the_batch_detector(
+    trials: list[Trial], labels: dict[str, TrialLabel], tmp_path: Path
+) -> None:
+    config = load_verify_config()
+    train = [t for t in trials if t.name not in (trials[0].name, trials[-1].name)]
+    model = load_verifier(save_verifier(train_verifier(train, labels, config), tmp_path / "v.npz"))
+    assert model.characteriser is not None
+    for trial in (trials[0], trials[-1]):
+        tf = trial_features(trial, config)
+        batch = model.detector.run(tf)
+        verdicts = replay(VerifierSession(model), trial)
+        assert [v.time for v in verdicts] == pytest.approx(list(tf.times), abs=1e-9)
+        np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
+        assert verdicts[-1].alarm_time == batch.alarm
+        assert verdicts[-1].onset == batch.onset
+        if batch.alarm is not None and batch.onset is not None:
+            z = model.detector.models.envelope.z(tf)  # type: ignore[union-attr]
+            cls, probs, dirs = model.characteriser.predict(tf, z, batch.onset, tf.end)
+            assert verdicts[-1].failure_class == cls
+            assert verdicts[-1].class_probabilities == pytest.approx(probs)
+            assert verdicts[-1].health == cls
+        else:
+            assert {v.health for v in verdicts} == {NOMINAL}
+
+
+def test_an_injected_contact_anomaly_raises_the_alarm_after_it(
+    trials: list[Trial], labels: dict[str, TrialLabel]
+) -> None:
+    config = load_verify_config()
+    successes = [t for t in trials if not labels[t.name].failed]
+    held = successes[-1]
+    detector = Detector.fit([trial_features(t, config) for t in successes[:-1]], config)
+    start = float(held.state_times[1])  # rotation: the part presses on the housing
+    onset = start + 1.0
+    wrench = held.wrench["R"].copy()
+    after = np.asarray(held.time) >= onset
+    wrench[after, 3] += 0.3  # a 0.3 N m moment about x: contact 40 mm off-centre at 7 N
+    bumped = dataclasses.replace(held, wrench={"R": wrench})
+    plain = detector.run(trial_features(held, config))
+    hit = detector.run(trial_features(bumped, config))
+    assert hit.alarm is not None and onset <= hit.alarm <= onset + GATE_S
+    assert hit.onset is not None and hit.onset <= hit.alarm
+    assert plain.alarm is None or plain.alarm > hit.alarm
+
+
+def test_verifier_file_refuses_tampering(
+    trials: list[Trial], labels: dict[str, TrialLabel], tmp_path: Path
+) -> None:
+    path = save_verifier(train_verifier(trials, labels, load_verify_config()), tmp_path / "v.npz")
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(InputError):
+        load_verifier(bad)
+    with pytest.raises(InputError, match="not found"):
+        load_verifier(tmp_path / "missing.npz")
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(st.floats(0, 100, allow_nan=False), min_size=1, max_size=200),
+    st.floats(0.01, 0.5),
+)
+def test_conformal_threshold_bounds_the_exceedances(values: list[float], rate: float) -> None:
+    thr = conformal_threshold(values, 1 - rate)
+    above = sum(v > thr for v in values) / len(values)
+    assert above <= rate
+    assert thr in values
+
+
+def _run(name: str, failed: bool, onset: float | None, alarm: float | None) -> RunResult:
+    label = TrialLabel(name, "failure" if failed else "success", "jam" if failed else "", onset)
+    return RunResult(
+        trial=name,
+        label=label,
+        onset=onset,
+        onset_source="label" if failed else "",
+        run_score=2.0 if alarm is not None else 0.5,
+        alarm=alarm,
+        alarm_signal="wrench" if alarm is not None else "",
+        onset_estimate=alarm,
+        predicted_class="jam" if alarm is not None and failed else "",
+        class_by_evidence={},
+        class_given_onset="",
+        directions={},
+        times=np.zeros(0),
+        score=np.zeros(0),
+        classes_over_time=[],
+    )
+
+
+def test_the_protocol_counts_alarms_by_the_one_second_gate() -> None:
+    runs = [
+        _run("ok", True, 5.0, 5.4),  # within the gate: true positive
+        _run("early", True, 5.0, 4.9),  # before onset: a false alarm, and missed
+        _run("late", True, 5.0, 5.0 + GATE_S + 0.05),  # after the gate: missed
+        _run("quiet", True, 5.0, None),
+        _run("n1", False, None, None),
+        _run("n2", False, None, 3.0),  # alarm on a nominal run: false positive
+    ]
+    m = metrics(runs)
+    assert m["precision"] == pytest.approx(1 / 3)
+    assert m["recall"] == pytest.approx(1 / 4)
+    assert m["detection_accuracy"] == pytest.approx(2 / 6)
+    assert m["false_alarms_per_nominal_run"] == pytest.approx(1 / 2)
+    assert m["early_alarms"] == 1 and m["late_or_missed"] == 2
+    assert m["detection_delay_s"]["p50"] == pytest.approx(0.4)
+
+
+def test_labels_file(tmp_path: Path) -> None:
+    path = tmp_path / "labels.csv"
+    path.write_text(
+        "trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg\n"
+        "a,failure,slip,12.5,2,,-3\n"
+        "b,success,,,,,\n"
+    )
+    got = read_labels(path)
+    assert got["a"].onset == 12.5 and got["a"].directions() == {"x": "+", "y": "0", "r": "-"}
+    assert not got["b"].failed
+    path.write_text(
+        "trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg\nc,failure,slip,soon,,,\n"
+    )
+    with pytest.raises(InputError) as err:
+        read_labels(path)
+    assert "line 2" in str(err.value) and "onset_s" in str(err.value)
+
+
+def test_verify_eval_cli_reports_the_verifier_beside_both_baselines(
+    trials: list[Trial], tmp_path: Path
+) -> None:
+    from rcbht_introspection.cli import main
+    from rcbht_introspection.io.hiro import write_trial
+
+    for t in trials:
+        folder = write_trial(t, tmp_path / "set" / t.name)
+        if "failure" in t.metadata:
+            (folder / "meta.json").write_text(json.dumps(t.metadata))
+    out = tmp_path / "v.json"
+    assert main(["verify-eval", str(tmp_path / "set"), "--folds", "2", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    for m in (result, *result["baselines"].values()):
+        assert 0 <= m["roc_auc"] <= 1 and 0 <= m["false_alarms_per_nominal_run"] <= 1
+        assert m["failure_runs"] == len(FAILURES)
+    assert set(result["baselines"]) == {"raw_wrench", "timing"}
+    assert result["protocol"]["onset_source"] == {"label": len(FAILURES)}
