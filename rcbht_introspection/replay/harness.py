@@ -37,6 +37,7 @@ from rcbht_introspection.io.bags import (
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import load_model, profile_mismatch
 from rcbht_introspection.live import BeliefMode
+from rcbht_introspection.live.offline import percentiles_ms
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.live.state import TaskStateConfig
 from rcbht_introspection.nodes.common import RosSession, qos_profile
@@ -61,7 +62,11 @@ from rcbht_introspection.replay.supervision import (
     wait_for_nodes,
     write_params,
 )
-from rcbht_introspection.replay.verify_scoring import VerdictRecord, verifier_scores
+from rcbht_introspection.replay.verify_scoring import (
+    VerdictRecord,
+    verdict_latencies,
+    verifier_scores,
+)
 from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.config import load_taxonomy_config
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier
@@ -351,6 +356,9 @@ def replay_eval(
         result["verifier"] = {
             "file": str(options.verifier_file),
             **verifier_scores(verdict_records, scored_trials, verifier, options.offline),
+            "sample_to_verdict_ms": percentiles_ms(
+                [n for r in verdict_records for n in r.latencies_ns]
+            ),
         }
     result.update(
         {
@@ -507,5 +515,9 @@ def _play_one(
     )
     observer.convert()
     verdict_record = verdicts.record(stream_id) if verdicts is not None else None
+    if verdict_record is not None:
+        verdict_record.latencies_ns = verdict_latencies(
+            playback.pub_series, verdict_record.arrivals
+        )
     with observer.lock:
         return bag_record(observer.obs, since, stream_id, arms, playback), verdict_record

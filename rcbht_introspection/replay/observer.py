@@ -168,10 +168,12 @@ class VerdictObserver:
         """One Verdict (executor thread): at most one per step_s of stream time."""
         alarm = None if math.isnan(msg.alarm_time) else float(msg.alarm_time)
         onset = None if math.isnan(msg.onset) else float(msg.onset)
+        wall = time.time_ns()
         with self.lock:
             rec = self.records.setdefault(msg.stream_id, VerdictRecord(msg.stream_id))
             self.first_sent.setdefault(msg.stream_id, int(info.get("source_timestamp") or 0))
             self.last_health[msg.stream_id] = msg.health
+            rec.arrivals.append((wall, to_ns(msg.header.stamp)))
             rec.add(
                 msg.time,
                 msg.score,

@@ -9,6 +9,7 @@ the start of its first failing sub-task (verify/train.onset_for), stated per run
 
 from __future__ import annotations
 
+import bisect
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -40,6 +41,10 @@ class VerdictRecord:
     """Stream time of the last verdict received."""
     health_seen: list[str] = field(default_factory=list)
     """Distinct /task_health values received while the bag played, in order."""
+    arrivals: list[tuple[int, int]] = field(default_factory=list)
+    """(wall ns received, tick stamp ns) of each verdict"""
+    latencies_ns: list[int] = field(default_factory=list)
+    """Sample -> verdict latency of each verdict (verdict_latencies)"""
 
     def add(
         self,
@@ -59,6 +64,22 @@ class VerdictRecord:
         if alarm_time is not None:
             self.final_class, self.directions = failure_class, dict(directions)
         self.end_time = max(self.end_time, time)
+
+
+def verdict_latencies(
+    pub_series: Sequence[tuple[int, int]], arrivals: Sequence[tuple[int, int]]
+) -> list[int]:
+    """Sample -> verdict latencies (ns): from the publication of the first wrench sample stamped
+    after a verdict's tick (the earliest the tick can be judged) to the verdict's arrival here.
+    `pub_series`: (wall ns, stamp ns) of each published stamp, in order. The last verdict of a
+    stream (at the end event, no later sample) has none."""
+    stamps = [stamp for _, stamp in pub_series]
+    out = []
+    for wall, tick in arrivals:
+        i = bisect.bisect_right(stamps, tick)
+        if i < len(stamps):
+            out.append(wall - pub_series[i][0])
+    return out
 
 
 def _outcome(r: RunResult, gate_s: float) -> str:
