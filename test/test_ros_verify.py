@@ -13,9 +13,9 @@ from verify_support import simulated_verifier
 
 from rcbht_introspection.cli import main
 from rcbht_introspection.io.bags import write_trial_bag
-from rcbht_introspection.live.verifier import offline_verdicts
 from rcbht_introspection.verify.labels import label_of
 from rcbht_introspection.verify.model_file import load_verifier
+from rcbht_introspection.verify.stream import offline_verdicts
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

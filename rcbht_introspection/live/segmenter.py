@@ -51,7 +51,7 @@ and no pose of the sensor has arrived yet."""
 
 class ArmFeed(Protocol):
     """What the session feeds per arm: an ArmStream (words), or the verifier's feed
-    (live/verifier.py), which reuses the intake and event placement and returns no words."""
+    (verify/stream.py), which reuses the intake and event placement and returns no words."""
 
     def push(self, t: float, wrench6: Sequence[float]) -> list[Word]: ...
 

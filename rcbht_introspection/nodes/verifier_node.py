@@ -1,7 +1,7 @@
 """verifier_node: WrenchStamped per arm + /task_phase -> rcbht/verdict and /task_health.
 
 Parameters: see config/verifier.yaml. The samples and events are taken as segmenter_node takes
-them (live/verifier.py: same checks, event placement and streams); the verifier model
+them (verify/stream.py: same checks, event placement and streams); the verifier model
 (verify/) judges each tick. Without a usable model (missing, unreadable, other arms) it logs
 why once, publishes no verdicts and keeps /task_health at "unknown". /task_health is published
 when it changes and at `publish_rate_hz`, latched (a late subscriber gets the current value).
@@ -33,12 +33,6 @@ from rcbht_introspection.live.health import (
     LatencyWindow,
     file_sha256,
 )
-from rcbht_introspection.live.verifier import (
-    NO_MODEL,
-    StreamVerdict,
-    VerifierOutput,
-    VerifierStream,
-)
 from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run
 from rcbht_introspection.nodes.conversions import to_time, wrench_sample
 from rcbht_introspection.nodes.draining import DrainedGroup, take
@@ -46,6 +40,12 @@ from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import VerifierConfig
 from rcbht_introspection.task import load_task_file
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier
+from rcbht_introspection.verify.stream import (
+    NO_MODEL,
+    StreamVerdict,
+    VerifierOutput,
+    VerifierStream,
+)
 
 MAX_BURST = 1000
 """Most samples per arm taken in one executor wake-up."""

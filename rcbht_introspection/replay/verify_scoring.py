@@ -15,11 +15,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.live.verifier import offline_verdicts
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
 from rcbht_introspection.verify.features import trial_features
 from rcbht_introspection.verify.labels import label_of
 from rcbht_introspection.verify.model_file import VerifierModel
+from rcbht_introspection.verify.stream import offline_verdicts
 from rcbht_introspection.verify.train import onset_for
 
 

@@ -1,4 +1,4 @@
-"""The verifier node's state without ROS (live/verifier.py): a held-out trial's bag messages fed
+"""The verifier node's state without ROS (verify/stream.py): a held-out trial's bag messages fed
 in playback order give the offline verifier's verdicts, stream after stream."""
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from rcbht_introspection.io.bags import (
     write_trial_bag,
 )
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.live.verifier import StreamVerdict, VerifierStream, offline_verdicts
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier
 from rcbht_introspection.verify.monitor import NOMINAL
+from rcbht_introspection.verify.stream import StreamVerdict, VerifierStream, offline_verdicts
 
 
 @pytest.fixture(scope="module")
