@@ -1,6 +1,7 @@
-"""Both introspection nodes with their parameter files; one or two arms as a launch argument.
+"""The introspection nodes with their parameter files; one or two arms as a launch argument.
 
 ros2 launch rcbht_introspection introspection.launch.py arms:=two model_file:=$HOME/model.rcbht
+verifier_node (failure detection, /task_health) runs with verifier:=true or a verifier_file.
 """
 
 from __future__ import annotations
@@ -38,16 +39,31 @@ def arm_parameters(arms: list[str]) -> tuple[dict[str, Any], dict[str, Any]]:
     return {"arms": arms, "wrench_topics": topics}, {"arms": arms}
 
 
+def verifier_enabled(value: str, verifier_file: str) -> bool:
+    """The `verifier` launch argument: true or false ('' : on when a verifier_file is given)."""
+    value = value.strip().lower()
+    if value not in ("", "true", "false"):
+        raise ValueError(f"verifier: expected true or false, got {value!r}")
+    return value == "true" or (value == "" and bool(verifier_file))
+
+
 def launch_nodes(context: LaunchContext) -> list[Node]:
-    """The two nodes, their parameters computed from the launch arguments."""
+    """The nodes, their parameters computed from the launch arguments."""
     segmenter, classifier = arm_parameters(parse_arms(LaunchConfiguration("arms").perform(context)))
+    verifier = dict(segmenter)
     model_file = LaunchConfiguration("model_file").perform(context)
     if model_file:
         classifier["model_file"] = os.path.abspath(os.path.expanduser(model_file))
     # Plain Node actions: the nodes are lifecycle nodes whose `autostart` parameter (default
     # true) takes them to active by themselves; set autostart: false to drive the transitions.
+    verifier_file = LaunchConfiguration("verifier_file").perform(context)
+    if verifier_file:
+        verifier["verifier_file"] = os.path.abspath(os.path.expanduser(verifier_file))
+    chosen = [("segmenter_node", segmenter), ("classifier_node", classifier)]
+    if verifier_enabled(LaunchConfiguration("verifier").perform(context), verifier_file):
+        chosen.append(("verifier_node", verifier))
     nodes = []
-    for name, overrides in (("segmenter_node", segmenter), ("classifier_node", classifier)):
+    for name, overrides in chosen:
         params_file = LaunchConfiguration(name.replace("_node", "_params")).perform(context)
         parameters = [params_file, overrides] if overrides else [params_file]
         nodes.append(
@@ -59,7 +75,7 @@ def launch_nodes(context: LaunchContext) -> list[Node]:
 
 
 def generate_launch_description() -> LaunchDescription:
-    """Launch arguments arms, model_file, segmenter_params, classifier_params; both nodes."""
+    """Launch arguments arms, model_file, verifier, verifier_file and the parameter files."""
     config = os.path.join(get_package_share_directory(PACKAGE), "config")
     return LaunchDescription(
         [
@@ -75,6 +91,18 @@ def generate_launch_description() -> LaunchDescription:
                 description="model file written by `rcbht train` (empty: as in classifier_params)",
             ),
             DeclareLaunchArgument(
+                "verifier",
+                default_value="",
+                description="true: run verifier_node too (failure detection, /task_health); "
+                "empty: only when verifier_file is given",
+            ),
+            DeclareLaunchArgument(
+                "verifier_file",
+                default_value="",
+                description="verifier file written by `rcbht verify-train` (empty: as in "
+                "verifier_params)",
+            ),
+            DeclareLaunchArgument(
                 "segmenter_params",
                 default_value=os.path.join(config, "segmenter.yaml"),
                 description="segmenter_node ROS parameter file",
@@ -83,6 +111,11 @@ def generate_launch_description() -> LaunchDescription:
                 "classifier_params",
                 default_value=os.path.join(config, "classifier.yaml"),
                 description="classifier_node ROS parameter file",
+            ),
+            DeclareLaunchArgument(
+                "verifier_params",
+                default_value=os.path.join(config, "verifier.yaml"),
+                description="verifier_node ROS parameter file",
             ),
             OpaqueFunction(function=launch_nodes),
         ]

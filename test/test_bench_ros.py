@@ -24,3 +24,7 @@ def test_ros_benchmark_short(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) ->
         assert r["achieved_rate_hz_per_arm"] > 500
         assert r["latency_ms"]["n"] > 0 and r["word_latency_ms"]["n"] > 0
         assert r["clean_shutdown"], (r["exit_codes"], r["shutdown_logs"])
+    v = result["one_arm_1kHz_verifier"]
+    assert v["clean_shutdown"], (v["exit_codes"], v["shutdown_logs"])
+    assert v["sample_to_verdict_ms"]["n"] > 0 and v["latency_ms"]["n"] > 0
+    assert v["verdicts"] > 0

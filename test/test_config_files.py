@@ -21,7 +21,12 @@ from rcbht_introspection.config_files import (
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.live import LiveAugmentConfig, load_live_config
 from rcbht_introspection.learn.online import TeachConfig, load_teach_config
-from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, load_node_config
+from rcbht_introspection.nodes.params import (
+    ClassifierConfig,
+    SegmenterConfig,
+    VerifierConfig,
+    load_node_config,
+)
 from rcbht_introspection.sim.config import SimConfig, load_sim_config
 from rcbht_introspection.sim.peg_config import PegConfig, load_peg_config
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
@@ -58,6 +63,7 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
     "teach.yaml": [(load_teach_config, TeachConfig())],
     "segmenter.yaml": [(lambda p: load_node_config(SegmenterConfig, p), SegmenterConfig())],
     "classifier.yaml": [(lambda p: load_node_config(ClassifierConfig, p), ClassifierConfig())],
+    "verifier.yaml": [(lambda p: load_node_config(VerifierConfig, p), VerifierConfig())],
 }
 """Every shipped YAML file, how it is loaded and what it must load to (the values before the
 loader was unified)."""

@@ -11,6 +11,7 @@ import yaml
 from rcbht_introspection.nodes.params import (
     ClassifierConfig,
     SegmenterConfig,
+    VerifierConfig,
     defaults,
     descriptions,
 )
@@ -36,7 +37,11 @@ def table_after(heading: str) -> dict[str, tuple[str, str]]:
 
 @pytest.mark.parametrize(
     ("cls", "heading"),
-    [(SegmenterConfig, "### segmenter_node"), (ClassifierConfig, "### classifier_node")],
+    [
+        (SegmenterConfig, "### segmenter_node"),
+        (ClassifierConfig, "### classifier_node"),
+        (VerifierConfig, "### verifier_node"),
+    ],
 )
 def test_parameter_tables_match_the_config_dataclasses(cls: type, heading: str) -> None:
     expected = {name: (default, descriptions(cls)[name]) for name, default in defaults(cls).items()}

@@ -290,6 +290,36 @@ def test_launch_arguments_reach_the_nodes(
     assert classifier.parameters[-1]["model_file"] == "/data/model.rcbht"
 
 
+@pytest.mark.parametrize(
+    ("arguments", "arms", "verifier_file"),
+    [
+        ({"verifier": "true"}, ["R"], ""),
+        ({"verifier": "true", "arms": "two"}, ["L", "R"], ""),
+        ({"verifier_file": "/data/v.npz", "arms": "two"}, ["L", "R"], "/data/v.npz"),
+    ],
+)
+def test_the_verifier_argument_adds_verifier_node(
+    launch_api: None,
+    install: Install,
+    arguments: dict[str, str],
+    arms: list[str],
+    verifier_file: str,
+) -> None:
+    params = node_parameters(launch(LAUNCH_FILE, **arguments), install)
+    assert sorted(params) == ["classifier_node", "segmenter_node", "verifier_node"]
+    verifier = params["verifier_node"]
+    assert list(verifier["arms"]) == arms
+    assert list(verifier["wrench_topics"]) == list(params["segmenter_node"]["wrench_topics"])
+    assert verifier["verifier_file"] == verifier_file
+
+
+def test_verifier_false_leaves_it_out_and_a_bad_value_fails(launch_api: None) -> None:
+    nodes = launch(LAUNCH_FILE, verifier="false", verifier_file="/data/v.npz")
+    assert "verifier_node" not in {n.executable for n in nodes}
+    with pytest.raises(ValueError, match="verifier"):
+        launch(LAUNCH_FILE, verifier="maybe")
+
+
 @pytest.mark.parametrize("arms", ["[A, B, C]", "[L, L]", "[]", "three", "L, R"])
 def test_bad_arms_argument_fails_at_launch(launch_api: None, arms: str) -> None:
     with pytest.raises(ValueError, match="arms"):
@@ -317,7 +347,7 @@ def test_the_checks_catch_a_broken_launch_file(
 
 
 def test_node_executables_import_an_existing_main(install: Install) -> None:
-    for exe in ("segmenter_node", "classifier_node"):
+    for exe in ("segmenter_node", "classifier_node", "verifier_node"):
         script = ast.parse((install.prefix / "lib" / PACKAGE / exe).read_text())
         modules = [
             n.module

@@ -10,6 +10,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.nodes.params import (
     ClassifierConfig,
     SegmenterConfig,
+    VerifierConfig,
     config_from_parameters,
     defaults,
     descriptions,
@@ -21,9 +22,10 @@ from rcbht_introspection.nodes.params import (
 def test_shipped_files_equal_defaults() -> None:
     assert load_node_config(SegmenterConfig) == SegmenterConfig()
     assert load_node_config(ClassifierConfig) == ClassifierConfig()
+    assert load_node_config(VerifierConfig) == VerifierConfig()
 
 
-@pytest.mark.parametrize("cls", [SegmenterConfig, ClassifierConfig])
+@pytest.mark.parametrize("cls", [SegmenterConfig, ClassifierConfig, VerifierConfig])
 def test_every_parameter_is_described(cls: type) -> None:
     assert all(len(text) > 10 for text in descriptions(cls).values())
     assert set(defaults(cls)) == set(descriptions(cls))
@@ -50,6 +52,12 @@ def test_every_parameter_is_described(cls: type) -> None:
         (ClassifierConfig, {"teach_history_s": -1.0}, "teach_history_s"),
         (ClassifierConfig, {"teach_config_file": "/no/such.yaml"}, "teach_config_file"),
         (ClassifierConfig, {"teach_topic": "not a topic"}, "teach_topic"),
+        (VerifierConfig, {"arms": ["L", "R"]}, "wrench_topics"),
+        (VerifierConfig, {"event_max_hold_s": 0.1}, "event_max_hold_s"),
+        (VerifierConfig, {"task_file": "/no/such.yaml"}, "task_file"),
+        (VerifierConfig, {"publish_rate_hz": -1.0}, "publish_rate_hz"),
+        (VerifierConfig, {"health_topic": ""}, "health_topic"),
+        (VerifierConfig, {"verdict_topic": "not a topic"}, "verdict_topic"),
     ],
 )
 def test_bad_values_name_the_parameter(cls: type, values: dict, field: str) -> None:

@@ -2,7 +2,9 @@
 
 Two scenarios through segmenter_node + classifier_node as separate processes (the replay-eval
 machinery): one arm at 1 kHz and two arms at 2 x 1 kHz, each for RCBHT_BENCH_ROS_SECONDS of
-playback (default 60). The wrench comes from REAL HIRO trials (200 Hz recordings played at 5x =
+playback (default 60); a third plays the one-arm bags with verifier_node beside them, giving
+sample -> verdict latency (the verifier's input is the wrench, not the words) beside word ->
+belief in the same run. The verifier is trained on other successful trials (detection only). The wrench comes from REAL HIRO trials (200 Hz recordings played at 5x =
 1 kHz) when ../shared data is present, else from a synthetic contact signal. The classifier uses
 the default `rcbht train` model (with its live head) of HIRO trials 1-40 when the data are
 present, else none.
@@ -25,6 +27,10 @@ from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.live import live_training
 from rcbht_introspection.learn.model_file import save_model
 from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
+from rcbht_introspection.verify.config import load_verify_config
+from rcbht_introspection.verify.labels import SUCCESS, TrialLabel
+from rcbht_introspection.verify.model_file import save_verifier
+from rcbht_introspection.verify.train import train_verifier
 
 SOURCE_RATE_HZ = 200.0
 TARGET_RATE_HZ = 1000.0
@@ -79,6 +85,23 @@ def bench_model(out_dir: Path) -> Path | None:
     return save_model(model, out_dir / "bench_model.rcbht")
 
 
+VERIFIER_TRIALS = 10
+"""Successful trials the bench verifier is trained on (HIRO 1-10, else synthetic)."""
+
+
+def bench_verifier(out_dir: Path) -> Path:
+    """A verifier of successful trials not played in the bench (HIRO 1-10, else synthetic)."""
+    hiro = shared_hiro()
+    if hiro is not None:
+        folders = [f for f in find_trials([hiro]) if int(f.name.rsplit("-", 1)[1]) <= 40]
+        trials = [read_trial(f) for f in folders[:VERIFIER_TRIALS]]
+    else:
+        trials = [synthetic_trial(f"train-{i}", 30.0, 100 + i) for i in range(VERIFIER_TRIALS)]
+    labels = {t.name: TrialLabel(t.name, SUCCESS) for t in trials}
+    model = train_verifier(trials, labels, load_verify_config())
+    return save_verifier(model, out_dir / "bench_verifier.npz")
+
+
 def run(out_dir: Path) -> dict[str, Any]:
     """Both scenarios; figures per scenario plus the load average around them."""
 
@@ -94,17 +117,26 @@ def run(out_dir: Path) -> dict[str, Any]:
         "source": "REAL HIRO trials at 5x" if shared_hiro() else "synthetic 200 Hz at 5x",
         "model": str(model) if model else None,
     }
-    for name, arms in (("one_arm_1kHz", 1), ("two_arm_2x1kHz", 2)):
+    verifier = bench_verifier(work)
+    results["verifier"] = str(verifier)
+    scenarios = (("one_arm_1kHz", 1, None), ("two_arm_2x1kHz", 2, None))
+    for name, arms, verifier_file in (*scenarios, ("one_arm_1kHz_verifier", 1, verifier)):
         bags = []
         for i, trial in enumerate(sources):
             if arms == 2:
                 trial = two_arm_trial(trial, sources[(i + 1) % len(sources)])
             bag = work / name / f"{i:02d}-{trial.name}.mcap"
+            if verifier_file is not None:  # the one-arm bags again
+                bag = work / "one_arm_1kHz" / f"{i:02d}-{trial.name}.mcap"
+                bags.append(bag)
+                continue
             write_trial_bag(trial, bag)
             bags.append(bag)
         load_before = os.getloadavg()
         t0 = time.monotonic()
-        options = ReplayEvalOptions(rate=rate, offline=False, log_dir=work / f"{name}_logs")
+        options = ReplayEvalOptions(
+            rate=rate, offline=False, log_dir=work / f"{name}_logs", verifier_file=verifier_file
+        )
         r = replay_eval(bags, model, options)
         play_s = sum(b["play_s"] for b in r["per_bag"])
         published = sum(b["published_wrench"] for b in r["per_bag"])
@@ -126,4 +158,7 @@ def run(out_dir: Path) -> dict[str, Any]:
             "load_avg_before": [round(x, 2) for x in load_before],
             "load_avg_after": [round(x, 2) for x in os.getloadavg()],
         }
+        if verifier_file is not None:
+            results[name]["sample_to_verdict_ms"] = r["verifier"]["sample_to_verdict_ms"]
+            results[name]["verdicts"] = sum(v["verdicts"] for v in r["verifier"]["runs"])
     return results

@@ -52,7 +52,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     p = subparsers.add_parser(
         "replay-eval",
-        help="replay bags through segmenter_node and classifier_node (real DDS) and score them",
+        help="replay bags through segmenter_node and classifier_node (and verifier_node) over real DDS and score them",
     )
     p.add_argument("bags", nargs="+", type=Path, help="trial bags (or folders of bags)")
     p.add_argument(
@@ -103,6 +103,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         help="with --teach-first: keep the taught model here (must not exist yet)",
+    )
+    p.add_argument(
+        "--verifier",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="verifier file (`rcbht verify-train`): run verifier_node too and report its alarms, "
+        "detection delays against the labelled onsets and false alarms on nominal runs",
     )
     p.set_defaults(func=cmd_replay_eval)
 
@@ -335,9 +343,12 @@ def cmd_replay_eval(args: argparse.Namespace) -> int:
         teach_first=args.teach_first,
         teach_restart=args.teach_restart,
         teach_file=args.teach_file.resolve() if args.teach_file else None,
+        verifier_file=args.verifier.resolve() if args.verifier else None,
     )
-    if args.model is None and not args.teach_first:
-        raise InputError("give --model (or --teach-first K to teach the classifier)")
+    if args.model is None and not args.teach_first and args.verifier is None:
+        raise InputError(
+            "give --model (or --teach-first K to teach the classifier, or --verifier FILE)"
+        )
     if (args.teach_restart or args.teach_file) and not args.teach_first:
         raise InputError("--teach-restart and --teach-file need --teach-first")
     result = replay_eval(_bags(args.bags), args.model, options)
@@ -345,4 +356,8 @@ def cmd_replay_eval(args: argparse.Namespace) -> int:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))
     print(summary(result, timeline=args.timeline))
+    if "verifier" in result:
+        from rcbht_introspection.replay.verify_scoring import verifier_summary
+
+        print(verifier_summary(result["verifier"]))
     return 0

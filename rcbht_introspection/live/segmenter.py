@@ -20,6 +20,7 @@ import math
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
@@ -46,6 +47,20 @@ REJECT_REASONS: tuple[str, ...] = (
 other values (policy reject, or left over at the end of a stream with spread); duplicate_sample:
 the previous stamp and values (a re-sent message); no_pose: gravity compensation is configured
 and no pose of the sensor has arrived yet."""
+
+
+class ArmFeed(Protocol):
+    """What the session feeds per arm: an ArmStream (words), or the verifier's feed
+    (verify/stream.py), which reuses the intake and event placement and returns no words."""
+
+    def push(self, t: float, wrench6: Sequence[float]) -> list[Word]: ...
+
+    def mark_boundary(self, t: float, subtask: str = "") -> list[Word]: ...
+
+    def finish(self) -> list[Word]: ...
+
+
+S = TypeVar("S", bound=ArmFeed)
 
 
 @dataclass
@@ -109,10 +124,10 @@ class _Pending:
     late: bool = False
 
 
-class _Arm:
+class _Arm(Generic[S]):
     """Per-arm stream state."""
 
-    def __init__(self, stream: ArmStream) -> None:
+    def __init__(self, stream: S) -> None:
         self.stream = stream
         self.last_ns = 0
         self.last_wrench: Sequence[float] = ()
@@ -129,13 +144,14 @@ class _Arm:
         self.finished = False
 
 
-class SegmenterSession:
-    """One live segmentation session over `arms`; `stream_factory(arm)` builds an ArmStream."""
+class SegmenterSession(Generic[S]):
+    """One live segmentation session over `arms`; `stream_factory(arm)` builds an ArmStream
+    (or another ArmFeed) for each arm of each stream."""
 
     def __init__(
         self,
         arms: Sequence[str],
-        stream_factory: Callable[[str], ArmStream],
+        stream_factory: Callable[[str], S],
         end_phases: Sequence[str] = ("done",),
         subtasks: Sequence[str] | None = None,
         hold_s: float = 0.2,
@@ -167,7 +183,7 @@ class SegmenterSession:
         self._new_stream()
 
     def _new_stream(self) -> None:
-        self.state = {arm: _Arm(self.stream_factory(arm)) for arm in self.arms}
+        self.state: dict[str, _Arm[S]] = {arm: _Arm(self.stream_factory(arm)) for arm in self.arms}
         self.origin_ns: int | None = None
         self.stream_id += 1
         if self.intake.tare_at_start:

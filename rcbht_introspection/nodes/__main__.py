@@ -1,4 +1,4 @@
-"""`python -m rcbht_introspection.nodes NODE [--ros-args ...]`: start segmenter_node or classifier_node.
+"""`python -m rcbht_introspection.nodes NODE [--ros-args ...]`: start one of the nodes.
 
 The stop handlers go in before the node's modules are imported, so SIGINT/SIGTERM at any moment
 of start-up end the process at once and cleanly (exit 0, no traceback); once the node is up, a
@@ -11,7 +11,7 @@ import sys
 
 from rcbht_introspection.nodes.lifetime import StopSignal
 
-NODES = ("segmenter_node", "classifier_node")
+NODES = ("segmenter_node", "classifier_node", "verifier_node")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -24,8 +24,10 @@ def main(argv: list[str] | None = None) -> int:
     name, args = argv[0], argv[1:]
     if name == "segmenter_node":
         from rcbht_introspection.nodes.segmenter_node import main as node_main
-    else:
+    elif name == "classifier_node":
         from rcbht_introspection.nodes.classifier_node import main as node_main
+    else:
+        from rcbht_introspection.nodes.verifier_node import main as node_main
     return node_main(args, stop)
 
 

@@ -1,4 +1,4 @@
-"""What both nodes share: QoS, parameters, the managed (lifecycle) node, /diagnostics, run()."""
+"""What the nodes share: QoS, parameters, the managed (lifecycle) node, /diagnostics, run()."""
 
 from __future__ import annotations
 
@@ -31,6 +31,7 @@ from rcbht_introspection.nodes.params import (
     NodeConfig,
     Reliability,
     SegmenterConfig,
+    VerifierConfig,
     config_from_parameters,
     defaults,
     descriptions,
@@ -95,7 +96,9 @@ class ManagedNode(LifecycleNode):
     of `health()` goes to /diagnostics once a second in every state.
     """
 
-    def __init__(self, name: str, config_class: type[SegmenterConfig | ClassifierConfig]) -> None:
+    def __init__(
+        self, name: str, config_class: type[SegmenterConfig | ClassifierConfig | VerifierConfig]
+    ) -> None:
         super().__init__(name)
         self.config_class = config_class
         declare_parameters(self, config_class)

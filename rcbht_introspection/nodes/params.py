@@ -133,7 +133,46 @@ class ClassifierConfig:
     """Parameters `state.<name>`: when a new believed sub-task becomes /task_state."""
 
 
-NodeConfig = TypeVar("NodeConfig", bound=SegmenterConfig | ClassifierConfig)
+@dataclass(frozen=True)
+class VerifierConfig:
+    """verifier_node: wrench topics per arm + /task_phase -> verdicts and /task_health."""
+
+    verifier_file: str = _f(
+        "", "verifier file written by `rcbht verify-train` (empty: no verdicts, health 'unknown')"
+    )
+    arms: tuple[str, ...] = _f(("R",), "arm names, as in the segmenter (the verifier's arms)")
+    wrench_topics: tuple[str, ...] = _f(
+        ("/wrench",), "geometry_msgs/WrenchStamped topic of each arm, in `arms` order"
+    )
+    phase_topic: str = _f(
+        "/task_phase", "std_msgs/String sub-task events of the task's state machine"
+    )
+    end_phases: tuple[str, ...] = _f(("done",), "event names that end the task (end the stream)")
+    task_file: str = _f(
+        "",
+        "task.yaml naming the sub-tasks (empty: every event that is not an end phase starts one)",
+    )
+    event_hold_s: float = _f(0.2, "as segmenter_node's event_hold_s")
+    event_max_hold_s: float = _f(10.0, "as segmenter_node's event_max_hold_s")
+    belief_topic: str = _f(
+        "rcbht/belief", "rcbht_interfaces/Belief of classifier_node: the verdicts' subtask field"
+    )
+    verdict_topic: str = _f("rcbht/verdict", "rcbht_interfaces/Verdict: one per tick")
+    health_topic: str = _f(
+        "/task_health",
+        "std_msgs/String: nominal, anomaly or the failure class (latched; on change and at "
+        "publish_rate_hz)",
+    )
+    publish_rate_hz: float = _f(
+        10.0, "the health topic is also republished at this rate (0: only on change)"
+    )
+    qos_depth: int = _f(
+        10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
+    )
+    qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
+
+
+NodeConfig = TypeVar("NodeConfig", bound=SegmenterConfig | ClassifierConfig | VerifierConfig)
 """The config of one node (the checks and the defaults file depend on which)."""
 
 
@@ -203,6 +242,8 @@ TOPIC_FIELDS = (
     "belief_topic",
     "pose_topics",
     "teach_topic",
+    "verdict_topic",
+    "health_topic",
 )
 
 
@@ -234,7 +275,7 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
                 f"not a valid ROS topic name: {value!r}",
                 path,
             )
-    if isinstance(cfg, SegmenterConfig):
+    if isinstance(cfg, SegmenterConfig | VerifierConfig):
         _check(
             len(cfg.wrench_topics) == len(arms),
             "wrench_topics",
@@ -255,8 +296,17 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
             path,
         )
         for name in ("taxonomy_config_file", "stream_config_file", "task_file"):
-            value = getattr(cfg, name)
+            value = getattr(cfg, name, "")
             _check(not value or Path(value).is_file(), name, f"no such file: {value}", path)
+    if isinstance(cfg, VerifierConfig):
+        _check(
+            cfg.publish_rate_hz >= 0,
+            "publish_rate_hz",
+            f"must be >= 0, got {cfg.publish_rate_hz}",
+            path,
+        )
+        _check(bool(cfg.health_topic), "health_topic", "must not be empty", path)
+    if isinstance(cfg, SegmenterConfig):
         _check(
             len(cfg.pose_topics) in (0, len(arms)),
             "pose_topics",
@@ -309,8 +359,16 @@ def config_from_parameters(
     return validate(from_mapping(cls, nested(values), path=path), path)
 
 
-NODE_NAMES = {SegmenterConfig: "segmenter_node", ClassifierConfig: "classifier_node"}
-CONFIG_FILES = {SegmenterConfig: "segmenter.yaml", ClassifierConfig: "classifier.yaml"}
+NODE_NAMES: dict[type, str] = {
+    SegmenterConfig: "segmenter_node",
+    ClassifierConfig: "classifier_node",
+    VerifierConfig: "verifier_node",
+}
+CONFIG_FILES: dict[type, str] = {
+    SegmenterConfig: "segmenter.yaml",
+    ClassifierConfig: "classifier.yaml",
+    VerifierConfig: "verifier.yaml",
+}
 
 
 def load_node_config(cls: type[NodeConfig], path: Path | str | None = None) -> NodeConfig:

@@ -27,21 +27,24 @@ from typing import Any
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import (
     PHASE_TOPIC,
+    WRENCH_TYPE,
     BagMessage,
     bag_messages,
+    decode_wrench,
     read_trial_bag,
     wrench_topic,
 )
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import load_model, profile_mismatch
 from rcbht_introspection.live import BeliefMode
+from rcbht_introspection.live.offline import percentiles_ms
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.live.state import TaskStateConfig
 from rcbht_introspection.nodes.common import RosSession, qos_profile
-from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
+from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, VerifierConfig
 from rcbht_introspection.nodes.player import BagPlayer
 from rcbht_introspection.nodes.teach_client import call_teach, teach_client, teach_request
-from rcbht_introspection.replay.observer import Observer, segmenter_matches
+from rcbht_introspection.replay.observer import Observer, VerdictObserver, segmenter_matches
 from rcbht_introspection.replay.scoring import (
     BagRecord,
     Playback,
@@ -59,8 +62,14 @@ from rcbht_introspection.replay.supervision import (
     wait_for_nodes,
     write_params,
 )
+from rcbht_introspection.replay.verify_scoring import (
+    VerdictRecord,
+    verdict_latencies,
+    verifier_scores,
+)
 from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.config import load_taxonomy_config
+from rcbht_introspection.verify.model_file import VerifierModel, load_verifier
 from rcbht_introspection.waiting import wait_until
 
 
@@ -92,6 +101,8 @@ class ReplayEvalOptions:
     """Where the classifier saves the taught model (default: in the work folder)."""
     teach_timeout: float = 600.0
     """Longest wait for one bag's sub-tasks to be learned."""
+    verifier_file: Path | None = None
+    """A verifier file (`rcbht verify-train`): verifier_node runs too and its alarms are scored."""
 
 
 def _params(
@@ -134,6 +145,35 @@ def _params(
         )
     cls_params = write_params(work / "classifier.yaml", ClassifierConfig, values)
     return seg, cls_cfg, seg_params, cls_params
+
+
+def verifier_params(
+    work: Path, arms: tuple[str, ...], verifier: Path
+) -> tuple[VerifierConfig, Path]:
+    """verifier_node's configuration for `arms` and its parameter file in `work`."""
+    cfg = VerifierConfig(
+        verifier_file=str(Path(verifier).resolve()),
+        arms=arms,
+        wrench_topics=tuple(wrench_topic(a, arms) for a in arms),
+    )
+    values = {
+        "verifier_file": cfg.verifier_file,
+        "arms": list(arms),
+        "wrench_topics": list(cfg.wrench_topics),
+    }
+    return cfg, write_params(work / "verifier.yaml", VerifierConfig, values)
+
+
+def check_verifier(path: Path, arms: tuple[str, ...]) -> VerifierModel:
+    """The verifier file of a replay, usable for the bags' arms (else a one-line InputError)."""
+    if not Path(path).is_file():
+        raise InputError("no such verifier file", path)
+    model = load_verifier(path)
+    if set(model.arms) != set(arms):
+        raise InputError(
+            f"the verifier's arms {list(model.arms)} are not the bags' {list(arms)}", path
+        )
+    return model
 
 
 TEACH_HISTORY_S = 600.0
@@ -184,6 +224,7 @@ def replay_eval(
     for b, t in zip(bags, trials, strict=True):
         if t.arms != arms:
             raise InputError(f"arms {list(t.arms)} differ from the first bag's {list(arms)}", b)
+    verifier = check_verifier(options.verifier_file, arms) if options.verifier_file else None
     domain_id = options.domain_id or lease_domain()
     tmp = tempfile.TemporaryDirectory(prefix="rcbht-replay-")
     work = Path(options.log_dir) if options.log_dir else Path(tmp.name)
@@ -192,6 +233,7 @@ def replay_eval(
     seg, cls_cfg, seg_params, cls_params = _params(work, arms, model_path, options)
     started = time.monotonic()
     result: dict[str, Any] = {}
+    verdict_records: list[VerdictRecord] = []
     with environment(env), sigterm_as_interrupt():
         procs: list[NodeProcess] = []
         codes: dict[str, int | None] = {}
@@ -202,9 +244,16 @@ def replay_eval(
             procs.append(
                 NodeProcess("classifier_node", cls_params, env, work / "classifier_node.log")
             )
+            ver_cfg = None
+            if options.verifier_file is not None:
+                ver_cfg, ver_params = verifier_params(work, arms, options.verifier_file)
+                procs.append(
+                    NodeProcess("verifier_node", ver_params, env, work / "verifier_node.log")
+                )
             with RosSession("rcbht_replay_eval", domain_id=domain_id) as ros:
                 qos = qos_profile(seg.qos_depth, "reliable")
                 observer = Observer(ros.node, seg, cls_cfg, qos)
+                verdicts = VerdictObserver(ros.node, ver_cfg, qos) if ver_cfg else None
                 player = BagPlayer(ros.node, qos)
                 all_messages = [list(bag_messages(b)) for b in bags]
                 for msgs in all_messages:
@@ -220,9 +269,16 @@ def replay_eval(
                     # the graph shows the classifier's readers before the segmenter's writers
                     # have matched them; words published in between would be lost, so the
                     # segmenter's own /diagnostics must count both readers (observer, classifier)
+                    readers = 2 if verdicts is not None else 1  # segmenter (+ verifier)
                     return (
-                        all(player.publishers[t].get_subscription_count() > 0 for t in needed)
+                        all(
+                            player.publishers[t].get_subscription_count() >= readers for t in needed
+                        )
                         and all(s.get_publisher_count() > 0 for s in observer.subs)
+                        and (
+                            verdicts is None
+                            or all(s.get_publisher_count() > 0 for s in verdicts.subs)
+                        )
                         and all(ros.node.count_subscribers(t) >= 2 for t in classifier_inputs)
                         and matched() >= 2
                     )
@@ -236,18 +292,22 @@ def replay_eval(
                     client = teach_client(ros.node)
                     taught = []
                     for stream_id, (bag, msgs) in enumerate(plays[:k]):
-                        rec = _play_one(
-                            bag, msgs, stream_id, player, observer, procs, options, arms
+                        rec, _ = _play_one(
+                            bag, msgs, stream_id, player, observer, procs, options, arms, verdicts
                         )
                         taught.append(_teach_bag(client, rec, trials[stream_id], options))
                         accepted_before = {
                             a: rec.ends.get((a, "primitives"), (0, 0))[0] for a in arms
                         }
                     result["teach"] = _teach_summary(taught)
-                records = [
-                    _play_one(bag, msgs, stream_id, player, observer, procs, options, arms)
+                played = [
+                    _play_one(
+                        bag, msgs, stream_id, player, observer, procs, options, arms, verdicts
+                    )
                     for stream_id, (bag, msgs) in enumerate(plays[k:], start=k)
                 ]
+                records = [rec for rec, _ in played]
+                verdict_records = [v for _, v in played if v is not None]
                 if k and options.teach_restart:
                     procs[1].interrupt()
                     codes["classifier_node (taught)"] = procs[1].stop()
@@ -268,7 +328,9 @@ def replay_eval(
                         ready, options.startup_timeout, procs, "the restarted classifier"
                     )
                     again = [
-                        _play_one(bag, msgs, stream_id, player, observer, procs, options, arms)
+                        _play_one(
+                            bag, msgs, stream_id, player, observer, procs, options, arms, verdicts
+                        )[0]
                         for stream_id, (bag, msgs) in enumerate(plays[k:], start=len(plays))
                     ]
                     result["restart"] = _restart_summary(records, again)
@@ -290,6 +352,14 @@ def replay_eval(
     if options.teach_first:
         model_path = teach_path(work, options)
     result.update(_score(records, scored_trials, model_path, options, arms, accepted_before))
+    if verifier is not None:
+        result["verifier"] = {
+            "file": str(options.verifier_file),
+            **verifier_scores(verdict_records, scored_trials, verifier, options.offline),
+            "sample_to_verdict_ms": percentiles_ms(
+                [n for r in verdict_records for n in r.latencies_ns]
+            ),
+        }
     result.update(
         {
             "bags": [str(b) for b in bags],
@@ -404,8 +474,10 @@ def _play_one(
     procs: list[NodeProcess],
     options: ReplayEvalOptions,
     arms: tuple[str, ...],
-) -> BagRecord:
-    """Play one bag, wait until every verdict and end-of-stream arrived; return its record."""
+    verdicts: VerdictObserver | None = None,
+) -> tuple[BagRecord, VerdictRecord | None]:
+    """Play one bag, wait until every verdict and end-of-stream arrived; return its records
+    (the classifier's, and the verifier's when it runs)."""
     observer.convert()
     with observer.lock:
         since = observer.obs.mark()
@@ -428,10 +500,13 @@ def _play_one(
             f"{len(obs.states) - since.states} state changes, {len(obs.phases)} events"
         )
 
+    stamps = [decode_wrench(m.raw)[0] for m in msgs if m.msgtype == WRENCH_TYPE]
+    end_time = (max(stamps) - min(stamps)) / 1e9 if stamps else 0.0
     wait_for_nodes(
         lambda: (
             observer.ended(stream_id, arms)
             and len(observer.finals_since(since.beliefs)) >= n_subtasks
+            and (verdicts is None or verdicts.reached(stream_id, end_time))
         ),
         options.drain_timeout,
         procs,
@@ -439,5 +514,10 @@ def _play_one(
         progress,
     )
     observer.convert()
+    verdict_record = verdicts.record(stream_id) if verdicts is not None else None
+    if verdict_record is not None:
+        verdict_record.latencies_ns = verdict_latencies(
+            playback.pub_series, verdict_record.arrivals
+        )
     with observer.lock:
-        return bag_record(observer.obs, since, stream_id, arms, playback)
+        return bag_record(observer.obs, since, stream_id, arms, playback), verdict_record

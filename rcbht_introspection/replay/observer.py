@@ -6,6 +6,7 @@ bags, so the observer's CPU during playback is small and the nodes under test ke
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -15,19 +16,26 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from rcbht_interfaces.msg import Belief as BeliefMsg
 from rcbht_interfaces.msg import Phase as PhaseMsg
+from rcbht_interfaces.msg import Verdict as VerdictMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
 from rcbht_introspection.nodes.conversions import belief_from_msg, msg_to_word, to_ns
-from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, word_topics
+from rcbht_introspection.nodes.params import (
+    ClassifierConfig,
+    SegmenterConfig,
+    VerifierConfig,
+    word_topics,
+)
 from rcbht_introspection.replay.scoring import (
     AppliedPhase,
     Observations,
     ReceivedBelief,
 )
+from rcbht_introspection.replay.verify_scoring import VerdictRecord
 
 
 def segmenter_matches(node: Node) -> Callable[[], int]:
@@ -131,3 +139,74 @@ class Observer:
         self.convert()
         with self.lock:
             return self.obs.finals_since(index)
+
+
+class VerdictObserver:
+    """Subscribes verifier_node's verdicts and health; one VerdictRecord per stream.
+
+    Health values are told apart by stream with the DDS source timestamps (the node's clock):
+    a stream's values are those published after its first verdict."""
+
+    def __init__(self, node: Node, cfg: VerifierConfig, qos: QoSProfile) -> None:
+        self.lock = threading.Lock()
+        self.records: dict[int, VerdictRecord] = {}
+        self.first_sent: dict[int, int] = {}
+        """stream id -> source timestamp of its first verdict"""
+        self.last_health: dict[int, str] = {}
+        """stream id -> health carried by its latest verdict"""
+        self.health: list[tuple[int, str]] = []
+        """(source ns, value) of each /task_health message"""
+        latched = QoSProfile(depth=1, reliability=qos.reliability)
+        latched.durability = DurabilityPolicy.TRANSIENT_LOCAL
+        self.subs = [
+            # (msg, MessageInfo) callbacks, which rclpy passes to two-argument callables
+            node.create_subscription(VerdictMsg, cfg.verdict_topic, self.on_verdict, qos),  # type: ignore[arg-type]
+            node.create_subscription(String, cfg.health_topic, self.on_health, latched),  # type: ignore[arg-type]
+        ]
+
+    def on_verdict(self, msg: Any, info: dict) -> None:
+        """One Verdict (executor thread): at most one per step_s of stream time."""
+        alarm = None if math.isnan(msg.alarm_time) else float(msg.alarm_time)
+        onset = None if math.isnan(msg.onset) else float(msg.onset)
+        wall = time.time_ns()
+        with self.lock:
+            rec = self.records.setdefault(msg.stream_id, VerdictRecord(msg.stream_id))
+            self.first_sent.setdefault(msg.stream_id, int(info.get("source_timestamp") or 0))
+            self.last_health[msg.stream_id] = msg.health
+            rec.arrivals.append((wall, to_ns(msg.header.stamp)))
+            rec.add(
+                msg.time,
+                msg.score,
+                alarm,
+                onset,
+                msg.failure_class,
+                dict(zip(msg.direction_axes, msg.directions, strict=False)),
+                msg.health,
+            )
+
+    def on_health(self, msg: String, info: dict) -> None:
+        with self.lock:
+            self.health.append((int(info.get("source_timestamp") or time.time_ns()), msg.data))
+
+    def reached(self, stream_id: int, end_time: float) -> bool:
+        """The verdict of stream `stream_id` at `end_time` (its last sample) arrived, and the
+        health topic shows what that verdict says."""
+        with self.lock:
+            rec = self.records.get(stream_id)
+            return (
+                rec is not None
+                and rec.end_time >= end_time - 1e-6
+                and bool(self.health)
+                and self.health[-1][1] == self.last_health[stream_id]
+            )
+
+    def record(self, stream_id: int) -> VerdictRecord:
+        """The stream's record, with the health values published during it."""
+        with self.lock:
+            rec = self.records.get(stream_id, VerdictRecord(stream_id))
+            since = self.first_sent.get(stream_id)
+            rec.health_seen = []
+            for sent, value in self.health:
+                if since is not None and sent >= since and rec.health_seen[-1:] != [value]:
+                    rec.health_seen.append(value)
+            return rec

@@ -1,0 +1,313 @@
+"""verifier_node: WrenchStamped per arm + /task_phase -> rcbht/verdict and /task_health.
+
+Parameters: see config/verifier.yaml. The samples and events are taken as segmenter_node takes
+them (verify/stream.py: same checks, event placement and streams); the verifier model
+(verify/) judges each tick. Without a usable model (missing, unreadable, other arms) it logs
+why once, publishes no verdicts and keeps /task_health at "unknown". /task_health is published
+when it changes and at `publish_rate_hz`, latched (a late subscriber gets the current value).
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+import sys
+import time
+from functools import partial
+
+from geometry_msgs.msg import WrenchStamped
+from rcbht_interfaces.msg import Belief as BeliefMsg
+from rcbht_interfaces.msg import Verdict as VerdictMsg
+from rclpy.qos import DurabilityPolicy
+from rclpy.serialization import deserialize_message
+from std_msgs.msg import String
+
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.io.bags import decode_wrench_sample
+from rcbht_introspection.live.health import (
+    ERROR,
+    OK,
+    WARN,
+    CounterWatch,
+    Health,
+    LatencyWindow,
+    file_sha256,
+)
+from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run
+from rcbht_introspection.nodes.conversions import to_time, wrench_sample
+from rcbht_introspection.nodes.draining import DrainedGroup, take
+from rcbht_introspection.nodes.lifetime import StopSignal
+from rcbht_introspection.nodes.params import VerifierConfig
+from rcbht_introspection.task import load_task_file
+from rcbht_introspection.verify.model_file import VerifierModel, load_verifier
+from rcbht_introspection.verify.stream import (
+    NO_MODEL,
+    StreamVerdict,
+    VerifierOutput,
+    VerifierStream,
+)
+
+MAX_BURST = 1000
+"""Most samples per arm taken in one executor wake-up."""
+
+
+def verdict_msg(sv: StreamVerdict, thresholds: list[float], subtask: str) -> VerdictMsg:
+    """StreamVerdict -> rcbht_interfaces/Verdict (signal scores raw, beside their thresholds)."""
+    v = sv.verdict
+    nan = math.nan
+    msg = VerdictMsg(
+        time_origin=to_time(sv.origin_ns),
+        stream_id=sv.stream_id,
+        time=float(v.time),
+        phase=v.phase,
+        subtask=subtask,
+        score=float(v.score),
+        signals=list(v.signals),
+        signal_scores=[float(s) * t for s, t in zip(v.signals.values(), thresholds, strict=True)],
+        signal_thresholds=list(thresholds),
+        alarm=v.alarm,
+        alarm_time=nan if v.alarm_time is None else float(v.alarm_time),
+        onset=nan if v.onset is None else float(v.onset),
+        failure_class=v.failure_class,
+        classes=list(v.class_probabilities),
+        probabilities=[float(p) for p in v.class_probabilities.values()],
+        direction_axes=list(v.directions),
+        directions=list(v.directions.values()),
+        evidence_start=float(sv.evidence_start),
+        evidence_end=float(v.time),
+        health=v.health,
+    )
+    msg.header.stamp = to_time(sv.stamp_ns)
+    return msg
+
+
+def load_usable(cfg: VerifierConfig) -> tuple[VerifierModel | None, str]:
+    """The verifier model of `cfg`, or None and why it cannot be used."""
+    if not cfg.verifier_file:
+        return None, "verifier_file not set"
+    try:
+        model = load_verifier(cfg.verifier_file)
+    except InputError as exc:
+        return None, str(exc)
+    if set(model.arms) != set(cfg.arms):
+        return None, f"the model's arms {list(model.arms)} are not the node's {list(cfg.arms)}"
+    return model, ""
+
+
+class VerifierNode(ManagedNode):
+    """Thin adapter: messages in -> VerifierStream -> Verdict messages and /task_health out."""
+
+    def __init__(self) -> None:
+        super().__init__("verifier_node", VerifierConfig)
+        self.latency = LatencyWindow()
+        self.watch = CounterWatch()
+
+    def configure(self, cfg: VerifierConfig) -> None:
+        self.cfg = cfg
+        model, self.model_problem = load_usable(cfg)
+        self.model_sha256 = file_sha256(cfg.verifier_file)
+        self.stream: VerifierStream | None = None
+        self.thresholds: list[float] = []
+        if model is None:
+            self.get_logger().error(
+                f"no usable verifier, no verdicts, {cfg.health_topic} stays "
+                f"{NO_MODEL!r}: {self.model_problem}"
+            )
+        else:
+            task = load_task_file(cfg.task_file) if cfg.task_file else None
+            self.stream = VerifierStream(
+                model,
+                cfg.arms,
+                tuple(dict.fromkeys([*cfg.end_phases, *(task.end_phases if task else ())])),
+                task.subtasks if task else None,
+                hold_s=cfg.event_hold_s,
+                max_hold_s=cfg.event_max_hold_s,
+            )
+            self.thresholds = [float(t) for t in model.detector.thresholds]
+        self.subtask = ""
+        self.published_health = ""
+        self.last_sample = time.monotonic()
+        self.qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
+        self.verdict_pub = self.create_publisher(VerdictMsg, cfg.verdict_topic, self.qos)
+        latched = qos_profile(1, cfg.qos_reliability)
+        latched.durability = DurabilityPolicy.TRANSIENT_LOCAL
+        self.health_pub = self.create_publisher(String, cfg.health_topic, latched)
+
+    def activate(self) -> None:
+        cfg = self.cfg
+        drained = DrainedGroup()
+        self.wrench_subs = []
+        self.phase_sub = None
+        if self.stream is not None:
+            self.wrench_subs = [
+                (
+                    arm,
+                    self.create_subscription(
+                        WrenchStamped, topic, partial(self.sample, arm), self.qos, raw=True,
+                        callback_group=drained,
+                    ),
+                )
+                for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True)
+            ]  # fmt: skip
+            self.phase_sub = self.create_subscription(
+                String,
+                cfg.phase_topic,
+                self.on_phase,  # type: ignore[arg-type]  # (msg, MessageInfo), as the segmenter's
+                self.qos,
+                callback_group=drained,
+            )
+        self.belief_sub = self.create_subscription(
+            BeliefMsg, cfg.belief_topic, self.on_belief, self.qos
+        )
+        self.flush_timer = self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
+        self.health_timer = (
+            self.create_timer(1.0 / cfg.publish_rate_hz, self.publish_health)
+            if cfg.publish_rate_hz > 0
+            else None
+        )
+        self.publish_health()
+        self.get_logger().info(
+            f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
+            f"verifier {cfg.verifier_file or '(none)'}, verdicts on {cfg.verdict_topic}, "
+            f"health on {cfg.health_topic}"
+        )
+
+    def deactivate(self) -> None:
+        for _, sub in self.wrench_subs:
+            self.destroy_subscription(sub)
+        if self.phase_sub is not None:
+            self.destroy_subscription(self.phase_sub)
+        self.destroy_subscription(self.belief_sub)
+        self.destroy_timer(self.flush_timer)
+        if self.health_timer is not None:
+            self.destroy_timer(self.health_timer)
+        self.wrench_subs = []
+        self.phase_sub = None
+        s = self.stream
+        counts = (
+            {a: (c.accepted, c.rejected_total) for a, c in s.segmenter.counts.items()} if s else {}
+        )
+        self.get_logger().info(
+            f"verdicts published {s.verdicts if s else 0}, alarms {s.alarms if s else 0}, "
+            f"samples (accepted, rejected) per arm {counts}"
+        )
+
+    def cleanup(self) -> None:
+        self.destroy_publisher(self.verdict_pub)
+        self.destroy_publisher(self.health_pub)
+
+    # --- input ---------------------------------------------------------------------------------
+    def take_phases(self) -> None:
+        """Handle /task_phase events already delivered, before the next wrench sample."""
+        if self.phase_sub is None:
+            return
+        while (taken := take(self.phase_sub)) is not None:
+            self.on_phase(*taken)
+
+    def drain(self) -> None:
+        """Handle every event and sample already delivered (arms in turn), in order."""
+        self.take_phases()
+        for _ in range(MAX_BURST):
+            taken = False
+            for other, sub in self.wrench_subs:
+                got = take(sub)
+                if got is not None:
+                    self.sample(other, *got)
+                    taken = True
+            if not taken:
+                return
+
+    def sample(self, arm: str, raw: bytes, info: dict) -> None:
+        assert self.stream is not None  # subscribed only with a model
+        self.last_sample = time.monotonic()
+        self.take_phases()
+        try:
+            stamp, wrench = decode_wrench_sample(raw)
+        except (ValueError, struct.error):
+            stamp, wrench = wrench_sample(deserialize_message(raw, WrenchStamped))
+        t0 = time.perf_counter()
+        out = self.stream.push(arm, stamp, wrench, info.get("source_timestamp") or None)
+        self.publish(out, t0)
+        if out.rejected:
+            self.get_logger().warning(
+                f"dropped a wrench sample of arm {arm}: {out.rejected}",
+                throttle_duration_sec=1.0,
+            )
+
+    def on_phase(self, msg: String, info: dict) -> None:
+        assert self.stream is not None
+        out = self.stream.phase(msg.data, info.get("source_timestamp") or None)
+        if out.unknown_phase is not None:
+            self.get_logger().warning(f"ignored unknown /task_phase name {out.unknown_phase!r}")
+        self.publish(out)
+
+    def on_belief(self, msg: BeliefMsg) -> None:
+        """The classifier's latest believed sub-task: the next verdicts' subtask field."""
+        self.subtask = msg.subtask
+
+    def on_flush(self) -> None:
+        """Apply events that waited longer than the hold time for a later sample (no samples)."""
+        s = self.stream
+        idle = time.monotonic() - self.last_sample > self.cfg.event_hold_s
+        if s is not None and s.segmenter.pending and idle:
+            self.publish(s.flush(time.time_ns()))
+
+    # --- output --------------------------------------------------------------------------------
+    def publish(self, out: VerifierOutput, t0: float | None = None) -> None:
+        """The verdicts in tick order, then /task_health when it changed."""
+        for sv in out.verdicts:
+            self.verdict_pub.publish(verdict_msg(sv, self.thresholds, self.subtask))
+        if out.verdicts and t0 is not None:
+            self.latency.add((time.perf_counter() - t0) * 1e3)
+        if self.stream is not None and self.stream.health != self.published_health:
+            self.publish_health()
+        if any(sv.verdict.alarm_time == sv.verdict.time for sv in out.verdicts):
+            v = next(sv.verdict for sv in out.verdicts if sv.verdict.alarm_time == sv.verdict.time)
+            self.get_logger().warning(
+                f"alarm at stream time {v.time:.3f} s in sub-task {v.phase!r}: {v.health} "
+                f"(score {v.score:.2f}, onset {v.onset})"
+            )
+
+    def publish_health(self) -> None:
+        """/task_health now (on change, and at publish_rate_hz)."""
+        health = self.stream.health if self.stream is not None else NO_MODEL
+        self.published_health = health
+        self.health_pub.publish(String(data=health))
+
+    def health(self, period_s: float) -> list[Health]:
+        """Model, verdict latency of the period, rejected samples and events, current health."""
+        s = self.stream
+        name = "verifier_node"
+        if s is None:
+            return [Health(f"{name}: model", ERROR, f"no usable verifier: {self.model_problem}")]
+        n, p50, p99 = self.latency.take()
+        counts = {
+            **{f"rejected samples {a}": c.rejected_total for a, c in s.segmenter.counts.items()},
+            "unknown events": s.segmenter.unknown_phases,
+            "late events": s.segmenter.late_phases,
+        }
+        moved = self.watch.moved(counts)
+        values = (
+            ("verifier file", self.cfg.verifier_file),
+            ("verifier sha256", self.model_sha256),
+            ("health", s.health),
+            ("verdicts", str(s.verdicts)),
+            ("alarms", str(s.alarms)),
+            ("verdict batches in period", str(n)),
+            ("sample to verdict p50 ms", f"{p50:.3f}"),
+            ("sample to verdict p99 ms", f"{p99:.3f}"),
+            ("verdict subscribers matched", str(self.verdict_pub.get_subscription_count())),
+            *((k, str(v)) for k, v in counts.items()),
+        )
+        level = WARN if moved else OK
+        message = f"health {s.health}" + (f"; moved: {moved}" if moved else "")
+        return [Health(f"{name}: verifier", level, message, values)]
+
+
+def main(args: list[str] | None = None, stop: StopSignal | None = None) -> int:
+    """Entry point (`ros2 run rcbht_introspection verifier_node`)."""
+    return run(VerifierNode, "verifier_node", args, stop or StopSignal.install(until_up=True))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,199 @@
+"""verifier_node's state without ROS: wrench samples and /task_phase events in, verdicts out.
+
+The samples and events go through a SegmenterSession, so the verifier checks samples, places
+events on the stream clock and starts streams exactly as segmenter_node does (stream time from
+the stream's first accepted sample; an end event ends the stream and the next sample starts a
+new one, with a new VerifierSession). No tare or gravity compensation: the verifier model is
+trained on the wrench as recorded.
+
+An event applies at the last sample before it (segmenter_node's Phase.time), and that sample
+counts as the new sub-task's first one: each arm's latest sample is held back until the arm's
+next sample or event, so the verdicts equal those of `offline_verdicts` - the trial's samples and
+events fed as the offline verifier features feed them (verify/features.trial_features) - at
+the cost of one sample period of latency.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rcbht_introspection.io.bags import END_PHASE, trial_phase_events
+from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.live.segmenter import SegmenterSession
+from rcbht_introspection.taxonomy.words import Word
+from rcbht_introspection.verify.model_file import VerifierModel
+from rcbht_introspection.verify.monitor import NOMINAL, Verdict, VerifierSession
+
+NO_MODEL = "unknown"
+"""Health without a usable verifier model: nothing is judged, nothing is claimed."""
+
+
+@dataclass(frozen=True)
+class StreamVerdict:
+    """A verdict with the stream it belongs to and the evidence window it rests on."""
+
+    verdict: Verdict
+    stream_id: int
+    origin_ns: int
+    evidence_start: float
+    """Onset estimate once the alarm fired, else the start of the running sub-task (0 before)."""
+
+    @property
+    def stamp_ns(self) -> int:
+        """The tick on the wrench stamps' clock."""
+        return self.origin_ns + round(self.verdict.time * 1e9)
+
+
+@dataclass
+class VerifierOutput:
+    """What one call produced: verdicts in tick order, a rejection reason, an unknown event."""
+
+    verdicts: list[StreamVerdict] = field(default_factory=list)
+    rejected: str | None = None
+    unknown_phase: str | None = None
+
+
+class _Stream:
+    """One stream's VerifierSession, shared by its arms' feeds."""
+
+    def __init__(self, model: VerifierModel, owner: VerifierStream) -> None:
+        self.session = VerifierSession(model)
+        self.owner = owner
+        self.boundaries = 0
+        """Sub-task events applied to the session (each arm marks every event once)."""
+        self.feeds: set[str] = set()
+        self.finished: set[str] = set()
+
+    def collect(self, verdicts: list[Verdict]) -> None:
+        owner = self.owner
+        starts = [t for _, t in self.session.phases]
+        for v in verdicts:
+            if v.alarm and v.onset is not None:
+                evidence = v.onset
+            else:
+                i = int(np.searchsorted(starts, v.time, side="right")) - 1
+                evidence = starts[i] if i >= 0 else 0.0
+            owner.pending.append(
+                StreamVerdict(
+                    v, owner.segmenter.stream_id, owner.segmenter.origin_ns or 0, evidence
+                )
+            )
+
+
+class _ArmFeed:
+    """One arm's feed into the stream's session (the ArmFeed the SegmenterSession drives)."""
+
+    def __init__(self, stream: _Stream, arm: str) -> None:
+        self.stream = stream
+        self.arm = arm
+        self.held: tuple[float, Sequence[float]] | None = None
+        self.marked = 0
+
+    def _release(self) -> None:
+        if self.held is not None:
+            t, values = self.held
+            self.held = None
+            self.stream.collect(self.stream.session.push(self.arm, t, values))
+
+    def push(self, t: float, wrench6: Sequence[float]) -> list[Word]:
+        self._release()
+        self.held = (t, wrench6)
+        return []
+
+    def mark_boundary(self, t: float, subtask: str = "") -> list[Word]:
+        self.marked += 1
+        if self.marked > self.stream.boundaries:  # the first arm to reach this event applies it
+            self.stream.boundaries += 1
+            self.stream.session.phase(subtask, t)
+        return []
+
+    def finish(self) -> list[Word]:
+        self._release()
+        self.stream.finished.add(self.arm)
+        if self.stream.finished >= set(self.stream.session.arms):
+            self.stream.collect(self.stream.session.end())
+        return []
+
+
+class VerifierStream:
+    """Samples and events of the verifier's arms -> verdicts, stream after stream."""
+
+    def __init__(
+        self,
+        model: VerifierModel,
+        arms: Sequence[str],
+        end_phases: Sequence[str] = (END_PHASE,),
+        subtasks: Sequence[str] | None = None,
+        hold_s: float = 0.2,
+        max_hold_s: float = 10.0,
+    ) -> None:
+        if set(arms) != set(model.arms):
+            raise ValueError(
+                f"arms {list(arms)} differ from the verifier model's {list(model.arms)}"
+            )
+        self.model = model
+        self.pending: list[StreamVerdict] = []
+        self._stream: _Stream | None = None
+        self.segmenter: SegmenterSession[_ArmFeed] = SegmenterSession(
+            arms, self._feed, end_phases, subtasks, hold_s=hold_s, max_hold_s=max_hold_s
+        )
+        self.health = NOMINAL
+        """The latest verdict's health (kept after a stream ends, until the next one's first)."""
+        self.verdicts = 0
+        self.alarms = 0
+
+    def _feed(self, arm: str) -> _ArmFeed:
+        """The SegmenterSession's stream factory: a new session when a new stream starts."""
+        if self._stream is None or arm in self._stream.feeds:
+            self._stream = _Stream(self.model, self)
+        self._stream.feeds.add(arm)
+        return _ArmFeed(self._stream, arm)
+
+    def _take(self, rejected: str | None = None, unknown: str | None = None) -> VerifierOutput:
+        out = VerifierOutput(self.pending, rejected, unknown)
+        self.pending = []
+        for sv in out.verdicts:
+            self.verdicts += 1
+            v = sv.verdict
+            if v.alarm and v.alarm_time == v.time:
+                self.alarms += 1
+            self.health = v.health
+        return out
+
+    def push(
+        self, arm: str, stamp_ns: int, wrench: Sequence[float], source_ns: int | None = None
+    ) -> VerifierOutput:
+        """One wrench sample (stamp on the sensor's clock, DDS source timestamp if known)."""
+        out = self.segmenter.push(arm, stamp_ns, wrench, source_ns)
+        return self._take(out.rejected)
+
+    def phase(self, name: str, source_ns: int | None = None) -> VerifierOutput:
+        """One /task_phase event."""
+        out = self.segmenter.phase(name, source_ns)
+        return self._take(unknown=out.unknown_phase)
+
+    def flush(self, now_ns: int) -> VerifierOutput:
+        """Apply events that no later sample will apply (segmenter_node's flush rule)."""
+        self.segmenter.flush(now_ns)
+        return self._take()
+
+
+def offline_verdicts(trial: Trial, model: VerifierModel) -> list[Verdict]:
+    """The verdicts of `trial` from one VerifierSession, fed as verify's offline features are
+    (stream time from the first sample; each event before the first sample at or after it;
+    the end event last): what verifier_node publishes for the trial's bag."""
+    session = VerifierSession(model)
+    time = np.asarray(trial.time, dtype=float) - float(trial.time[0])
+    events = [(t - float(trial.time[0]), n) for t, n in trial_phase_events(trial) if n != END_PHASE]
+    out: list[Verdict] = []
+    ev = 0
+    for i, t in enumerate(time):
+        while ev < len(events) and events[ev][0] <= t:
+            session.phase(events[ev][1], events[ev][0])
+            ev += 1
+        for arm in model.arms:
+            out += session.push(arm, float(t), trial.wrench[arm][i])
+    return out + session.end()

@@ -1,0 +1,89 @@
+"""The verifier node's state without ROS (verify/stream.py): a held-out trial's bag messages fed
+in playback order give the offline verifier's verdicts, stream after stream."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from verify_support import simulated_verifier
+
+from rcbht_introspection.io.bags import (
+    PHASE_TOPIC,
+    WRENCH_TYPE,
+    arm_of_topic,
+    bag_messages,
+    decode_string,
+    decode_wrench,
+    write_trial_bag,
+)
+from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.verify.model_file import VerifierModel, load_verifier
+from rcbht_introspection.verify.monitor import NOMINAL
+from rcbht_introspection.verify.stream import StreamVerdict, VerifierStream, offline_verdicts
+
+
+@pytest.fixture(scope="module")
+def verifier(tmp_path_factory: pytest.TempPathFactory) -> tuple[VerifierModel, list[Trial]]:
+    path, held_out = simulated_verifier(tmp_path_factory.mktemp("verifier"))
+    return load_verifier(path), held_out
+
+
+def play(stream: VerifierStream, bag: Path, health: list[str]) -> list[StreamVerdict]:
+    """The bag's wrench samples and events into `stream`, in playback order."""
+    out = []
+    for m in bag_messages(bag):
+        if m.msgtype == WRENCH_TYPE:
+            stamp, frame, values = decode_wrench(m.raw)
+            got = stream.push(arm_of_topic(m.topic, frame), stamp, values)
+        elif m.topic == PHASE_TOPIC:
+            got = stream.phase(decode_string(m.raw))
+        else:
+            continue
+        out += got.verdicts
+        if not health or health[-1] != stream.health:
+            health.append(stream.health)
+    return out
+
+
+def test_streams_give_the_offline_verdicts(
+    verifier: tuple[VerifierModel, list[Trial]], tmp_path: Path
+) -> None:
+    model, held_out = verifier
+    stream = VerifierStream(model, model.arms)
+    for stream_id, trial in enumerate(held_out):
+        bag = tmp_path / f"{trial.name}.mcap"
+        write_trial_bag(trial, bag)
+        health: list[str] = []
+        got = play(stream, bag, health)
+        offline = offline_verdicts(trial, model)
+        assert [sv.verdict for sv in got] == offline
+        assert {sv.stream_id for sv in got} == {stream_id}
+        first = got[0]
+        assert first.stamp_ns == first.origin_ns + round(first.verdict.time * 1e9)
+        for sv in got:
+            v = sv.verdict
+            if v.alarm:
+                assert sv.evidence_start == v.onset
+            else:
+                starts = [t for t in trial.state_times if t - trial.time[0] <= v.time]
+                assert math.isclose(
+                    sv.evidence_start, (starts[-1] - trial.time[0]) if starts else 0.0
+                )
+        # nothing is published as failure before the threshold: health follows the alarm
+        alarm = offline[-1].alarm_time
+        assert health[-1] == offline[-1].health
+        assert all(
+            sv.verdict.health == NOMINAL for sv in got if alarm is None or sv.verdict.time < alarm
+        )
+        assert all(
+            sv.verdict.score <= 1.0 for sv in got if alarm is None or sv.verdict.time < alarm
+        )
+    assert stream.segmenter.stream_id == len(held_out)
+
+
+def test_arms_must_be_the_models(verifier: tuple[VerifierModel, list[Trial]]) -> None:
+    model, _ = verifier
+    with pytest.raises(ValueError, match="differ from the verifier model"):
+        VerifierStream(model, ("L", "R"))
