@@ -31,6 +31,7 @@ from rcbht_introspection.sim.config import SimConfig, load_sim_config
 from rcbht_introspection.sim.peg_config import PegConfig, load_peg_config
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
 from rcbht_introspection.taxonomy.stream import StreamConfig, load_stream_config
+from rcbht_introspection.verify.config import VerifyConfig, load_verify_config
 
 TAXONOMY = TaxonomyConfig()
 SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
@@ -58,9 +59,21 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
         (lambda p: load_stream_config("causal", p), StreamConfig(profile="causal")),
     ],
     "sim.yaml": [(load_sim_config, SimConfig())],
+    "sim_deviation_b.yaml": [
+        (
+            load_sim_config,
+            replace(
+                SimConfig(),
+                failures=replace(
+                    SimConfig().failures, deviation_xy=(0.0025, 0.0032), deviation_yaw=(0.08, 0.1)
+                ),
+            ),
+        )
+    ],
     "sim_peg.yaml": [(load_peg_config, PegConfig())],
     "live.yaml": [(load_live_config, LiveAugmentConfig())],
     "teach.yaml": [(load_teach_config, TeachConfig())],
+    "verify.yaml": [(load_verify_config, VerifyConfig())],
     "segmenter.yaml": [(lambda p: load_node_config(SegmenterConfig, p), SegmenterConfig())],
     "classifier.yaml": [(lambda p: load_node_config(ClassifierConfig, p), ClassifierConfig())],
     "verifier.yaml": [(lambda p: load_node_config(VerifierConfig, p), VerifierConfig())],

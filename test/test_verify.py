@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import SIM_SUCCESS
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from conftest import SIM_SUCCESS
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.hiro import find_trials, read_trial
@@ -86,7 +86,7 @@ def test_live_session_equals_the_batch_detector(
         assert verdicts[-1].onset == batch.onset
         if batch.alarm is not None and batch.onset is not None:
             z = model.detector.models.envelope.z(tf)  # type: ignore[union-attr]
-            cls, probs, dirs = model.characteriser.predict(tf, z, batch.onset, tf.end)
+            cls, probs, _ = model.characteriser.predict(tf, z, batch.onset, tf.end)
             assert verdicts[-1].failure_class == cls
             assert verdicts[-1].class_probabilities == pytest.approx(probs)
             assert verdicts[-1].health == cls

@@ -141,7 +141,7 @@ def _plots(out: Path, trials: list[Any], labels: dict[str, Any], runs: list[Any]
         key = r.label.failure_class if r.label.failed else "success"
         if sum(k == key for k, _ in chosen) < (2 if key == "success" else 1):
             chosen.append((key, r))
-    for key, r in chosen:
+    for _, r in chosen:
         trial = by_name[r.trial]
         path = plot_failure_timeline(
             trial,
@@ -156,4 +156,3 @@ def _plots(out: Path, trials: list[Any], labels: dict[str, Any], runs: list[Any]
             out / f"{r.trial}.png",
         )
         print(f"wrote {path}")
-

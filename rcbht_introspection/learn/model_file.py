@@ -92,7 +92,9 @@ def read_safe_npz(path: Path, kind: str) -> tuple[dict[str, Any], dict[str, np.n
     return header, arrays
 
 
-def check_checksum(header: dict[str, Any], arrays: dict[str, np.ndarray], path: Path, kind: str) -> None:
+def check_checksum(
+    header: dict[str, Any], arrays: dict[str, np.ndarray], path: Path, kind: str
+) -> None:
     """One-line InputError when the file's content does not match its checksum."""
     if header.get("checksum") != _checksum(header, arrays):
         raise InputError(

@@ -47,7 +47,13 @@ def plot_failure_timeline(
     llb = words.words.get(arm, {}).get(Level.BEHAVIOR, {})
     for row, axis in enumerate(AXES):
         for w in llb.get(axis, []):
-            ax_l.barh(row, w.end - w.start, left=w.start, color=label_colors.get(w.label, "#999"), height=0.8)
+            ax_l.barh(
+                row,
+                w.end - w.start,
+                left=w.start,
+                color=label_colors.get(w.label, "#999"),
+                height=0.8,
+            )
             if w.end - w.start > 0.8:
                 ax_l.text((w.start + w.end) / 2, row, w.label, ha="center", va="center", fontsize=6)
     ax_l.set_yticks(range(len(AXES)), AXES, fontsize=7)
@@ -72,7 +78,9 @@ def plot_failure_timeline(
         ax_c.text(points[-1][0], 0.5, f" {points[-1][1]}", va="center", fontsize=8)
     ax_c.set_ylabel("class")
     ax_c.set_xlabel("stream time (s)")
-    alarm_text = "no alarm" if alarm is None else f"alarm {alarm:.2f} s (onset est. {onset_estimate:.2f} s)"
+    alarm_text = (
+        "no alarm" if alarm is None else f"alarm {alarm:.2f} s (onset est. {onset_estimate:.2f} s)"
+    )
     onset_text = "" if onset is None else f", onset {onset:.2f} s"
     fig.suptitle(f"{trial.name}: truth {truth}{onset_text}; {alarm_text}", fontsize=10)
     path.parent.mkdir(parents=True, exist_ok=True)

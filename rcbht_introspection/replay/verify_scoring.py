@@ -14,6 +14,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
 from rcbht_introspection.verify.features import trial_features
@@ -125,6 +127,9 @@ def verifier_scores(
             class_by_evidence={},
             class_given_onset="",
             directions=rec.directions,
+            times=np.zeros(0),
+            score=np.zeros(0),
+            classes_over_time=[],
         )
         runs.append(run)
         row: dict[str, Any] = {

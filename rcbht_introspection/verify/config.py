@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,14 +50,19 @@ def _check(cfg: VerifyConfig) -> None:
         if getattr(cfg, name) <= 0:
             raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)
     if cfg.elapsed_tolerance_s < 0:
-        raise InputError(f"must be >= 0, got {cfg.elapsed_tolerance_s}", field="elapsed_tolerance_s")
+        raise InputError(
+            f"must be >= 0, got {cfg.elapsed_tolerance_s}", field="elapsed_tolerance_s"
+        )
     if cfg.elapsed_relative < 0:
         raise InputError(f"must be >= 0, got {cfg.elapsed_relative}", field="elapsed_relative")
     if cfg.neighbours < 1:
         raise InputError(f"must be >= 1, got {cfg.neighbours}", field="neighbours")
     for i, k in enumerate(cfg.novelty_features):
         if k not in KINDS:
-            raise InputError(f"unknown feature kind {k!r} (known: {', '.join(KINDS)})", field=f"novelty_features[{i}]")
+            raise InputError(
+                f"unknown feature kind {k!r} (known: {', '.join(KINDS)})",
+                field=f"novelty_features[{i}]",
+            )
     if not cfg.novelty_features:
         raise InputError("needs at least one feature kind", field="novelty_features")
     if cfg.top_k < 1:
@@ -64,8 +70,10 @@ def _check(cfg: VerifyConfig) -> None:
     if not 0 < cfg.false_alarm_rate < 1:
         raise InputError(f"must be in (0, 1), got {cfg.false_alarm_rate}", field="false_alarm_rate")
     seg = cfg.threshold_segments_s
-    if any(b <= a for a, b in zip(seg, seg[1:], strict=False)) or any(x <= 0 for x in seg):
-        raise InputError(f"must be positive and increasing, got {list(seg)}", field="threshold_segments_s")
+    if any(b <= a for a, b in itertools.pairwise(seg)) or any(x <= 0 for x in seg):
+        raise InputError(
+            f"must be positive and increasing, got {list(seg)}", field="threshold_segments_s"
+        )
     if cfg.calibration_folds < 2:
         raise InputError(f"must be >= 2, got {cfg.calibration_folds}", field="calibration_folds")
     if not 0 <= cfg.onset_fraction < 1:

@@ -60,7 +60,9 @@ class SignalModels:
             neighbours=NeighbourModel.fit(trials, config) if wrench else None,
             timing=TimingModel.fit(trials, config) if "timing" in signals else None,
             global_envelope=EnvelopeModel.fit(trials, config, phase_free=True) if whole else None,
-            global_neighbours=NeighbourModel.fit(trials, config, phase_free=True) if whole else None,
+            global_neighbours=NeighbourModel.fit(trials, config, phase_free=True)
+            if whole
+            else None,
         )
 
     def scores(self, tf: TrialFeatures, signals: Sequence[str]) -> np.ndarray:
@@ -144,7 +146,9 @@ class Detector:
         maxima = np.zeros((n, len(signals), len(phases), n_seg))
         for k in range(folds):
             held = set(order[k::folds].tolist())
-            models = SignalModels.fit([successes[i] for i in order if i not in held], config, signals)
+            models = SignalModels.fit(
+                [successes[i] for i in order if i not in held], config, signals
+            )
             for i in held:
                 tf = successes[i]
                 s = models.scores(tf, signals)
@@ -178,7 +182,9 @@ class Detector:
         seg = int(np.searchsorted(self.config.threshold_segments_s, elapsed, side="right"))
         if phase in self.phases:
             return self.thresholds[:, self.phases.index(phase), seg]
-        return self.thresholds.max(axis=(1, 2)) if self.thresholds.size else np.ones(len(self.signals))
+        return (
+            self.thresholds.max(axis=(1, 2)) if self.thresholds.size else np.ones(len(self.signals))
+        )
 
     def run(self, tf: TrialFeatures) -> Detection:
         """Score every tick of a trial and find its first alarm."""

@@ -67,7 +67,7 @@ def view_of(detector: Detector, view: str) -> EvidenceView:
     model = getattr(detector.models, view)
     if model is None:
         raise ValueError(f"the detector has no {view}")
-    return model  # type: ignore[no-any-return]
+    return model
 
 
 def _fold_results(
@@ -90,11 +90,11 @@ def _fold_results(
     for method, (signals, view) in METHODS.items():
         detector = Detector.fit(successes, config, signals, seed=seed)
         ev = view_of(detector, view)
-        failures = [
-            (feats[n], labels[n], onset_of(n)[0]) for n in train if labels[n].failed
-        ]
+        failures = [(feats[n], labels[n], onset_of(n)[0]) for n in train if labels[n].failed]
         char = (
-            Characteriser.fit([(f, lb, float(o)) for f, lb, o in failures if o is not None], ev, config)
+            Characteriser.fit(
+                [(f, lb, float(o)) for f, lb, o in failures if o is not None], ev, config
+            )
             if failures
             else None
         )
@@ -103,7 +103,8 @@ def _fold_results(
             tf, label = feats[name], labels[name]
             onset, source = onset_of(name)
             d = detector.run(tf)
-            predicted, given, dirs = "", "", {}
+            predicted, given = "", ""
+            dirs: dict[str, str] = {}
             by_evidence: dict[str, str] = {}
             over_time: list[tuple[float, str]] = []
             if char is not None and label.failed:
@@ -156,9 +157,7 @@ def metrics(results: Sequence[RunResult], gate_s: float = GATE_S) -> dict[str, A
         for r in failed
         if r.alarm is not None and r.onset is not None and r.onset <= r.alarm <= r.onset + gate_s
     ]
-    early = sum(
-        r.alarm is not None and r.onset is not None and r.alarm < r.onset for r in failed
-    )
+    early = sum(r.alarm is not None and r.onset is not None and r.alarm < r.onset for r in failed)
     fp = fp_nominal + early
     precision = _ratio(len(tp), len(tp) + fp)
     recall = _ratio(len(tp), len(failed))

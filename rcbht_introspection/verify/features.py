@@ -27,12 +27,16 @@ RATIO_MIN_FORCE = 1.0
 """|Fz| (N) below which the ratios are 0: in free motion they are noise over noise."""
 
 
-
-
 def kind_columns(kinds: Sequence[str], n_arms: int) -> np.ndarray:
     """Column indices of the given feature kinds for every arm."""
     return np.array(
-        [a * PER_ARM + KINDS.index(k) * 6 + x for a in range(n_arms) for k in KINDS if k in kinds for x in range(6)],
+        [
+            a * PER_ARM + KINDS.index(k) * 6 + x
+            for a in range(n_arms)
+            for k in KINDS
+            if k in kinds
+            for x in range(6)
+        ],
         dtype=int,
     )
 

@@ -63,7 +63,11 @@ def label_of(trial: Trial) -> TrialLabel:
         dev = record.get("deviation")
         deviation = None
         if isinstance(dev, Mapping):
-            deviation = (float(dev.get("x", 0.0)), float(dev.get("y", 0.0)), float(dev.get("yaw", 0.0)))
+            deviation = (
+                float(dev.get("x", 0.0)),
+                float(dev.get("y", 0.0)),
+                float(dev.get("yaw", 0.0)),
+            )
         onset = record.get("onset")
         return TrialLabel(
             trial=trial.name,
@@ -117,7 +121,9 @@ def read_labels(path: Path | str) -> dict[str, TrialLabel]:
                 f"expected success or failure, got {outcome!r}", path, line=line, field="outcome"
             )
         if outcome == SUCCESS and cls:
-            raise InputError("a success has no failure class", path, line=line, field="failure_class")
+            raise InputError(
+                "a success has no failure class", path, line=line, field="failure_class"
+            )
         onset = _number(row[3], 1.0, path, line, "onset_s")
         if onset is not None and outcome == SUCCESS:
             raise InputError("a success has no onset", path, line=line, field="onset_s")

@@ -99,7 +99,11 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
     ch = model.characteriser
     if ch is not None:
         failure_header, failure_arrays = _head_parts("failure", ch.failure)
-        header["characteriser"] = {"phases": list(ch.phases), "failure": failure_header, "directions": {}}
+        header["characteriser"] = {
+            "phases": list(ch.phases),
+            "failure": failure_header,
+            "directions": {},
+        }
         arrays.update(failure_arrays)
         for axis, head in ch.directions.items():
             h, a = _head_parts(f"direction.{axis}", head)

@@ -156,7 +156,14 @@ class VerifierSession:
         if self.alarm_time is None or self.model.characteriser is None or self.onset is None:
             return verdict
         cls, probs, dirs = self.model.characteriser.predict(*self._evidence(), self.onset, g)
-        return Verdict(**{**verdict.__dict__, "failure_class": cls, "class_probabilities": probs, "directions": dirs})
+        return Verdict(
+            **{
+                **verdict.__dict__,
+                "failure_class": cls,
+                "class_probabilities": probs,
+                "directions": dirs,
+            }
+        )
 
     def _evidence(self) -> tuple[TrialFeatures, np.ndarray]:
         times = np.array([h[0] for h in self.history])

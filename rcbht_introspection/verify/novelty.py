@@ -142,7 +142,9 @@ class TimingModel:
         if phase not in self.phases:
             return np.inf
         p = self.phases.index(phase)
-        return max(0.0, (self.low[p] - duration) / self.scale[p], (duration - self.high[p]) / self.scale[p])
+        return max(
+            0.0, (self.low[p] - duration) / self.scale[p], (duration - self.high[p]) / self.scale[p]
+        )
 
     def z(self, tf: TrialFeatures) -> np.ndarray:
         """(ticks, sub-tasks) signed duration so far of each nominal sub-task, from the middle of
@@ -154,7 +156,9 @@ class TimingModel:
                 if tf.phases[i] in self.phases:
                     p = self.phases.index(tf.phases[i])
                     end = tf.starts[i + 1] if i + 1 < len(tf.starts) else tf.times[t]
-                    out[t, p] = (min(float(end), float(tf.times[t])) - tf.starts[i] - mid[p]) / self.scale[p]
+                    out[t, p] = (
+                        min(float(end), float(tf.times[t])) - tf.starts[i] - mid[p]
+                    ) / self.scale[p]
         return out
 
     def scores(self, tf: TrialFeatures) -> np.ndarray:
