@@ -155,6 +155,7 @@ def _run(name: str, failed: bool, onset: float | None, alarm: float | None) -> R
         class_by_evidence={},
         class_given_onset="",
         directions={},
+        directions_given_onset={},
         times=np.zeros(0),
         score=np.zeros(0),
         classes_over_time=[],

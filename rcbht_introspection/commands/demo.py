@@ -131,5 +131,83 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(summary(result, timeline=True))
     plot = plot_timelines(result, out / "task_state_timeline.png", durations)
     print(f"plot: {plot}")
+    if use_sim and args.task == "snap-assembly":
+        _verify_demo(args, out, train, held[0], model_path)
+    else:
+        print("(verification: the simulated snap assembly only; it has failure trials)")
     print(f"scores: {out / 'replay_eval.json'}  ({time.monotonic() - started:.0f} s in all)")
     return 0
+
+
+DEMO_FAILURES = ("deviation_x-", "jamming")
+"""Failure classes the demo's verifier learns; the held-out failing trial is of the first."""
+
+
+def _verify_demo(
+    args: argparse.Namespace, out: Path, train: list[Path], nominal: Path, model_path: Path
+) -> None:
+    """Train a verifier on the training successes and a few simulated failures, then replay one
+    nominal and one failing held-out trial through the nodes with verifier_node."""
+    from rcbht_introspection.io.bags import write_trial_bag
+    from rcbht_introspection.io.hiro import read_trial
+    from rcbht_introspection.plots.failure_timeline import plot_failure_timeline
+    from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
+    from rcbht_introspection.replay.verify_scoring import verifier_summary
+    from rcbht_introspection.sim import load_sim_config, simulate_trial
+    from rcbht_introspection.taxonomy.batch import label_trial
+    from rcbht_introspection.verify.config import load_verify_config
+    from rcbht_introspection.verify.features import trial_features
+    from rcbht_introspection.verify.labels import label_of
+    from rcbht_introspection.verify.model_file import save_verifier
+    from rcbht_introspection.verify.stream import offline_verdicts
+    from rcbht_introspection.verify.train import train_verifier
+
+    sim = load_sim_config()
+    base = 1000 * (args.seed + 1)
+    failures = [
+        simulate_trial(sim, base + i, failure=cls, name=f"SIM-ONE-F-{i + 1:02d}-{cls}")
+        for i, cls in enumerate(DEMO_FAILURES * 2)
+    ]
+    failing = simulate_trial(sim, base + 99, failure=DEMO_FAILURES[0], name="SIM-ONE-F-99-held")
+    _step(
+        f"6. train a verifier on {len(train)} successes and {len(failures)} failures "
+        f"({', '.join(DEMO_FAILURES)})"
+    )
+    trials = [read_trial(p) for p in train] + failures
+    config = load_verify_config()
+    verifier = train_verifier(trials, {t.name: label_of(t) for t in trials}, config)
+    verifier_path = save_verifier(verifier, out / "verifier.npz")
+    print(f"   {verifier_path}: {json.dumps(verifier.trained_on)}")
+    _step("7. replay one nominal and one failing held-out trial with verifier_node")
+    bags = []
+    for trial in (read_trial(nominal), failing):
+        bag = out / "bags_verify" / f"{trial.name}.mcap"
+        bag.unlink(missing_ok=True)
+        write_trial_bag(trial, bag)
+        bags.append(bag)
+    result = replay_eval(
+        bags,
+        model_path,
+        ReplayEvalOptions(rate=args.rate, log_dir=out / "logs_verify", verifier_file=verifier_path),
+    )
+    (out / "verify_eval.json").write_text(json.dumps(result["verifier"], indent=2))
+    print(verifier_summary(result["verifier"]))
+    detector = verifier.detector
+    for trial in (read_trial(nominal), failing):
+        verdicts = offline_verdicts(trial, verifier)
+        tf = trial_features(trial, config)
+        d = detector.run(tf)
+        label = label_of(trial)
+        plot = plot_failure_timeline(
+            trial,
+            label_trial(trial),
+            d.times,
+            d.score,
+            d.alarm,
+            d.onset,
+            [(v.time, v.failure_class) for v in verdicts if v.alarm][::10],
+            label.failure_class or "success",
+            label.onset,
+            out / f"failure_timeline_{trial.name}.png",
+        )
+        print(f"plot: {plot}")

@@ -127,6 +127,7 @@ def verifier_scores(
             class_by_evidence={},
             class_given_onset="",
             directions=rec.directions,
+            directions_given_onset={},
             times=np.zeros(0),
             score=np.zeros(0),
             classes_over_time=[],

@@ -26,12 +26,12 @@ class VerifyConfig:
     elapsed_tolerance_s: float = 0.5
     elapsed_relative: float = 0.25
     neighbours: int = 1
-    novelty_features: tuple[str, ...] = ("mean", "change")
+    novelty_features: tuple[str, ...] = ("mean",)
     scale_floor_force: float = 0.02
     scale_floor_torque: float = 0.001
     top_k: int = 3
     false_alarm_rate: float = 0.05
-    threshold_segments_s: tuple[float, ...] = (1.0, 3.0)
+    threshold_segments_s: tuple[float, ...] = ()
     calibration_folds: int = 5
     onset_fraction: float = 0.5
     evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)

@@ -55,6 +55,7 @@ class RunResult:
     class_by_evidence: dict[str, str]
     class_given_onset: str
     directions: dict[str, str]
+    directions_given_onset: dict[str, str]
     times: np.ndarray
     """Tick times and the combined score (largest signal over its threshold) per tick."""
     score: np.ndarray
@@ -105,6 +106,7 @@ def _fold_results(
             d = detector.run(tf)
             predicted, given = "", ""
             dirs: dict[str, str] = {}
+            dirs_given: dict[str, str] = {}
             by_evidence: dict[str, str] = {}
             over_time: list[tuple[float, str]] = []
             if char is not None and label.failed:
@@ -119,7 +121,7 @@ def _fold_results(
                     for g in ticks[:: max(1, len(ticks) // 40)]:
                         over_time.append((float(g), char.predict(tf, z, d.onset, float(g))[0]))
                 if onset is not None:
-                    given = char.predict(tf, z, onset, tf.end)[0]
+                    given, _, dirs_given = char.predict(tf, z, onset, tf.end)
             results.append(
                 RunResult(
                     trial=name,
@@ -134,6 +136,7 @@ def _fold_results(
                     class_by_evidence=by_evidence,
                     class_given_onset=given,
                     directions=dirs,
+                    directions_given_onset=dirs_given,
                     times=d.times,
                     score=d.score,
                     classes_over_time=over_time,
@@ -210,13 +213,17 @@ def metrics(results: Sequence[RunResult], gate_s: float = GATE_S) -> dict[str, A
     }
     deviated = [r for r in failed if r.label.directions() is not None]
     if deviated:
-        out["direction_accuracy"] = {
-            a: _ratio(
-                sum(r.directions.get(a) == r.label.directions()[a] for r in deviated),  # type: ignore[index]
-                len(deviated),
-            )
-            for a in DIRECTION_AXES
-        }
+        for key, attr in (
+            ("direction_accuracy", "directions"),
+            ("direction_accuracy_given_onset", "directions_given_onset"),
+        ):
+            out[key] = {
+                a: _ratio(
+                    sum(getattr(r, attr).get(a) == r.label.directions()[a] for r in deviated),  # type: ignore[index]
+                    len(deviated),
+                )
+                for a in DIRECTION_AXES
+            }
     return out
 
 
