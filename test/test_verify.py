@@ -105,7 +105,8 @@ def test_an_injected_contact_anomaly_raises_the_alarm_after_it(
     onset = start + 1.0
     wrench = held.wrench["R"].copy()
     after = np.asarray(held.time) >= onset
-    wrench[after, 3] += 0.3  # a 0.3 N m moment about x: contact 40 mm off-centre at 7 N
+    wrench[after, 2] += 30.0  # a jam: 30 N more push on the part ...
+    wrench[after, 4] += 0.5  # ... wedged about 17 mm off-centre
     bumped = dataclasses.replace(held, wrench={"R": wrench})
     plain = detector.run(trial_features(held, config))
     hit = detector.run(trial_features(bumped, config))
