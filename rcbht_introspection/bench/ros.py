@@ -5,7 +5,7 @@ machinery): one arm at 1 kHz and two arms at 2 x 1 kHz, each for RCBHT_BENCH_ROS
 playback (default 60). The wrench comes from REAL HIRO trials (200 Hz recordings played at 5x =
 1 kHz) when ../shared data is present, else from a synthetic contact signal. The classifier uses
 the default `rcbht train` model (with its live head) of HIRO trials 1-40 when the data are
-present, else none.
+present, else none; RCBHT_BENCH_ROS_MODEL names a model file to use instead (skips the training).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
 from rcbht_introspection.io.trial import Trial
@@ -79,6 +80,17 @@ def bench_model(out_dir: Path) -> Path | None:
     return save_model(model, out_dir / "bench_model.rcbht")
 
 
+def model_from_env(name: str, out_dir: Path) -> Path | None:
+    """The model file named by the environment variable `name` (training skipped, so that runs
+    can share one), else bench_model's."""
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return bench_model(out_dir)
+    if not Path(text).is_file():
+        raise InputError("no such model file", text, field=name)
+    return Path(text)
+
+
 def run(out_dir: Path) -> dict[str, Any]:
     """Both scenarios; figures per scenario plus the load average around them."""
 
@@ -87,7 +99,7 @@ def run(out_dir: Path) -> dict[str, Any]:
     work = Path(out_dir) / "ros"
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
-    model = bench_model(work)
+    model = model_from_env("RCBHT_BENCH_ROS_MODEL", work)
     sources = _sources(seconds * rate)
     results: dict[str, Any] = {
         "playback_seconds_target": seconds,
