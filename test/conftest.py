@@ -62,6 +62,20 @@ def sim_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
+@pytest.fixture(scope="session")
+def bench_model(tmp_path_factory: pytest.TempPathFactory) -> Path | None:
+    """The ROS benchmarks' classifier model, made once a session by bench/ros.py's bench_model
+    (`rcbht train` default on REAL HIRO 1-40, live head included; ~30 s on 2 shared cores), or
+    None without the shared data, as the benchmarks run then. The ROS benchmark, the soak and
+    the end-to-end replay share it instead of training it each."""
+    from ros_support import require_ros
+
+    require_ros()  # bench/ros.py imports the replay harness, which imports rclpy
+    from rcbht_introspection.bench.ros import bench_model as make
+
+    return make(tmp_path_factory.mktemp("bench_model"))
+
+
 def dataset_root(request: pytest.FixtureRequest, dataset: str) -> Path:
     """Folder of a data set by name: a generated one (SIM_MUJOCO_*) or a shared HIRO one."""
     if dataset in (SIM_SUCCESS, SIM_FAILURE):

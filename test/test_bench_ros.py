@@ -10,11 +10,15 @@ from ros_support import require_ros
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
-def test_ros_benchmark_short(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_ros_benchmark_short(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, bench_model: Path | None
+) -> None:
     require_ros()
     from rcbht_introspection.bench import ros
 
     monkeypatch.setenv("RCBHT_BENCH_ROS_SECONDS", "2")
+    if bench_model is not None:  # the session's copy of the model run() would train
+        monkeypatch.setenv("RCBHT_BENCH_ROS_MODEL", str(bench_model))
     result = ros.run(tmp_path)
     for name, arms in (("one_arm_1kHz", 1), ("two_arm_2x1kHz", 2)):
         r = result[name]
@@ -28,3 +32,4 @@ def test_ros_benchmark_short(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) ->
     assert v["clean_shutdown"], (v["exit_codes"], v["shutdown_logs"])
     assert v["sample_to_verdict_ms"]["n"] > 0 and v["latency_ms"]["n"] > 0
     assert v["verdicts"] > 0
+    assert result["model"] == (str(bench_model) if bench_model else None)

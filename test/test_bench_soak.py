@@ -78,7 +78,9 @@ def test_rss_growth_over_the_last_window() -> None:
 
 
 @pytest.mark.slow
-def test_soak_short(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_soak_short(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, bench_model: Path | None
+) -> None:
     """25 s of 2 x 1 kHz through both nodes with a classifier restart at a quarter of the run."""
     require_ros()
     from rcbht_introspection.bench import soak
@@ -86,7 +88,10 @@ def test_soak_short(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("RCBHT_SOAK_SECONDS", "25")
     monkeypatch.setenv("RCBHT_SOAK_SAMPLE_S", "5")
     monkeypatch.setenv("RCBHT_SOAK_RESTART_AT", "0.25")
+    if bench_model is not None:  # the session's copy of the model run() would train
+        monkeypatch.setenv("RCBHT_SOAK_MODEL", str(bench_model))
     r = soak.run(tmp_path)
+    assert r["model"] == (str(bench_model) if bench_model else None)
     assert r["aborted"] is None, r.get("aborted_log_tail")
     assert r["publisher_error"] is None
     assert r["arms"] == ["L", "R"]

@@ -26,7 +26,7 @@ def test_demo_names_what_is_missing(
 def test_demo_on_simulated_trials(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     require_ros()
     out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out), "--trials", "5", "--held-out", "1"]) == 0
+    assert main(["demo", "--out", str(out), "--trials", "3", "--held-out", "1"]) == 0
     text = capsys.readouterr().out
     assert "/task_state: start" in text and "subtask_accuracy" in text
     result = json.loads((out / "replay_eval.json").read_text())

@@ -1,5 +1,6 @@
 """End to end over real DDS: converted HIRO trials replayed through both node processes, scored
-against the truth and the offline run of the same stream and model (trained on other trials)."""
+against the truth and the offline run of the same stream and model (`rcbht train`'s default on
+the other trials, 1-40: the session's bench_model)."""
 
 from __future__ import annotations
 
@@ -13,20 +14,14 @@ from rcbht_introspection.cli import main
 
 pytestmark = [pytest.mark.ros, pytest.mark.shared_data, pytest.mark.slow]
 
-TRAIN = range(1, 41)
 HELD_OUT = (41, 44)
 
 
-@pytest.fixture(scope="module")
-def model(hiro_data: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    from rcbht_introspection.learn.data import load_samples
-    from rcbht_introspection.learn.model_file import save_model
-    from rcbht_introspection.learn.models import train_model
-
-    real = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS"
-    folders = [real / f"20121127-HIROSA-S-{i:02d}" for i in TRAIN]
-    path = tmp_path_factory.mktemp("model") / "model.rcbht"
-    return save_model(train_model(load_samples(folders, words="auto")), path)
+@pytest.fixture
+def model(hiro_data: Path, bench_model: Path | None) -> Path:
+    """The model of REAL 1-40 (present: hiro_data requires the shared data)."""
+    assert bench_model is not None, f"no model made from {hiro_data}"
+    return bench_model
 
 
 def test_replay_eval_of_held_out_trials(hiro_data: Path, model: Path, tmp_path: Path) -> None:

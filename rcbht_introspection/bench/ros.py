@@ -7,7 +7,7 @@ sample -> verdict latency (the verifier's input is the wrench, not the words) be
 belief in the same run. The verifier is trained on other successful trials (detection only). The wrench comes from REAL HIRO trials (200 Hz recordings played at 5x =
 1 kHz) when ../shared data is present, else from a synthetic contact signal. The classifier uses
 the default `rcbht train` model (with its live head) of HIRO trials 1-40 when the data are
-present, else none.
+present, else none; RCBHT_BENCH_ROS_MODEL names a model file to use instead (skips the training).
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
 from rcbht_introspection.io.trial import Trial
@@ -102,6 +103,17 @@ def bench_verifier(out_dir: Path) -> Path:
     return save_verifier(model, out_dir / "bench_verifier.npz")
 
 
+def model_from_env(name: str, out_dir: Path) -> Path | None:
+    """The model file named by the environment variable `name` (training skipped, so that runs
+    can share one), else bench_model's."""
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return bench_model(out_dir)
+    if not Path(text).is_file():
+        raise InputError("no such model file", text, field=name)
+    return Path(text)
+
+
 def run(out_dir: Path) -> dict[str, Any]:
     """Both scenarios; figures per scenario plus the load average around them."""
 
@@ -110,7 +122,7 @@ def run(out_dir: Path) -> dict[str, Any]:
     work = Path(out_dir) / "ros"
     shutil.rmtree(work, ignore_errors=True)
     work.mkdir(parents=True)
-    model = bench_model(work)
+    model = model_from_env("RCBHT_BENCH_ROS_MODEL", work)
     sources = _sources(seconds * rate)
     results: dict[str, Any] = {
         "playback_seconds_target": seconds,

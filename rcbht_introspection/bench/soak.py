@@ -104,10 +104,7 @@ def run(out_dir: Path) -> dict[str, Any]:
     work.mkdir(parents=True)
     wall0 = time.monotonic()
     source = trial_source()
-    model_env = os.environ.get("RCBHT_SOAK_MODEL", "")
-    model = Path(model_env) if model_env else ros.bench_model(work)
-    if model is not None and not model.is_file():
-        raise InputError("no such model file", model)
+    model = ros.model_from_env("RCBHT_SOAK_MODEL", work)
     domain_id = lease_domain()  # held for the whole run
     env = ros_env(domain_id, work / "ros_log")
     seg_params = write_params(
