@@ -34,6 +34,12 @@ def test_demo_on_simulated_trials(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert result["words_match_offline"] and result["verdicts_match_offline"]
     assert result["dropped_wrench"] == 0 and result["clean_shutdown"]
     assert (out / "task_state_timeline.png").stat().st_size > 10_000
+    verified = json.loads((out / "verify_eval.json").read_text())
+    runs = {r["failure_class"] or r["outcome"]: r for r in verified["runs"]}
+    assert set(runs) == {"success", "deviation_x-"}  # one nominal, one failing held-out trial
+    assert all(r["matches_offline"] for r in runs.values())  # the node alarms as offline
+    assert "verifier: detection_accuracy" in text
+    assert len(list(out.glob("failure_timeline_*.png"))) == 2
 
 
 def test_demo_task_choice_is_for_simulated_data(

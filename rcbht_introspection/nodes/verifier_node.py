@@ -51,9 +51,10 @@ MAX_BURST = 1000
 """Most samples per arm taken in one executor wake-up."""
 
 
-def verdict_msg(sv: StreamVerdict, thresholds: list[float], subtask: str) -> VerdictMsg:
+def verdict_msg(sv: StreamVerdict, subtask: str) -> VerdictMsg:
     """StreamVerdict -> rcbht_interfaces/Verdict (signal scores raw, beside their thresholds)."""
     v = sv.verdict
+    thresholds = list(v.thresholds.values())
     nan = math.nan
     msg = VerdictMsg(
         time_origin=to_time(sv.origin_ns),
@@ -107,7 +108,6 @@ class VerifierNode(ManagedNode):
         model, self.model_problem = load_usable(cfg)
         self.model_sha256 = file_sha256(cfg.verifier_file)
         self.stream: VerifierStream | None = None
-        self.thresholds: list[float] = []
         if model is None:
             self.get_logger().error(
                 f"no usable verifier, no verdicts, {cfg.health_topic} stays "
@@ -123,7 +123,6 @@ class VerifierNode(ManagedNode):
                 hold_s=cfg.event_hold_s,
                 max_hold_s=cfg.event_max_hold_s,
             )
-            self.thresholds = [float(t) for t in model.detector.thresholds]
         self.subtask = ""
         self.published_health = ""
         self.last_sample = time.monotonic()
@@ -256,7 +255,7 @@ class VerifierNode(ManagedNode):
     def publish(self, out: VerifierOutput, t0: float | None = None) -> None:
         """The verdicts in tick order, then /task_health when it changed."""
         for sv in out.verdicts:
-            self.verdict_pub.publish(verdict_msg(sv, self.thresholds, self.subtask))
+            self.verdict_pub.publish(verdict_msg(sv, self.subtask))
         if out.verdicts and t0 is not None:
             self.latency.add((time.perf_counter() - t0) * 1e3)
         if self.stream is not None and self.stream.health != self.published_health:

@@ -37,6 +37,8 @@ class Verdict:
     """Each signal over its threshold."""
     alarm: bool
     """Latched: the alarm has fired in this stream."""
+    thresholds: dict[str, float] = field(default_factory=dict)
+    """Each signal's threshold at this tick (its sub-task's, in the signal's own units)."""
     alarm_time: float | None = None
     onset: float | None = None
     failure_class: str = ""
@@ -132,7 +134,8 @@ class VerifierSession:
                 scores.append(min(v, SCORE_CAP))
             else:
                 raise ValueError(f"signal {s!r} is not in the verifier model")
-        normalised = np.asarray(scores) / d.threshold_of(name, elapsed)
+        thresholds = d.threshold_of(name, elapsed)
+        normalised = np.asarray(scores) / thresholds
         combined = float(np.nan_to_num(normalised.max(), posinf=1e6)) if len(scores) else 0.0
         self.history.append((g, i, elapsed, z))
         if len(self.history) > HISTORY_TICKS:
@@ -149,6 +152,7 @@ class VerifierSession:
             phase=name,
             score=combined,
             signals={s: float(v) for s, v in zip(d.signals, normalised, strict=True)},
+            thresholds={s: float(v) for s, v in zip(d.signals, thresholds, strict=True)},
             alarm=self.alarm_time is not None,
             alarm_time=self.alarm_time,
             onset=self.onset,
