@@ -85,17 +85,18 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     trials, labels = _load(args.data, args.labels)
     train, train_labels = _load(args.train, args.labels) if args.train else ([], {})
     folds = None if args.loo else args.folds
-    n_nominal = sum(not labels[t.name].failed for t in (train or trials))
+    n_nominal = sum(not (train_labels or labels)[t.name].failed for t in (train or trials))
     if n_nominal < 3:
         raise InputError("need at least 3 successful trials to train and calibrate on")
     runs = verify_runs(
         trials,
-        {**labels, **train_labels},
+        labels,
         config,
         folds,
         args.seed,
         train,
         progress=lambda s: print(s, file=sys.stderr),
+        train_labels=train_labels,
     )
     protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
     summary, records = summarise(runs, config, protocol)

@@ -28,6 +28,8 @@ from rcbht_introspection.verify.novelty import TimingModel
 from rcbht_introspection.verify.train import onset_for
 
 GATE_S = 1.0
+TRAIN_PREFIX = "train:"
+"""Key prefix of training trials in a transfer evaluation (names may repeat across sets)."""
 METHODS: dict[str, tuple[tuple[str, ...], str]] = {
     "verifier": (("wrench", "timing"), "envelope"),
     "raw_wrench": (("wrench_global",), "global_envelope"),
@@ -243,13 +245,20 @@ def verify_runs(
     seed: int = 0,
     train: Sequence[Trial] = (),
     progress: Callable[[str], None] | None = None,
+    train_labels: Mapping[str, TrialLabel] | None = None,
 ) -> dict[str, list[RunResult]]:
-    """Every test run of every method (see verify_eval)."""
-    feats = {t.name: trial_features(t, config) for t in [*trials, *train]}
+    """Every test run of every method (see verify_eval). Training trials of `train` are kept
+    apart from the test trials even when their names are the same (two simulated sets)."""
+    feats = {t.name: trial_features(t, config) for t in trials}
+    labels = dict(labels)
     names = [t.name for t in trials]
     splits: list[tuple[list[str], list[str]]]
     if train:
-        splits = [([t.name for t in train], names)]
+        keys = [TRAIN_PREFIX + t.name for t in train]
+        for key, t in zip(keys, train, strict=True):
+            feats[key] = trial_features(t, config)
+            labels[key] = (train_labels or labels)[t.name]
+        splits = [(keys, names)]
     elif folds is None:
         splits = [([m for m in names if m != n], [n]) for n in names]
     else:
@@ -314,10 +323,11 @@ def verify_eval(
     seed: int = 0,
     train: Sequence[Trial] = (),
     progress: Callable[[str], None] | None = None,
+    train_labels: Mapping[str, TrialLabel] | None = None,
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Score the verifier and its baselines; returns (summary, per-run records).
 
     folds None: leave one trial out. `train` given: fit on it, test on `trials` (transfer)."""
-    runs = verify_runs(trials, labels, config, folds, seed, train, progress)
+    runs = verify_runs(trials, labels, config, folds, seed, train, progress, train_labels)
     protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
     return summarise(runs, config, protocol)

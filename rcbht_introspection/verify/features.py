@@ -171,7 +171,11 @@ def trial_features(trial: Trial, config: VerifyConfig, end_phase: str = "done") 
     starts = np.array([t - float(trial.time[0]) for t, _ in events])
     names = tuple(n for _, n in events)
     idx = np.searchsorted(starts, times, side="right") - 1
-    elapsed = np.where(idx >= 0, times - starts[np.clip(idx, 0, None)], 0.0)
+    elapsed = (
+        np.where(idx >= 0, times - starts[np.clip(idx, 0, None)], 0.0)
+        if len(starts)
+        else np.zeros(len(times))
+    )
     return TrialFeatures(
         trial=trial.name,
         phases=names,
