@@ -118,6 +118,8 @@ class TimingModel:
     def fit(cls, trials: Sequence[TrialFeatures], config: VerifyConfig) -> TimingModel:
         durations: dict[str, list[float]] = {}
         for tf in trials:
+            if not tf.phases:
+                continue
             ends = [*tf.starts[1:], tf.end]
             for name, s, e in zip(tf.phases, tf.starts, ends, strict=True):
                 durations.setdefault(name, []).append(float(e - s))

@@ -20,6 +20,8 @@ MAIN_SIGNALS = ("wrench", "timing")
 def fallback_onset(tf: TrialFeatures, timing: TimingModel) -> float:
     """Start of the first failing sub-task: the first whose duration lies outside the nominal
     range (the last running one when none does)."""
+    if not tf.phases:
+        return 0.0  # no sub-task events: from the start
     ends = [*tf.starts[1:], tf.end]
     for name, s, e in zip(tf.phases, tf.starts, ends, strict=True):
         if timing.ended(name, float(e - s)) > 0:
