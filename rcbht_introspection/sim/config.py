@@ -3,11 +3,13 @@ controller gain, variation range and failure offset lives here, none in the code
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
 from rcbht_introspection.config_files import config_path, load_config
+from rcbht_introspection.errors import InputError
 
 Range = tuple[float, float]
 FailureFamily = Literal["misalignment", "jamming", "missed_snap", "deviation"]
@@ -221,9 +223,58 @@ class SimConfig:
     sensor: SensorConfig = field(default_factory=SensorConfig)
 
 
+DEVIATION = "deviation"
+DEVIATION_AXES: tuple[str, ...] = ("x", "y", "r")
+"""Deviation axes in the order a class names them: x, y (m) and r (yaw, rad)."""
+_DIRS = re.compile(r"(x[+-])?(y[+-])?(r[+-])?")
+
+
+def deviation_signs(dirs: str) -> dict[str, int]:
+    """Axis -> sign (+1/-1) of a deviation class such as `x+y-` (axes in order x, y, r)."""
+    match = _DIRS.fullmatch(dirs)
+    if not dirs or match is None:
+        raise InputError(
+            f"bad deviation class {dirs!r}: signed axes in the order x, y, r, e.g. x+, y-r+",
+            field="deviation_classes",
+        )
+    return {part[0]: 1 if part[1] == "+" else -1 for part in match.groups() if part}
+
+
+def deviation_dirs(failure: FailureType) -> str | None:
+    """The directions of a deviation class name (`deviation_x+` -> `x+`), else None."""
+    prefix = f"{DEVIATION}_"
+    return failure[len(prefix) :] if failure.startswith(prefix) else None
+
+
+def failure_classes(failures: FailureConfig) -> tuple[FailureType, ...]:
+    """Every failure class of the config, in cycle order: the families, `deviation` expanded
+    into one class per configured direction set."""
+    out: list[FailureType] = []
+    for family in failures.types:
+        if family == DEVIATION:
+            out.extend(f"{DEVIATION}_{dirs}" for dirs in failures.deviation_classes)
+        else:
+            out.append(family)
+    return tuple(out)
+
+
+def check_failures(config: SimConfig) -> None:
+    """Validation of the failure section: well-formed, distinct deviation classes."""
+    classes = config.failures.deviation_classes
+    for i, dirs in enumerate(classes):
+        try:
+            deviation_signs(dirs)
+        except InputError as exc:
+            raise InputError(exc.message, field=f"failures.deviation_classes[{i}]") from None
+        if dirs in classes[:i]:
+            raise InputError(
+                f"deviation class {dirs!r} listed twice", field=f"failures.deviation_classes[{i}]"
+            )
+    if DEVIATION in config.failures.types and not classes:
+        raise InputError("deviation needs at least one class", field="failures.deviation_classes")
+
+
 def load_sim_config(path: Path | str | None = None) -> SimConfig:
     """Load config/sim.yaml (or `path`); unknown keys and wrong types give one-line errors."""
-    from rcbht_introspection.sim.failures import check_failures  # it imports this module
-
     path = path if path is not None else config_path("sim.yaml")
     return load_config(SimConfig, path, check=check_failures)
