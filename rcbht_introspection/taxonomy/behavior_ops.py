@@ -23,6 +23,12 @@ class ComposeBehaviors(BufferedOp):
         self.config = config
         self.rows: list[Row] = []
         self.flag = False
+        self.cutoff = -math.inf
+
+    def expire(self, cutoff: float) -> list[Row]:
+        """An MC past the cutoff is composed with the look-ahead there is (as at the end)."""
+        self.cutoff = cutoff
+        return self._step(False) if self.rows and self.rows[0][mc.T2E] < cutoff else []
 
     def _step(self, ended: bool) -> list[Row]:
         """Emit LLBs while the lookahead the current MC needs (1 or 2 more) is there."""
@@ -32,7 +38,7 @@ class ComposeBehaviors(BufferedOp):
             m = self.rows[0]
             lbl = m[mc.LBL]
             need = 3 if lbl == mc.A else 2
-            if not ended and len(self.rows) < need:
+            if not ended and len(self.rows) < need and not m[mc.T2E] < self.cutoff:
                 break
             if lbl in (mc.K, mc.I, mc.D, mc.A) and m[mc.T2E] - m[mc.T1S] >= thresh:
                 self.flag = True
@@ -52,6 +58,12 @@ class BehaviorDurations(BufferedOp):
         self.rows: list[Row] = []  # rows from the next decision position
         self.skip = 0  # rows to pass through before the next decision (the jump of 3)
         self.stopped = False
+
+    def expire(self, cutoff: float) -> list[Row]:
+        """A row past the cutoff still waiting for its look-ahead ends the pass (as at the end)."""
+        if self.stopped or not self.rows or not self.rows[0][bh.B_T2E] < cutoff:
+            return []
+        return self._step(True)
 
     def _step(self, ended: bool) -> list[Row]:
         """Decide pairs from the front until one needs more rows or the pass stops."""
@@ -125,6 +137,11 @@ class RepeatedBehaviors(Op):
     def __init__(self) -> None:
         self.blocks: list[Row | None] = []  # blocks[k]: a merged block of 2**k rows
         self.label: int | None = None
+        self.last_end = -math.inf  # end of the run's last row
+
+    def expire(self, cutoff: float) -> list[Row]:
+        """The run ends here once its last row is past the cutoff."""
+        return self._flush() if self.label is not None and self.last_end < cutoff else []
 
     def _flush(self) -> list[Row]:
         """Fold the run's blocks right to left into one row and release it."""
@@ -142,6 +159,7 @@ class RepeatedBehaviors(Op):
         if self.label is not None and row[bh.B_LBL] != self.label:
             out = self._flush()
         self.label = row[bh.B_LBL]
+        self.last_end = row[bh.B_T2E]
         carry, k = row, 0
         while k < len(self.blocks) and (block := self.blocks[k]) is not None:
             carry = bh.merge_behaviors(block, carry, None)
@@ -224,18 +242,23 @@ def refinement_cycle(config: TaxonomyConfig) -> list[Op]:
         PairPass(
             behavior_pairs(_push_pull(*config.push_pull_similarity), bh.AL),
             can_start=label_in(bh.PS, bh.PL, field=first),
+            end=bh.B_T2E,
         ),
         PairPass(
-            behavior_pairs(_align_shift, bh.AL), can_start=label_in(bh.SH, bh.AL, field=first)
+            behavior_pairs(_align_shift, bh.AL),
+            can_start=label_in(bh.SH, bh.AL, field=first),
+            end=bh.B_T2E,
         ),
         RepeatedBehaviors(),
         PairPass(
             behavior_pairs(_align_push(*config.align_push_similarity), bh.AL),
             can_start=label_in(bh.AL, bh.SH, field=first),
+            end=bh.B_T2E,
         ),
         PairPass(
             behavior_pairs(_fixed(*config.fixed_similarity), bh.FX),
             can_start=label_in(bh.FX, *_MOVES, field=first),
+            end=bh.B_T2E,
         ),
     ]
 

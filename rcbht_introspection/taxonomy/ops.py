@@ -11,6 +11,10 @@ the sub-task start times (rotation start s2 -> startIndex; mating start -> the '
 limit), the time of the latest sample (a boundary is never marked later than the samples it
 precedes, so unknown boundaries lie in the future) and, per MC cycle, the largest amplitude of
 step 3 (final once that pass stops).
+
+Bounded finality (the `live` profile, `StreamContext.bound`): a Chain asks each operator to
+`expire(cutoff)` before and after every row it pushes and on every poll; an operator then releases
+the rows it holds whose end is before `cutoff` = now - bound, decided as if no later row came.
 """
 
 from __future__ import annotations
@@ -42,6 +46,13 @@ class StreamContext:
     _limit: float | None = None
     waiting: set = field(default_factory=set)
     """Operators waiting for time to pass (the 'a'-chain limit); poll them as samples arrive."""
+    bound: float | None = None
+    """Finality bound in seconds (live profile): a held row whose end is before now - bound is
+    released as final. None = rows wait for whatever look-ahead their pass needs."""
+
+    def cutoff(self) -> float:
+        """Rows ending before this time may no longer be held (-inf when unbounded)."""
+        return -math.inf if self.bound is None else self.now - self.bound
 
     @property
     def s2(self) -> float | None:
@@ -77,6 +88,11 @@ class Op:
         """Rows that became final without new input (e.g. when time advanced)."""
         return []
 
+    def expire(self, cutoff: float) -> list[Row]:
+        """Release the held rows whose end is before `cutoff`, decided as if no later row came
+        (bounded finality); unbounded operators and ones that hold nothing return []."""
+        return []
+
 
 class BufferedOp(Op):
     """A pass that buffers rows and decides in `_step(ended)` how many it can release."""
@@ -99,9 +115,20 @@ class BufferedOp(Op):
 
 
 class HoldsOneRow(Op):
-    """An operator that holds at most one row back (`pending`); the end releases it."""
+    """An operator that holds at most one row back (`pending`); the end releases it.
+
+    `end` is the index of a row's end time: past the cutoff the pending row goes out undecided.
+    """
 
     pending: Row | None = None
+    end: int | None = None
+
+    def expire(self, cutoff: float) -> list[Row]:
+        row = self.pending
+        if row is None or self.end is None or not row[self.end] < cutoff:
+            return []
+        self.pending = None
+        return [row]
 
     def finish(self) -> list[Row]:
         out = [self.pending] if self.pending is not None else []
@@ -117,7 +144,8 @@ class PairPass(HoldsOneRow):
 
     `decide(a, b)` returns the merged row or None. Rows before `start(pos)` pass through, and so
     does a row that `can_start` says can never be the first of a merging pair (it waits for no
-    one: the previous pair was already decided without it).
+    one: the previous pair was already decided without it). `end` (the index of a row's end
+    time) lets a bounded chain release the pending row unpaired once it is past the cutoff.
     """
 
     def __init__(
@@ -125,10 +153,12 @@ class PairPass(HoldsOneRow):
         decide: Callable[[Row, Row], Row | None],
         start: Callable[[int], bool] | None = None,
         can_start: Callable[[Row], bool] | None = None,
+        end: int | None = None,
     ) -> None:
         self.decide = decide
         self.before_start = start
         self.can_start = can_start
+        self.end = end
         self.pending: Row | None = None
         self.pos = 0  # position of the next input row
 
@@ -153,13 +183,34 @@ class PairPass(HoldsOneRow):
 
 
 class Chain(Op):
-    """Operators in sequence; rows leaving one enter the next."""
+    """Operators in sequence; rows leaving one enter the next.
 
-    def __init__(self, ops: list[Op]) -> None:
+    With a bounded context (`ctx.bound`), every operator expires its held rows past the cutoff
+    before and after each row it takes and on every poll, so no row is held past the bound.
+    """
+
+    def __init__(self, ops: list[Op], ctx: StreamContext | None = None) -> None:
         self.ops = ops
+        self.ctx = ctx if ctx is not None and ctx.bound is not None else None
+
+    def _bounded_push(self, op: Op, rows: list[Row], cutoff: float) -> list[Row]:
+        """Push `rows` into one operator, expiring its held rows around each of them."""
+        out: list[Row] = []
+        for r in rows:
+            out.extend(op.expire(cutoff))
+            out.extend(op.push(r))
+            out.extend(op.expire(cutoff))
+        return out
 
     def _through(self, rows: list[Row], start: int) -> list[Row]:
         """Push `rows` through the operators from index `start` on."""
+        if self.ctx is not None:
+            cutoff = self.ctx.cutoff()
+            for op in self.ops[start:]:
+                rows = self._bounded_push(op, rows, cutoff)
+                if not rows:
+                    break
+            return rows
         for op in self.ops[start:]:
             nxt: list[Row] = []
             for r in rows:
@@ -174,8 +225,11 @@ class Chain(Op):
 
     def poll(self) -> list[Row]:
         out: list[Row] = []
+        cutoff = self.ctx.cutoff() if self.ctx is not None else -math.inf
         for k, op in enumerate(self.ops):
             rows = op.poll()
+            if self.ctx is not None:
+                rows += op.expire(cutoff)
             if rows:
                 out.extend(self._through(rows, k + 1))
         return out
@@ -193,6 +247,8 @@ class Chain(Op):
 
     def push_rows(self, rows: list[Row]) -> list[Row]:
         """Several final rows at once, operator after operator (same rows as pushing each)."""
+        if self.ctx is not None:
+            return self._through(rows, 0)
         for op in self.ops:
             if not rows:
                 break

@@ -29,8 +29,8 @@ class AxisPipeline:
         llb_ops: list[Op] = [ComposeBehaviors(cfg)]
         for _ in range(cfg.behavior_refinement_cycles):
             llb_ops.extend(refinement_cycle(cfg))
-        self.compositions = Chain(prim_ops + mc_ops)
-        self.behaviors = Chain(llb_ops)
+        self.compositions = Chain(prim_ops + mc_ops, ctx)
+        self.behaviors = Chain(llb_ops, ctx)
         self.held_last: Row | None = None  # final_segment=False drops the wrap-up segment
 
     def _flow(self, mcs: list[Row]) -> tuple[list[Row], list[Row]]:

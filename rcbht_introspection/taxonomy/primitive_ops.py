@@ -62,6 +62,12 @@ class RepeatedPrimitives(Op):
     def finish(self) -> list[Row]:
         return self._flush()
 
+    def expire(self, cutoff: float) -> list[Row]:
+        """The run ends here once its last row is past the cutoff."""
+        if self.last is not None and self.last[pr.FINISH] < cutoff:
+            return self._flush()
+        return []
+
     def retained(self) -> int:
         return 1 if self.first is not None else 0
 
@@ -71,6 +77,7 @@ def primitive_durations_pass(config: TaxonomyConfig) -> PairPass:
     return PairPass(
         lambda a, b: pr.duration_pair(a, b, config),
         can_start=lambda row: row[pr.LABEL] not in (pr.PIMP, pr.NIMP),
+        end=pr.FINISH,
     )
 
 
