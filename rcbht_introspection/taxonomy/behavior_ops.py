@@ -23,12 +23,9 @@ class ComposeBehaviors(BufferedOp):
         self.config = config
         self.rows: list[Row] = []
         self.flag = False
-        self.cutoff = -math.inf
 
-    def expire(self, cutoff: float) -> list[Row]:
-        """An MC past the cutoff is composed with the look-ahead there is (as at the end)."""
-        self.cutoff = cutoff
-        return self._step(False) if self.rows and self.rows[0][mc.T2E] < cutoff else []
+    def oldest_end(self) -> float:
+        return self.rows[0][mc.T2E] if self.rows else math.inf
 
     def _step(self, ended: bool) -> list[Row]:
         """Emit LLBs while the lookahead the current MC needs (1 or 2 more) is there."""
@@ -38,7 +35,7 @@ class ComposeBehaviors(BufferedOp):
             m = self.rows[0]
             lbl = m[mc.LBL]
             need = 3 if lbl == mc.A else 2
-            if not ended and len(self.rows) < need and not m[mc.T2E] < self.cutoff:
+            if not ended and len(self.rows) < need:
                 break
             if lbl in (mc.K, mc.I, mc.D, mc.A) and m[mc.T2E] - m[mc.T1S] >= thresh:
                 self.flag = True
@@ -59,11 +56,8 @@ class BehaviorDurations(BufferedOp):
         self.skip = 0  # rows to pass through before the next decision (the jump of 3)
         self.stopped = False
 
-    def expire(self, cutoff: float) -> list[Row]:
-        """A row past the cutoff still waiting for its look-ahead ends the pass (as at the end)."""
-        if self.stopped or not self.rows or not self.rows[0][bh.B_T2E] < cutoff:
-            return []
-        return self._step(True)
+    def oldest_end(self) -> float:
+        return self.rows[0][bh.B_T2E] if self.rows else math.inf
 
     def _step(self, ended: bool) -> list[Row]:
         """Decide pairs from the front until one needs more rows or the pass stops."""
@@ -137,11 +131,10 @@ class RepeatedBehaviors(Op):
     def __init__(self) -> None:
         self.blocks: list[Row | None] = []  # blocks[k]: a merged block of 2**k rows
         self.label: int | None = None
-        self.last_end = -math.inf  # end of the run's last row
+        self.last_end = math.inf  # end of the run's last row (inf: no run)
 
-    def expire(self, cutoff: float) -> list[Row]:
-        """The run ends here once its last row is past the cutoff."""
-        return self._flush() if self.label is not None and self.last_end < cutoff else []
+    def oldest_end(self) -> float:
+        return self.last_end
 
     def _flush(self) -> list[Row]:
         """Fold the run's blocks right to left into one row and release it."""
@@ -152,6 +145,7 @@ class RepeatedBehaviors(Op):
             carry = block if carry is None else bh.merge_behaviors(block, carry, None)
         self.blocks = []
         self.label = None
+        self.last_end = math.inf
         return [carry] if carry is not None else []
 
     def push(self, row: Row) -> list[Row]:

@@ -27,19 +27,13 @@ from rcbht_introspection.taxonomy.ops import (
 
 
 class Compose(HoldsOneRow):
-    """The MC layer: P1 with the next primitive (the last one pairs with itself, and so does
-    one past the finality cutoff)."""
+    """The MC layer: P1 with the next primitive (the last one pairs with itself)."""
 
     end = pr.FINISH
 
     def __init__(self, config: TaxonomyConfig) -> None:
         self.config = config
         self.pending: Row | None = None
-
-    def expire(self, cutoff: float) -> list[Row]:
-        if self.pending is not None and self.pending[pr.FINISH] < cutoff:
-            return self.finish()
-        return []
 
     def push(self, row: Row) -> list[Row]:
         if self.pending is None:
@@ -200,22 +194,8 @@ class AdjustmentChains(Op):
                 out.append(row)
         return out
 
-    def expire(self, cutoff: float) -> list[Row]:
-        """Bounded finality: once the oldest held row is past the cutoff, a chain in progress
-        ends here (merged as if the next MC broke it), the pending decision is not taken, and
-        the rows up to it are released; the pass goes on from the next row with a fresh chain."""
-        if self.ended or not (self.cycle.start_known and self.cycle.start is not None):
-            return []
-        out: list[Row] = []
-        while True:
-            oldest = next((r for r in self.rows if r is not None), None)
-            if oldest is None or not oldest[mc.T2E] < cutoff or self.next_i >= self._available():
-                return out
-            if self.ctr > 0:
-                self._merge(self.next_i - self.ctr, self.ctr)
-            self.repeat, self.ctr = False, 0
-            self.next_i += 1
-            out.extend(self._run())
+    def oldest_end(self) -> float:
+        return next((r[mc.T2E] for r in self.rows if r is not None), math.inf)
 
     def finish(self) -> list[Row]:
         self.ended = True
@@ -272,11 +252,8 @@ class RepeatedCompositions(Op):
     def finish(self) -> list[Row]:
         return self._flush()
 
-    def expire(self, cutoff: float) -> list[Row]:
-        """The run ends here once its last row is past the cutoff."""
-        if self.last is not None and self.last[mc.T2E] < cutoff:
-            return self._flush()
-        return []
+    def oldest_end(self) -> float:
+        return math.inf if self.last is None else self.last[mc.T2E]
 
     def retained(self) -> int:
         return 1 if self.first is not None else 0
@@ -433,12 +410,8 @@ class ContactAmplitudes(Op):
     def poll(self) -> list[Row]:
         return self._drain()
 
-    def expire(self, cutoff: float) -> list[Row]:
-        """Rows past the cutoff are decided with the largest amplitude known now."""
-        out: list[Row] = []
-        while self.held and self.held[0][mc.T2E] < cutoff:
-            out.append(self.held.pop(0))  # above the current limit: stays a contact
-        return out + self._drain()
+    def oldest_end(self) -> float:
+        return self.held[0][mc.T2E] if self.held else math.inf
 
     def finish(self) -> list[Row]:
         self.cycle.max_amp_final = True

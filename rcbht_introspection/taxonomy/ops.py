@@ -11,10 +11,6 @@ the sub-task start times (rotation start s2 -> startIndex; mating start -> the '
 limit), the time of the latest sample (a boundary is never marked later than the samples it
 precedes, so unknown boundaries lie in the future) and, per MC cycle, the largest amplitude of
 step 3 (final once that pass stops).
-
-Bounded finality (the `live` profile, `StreamContext.bound`): a Chain asks each operator to
-`expire(cutoff)` before and after every row it pushes and on every poll; an operator then releases
-the rows it holds whose end is before `cutoff` = now - bound, decided as if no later row came.
 """
 
 from __future__ import annotations
@@ -47,8 +43,8 @@ class StreamContext:
     waiting: set = field(default_factory=set)
     """Operators waiting for time to pass (the 'a'-chain limit); poll them as samples arrive."""
     bound: float | None = None
-    """Finality bound in seconds (live profile): a held row whose end is before now - bound is
-    released as final. None = rows wait for whatever look-ahead their pass needs."""
+    """Finality bound in seconds (live profile, pipeline.AxisPipeline): a chain holding a row
+    whose end is before now - bound ends its sequence there. None = unbounded look-ahead."""
 
     def cutoff(self) -> float:
         """Rows ending before this time may no longer be held (-inf when unbounded)."""
@@ -88,10 +84,9 @@ class Op:
         """Rows that became final without new input (e.g. when time advanced)."""
         return []
 
-    def expire(self, cutoff: float) -> list[Row]:
-        """Release the held rows whose end is before `cutoff`, decided as if no later row came
-        (bounded finality); unbounded operators and ones that hold nothing return []."""
-        return []
+    def oldest_end(self) -> float:
+        """End time of the oldest row held back (inf when none), for the finality bound."""
+        return math.inf
 
 
 class BufferedOp(Op):
@@ -116,19 +111,14 @@ class BufferedOp(Op):
 
 class HoldsOneRow(Op):
     """An operator that holds at most one row back (`pending`); the end releases it.
-
-    `end` is the index of a row's end time: past the cutoff the pending row goes out undecided.
-    """
+    `end` is the index of a row's end time (for oldest_end)."""
 
     pending: Row | None = None
     end: int | None = None
 
-    def expire(self, cutoff: float) -> list[Row]:
+    def oldest_end(self) -> float:
         row = self.pending
-        if row is None or self.end is None or not row[self.end] < cutoff:
-            return []
-        self.pending = None
-        return [row]
+        return math.inf if row is None or self.end is None else row[self.end]
 
     def finish(self) -> list[Row]:
         out = [self.pending] if self.pending is not None else []
@@ -144,8 +134,7 @@ class PairPass(HoldsOneRow):
 
     `decide(a, b)` returns the merged row or None. Rows before `start(pos)` pass through, and so
     does a row that `can_start` says can never be the first of a merging pair (it waits for no
-    one: the previous pair was already decided without it). `end` (the index of a row's end
-    time) lets a bounded chain release the pending row unpaired once it is past the cutoff.
+    one: the previous pair was already decided without it). `end`: the index of a row's end time.
     """
 
     def __init__(
@@ -183,34 +172,13 @@ class PairPass(HoldsOneRow):
 
 
 class Chain(Op):
-    """Operators in sequence; rows leaving one enter the next.
+    """Operators in sequence; rows leaving one enter the next."""
 
-    With a bounded context (`ctx.bound`), every operator expires its held rows past the cutoff
-    before and after each row it takes and on every poll, so no row is held past the bound.
-    """
-
-    def __init__(self, ops: list[Op], ctx: StreamContext | None = None) -> None:
+    def __init__(self, ops: list[Op]) -> None:
         self.ops = ops
-        self.ctx = ctx if ctx is not None and ctx.bound is not None else None
-
-    def _bounded_push(self, op: Op, rows: list[Row], cutoff: float) -> list[Row]:
-        """Push `rows` into one operator, expiring its held rows around each of them."""
-        out: list[Row] = []
-        for r in rows:
-            out.extend(op.expire(cutoff))
-            out.extend(op.push(r))
-            out.extend(op.expire(cutoff))
-        return out
 
     def _through(self, rows: list[Row], start: int) -> list[Row]:
         """Push `rows` through the operators from index `start` on."""
-        if self.ctx is not None:
-            cutoff = self.ctx.cutoff()
-            for op in self.ops[start:]:
-                rows = self._bounded_push(op, rows, cutoff)
-                if not rows:
-                    break
-            return rows
         for op in self.ops[start:]:
             nxt: list[Row] = []
             for r in rows:
@@ -225,11 +193,8 @@ class Chain(Op):
 
     def poll(self) -> list[Row]:
         out: list[Row] = []
-        cutoff = self.ctx.cutoff() if self.ctx is not None else -math.inf
         for k, op in enumerate(self.ops):
             rows = op.poll()
-            if self.ctx is not None:
-                rows += op.expire(cutoff)
             if rows:
                 out.extend(self._through(rows, k + 1))
         return out
@@ -245,10 +210,11 @@ class Chain(Op):
     def retained(self) -> int:
         return sum(op.retained() for op in self.ops)
 
+    def oldest_end(self) -> float:
+        return min(op.oldest_end() for op in self.ops)
+
     def push_rows(self, rows: list[Row]) -> list[Row]:
         """Several final rows at once, operator after operator (same rows as pushing each)."""
-        if self.ctx is not None:
-            return self._through(rows, 0)
         for op in self.ops:
             if not rows:
                 break

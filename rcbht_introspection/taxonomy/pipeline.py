@@ -18,20 +18,48 @@ class AxisPipeline:
     """Labelled primitives of one axis in; final MC and LLB rows out, in order."""
 
     def __init__(self, ctx: StreamContext) -> None:
-        cfg = ctx.config
         self.ctx = ctx
+        self.compositions = self._composition_chain()
+        self.behaviors = self._behavior_chain(False)
+        self.held_last: Row | None = None  # final_segment=False drops the wrap-up segment
+
+    def _composition_chain(self) -> Chain:
+        """The primitive clean-up, the MC scan and its filter cycles."""
+        cfg = self.ctx.config
         prim_ops: list[Op] = []
         if cfg.primitive_cleanup:
             prim_ops = [RepeatedPrimitives(), primitive_durations_pass(cfg)]
         mc_ops: list[Op] = [Compose(cfg)]
         for _ in range(cfg.composition_cleanup_cycles):
-            mc_ops.extend(composition_cycle(ctx))
-        llb_ops: list[Op] = [ComposeBehaviors(cfg)]
+            mc_ops.extend(composition_cycle(self.ctx))
+        return Chain(prim_ops + mc_ops)
+
+    def _behavior_chain(self, flag: bool) -> Chain:
+        """The LLB scan (its time flag carried over: set once per trial) and refinement cycles."""
+        cfg = self.ctx.config
+        self.llb_scan = ComposeBehaviors(cfg)
+        self.llb_scan.flag = flag
+        llb_ops: list[Op] = [self.llb_scan]
         for _ in range(cfg.behavior_refinement_cycles):
             llb_ops.extend(refinement_cycle(cfg))
-        self.compositions = Chain(prim_ops + mc_ops, ctx)
-        self.behaviors = Chain(llb_ops, ctx)
-        self.held_last: Row | None = None  # final_segment=False drops the wrap-up segment
+        return Chain(llb_ops)
+
+    def _cut(self, mcs: list[Row], llbs: list[Row]) -> tuple[list[Row], list[Row]]:
+        """Bounded finality: a chain holding a row that ended before now - bound ends its
+        sequence there (every held row decided as at the end of a trial) and starts afresh."""
+        if self.ctx.bound is None:
+            return mcs, llbs
+        cutoff = self.ctx.cutoff()
+        if self.compositions.oldest_end() < cutoff:
+            more = self.compositions.finish()
+            self.compositions = self._composition_chain()
+            mcs = mcs + more
+            for m in more:
+                llbs = llbs + self.behaviors.push(list(m))
+        if self.behaviors.oldest_end() < cutoff:
+            llbs = llbs + self.behaviors.finish()
+            self.behaviors = self._behavior_chain(self.llb_scan.flag)
+        return mcs, llbs
 
     def _flow(self, mcs: list[Row]) -> tuple[list[Row], list[Row]]:
         """Feed final MCs to the LLB chain; return them with the LLBs that became final."""
@@ -46,8 +74,8 @@ class AxisPipeline:
             held, self.held_last = self.held_last, prim
             if held is None:
                 return [], []
-            return self._flow(self.compositions.push(held))
-        return self._flow(self.compositions.push(prim))
+            return self._cut(*self._flow(self.compositions.push(held)))
+        return self._cut(*self._flow(self.compositions.push(prim)))
 
     def push_rows(self, prims: list[Row]) -> tuple[list[Row], list[Row]]:
         """Several final labelled primitives in (e.g. from push_many); final MCs and LLBs out."""
@@ -57,13 +85,13 @@ class AxisPipeline:
             prims = [self.held_last, *prims] if self.held_last is not None else list(prims)
             self.held_last = prims.pop()
         mcs = self.compositions.push_rows(prims)
-        return mcs, self.behaviors.push_rows([list(m) for m in mcs])
+        return self._cut(mcs, self.behaviors.push_rows([list(m) for m in mcs]))
 
     def poll(self) -> tuple[list[Row], list[Row]]:
         """Rows released because time advanced or a boundary was marked."""
         mcs, llbs = self._flow(self.compositions.poll())
         llbs += self.behaviors.poll()
-        return mcs, llbs
+        return self._cut(mcs, llbs)
 
     def finish(self) -> tuple[list[Row], list[Row]]:
         """The end of the axis: every held MC and LLB."""

@@ -62,11 +62,8 @@ class RepeatedPrimitives(Op):
     def finish(self) -> list[Row]:
         return self._flush()
 
-    def expire(self, cutoff: float) -> list[Row]:
-        """The run ends here once its last row is past the cutoff."""
-        if self.last is not None and self.last[pr.FINISH] < cutoff:
-            return self._flush()
-        return []
+    def oldest_end(self) -> float:
+        return math.inf if self.last is None else self.last[pr.FINISH]
 
     def retained(self) -> int:
         return 1 if self.first is not None else 0
