@@ -8,13 +8,14 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, get_args
 
 from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_from_args
 from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy, warn
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
+from rcbht_introspection.taxonomy import StreamProfile
 
 PROTOCOLS = ("curve", "prequential")
 
@@ -156,6 +157,13 @@ def _common(parser: argparse.ArgumentParser) -> None:
         help="Mondrian memory budget: stored training points (default unbounded)",
     )
     add_taxonomy_options(parser)
+    parser.add_argument(
+        "--stream-profile",
+        choices=get_args(StreamProfile),
+        default="reference",
+        help="engine words as this stream profile emits them (config/stream.yaml; live: every "
+        "word final within its finality bound); not reference: golden files are not used",
+    )
     add_repeated_stamps(parser)
 
 
@@ -183,9 +191,11 @@ def load_checked(
     config/segmenter.yaml's intake section)."""
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.live.intake import load_intake_config
+    from rcbht_introspection.taxonomy.stream import load_stream_config
 
     policy = repeated_policy(args)
-    trials = load_trials(args.inputs, args.words, taxonomy, policy, load_intake_config())
+    stream = load_stream_config(args.stream_profile)
+    trials = load_trials(args.inputs, args.words, taxonomy, policy, load_intake_config(), stream)
     for trial in trials:
         warn(command, trial.trial, trial.findings)
     return trials
@@ -272,6 +282,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     )
     result["datasets"] = [str(p) for p in args.inputs]
     result["words"] = args.words
+    result["stream_profile"] = args.stream_profile
     if args.classifier == "mondrian":
         result["forest_budget"] = budget
     result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"

@@ -78,7 +78,9 @@ def _check(config: StreamConfig) -> None:
     """The bound belongs to the live profile, and the live profile needs one."""
     bound = config.finality_bound_s
     if config.profile == "live" and not (bound is not None and bound > 0):
-        raise InputError(f"the live profile needs a bound > 0, got {bound}", field="finality_bound_s")
+        raise InputError(
+            f"the live profile needs a bound > 0, got {bound}", field="finality_bound_s"
+        )
     if config.profile != "live" and bound is not None:
         raise InputError(
             f"applies to the live profile only, not {config.profile!r}", field="finality_bound_s"
@@ -165,7 +167,9 @@ class ArmStream:
         self.stream_config = stream_config or StreamConfig()
         self.arm = arm
         self.causal = self.stream_config.profile in ("causal", "live")
-        bound = self.stream_config.finality_bound_s if self.stream_config.profile == "live" else None
+        bound = (
+            self.stream_config.finality_bound_s if self.stream_config.profile == "live" else None
+        )
         self.ctx = StreamContext(self.config, causal=self.causal, bound=bound)
         self.counters = IntakeCounters()
         self.segmenter = Segmenter(self.config)
