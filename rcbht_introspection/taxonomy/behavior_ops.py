@@ -27,6 +27,10 @@ class ComposeBehaviors(BufferedOp):
     def oldest_end(self) -> float:
         return self.rows[0][mc.T2E] if self.rows else math.inf
 
+    def resume(self, previous: Op) -> None:
+        assert isinstance(previous, ComposeBehaviors)
+        self.flag = previous.flag  # set once per trial, never reset
+
     def _step(self, ended: bool) -> list[Row]:
         """Emit LLBs while the lookahead the current MC needs (1 or 2 more) is there."""
         out: list[Row] = []
@@ -58,6 +62,10 @@ class BehaviorDurations(BufferedOp):
 
     def oldest_end(self) -> float:
         return self.rows[0][bh.B_T2E] if self.rows else math.inf
+
+    def resume(self, previous: Op) -> None:
+        assert isinstance(previous, BehaviorDurations)
+        self.stopped = previous.stopped
 
     def _step(self, ended: bool) -> list[Row]:
         """Decide pairs from the front until one needs more rows or the pass stops."""

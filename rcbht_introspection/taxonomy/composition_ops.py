@@ -298,6 +298,12 @@ class PrimitiveDurations(HoldsOneRow):
         if r[mc.AMP] > self.cycle.max_amp:
             self.cycle.max_amp = r[mc.AMP]
 
+    def resume(self, previous: Op) -> None:
+        assert isinstance(previous, PrimitiveDurations)
+        self.stopped = previous.stopped
+        self.cycle.max_amp = previous.cycle.max_amp
+        self.cycle.max_amp_final = previous.cycle.max_amp_final and previous.stopped
+
     def push(self, row: Row) -> list[Row]:
         pos = self.pos
         self.pos += 1
@@ -329,6 +335,10 @@ class CompositionDurations(HoldsOneRow):
         self.pending: Row | None = None
         self.pos = 0
         self.stopped = False
+
+    def resume(self, previous: Op) -> None:
+        assert isinstance(previous, CompositionDurations)
+        self.stopped = previous.stopped
 
     def _advance(self, row: Row, out: list[Row]) -> list[Row]:
         """`row` is the next to be examined: contacts are skipped, so they need not wait."""

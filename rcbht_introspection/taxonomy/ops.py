@@ -88,6 +88,10 @@ class Op:
         """End time of the oldest row held back (inf when none), for the finality bound."""
         return math.inf
 
+    def resume(self, previous: Op) -> None:
+        """Take over the trial-long state of `previous`, the same pass before a finality cut
+        (e.g. a pass that stopped for good stays stopped); most passes have none."""
+
 
 class BufferedOp(Op):
     """A pass that buffers rows and decides in `_step(ended)` how many it can release."""
@@ -212,6 +216,11 @@ class Chain(Op):
 
     def oldest_end(self) -> float:
         return min(op.oldest_end() for op in self.ops)
+
+    def resume(self, previous: Op) -> None:
+        assert isinstance(previous, Chain) and len(previous.ops) == len(self.ops)
+        for op, old in zip(self.ops, previous.ops, strict=True):
+            op.resume(old)
 
     def push_rows(self, rows: list[Row]) -> list[Row]:
         """Several final rows at once, operator after operator (same rows as pushing each)."""

@@ -20,7 +20,7 @@ class AxisPipeline:
     def __init__(self, ctx: StreamContext) -> None:
         self.ctx = ctx
         self.compositions = self._composition_chain()
-        self.behaviors = self._behavior_chain(False)
+        self.behaviors = self._behavior_chain()
         self.held_last: Row | None = None  # final_segment=False drops the wrap-up segment
 
     def _composition_chain(self) -> Chain:
@@ -34,31 +34,34 @@ class AxisPipeline:
             mc_ops.extend(composition_cycle(self.ctx))
         return Chain(prim_ops + mc_ops)
 
-    def _behavior_chain(self, flag: bool) -> Chain:
-        """The LLB scan (its time flag carried over: set once per trial) and refinement cycles."""
+    def _behavior_chain(self) -> Chain:
+        """The LLB scan and the refinement cycles."""
         cfg = self.ctx.config
-        self.llb_scan = ComposeBehaviors(cfg)
-        self.llb_scan.flag = flag
-        llb_ops: list[Op] = [self.llb_scan]
+        llb_ops: list[Op] = [ComposeBehaviors(cfg)]
         for _ in range(cfg.behavior_refinement_cycles):
             llb_ops.extend(refinement_cycle(cfg))
         return Chain(llb_ops)
 
     def _cut(self, mcs: list[Row], llbs: list[Row]) -> tuple[list[Row], list[Row]]:
         """Bounded finality: a chain holding a row that ended before now - bound ends its
-        sequence there (every held row decided as at the end of a trial) and starts afresh."""
+        sequence there (every held row decided as at the end of a trial) and starts afresh,
+        keeping only the passes' trial-long state (Op.resume)."""
         if self.ctx.bound is None:
             return mcs, llbs
         cutoff = self.ctx.cutoff()
         if self.compositions.oldest_end() < cutoff:
             more = self.compositions.finish()
-            self.compositions = self._composition_chain()
+            fresh = self._composition_chain()
+            fresh.resume(self.compositions)
+            self.compositions = fresh
             mcs = mcs + more
             for m in more:
                 llbs = llbs + self.behaviors.push(list(m))
         if self.behaviors.oldest_end() < cutoff:
             llbs = llbs + self.behaviors.finish()
-            self.behaviors = self._behavior_chain(self.llb_scan.flag)
+            fresh = self._behavior_chain()
+            fresh.resume(self.behaviors)
+            self.behaviors = fresh
         return mcs, llbs
 
     def _flow(self, mcs: list[Row]) -> tuple[list[Row], list[Row]]:
