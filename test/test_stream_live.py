@@ -153,3 +153,27 @@ def test_the_live_words_cover_the_trial_like_the_reference(
                 assert b[-1].end == pytest.approx(a[-1].end, abs=0.01)
                 starts = [w.start for w in b]
                 assert starts == sorted(starts)
+
+
+def test_a_cut_keeps_the_trial_long_state_of_the_passes() -> None:
+    """After a cut the fresh chain goes on where the old one was: a duration pass that stopped
+    for good stays stopped, step 3's largest amplitude and the LLB time flag are kept."""
+    from rcbht_introspection.taxonomy.ops import StreamContext
+    from rcbht_introspection.taxonomy.pipeline import AxisPipeline
+
+    pipe = AxisPipeline(StreamContext(default_config(), causal=True, bound=1.0))
+    old_mc, old_llb = pipe._composition_chain(), pipe._behavior_chain()
+    for op in old_mc.ops + old_llb.ops:
+        if hasattr(op, "stopped"):
+            op.stopped = True
+        if hasattr(op, "cycle"):
+            op.cycle.max_amp = 42.0
+        if hasattr(op, "flag"):
+            op.flag = True
+    new_mc, new_llb = pipe._composition_chain(), pipe._behavior_chain()
+    new_mc.resume(old_mc)
+    new_llb.resume(old_llb)
+    stopped = [op.stopped for op in new_mc.ops + new_llb.ops if hasattr(op, "stopped")]
+    assert len(stopped) == 2 * 4 + 5 and all(stopped)  # steps 3 and 4 per MC cycle, LLB step 1
+    assert {op.cycle.max_amp for op in new_mc.ops if hasattr(op, "cycle")} == {42.0}
+    assert new_llb.ops[0].flag is True
