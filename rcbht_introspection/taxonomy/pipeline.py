@@ -8,6 +8,8 @@ original whole-sequence passes.
 
 from __future__ import annotations
 
+import math
+
 from rcbht_introspection.taxonomy.behavior_ops import ComposeBehaviors, refinement_cycle
 from rcbht_introspection.taxonomy.composition_ops import Compose, composition_cycle
 from rcbht_introspection.taxonomy.ops import Chain, Op, Row, StreamContext
@@ -22,6 +24,7 @@ class AxisPipeline:
         self.compositions = self._composition_chain()
         self.behaviors = self._behavior_chain()
         self.held_last: Row | None = None  # final_segment=False drops the wrap-up segment
+        self.oldest = (math.inf, math.inf)  # end of the oldest row each chain holds
 
     def _composition_chain(self) -> Chain:
         """The primitive clean-up, the MC scan and its filter cycles."""
@@ -42,14 +45,18 @@ class AxisPipeline:
             llb_ops.extend(refinement_cycle(cfg))
         return Chain(llb_ops)
 
-    def _cut(self, mcs: list[Row], llbs: list[Row]) -> tuple[list[Row], list[Row]]:
+    def _cut(
+        self, mcs: list[Row], llbs: list[Row], changed: bool = True
+    ) -> tuple[list[Row], list[Row]]:
         """Bounded finality: a chain holding a row that ended before now - bound ends its
         sequence there (every held row decided as at the end of a trial) and starts afresh,
         keeping only the passes' trial-long state (Op.resume)."""
         if self.ctx.bound is None:
             return mcs, llbs
         cutoff = self.ctx.cutoff()
-        if self.compositions.oldest_end() < cutoff:
+        if changed:  # rows moved: the chains' oldest held ends are looked up again
+            self.oldest = (self.compositions.oldest_end(), self.behaviors.oldest_end())
+        if self.oldest[0] < cutoff:
             more = self.compositions.finish()
             fresh = self._composition_chain()
             fresh.resume(self.compositions)
@@ -57,11 +64,13 @@ class AxisPipeline:
             mcs = mcs + more
             for m in more:
                 llbs = llbs + self.behaviors.push(list(m))
-        if self.behaviors.oldest_end() < cutoff:
+            self.oldest = (math.inf, self.behaviors.oldest_end())
+        if self.oldest[1] < cutoff:
             llbs = llbs + self.behaviors.finish()
             fresh = self._behavior_chain()
             fresh.resume(self.behaviors)
             self.behaviors = fresh
+            self.oldest = (self.oldest[0], math.inf)
         return mcs, llbs
 
     def _flow(self, mcs: list[Row]) -> tuple[list[Row], list[Row]]:
@@ -95,6 +104,10 @@ class AxisPipeline:
         mcs, llbs = self._flow(self.compositions.poll())
         llbs += self.behaviors.poll()
         return self._cut(mcs, llbs)
+
+    def expire(self) -> tuple[list[Row], list[Row]]:
+        """Rows released because time advanced past the finality bound of a held row."""
+        return self._cut([], [], changed=False)
 
     def finish(self) -> tuple[list[Row], list[Row]]:
         """The end of the axis: every held MC and LLB."""

@@ -346,8 +346,12 @@ class ArmStream:
         self._ys = []
         self.segmenter.feed_blocks(stats, 1, final=final)
         self._closed(out)
-        if self.ctx.waiting or self.ctx.bound is not None:
-            self._poll(out)  # bounded: held rows expire as time passes
+        if self.ctx.waiting:
+            self._poll(out)
+        elif self.ctx.bound is not None:
+            for a, pipe in enumerate(self.pipes):  # held rows reach the bound as time passes
+                mcs, llbs = pipe.expire()
+                self._emit(a, mcs, llbs, out)
 
     def _poll(self, out: list[Word]) -> None:
         for a, pipe in enumerate(self.pipes):
