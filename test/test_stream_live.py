@@ -4,6 +4,7 @@ however the samples are chunked, and the bound as the only difference from `caus
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
@@ -177,3 +178,40 @@ def test_a_cut_keeps_the_trial_long_state_of_the_passes() -> None:
     assert len(stopped) == 2 * 4 + 5 and all(stopped)  # steps 3 and 4 per MC cycle, LLB step 1
     assert {op.cycle.max_amp for op in new_mc.ops if hasattr(op, "cycle")} == {42.0}
     assert new_llb.ops[0].flag is True
+
+
+@pytest.mark.parametrize("source", SOURCES)
+def test_engine_samples_carry_the_live_words_and_golden_is_refused(
+    request: pytest.FixtureRequest, source: str
+) -> None:
+    from rcbht_introspection.grammar.split import split_words
+    from rcbht_introspection.learn.data import load_trials
+
+    live = load_stream_config("live")
+    folders = trial_folders(request, source, REAL_TRIALS[:1], SIM_TRIALS[:1])
+    (loaded,) = load_trials(folders, "auto", stream=live)
+    assert loaded.source == "engine"  # auto: golden files hold the reference words
+    trial = read_trial(folders[0])
+    expected = split_words(
+        label_trial(trial, stream_config=live), trial.state_times, trial.end_time, trial.phase_names
+    )
+    for got, want in zip(loaded.samples, expected, strict=True):
+        assert got.subtask == want.subtask
+        assert_same(got.words, want.words)
+    with pytest.raises(InputError, match="stream profile 'live'"):
+        load_trials(folders, "golden", stream=live)
+
+
+def test_evaluate_scores_the_live_words(request: pytest.FixtureRequest, tmp_path: Path) -> None:
+    from conftest import SIM_SUCCESS, dataset_root
+
+    from rcbht_introspection.cli import main
+
+    out = tmp_path / "eval.json"
+    code = main(["evaluate", str(dataset_root(request, SIM_SUCCESS)), "--stream-profile", "live",
+                 "--permutations", "1", "--validation-trials", "2", "--no-variant",
+                 "--json", str(out), "--no-progress"])  # fmt: skip
+    assert code == 0
+    result = json.loads(out.read_text())
+    assert result["stream_profile"] == "live" and result["words"] == "auto"
+    assert 0.0 <= result["steady_state_accuracy"]["mean"] <= 1.0
