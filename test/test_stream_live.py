@@ -215,3 +215,17 @@ def test_evaluate_scores_the_live_words(request: pytest.FixtureRequest, tmp_path
     result = json.loads(out.read_text())
     assert result["stream_profile"] == "live" and result["words"] == "auto"
     assert 0.0 <= result["steady_state_accuracy"]["mean"] <= 1.0
+
+
+def test_the_segmenter_node_parameters_select_the_live_profile(tmp_path: Path) -> None:
+    from rcbht_introspection.live.segmenter import arm_stream_factory
+    from rcbht_introspection.nodes.params import SegmenterConfig, load_node_config
+
+    params = tmp_path / "segmenter.yaml"
+    params.write_text("segmenter_node:\n  ros__parameters:\n    stream_profile: live\n")
+    cfg = load_node_config(SegmenterConfig, params)
+    stream = arm_stream_factory(stream_profile=cfg.stream_profile)("R")
+    assert stream.causal and stream.ctx.bound == load_stream_config("live").finality_bound_s
+    params.write_text("segmenter_node:\n  ros__parameters:\n    stream_profile: quick\n")
+    with pytest.raises(InputError, match="stream_profile"):
+        load_node_config(SegmenterConfig, params)
