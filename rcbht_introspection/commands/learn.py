@@ -118,6 +118,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="score on the validation trials' live windows (live_accuracy)",
     )
+    ev.add_argument(
+        "--live-config",
+        type=Path,
+        default=None,
+        metavar="YAML",
+        help="live_augment settings of the live windows, e.g. stream_profile: live "
+        "(default config/live.yaml)",
+    )
     ev.add_argument("--json", type=Path, default=None, metavar="OUT")
     ev.add_argument("--plot", type=Path, default=None, metavar="OUT.png")
     ev.add_argument("--no-progress", action="store_true")
@@ -272,6 +280,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         live_score=args.live_score,
         taxonomy=taxonomy,
         repeated=repeated_policy(args),
+        live_config=args.live_config,
     )
     result = _with_progress(
         args,
