@@ -202,19 +202,31 @@ def test_engine_samples_carry_the_live_words_and_golden_is_refused(
         load_trials(folders, "golden", stream=live)
 
 
-def test_evaluate_scores_the_live_words(request: pytest.FixtureRequest, tmp_path: Path) -> None:
+def test_evaluate_scores_the_live_words_and_live_windows(
+    request: pytest.FixtureRequest, tmp_path: Path
+) -> None:
     from conftest import SIM_SUCCESS, dataset_root
 
     from rcbht_introspection.cli import main
 
-    out = tmp_path / "eval.json"
+    out, live_yaml = tmp_path / "eval.json", tmp_path / "live.yaml"
+    live_yaml.write_text("live_augment:\n  stream_profile: live\n  window_s: 0.0\n")
     code = main(["evaluate", str(dataset_root(request, SIM_SUCCESS)), "--stream-profile", "live",
                  "--permutations", "1", "--validation-trials", "2", "--no-variant",
+                 "--live-score", "--live-config", str(live_yaml),
                  "--json", str(out), "--no-progress"])  # fmt: skip
     assert code == 0
     result = json.loads(out.read_text())
     assert result["stream_profile"] == "live" and result["words"] == "auto"
     assert 0.0 <= result["steady_state_accuracy"]["mean"] <= 1.0
+    # the windows are those of the given live config (live stream profile, no window mode)
+    from rcbht_introspection.io.hiro import find_trials
+    from rcbht_introspection.learn.live import load_live_config, trial_live_samples
+
+    windows = trial_live_samples(
+        find_trials([dataset_root(request, SIM_SUCCESS)]), load_live_config(live_yaml)
+    )
+    assert result["live_accuracy"]["n_windows"] == sum(map(len, windows.values())) > 0
 
 
 def test_the_segmenter_node_parameters_select_the_live_profile(tmp_path: Path) -> None:
