@@ -4,6 +4,11 @@ The primitive clean-up (primitive_ops.py), the MC layer and its filter cycles (c
 and the LLB layer and its refinement cycles (behavior_ops.py) run as one `Chain` per level; the
 batch and the streaming engine both drive this class, so the rows come out identical to the
 original whole-sequence passes.
+
+With a finality bound (the `live` stream profile, StreamContext.bound), a chain that holds a row
+whose end is older than now - bound is finished there, as if the trial ended, and replaced by a
+fresh one that keeps the passes' trial-long state: every word is final at most the bound (plus one
+window step) after its end.
 """
 
 from __future__ import annotations
