@@ -57,6 +57,10 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
     "stream.yaml": [
         (lambda p: load_stream_config("reference", p), StreamConfig()),
         (lambda p: load_stream_config("causal", p), StreamConfig(profile="causal")),
+        (
+            lambda p: load_stream_config("live", p),
+            StreamConfig(profile="live", finality_bound_s=1.9),
+        ),
     ],
     "sim.yaml": [(load_sim_config, SimConfig())],
     "sim_deviation_b.yaml": [

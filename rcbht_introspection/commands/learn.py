@@ -8,13 +8,14 @@ import json
 import math
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, get_args
 
 from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_from_args
 from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy, warn
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
+from rcbht_introspection.taxonomy import StreamProfile
 
 PROTOCOLS = ("curve", "prequential")
 
@@ -117,6 +118,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="score on the validation trials' live windows (live_accuracy)",
     )
+    ev.add_argument(
+        "--live-config",
+        type=Path,
+        default=None,
+        metavar="YAML",
+        help="live_augment settings of the live windows, e.g. stream_profile: live "
+        "(default config/live.yaml)",
+    )
     ev.add_argument("--json", type=Path, default=None, metavar="OUT")
     ev.add_argument("--plot", type=Path, default=None, metavar="OUT.png")
     ev.add_argument("--no-progress", action="store_true")
@@ -156,6 +165,13 @@ def _common(parser: argparse.ArgumentParser) -> None:
         help="Mondrian memory budget: stored training points (default unbounded)",
     )
     add_taxonomy_options(parser)
+    parser.add_argument(
+        "--stream-profile",
+        choices=get_args(StreamProfile),
+        default="reference",
+        help="engine words as this stream profile emits them (config/stream.yaml; live: every "
+        "word final within its finality bound); not reference: golden files are not used",
+    )
     add_repeated_stamps(parser)
 
 
@@ -183,9 +199,11 @@ def load_checked(
     config/segmenter.yaml's intake section)."""
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.live.intake import load_intake_config
+    from rcbht_introspection.taxonomy.stream import load_stream_config
 
     policy = repeated_policy(args)
-    trials = load_trials(args.inputs, args.words, taxonomy, policy, load_intake_config())
+    stream = load_stream_config(args.stream_profile)
+    trials = load_trials(args.inputs, args.words, taxonomy, policy, load_intake_config(), stream)
     for trial in trials:
         warn(command, trial.trial, trial.findings)
     return trials
@@ -262,6 +280,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
         live_score=args.live_score,
         taxonomy=taxonomy,
         repeated=repeated_policy(args),
+        live_config=args.live_config,
     )
     result = _with_progress(
         args,
@@ -272,6 +291,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     )
     result["datasets"] = [str(p) for p in args.inputs]
     result["words"] = args.words
+    result["stream_profile"] = args.stream_profile
     if args.classifier == "mondrian":
         result["forest_budget"] = budget
     result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"

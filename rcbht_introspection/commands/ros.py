@@ -80,7 +80,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--stream-profile",
         choices=get_args(StreamProfile),
         default="reference",
-        help="stream profile of the segmenter (causal: moment-axis words without waiting)",
+        help="stream profile of the segmenter (causal: moment-axis words without waiting; "
+        "live: every word final within finality_bound_s)",
     )
     add_state_options(p)
     p.add_argument("--timeline", action="store_true", help="print the /task_state timeline")

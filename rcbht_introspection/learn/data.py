@@ -19,6 +19,7 @@ from rcbht_introspection.live.intake import IntakeConfig
 from rcbht_introspection.task import HIRO_TASK, Task, task_of_folder, task_of_names
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, is_reference
+from rcbht_introspection.taxonomy.stream import StreamConfig
 from rcbht_introspection.taxonomy.words import LEVELS, TrialWords
 
 
@@ -81,11 +82,14 @@ def load_trial_samples(
     taxonomy: TaxonomyConfig | None = None,
     repeated: RepeatedPolicy | None = None,
     checks: IntakeConfig | None = None,
+    stream: StreamConfig | None = None,
 ) -> TrialSamples:
     """Samples of one trial folder or bag; `words` picks golden files or the batch engine.
 
-    `taxonomy` labels engine words (None: reference). The golden files hold the reference
-    profile's words, so with another profile 'auto' means the engine and 'golden' is an error.
+    `taxonomy` labels engine words (None: reference) and `stream` picks the stream profile whose
+    words they are (None: reference; causal and live as the segmenter emits them). The golden
+    files hold the reference profiles' words, so with another profile 'auto' means the engine
+    and 'golden' is an error.
     A trial whose wrench is read (engine words) is resolved with the `repeated` stamp policy
     and checked for a frozen sensor (thresholds of `checks`, default IntakeConfig()).
     """
@@ -93,10 +97,16 @@ def load_trial_samples(
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
     path = Path(path)
     checks = checks or IntakeConfig()
-    reference = taxonomy is None or is_reference(taxonomy)
-    if words == "golden" and taxonomy is not None and not reference:
+    exact = stream is None or stream.profile == "reference"
+    reference = (taxonomy is None or is_reference(taxonomy)) and exact
+    if words == "golden" and not reference:
+        name = (
+            f"stream profile {stream.profile!r}"
+            if stream is not None and not exact
+            else f"{taxonomy.profile if taxonomy else 'reference'!r}"
+        )
         raise InputError(
-            f"golden label files hold the reference profile's words, not {taxonomy.profile!r}'s; "
+            f"golden label files hold the reference profile's words, not {name}'s; "
             "use words='engine'",
             path,
         )
@@ -105,7 +115,10 @@ def load_trial_samples(
             raise InputError("a bag has no golden label files; use words='engine'", path)
         trial = bags.read_trial_bag(path, repeated=repeated)
         samples = split_words(
-            label_trial(trial, taxonomy), trial.state_times, trial.end_time, trial.phase_names
+            label_trial(trial, taxonomy, stream),
+            trial.state_times,
+            trial.end_time,
+            trial.phase_names,
         )
         found = tuple(trial_findings(trial, checks.frozen_samples, checks.frozen_s))
         task = task_of_bag(trial)
@@ -124,7 +137,7 @@ def load_trial_samples(
         return TrialSamples(path.name, path, "golden", samples, task)
     trial = read_trial(path, repeated)
     samples = split_words(
-        label_trial(trial, taxonomy), trial.state_times, trial.end_time, trial.phase_names
+        label_trial(trial, taxonomy, stream), trial.state_times, trial.end_time, trial.phase_names
     )
     found = tuple(trial_findings(trial, checks.frozen_samples, checks.frozen_s))
     task = task_of_folder(path)
@@ -176,11 +189,14 @@ def load_trials(
     taxonomy: TaxonomyConfig | None = None,
     repeated: RepeatedPolicy | None = None,
     checks: IntakeConfig | None = None,
+    stream: StreamConfig | None = None,
 ) -> list[TrialSamples]:
     """Per-trial samples of every trial under `paths` (see load_trial_samples)."""
     if words not in WORD_SOURCES:
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
-    return [load_trial_samples(p, words, taxonomy, repeated, checks) for p in find_inputs(paths)]
+    return [
+        load_trial_samples(p, words, taxonomy, repeated, checks, stream) for p in find_inputs(paths)
+    ]
 
 
 def load_samples(

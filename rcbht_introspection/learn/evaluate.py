@@ -69,6 +69,8 @@ class Protocol:
     """Profile of the live windows' words, as the trials' (None: config/live.yaml's)."""
     repeated: RepeatedPolicy | None = None
     """Repeated-stamp policy the live windows' trials are read with, as the trials were."""
+    live_config: Path | None = None
+    """live_augment settings of the live windows, e.g. their stream profile (None: config/live.yaml)."""
 
 
 def default_validation(n_trials: int, two_arm: bool = False) -> int:
@@ -143,7 +145,7 @@ def evaluate(
     near_empty = lambda s: s.duration < protocol.near_empty_seconds  # noqa: E731
     n_near_empty = sum(near_empty(s) for t in complete for s in t.samples)
     live = (
-        _live_windows(complete, protocol.taxonomy, protocol.repeated)
+        _live_windows(complete, protocol.taxonomy, protocol.repeated, protocol.live_config)
         if protocol.live_augment or protocol.live_score
         else {}
     )
@@ -285,9 +287,10 @@ def _live_windows(
     trials: Sequence[TrialSamples],
     taxonomy: TaxonomyConfig | None = None,
     repeated: RepeatedPolicy | None = None,
+    live_config: Path | None = None,
 ) -> dict[str, list[SubtaskSample]]:
     """Live-like windows of every trial (words final by t, learn/live.py), by trial name."""
-    config = load_live_config()
+    config = load_live_config(live_config)
     factory = stream_factory(config, taxonomy)
     by_path = trial_live_samples([t.path for t in trials], config, factory, repeated=repeated)
     return {t.trial: by_path[str(t.path)] for t in trials}

@@ -75,8 +75,9 @@ class SegmenterConfig:
     )
     stream_profile: StreamProfile = _f(
         "reference",
-        "reference (words equal the batch engine's; whole-trial quantities are waited for) or "
-        "causal (past samples only: moment-axis words without waiting)",
+        "reference (words equal the batch engine's; whole-trial quantities are waited for), "
+        "causal (past samples only: moment-axis words without waiting) or live (causal, and "
+        "every word final within finality_bound_s of its end)",
     )
     stream_config_file: str = _f("", "optional YAML file overriding config/stream.yaml")
     qos_depth: int = _f(

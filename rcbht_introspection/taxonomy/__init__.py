@@ -2,6 +2,7 @@
 
 from typing import Literal
 
-StreamProfile = Literal["reference", "causal"]
+StreamProfile = Literal["reference", "causal", "live"]
 """reference: the words equal the batch engine's (whole-trial quantities are waited for);
-causal: past samples only. Here (not in stream.py) so the CLI lists it without the engine."""
+causal: past samples only; live: causal, and every word final within finality_bound_s.
+Here (not in stream.py) so the CLI lists it without the engine."""

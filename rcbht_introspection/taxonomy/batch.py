@@ -13,7 +13,7 @@ import numpy as np
 
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config
 from rcbht_introspection.taxonomy.primitives import axis_domain
-from rcbht_introspection.taxonomy.stream import ArmStream, StreamConfig
+from rcbht_introspection.taxonomy.stream import ArmStream, StreamConfig, label_trial_streamed
 from rcbht_introspection.taxonomy.words import AXES, Level, TrialWords
 
 # --------------------------------------------------------------------------- layers
@@ -55,9 +55,17 @@ def label_arm(
     return out
 
 
-def label_trial(trial, config: TaxonomyConfig | None = None) -> TrialWords:
-    """Every arm of a Trial, all three levels (PRIMITIVE = the pre-clean-up Segments)."""
+def label_trial(
+    trial, config: TaxonomyConfig | None = None, stream_config: StreamConfig | None = None
+) -> TrialWords:
+    """Every arm of a Trial, all three levels (PRIMITIVE = the pre-clean-up Segments).
+
+    A stream profile other than reference (causal, live) cannot know the future: its words are
+    push_many between the sub-task starts, each marked when it happens, + finish().
+    """
     config = config or default_config()
+    if stream_config is not None and stream_config.profile != "reference":
+        return label_trial_streamed(trial, config, stream_config, many=True)
     result = TrialWords(name=trial.name)
     for arm in trial.arms:
         label_arm(trial.time, trial.wrench[arm], trial.state_times, config, arm, result)

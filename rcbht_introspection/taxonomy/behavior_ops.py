@@ -24,6 +24,13 @@ class ComposeBehaviors(BufferedOp):
         self.rows: list[Row] = []
         self.flag = False
 
+    def oldest_end(self) -> float:
+        return self.rows[0][mc.T2E] if self.rows else math.inf
+
+    def resume(self, previous: Op) -> None:
+        assert isinstance(previous, ComposeBehaviors)
+        self.flag = previous.flag  # set once per trial, never reset
+
     def _step(self, ended: bool) -> list[Row]:
         """Emit LLBs while the lookahead the current MC needs (1 or 2 more) is there."""
         out: list[Row] = []
@@ -52,6 +59,13 @@ class BehaviorDurations(BufferedOp):
         self.rows: list[Row] = []  # rows from the next decision position
         self.skip = 0  # rows to pass through before the next decision (the jump of 3)
         self.stopped = False
+
+    def oldest_end(self) -> float:
+        return self.rows[0][bh.B_T2E] if self.rows else math.inf
+
+    def resume(self, previous: Op) -> None:
+        assert isinstance(previous, BehaviorDurations)
+        self.stopped = previous.stopped
 
     def _step(self, ended: bool) -> list[Row]:
         """Decide pairs from the front until one needs more rows or the pass stops."""
@@ -125,6 +139,10 @@ class RepeatedBehaviors(Op):
     def __init__(self) -> None:
         self.blocks: list[Row | None] = []  # blocks[k]: a merged block of 2**k rows
         self.label: int | None = None
+        self.last_end = math.inf  # end of the run's last row (inf: no run)
+
+    def oldest_end(self) -> float:
+        return self.last_end
 
     def _flush(self) -> list[Row]:
         """Fold the run's blocks right to left into one row and release it."""
@@ -135,6 +153,7 @@ class RepeatedBehaviors(Op):
             carry = block if carry is None else bh.merge_behaviors(block, carry, None)
         self.blocks = []
         self.label = None
+        self.last_end = math.inf
         return [carry] if carry is not None else []
 
     def push(self, row: Row) -> list[Row]:
@@ -142,6 +161,7 @@ class RepeatedBehaviors(Op):
         if self.label is not None and row[bh.B_LBL] != self.label:
             out = self._flush()
         self.label = row[bh.B_LBL]
+        self.last_end = row[bh.B_T2E]
         carry, k = row, 0
         while k < len(self.blocks) and (block := self.blocks[k]) is not None:
             carry = bh.merge_behaviors(block, carry, None)
@@ -224,18 +244,23 @@ def refinement_cycle(config: TaxonomyConfig) -> list[Op]:
         PairPass(
             behavior_pairs(_push_pull(*config.push_pull_similarity), bh.AL),
             can_start=label_in(bh.PS, bh.PL, field=first),
+            end=bh.B_T2E,
         ),
         PairPass(
-            behavior_pairs(_align_shift, bh.AL), can_start=label_in(bh.SH, bh.AL, field=first)
+            behavior_pairs(_align_shift, bh.AL),
+            can_start=label_in(bh.SH, bh.AL, field=first),
+            end=bh.B_T2E,
         ),
         RepeatedBehaviors(),
         PairPass(
             behavior_pairs(_align_push(*config.align_push_similarity), bh.AL),
             can_start=label_in(bh.AL, bh.SH, field=first),
+            end=bh.B_T2E,
         ),
         PairPass(
             behavior_pairs(_fixed(*config.fixed_similarity), bh.FX),
             can_start=label_in(bh.FX, *_MOVES, field=first),
+            end=bh.B_T2E,
         ),
     ]
 

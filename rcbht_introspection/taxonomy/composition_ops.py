@@ -29,6 +29,8 @@ from rcbht_introspection.taxonomy.ops import (
 class Compose(HoldsOneRow):
     """The MC layer: P1 with the next primitive (the last one pairs with itself)."""
 
+    end = pr.FINISH
+
     def __init__(self, config: TaxonomyConfig) -> None:
         self.config = config
         self.pending: Row | None = None
@@ -192,6 +194,9 @@ class AdjustmentChains(Op):
                 out.append(row)
         return out
 
+    def oldest_end(self) -> float:
+        return next((r[mc.T2E] for r in self.rows if r is not None), math.inf)
+
     def finish(self) -> list[Row]:
         self.ended = True
         self.ctx.waiting.discard(self)
@@ -247,12 +252,17 @@ class RepeatedCompositions(Op):
     def finish(self) -> list[Row]:
         return self._flush()
 
+    def oldest_end(self) -> float:
+        return math.inf if self.last is None else self.last[mc.T2E]
+
     def retained(self) -> int:
         return 1 if self.first is not None else 0
 
 
 class PrimitiveDurations(HoldsOneRow):
     """Step 3: relabel from the much longer primitive; stops at the first amplitude-gate failure."""
+
+    end = mc.T2E
 
     def __init__(self, ctx: StreamContext, cycle: CycleState) -> None:
         self.ctx, self.cycle = ctx, cycle
@@ -288,6 +298,12 @@ class PrimitiveDurations(HoldsOneRow):
         if r[mc.AMP] > self.cycle.max_amp:
             self.cycle.max_amp = r[mc.AMP]
 
+    def resume(self, previous: Op) -> None:
+        assert isinstance(previous, PrimitiveDurations)
+        self.stopped = previous.stopped
+        self.cycle.max_amp = previous.cycle.max_amp
+        self.cycle.max_amp_final = previous.cycle.max_amp_final and previous.stopped
+
     def push(self, row: Row) -> list[Row]:
         pos = self.pos
         self.pos += 1
@@ -312,11 +328,17 @@ class PrimitiveDurations(HoldsOneRow):
 class CompositionDurations(HoldsOneRow):
     """Step 4: absorb an MC into a neighbour five times longer; stops like step 3."""
 
+    end = mc.T2E
+
     def __init__(self, ctx: StreamContext, cycle: CycleState) -> None:
         self.ctx, self.cycle = ctx, cycle
         self.pending: Row | None = None
         self.pos = 0
         self.stopped = False
+
+    def resume(self, previous: Op) -> None:
+        assert isinstance(previous, CompositionDurations)
+        self.stopped = previous.stopped
 
     def _advance(self, row: Row, out: list[Row]) -> list[Row]:
         """`row` is the next to be examined: contacts are skipped, so they need not wait."""
@@ -398,6 +420,9 @@ class ContactAmplitudes(Op):
     def poll(self) -> list[Row]:
         return self._drain()
 
+    def oldest_end(self) -> float:
+        return self.held[0][mc.T2E] if self.held else math.inf
+
     def finish(self) -> list[Row]:
         self.cycle.max_amp_final = True
         return self._drain()
@@ -436,8 +461,8 @@ def composition_cycle(ctx: StreamContext) -> list[Op]:
         PrimitiveDurations(ctx, cycle),
         CompositionDurations(ctx, cycle),
         ContactAmplitudes(ctx, cycle),
-        PairPass(adjust, cycle.before_start, label_in(mc.A, mc.I, mc.D, field=mc.LBL)),
-        PairPass(constant, cycle.before_start, label_in(mc.I, mc.K, mc.D, field=mc.LBL)),
+        PairPass(adjust, cycle.before_start, label_in(mc.A, mc.I, mc.D, field=mc.LBL), mc.T2E),
+        PairPass(constant, cycle.before_start, label_in(mc.I, mc.K, mc.D, field=mc.LBL), mc.T2E),
     ]
 
 

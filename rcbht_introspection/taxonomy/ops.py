@@ -42,6 +42,13 @@ class StreamContext:
     _limit: float | None = None
     waiting: set = field(default_factory=set)
     """Operators waiting for time to pass (the 'a'-chain limit); poll them as samples arrive."""
+    bound: float | None = None
+    """Finality bound in seconds (live profile, pipeline.AxisPipeline): a chain holding a row
+    whose end is before now - bound ends its sequence there. None = unbounded look-ahead."""
+
+    def cutoff(self) -> float:
+        """Rows ending before this time may no longer be held (-inf when unbounded)."""
+        return -math.inf if self.bound is None else self.now - self.bound
 
     @property
     def s2(self) -> float | None:
@@ -77,6 +84,14 @@ class Op:
         """Rows that became final without new input (e.g. when time advanced)."""
         return []
 
+    def oldest_end(self) -> float:
+        """End time of the oldest row held back (inf when none), for the finality bound."""
+        return math.inf
+
+    def resume(self, previous: Op) -> None:
+        """Take over the trial-long state of `previous`, the same pass before a finality cut
+        (e.g. a pass that stopped for good stays stopped); most passes have none."""
+
 
 class BufferedOp(Op):
     """A pass that buffers rows and decides in `_step(ended)` how many it can release."""
@@ -99,9 +114,15 @@ class BufferedOp(Op):
 
 
 class HoldsOneRow(Op):
-    """An operator that holds at most one row back (`pending`); the end releases it."""
+    """An operator that holds at most one row back (`pending`); the end releases it.
+    `end` is the index of a row's end time (for oldest_end)."""
 
     pending: Row | None = None
+    end: int | None = None
+
+    def oldest_end(self) -> float:
+        row = self.pending
+        return math.inf if row is None or self.end is None else row[self.end]
 
     def finish(self) -> list[Row]:
         out = [self.pending] if self.pending is not None else []
@@ -117,7 +138,7 @@ class PairPass(HoldsOneRow):
 
     `decide(a, b)` returns the merged row or None. Rows before `start(pos)` pass through, and so
     does a row that `can_start` says can never be the first of a merging pair (it waits for no
-    one: the previous pair was already decided without it).
+    one: the previous pair was already decided without it). `end`: the index of a row's end time.
     """
 
     def __init__(
@@ -125,10 +146,12 @@ class PairPass(HoldsOneRow):
         decide: Callable[[Row, Row], Row | None],
         start: Callable[[int], bool] | None = None,
         can_start: Callable[[Row], bool] | None = None,
+        end: int | None = None,
     ) -> None:
         self.decide = decide
         self.before_start = start
         self.can_start = can_start
+        self.end = end
         self.pending: Row | None = None
         self.pos = 0  # position of the next input row
 
@@ -190,6 +213,14 @@ class Chain(Op):
 
     def retained(self) -> int:
         return sum(op.retained() for op in self.ops)
+
+    def oldest_end(self) -> float:
+        return min(op.oldest_end() for op in self.ops)
+
+    def resume(self, previous: Op) -> None:
+        assert isinstance(previous, Chain) and len(previous.ops) == len(self.ops)
+        for op, old in zip(self.ops, previous.ops, strict=True):
+            op.resume(old)
 
     def push_rows(self, rows: list[Row]) -> list[Row]:
         """Several final rows at once, operator after operator (same rows as pushing each)."""

@@ -62,6 +62,9 @@ class RepeatedPrimitives(Op):
     def finish(self) -> list[Row]:
         return self._flush()
 
+    def oldest_end(self) -> float:
+        return math.inf if self.last is None else self.last[pr.FINISH]
+
     def retained(self) -> int:
         return 1 if self.first is not None else 0
 
@@ -71,6 +74,7 @@ def primitive_durations_pass(config: TaxonomyConfig) -> PairPass:
     return PairPass(
         lambda a, b: pr.duration_pair(a, b, config),
         can_start=lambda row: row[pr.LABEL] not in (pr.PIMP, pr.NIMP),
+        end=pr.FINISH,
     )
 
 

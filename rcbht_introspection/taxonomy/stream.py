@@ -5,7 +5,8 @@ segmentation) the block's least-squares statistics are merged into the open segm
 axes at once. Closed segments become primitive words and flow through the same operator chain as
 the batch engine (pipeline.AxisPipeline), which releases MCs and LLBs once no later sample can
 change them. `finish()` is the end of the trial. With the `reference` profile the words equal the
-batch output exactly; `causal` decides whole-trial quantities from the past only.
+batch output exactly; `causal` decides whole-trial quantities from the past only; `live` is causal
+and releases every held row once its end is `finality_bound_s` old (ops.StreamContext.bound).
 
 Whole-trial inputs and how the stream gets them (docs/streaming.md):
 * moment-axis domain (4th largest/smallest sample of the trial): given in StreamConfig
@@ -28,6 +29,7 @@ from typing import Literal
 import numpy as np
 
 from rcbht_introspection.config_files import config_path, load_profile
+from rcbht_introspection.errors import InputError
 from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.behaviors import behavior_word
 from rcbht_introspection.taxonomy.compositions import composition_word
@@ -67,12 +69,28 @@ class StreamConfig:
     """Intervals used to estimate the nominal sample period."""
     rate_tolerance: float = 0.1
     """A sustained period change beyond this fraction is a changed rate (counted, adopted)."""
+    finality_bound_s: float | None = None
+    """live profile: a word may be revised only until its end is this many seconds old, then it
+    is final (decided as if no later row changed it). None = unbounded (reference, causal)."""
+
+
+def _check(config: StreamConfig) -> None:
+    """The bound belongs to the live profile, and the live profile needs one."""
+    bound = config.finality_bound_s
+    if config.profile == "live" and not (bound is not None and bound > 0):
+        raise InputError(
+            f"the live profile needs a bound > 0, got {bound}", field="finality_bound_s"
+        )
+    if config.profile != "live" and bound is not None:
+        raise InputError(
+            f"applies to the live profile only, not {config.profile!r}", field="finality_bound_s"
+        )
 
 
 def load_stream_config(profile: str = "reference", path: Path | str | None = None) -> StreamConfig:
     """One profile of config/stream.yaml (or of `path`)."""
     file = Path(path) if path is not None else config_path(STREAM_CONFIG_FILE)
-    return load_profile(StreamConfig, file, profile, kind="stream")
+    return load_profile(StreamConfig, file, profile, kind="stream", check=_check)
 
 
 @dataclass
@@ -148,8 +166,11 @@ class ArmStream:
         self.config = config or default_config()
         self.stream_config = stream_config or StreamConfig()
         self.arm = arm
-        self.causal = self.stream_config.profile == "causal"
-        self.ctx = StreamContext(self.config, causal=self.causal)
+        self.causal = self.stream_config.profile in ("causal", "live")
+        bound = (
+            self.stream_config.finality_bound_s if self.stream_config.profile == "live" else None
+        )
+        self.ctx = StreamContext(self.config, causal=self.causal, bound=bound)
         self.counters = IntakeCounters()
         self.segmenter = Segmenter(self.config)
         self.pipes = [AxisPipeline(self.ctx) for _ in AXES]
@@ -327,6 +348,10 @@ class ArmStream:
         self._closed(out)
         if self.ctx.waiting:
             self._poll(out)
+        elif self.ctx.bound is not None:
+            for a, pipe in enumerate(self.pipes):  # held rows reach the bound as time passes
+                mcs, llbs = pipe.expire()
+                self._emit(a, mcs, llbs, out)
 
     def _poll(self, out: list[Word]) -> None:
         for a, pipe in enumerate(self.pipes):
@@ -408,8 +433,10 @@ class ArmStream:
         dts = np.diff(np.concatenate(([self._last_t], t)))
         steady = bool((np.abs(dts - period) <= sc.rate_tolerance * period).all())
         full = n // w
-        if not steady or self.ctx.waiting or not full:
-            for j in range(n):  # gaps and rate changes keep their sample-by-sample bookkeeping
+        if not steady or self.ctx.waiting or self.ctx.bound is not None or not full:
+            # gaps, rate changes and the live profile's expiry (decided per window step) keep
+            # their sample-by-sample bookkeeping
+            for j in range(n):
                 out.extend(self.push(t[j], wrench[j]))
             return out
         tb = t[: full * w].reshape(full, w)
