@@ -217,3 +217,68 @@ def test_verify_eval_cli_reports_the_verifier_beside_both_baselines(
         assert m["failure_runs"] == len(FAILURES)
     assert set(result["baselines"]) == {"raw_wrench", "timing"}
     assert result["protocol"]["onset_source"] == {"label": len(FAILURES)}
+
+
+def test_live_session_with_a_late_first_event_equals_the_batch_detector(
+    trials: list[Trial], labels: dict[str, TrialLabel]
+) -> None:
+    """A robot streams wrench before its state machine's first event: the ticks before it are
+    judged 'no sub-task yet', and an alarm's evidence still stacks."""
+    config = load_verify_config()
+    model = train_verifier(trials, labels, config)
+    failing = trials[-1]
+    late = dataclasses.replace(failing, state_times=(0.5, *failing.state_times[1:]))
+    tf = trial_features(late, config)
+    batch = model.detector.run(tf)
+    verdicts = replay(VerifierSession(model), late)
+    np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
+    assert verdicts[-1].alarm_time == batch.alarm
+    assert verdicts[0].phase == "" and verdicts[-1].phase != ""
+
+
+def test_two_arms_with_offset_stamps_and_a_silent_arm_still_give_verdicts(
+    trials: list[Trial], labels: dict[str, TrialLabel]
+) -> None:
+    both = [dataclasses.replace(t, wrench={"L": t.wrench["R"], "R": t.wrench["R"]}) for t in trials]
+    model = train_verifier(both, labels, load_verify_config())
+    trial = both[0]
+    session = VerifierSession(model)
+    session.phase(trial.phase_names[0], 0.0)
+    time = np.asarray(trial.time) - float(trial.time[0])
+    verdicts = []
+    for i, t in enumerate(time[: len(time) // 2]):
+        verdicts += session.push("R", float(t), trial.wrench["R"][i])
+        if t < 2.0:  # the left arm's stamps run 5 ms late, then it falls silent
+            verdicts += session.push("L", float(t) + 0.005, trial.wrench["L"][i])
+    ticks = int(time[len(time) // 2 - 1] / model.config.step_s)
+    assert len(verdicts) >= ticks - 25  # at most the 1 s of waiting for the silent arm behind
+    assert session.held_rows > 0
+    assert [v.time for v in verdicts] == sorted(v.time for v in verdicts)
+
+
+def test_labels_file_refuses_bad_text_and_accepts_a_byte_order_mark(tmp_path: Path) -> None:
+    header = "trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg\n"
+    path = tmp_path / "labels.csv"
+    path.write_text("\ufeff" + header + "a,failure,slip,1.5,,,\n", encoding="utf-8")
+    assert read_labels(path)["a"].onset == 1.5
+    path.write_bytes(b"\xff\xfe" + header.encode("utf-16-le"))
+    with pytest.raises(InputError, match="not UTF-8"):
+        read_labels(path)
+    path.write_text(header + "a,failure,slip,-3,,,\n")
+    with pytest.raises(InputError, match="onset_s"):
+        read_labels(path)
+
+
+def test_a_labels_row_naming_no_trial_is_an_error(trials: list[Trial], tmp_path: Path) -> None:
+    from rcbht_introspection.cli import main
+    from rcbht_introspection.io.hiro import write_trial
+
+    for t in trials[:4]:
+        write_trial(t, tmp_path / "set" / t.name)
+    labels = tmp_path / "labels.csv"
+    labels.write_text(
+        "trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg\n"
+        f"{trials[0].name}x,failure,slip,,,,\n"
+    )
+    args = ["verify-train", str(tmp_path / "set"), "--labels", str(labels), "--out", "v.npz"]
+    assert main(args) == 2

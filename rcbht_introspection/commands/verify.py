@@ -47,17 +47,30 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", type=Path, default=None, help="verify config (config/verify.yaml)")
 
 
-def _load(paths: list[str], labels_file: Path | None) -> tuple[list[Any], dict[str, Any]]:
+def _load(paths: list[str]) -> list[Any]:
+    """The trials of `paths`: unique names, one arm set."""
     from rcbht_introspection.learn.data import find_inputs, read_any_trial
-    from rcbht_introspection.verify.labels import label_of, read_labels
 
     trials = [read_any_trial(p) for p in find_inputs(paths)]
-    given = read_labels(labels_file) if labels_file is not None else {}
-    labels = {t.name: given.get(t.name) or label_of(t) for t in trials}
     names = [t.name for t in trials]
     if len(set(names)) != len(names):
         raise InputError("two trials have the same name", ", ".join(paths))
-    return trials, labels
+    if len({t.arms for t in trials}) != 1:
+        raise InputError(
+            f"trials mix arm sets {sorted({t.arms for t in trials})}", ", ".join(paths)
+        )
+    return trials
+
+
+def _labels(labels_file: Path | None, *sets: list[Any]) -> list[dict[str, Any]]:
+    """Per set of trials, each trial's label: its row of the labels file, else its metadata's.
+    A row naming none of the trials is an error (a typo would make a failure a success)."""
+    from rcbht_introspection.verify.labels import check_labels_cover, label_of, read_labels
+
+    given = read_labels(labels_file) if labels_file is not None else {}
+    if labels_file is not None:
+        check_labels_cover(labels_file, given, [t for trials in sets for t in trials])
+    return [{t.name: given.get(t.name) or label_of(t) for t in trials} for trials in sets]
 
 
 def cmd_verify_train(args: argparse.Namespace) -> int:
@@ -65,7 +78,8 @@ def cmd_verify_train(args: argparse.Namespace) -> int:
     from rcbht_introspection.verify.model_file import save_verifier
     from rcbht_introspection.verify.train import train_verifier
 
-    trials, labels = _load(args.data, args.labels)
+    trials = _load(args.data)
+    (labels,) = _labels(args.labels, trials)
     if sum(not lb.failed for lb in labels.values()) < 2:
         raise InputError("need at least 2 successful trials to calibrate the detector")
     try:
@@ -82,22 +96,30 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     from rcbht_introspection.verify.evaluate import summarise, verify_runs
 
     config = load_verify_config(args.config)
-    trials, labels = _load(args.data, args.labels)
-    train, train_labels = _load(args.train, args.labels) if args.train else ([], {})
+    trials = _load(args.data)
+    train = _load(args.train) if args.train else []
+    labels, train_labels = _labels(args.labels, trials, train)
     folds = None if args.loo else args.folds
+    if folds is not None and not 2 <= folds <= len(trials):
+        raise InputError(f"--folds must be 2..{len(trials)} (the trials), got {folds}")
+    if train and train[0].arms != trials[0].arms:
+        raise InputError(f"--train trials have arms {train[0].arms}, the others {trials[0].arms}")
     n_nominal = sum(not (train_labels or labels)[t.name].failed for t in (train or trials))
     if n_nominal < 3:
         raise InputError("need at least 3 successful trials to train and calibrate on")
-    runs = verify_runs(
-        trials,
-        labels,
-        config,
-        folds,
-        args.seed,
-        train,
-        progress=lambda s: print(s, file=sys.stderr),
-        train_labels=train_labels,
-    )
+    try:
+        runs = verify_runs(
+            trials,
+            labels,
+            config,
+            folds,
+            args.seed,
+            train,
+            progress=lambda s: print(s, file=sys.stderr),
+            train_labels=train_labels,
+        )
+    except ValueError as exc:  # e.g. successes without sub-task events to calibrate on
+        raise InputError(str(exc)) from None
     protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
     summary, records = summarise(runs, config, protocol)
     _print(summary)

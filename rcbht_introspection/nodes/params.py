@@ -301,9 +301,9 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
             _check(not value or Path(value).is_file(), name, f"no such file: {value}", path)
     if isinstance(cfg, VerifierConfig):
         _check(
-            cfg.publish_rate_hz >= 0,
+            0 <= cfg.publish_rate_hz <= 1000,
             "publish_rate_hz",
-            f"must be >= 0, got {cfg.publish_rate_hz}",
+            f"must be 0..1000, got {cfg.publish_rate_hz}",
             path,
         )
         _check(bool(cfg.health_topic), "health_topic", "must not be empty", path)
@@ -328,9 +328,9 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
     if isinstance(cfg, ClassifierConfig):
         _check(cfg.window_s > 0, "window_s", f"must be > 0, got {cfg.window_s}", path)
         _check(
-            cfg.publish_rate_hz >= 0,
+            0 <= cfg.publish_rate_hz <= 1000,
             "publish_rate_hz",
-            f"must be >= 0, got {cfg.publish_rate_hz}",
+            f"must be 0..1000, got {cfg.publish_rate_hz}",
             path,
         )
         try:

@@ -140,6 +140,8 @@ class Detector:
         if folds < 2:
             raise ValueError(f"need at least 2 successful trials to calibrate, got {n}")
         phases = tuple(dict.fromkeys(p for tf in successes for p in tf.phases))
+        if not phases:
+            raise ValueError("the successful trials have no sub-task events to calibrate on")
         edges = np.asarray(config.threshold_segments_s, dtype=float)
         n_seg = len(edges) + 1
         order = np.random.default_rng(seed).permutation(n)

@@ -74,6 +74,7 @@ class ArmFeatures:
         self.next_tick = 0
         """Index of the next tick to emit (tick k is at k * step_s)."""
         self.phase_start = -math.inf
+        self._last = np.zeros(PER_ARM)
         self._base_sum = np.zeros(6)
         self._base_n = 0
         self._hi = np.full(6, -np.inf)
@@ -94,8 +95,7 @@ class ArmFeatures:
         while self.next_tick * step < t:
             g = self.next_tick * step
             self.next_tick += 1
-            if self.window:
-                out.append((g, self._row(g)))
+            out.append((g, self._row(g)))
         w = np.asarray(wrench, dtype=float)
         self.window.append((t, w))
         self.sum += w
@@ -120,14 +120,20 @@ class ArmFeatures:
         return [(t, self._row(t))]
 
     def _row(self, g: float) -> np.ndarray:
+        """The features at tick g; an empty window (no sample for window_s, or none yet) holds
+        the last row (zeros before the first sample: the tared wrench), so every arm has a row
+        for every tick."""
         n = len(self.window)
+        if n == 0:
+            return self._last.copy()
         mean = self.sum / n
         std = np.sqrt(np.maximum(self.sumsq / n - mean * mean, 0.0))
         base = self._base_sum / self._base_n if self._base_n else mean
         change = mean - base
         self._hi = np.maximum(self._hi, change)
         self._lo = np.minimum(self._lo, change)
-        return np.concatenate([mean, std, change, self._hi, self._lo, ratios(mean)])
+        self._last = np.concatenate([mean, std, change, self._hi, self._lo, ratios(mean)])
+        return self._last.copy()
 
 
 @dataclass(frozen=True)

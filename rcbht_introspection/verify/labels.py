@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -39,6 +39,8 @@ class TrialLabel:
     failure_class: str = ""
     onset: float | None = None
     deviation: tuple[float, float, float] | None = None
+    line: int | None = None
+    """The row of the labels file it was read from (None: the trial's own metadata)."""
 
     @property
     def failed(self) -> bool:
@@ -98,10 +100,19 @@ def read_labels(path: Path | str) -> dict[str, TrialLabel]:
     """The labels file at `path`, by trial name; a bad row is a one-line error (file, line, field)."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")  # a spreadsheet's byte-order mark is fine
     except OSError as exc:
         raise InputError(f"cannot read labels: {exc.strerror}", path) from None
-    rows = csv.reader(text.splitlines())
+    except UnicodeDecodeError:
+        raise InputError("not UTF-8 text", path) from None
+    try:
+        return _parse(path, list(csv.reader(text.splitlines())))
+    except csv.Error as exc:
+        raise InputError(f"not CSV: {exc}", path) from None
+
+
+def _parse(path: Path, table: list[list[str]]) -> dict[str, TrialLabel]:
+    rows = iter(table)
     header = next(rows, None)
     if header is None or tuple(h.strip() for h in header) != COLUMNS:
         raise InputError(f"header must be {','.join(COLUMNS)}", path, line=1, field="header")
@@ -125,6 +136,8 @@ def read_labels(path: Path | str) -> dict[str, TrialLabel]:
                 "a success has no failure class", path, line=line, field="failure_class"
             )
         onset = _number(row[3], 1.0, path, line, "onset_s")
+        if onset is not None and onset < 0:
+            raise InputError(f"must be >= 0, got {onset}", path, line=line, field="onset_s")
         if onset is not None and outcome == SUCCESS:
             raise InputError("a success has no onset", path, line=line, field="onset_s")
         dev = [
@@ -141,5 +154,31 @@ def read_labels(path: Path | str) -> dict[str, TrialLabel]:
             failure_class=cls or (FAILURE if outcome == FAILURE else ""),
             onset=onset,
             deviation=deviation,
+            line=line,
         )
     return labels
+
+
+def check_labels_cover(
+    path: Path, labels: Mapping[str, TrialLabel], trials: Sequence[Trial]
+) -> None:
+    """One-line error for a labels row that names no given trial (a typo would otherwise make
+    the failure it labels a success silently) or an onset after its trial's end."""
+    by_name = {t.name: t for t in trials}  # (a name in two sets: the bound of either)
+    for name, label in labels.items():
+        trial = by_name.get(name)
+        if trial is None:
+            raise InputError(
+                f"trial {name!r} is not among the given trials",
+                path,
+                line=label.line,
+                field="trial",
+            )
+        end = float(trial.time[-1] - trial.time[0])
+        if label.onset is not None and label.onset > end:
+            raise InputError(
+                f"onset {label.onset} s is after the trial's end ({end:.3f} s)",
+                path,
+                line=label.line,
+                field="onset_s",
+            )

@@ -15,11 +15,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rcbht_introspection.verify.detector import SCORE_CAP
-from rcbht_introspection.verify.features import ArmFeatures, TrialFeatures
+from rcbht_introspection.verify.features import PER_ARM, ArmFeatures, TrialFeatures
 from rcbht_introspection.verify.model_file import VerifierModel
 
 NOMINAL = "nominal"
 ANOMALY = "anomaly"
+MAX_ARM_LAG_TICKS = 20
+"""An arm this many ticks behind the others (1 s at 20 Hz) is held, so verdicts do not stall."""
 HISTORY_TICKS = 20_000
 """Ticks of evidence kept for the characterisation (1000 s at 20 Hz); older ones are dropped."""
 
@@ -64,6 +66,10 @@ class VerifierSession:
         cfg = self.model.config
         self.arms = {a: ArmFeatures(cfg) for a in self.model.arms}
         self.pending: dict[str, dict[int, tuple[float, np.ndarray]]] = {a: {} for a in self.arms}
+        self.last_rows = {a: np.zeros(PER_ARM) for a in self.arms}
+        self.held_rows = 0
+        """Ticks at which an arm had sent nothing for MAX_ARM_LAG_TICKS while another had:
+        its last row stood in (counted, not silent)."""
         self.phases: list[tuple[str, float]] = []
         self.alarm_time: float | None = None
         self.onset: float | None = None
@@ -102,8 +108,21 @@ class VerifierSession:
 
     def _complete(self, final: bool = False) -> list[Verdict]:
         out = []
-        while all(self.tick in p for p in self.pending.values()):
+        while True:
+            missing = [a for a, p in self.pending.items() if self.tick not in p]
+            if missing:
+                ahead = max((max(p) for p in self.pending.values() if p), default=-1)
+                if ahead < self.tick + MAX_ARM_LAG_TICKS:
+                    break
+                for a in missing:  # a silent arm: hold its last row rather than stall
+                    self.pending[a][self.tick] = (
+                        self.tick * self.model.config.step_s,
+                        self.last_rows[a],
+                    )
+                    self.held_rows += 1
             rows = [self.pending[a].pop(self.tick) for a in self.arms]
+            for a, (_, row) in zip(self.arms, rows, strict=True):
+                self.last_rows[a] = row
             self.tick += 1
             out.append(self._verdict(rows[0][0], np.concatenate([r for _, r in rows]), False))
         if final and all(-1 in p for p in self.pending.values()):
@@ -119,7 +138,11 @@ class VerifierSession:
         elapsed = g - self.phases[i][1] if i >= 0 else 0.0
         scores = []
         env = d.models.envelope
-        z = env.z_row(name, elapsed, features) if env is not None and i >= 0 else np.full(0, np.nan)
+        z = (
+            env.z_row(name, elapsed, features)
+            if env is not None
+            else np.full(len(features), np.nan)
+        )
         for s in d.signals:
             if s == "wrench" and d.models.neighbours is not None:
                 v = d.models.neighbours.score_row(name, elapsed, features) if i >= 0 else 0.0

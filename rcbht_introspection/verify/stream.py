@@ -25,7 +25,7 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live.segmenter import SegmenterSession
 from rcbht_introspection.taxonomy.words import Word
 from rcbht_introspection.verify.model_file import VerifierModel
-from rcbht_introspection.verify.monitor import NOMINAL, Verdict, VerifierSession
+from rcbht_introspection.verify.monitor import Verdict, VerifierSession
 
 NO_MODEL = "unknown"
 """Health without a usable verifier model: nothing is judged, nothing is claimed."""
@@ -140,8 +140,9 @@ class VerifierStream:
         self.segmenter: SegmenterSession[_ArmFeed] = SegmenterSession(
             arms, self._feed, end_phases, subtasks, hold_s=hold_s, max_hold_s=max_hold_s
         )
-        self.health = NOMINAL
-        """The latest verdict's health (kept after a stream ends, until the next one's first)."""
+        self.health = NO_MODEL
+        """The latest verdict's health (kept after a stream ends, until the next one's first);
+        `unknown` before the first verdict: nothing has been judged yet."""
         self.verdicts = 0
         self.alarms = 0
 
