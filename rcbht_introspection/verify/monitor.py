@@ -169,6 +169,8 @@ class VerifierSession:
             if combined > 1.0:
                 self.alarm_time = g
                 self.onset = self._excursion
+                # the evidence is [onset, now] from here on: older ticks are not needed
+                self.history = [h for h in self.history if h[0] >= self._excursion - 1e-9]
             self._prev_below = combined < d.config.onset_fraction
         verdict = Verdict(
             time=g,
