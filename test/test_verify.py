@@ -119,12 +119,14 @@ def test_verifier_file_refuses_tampering(
     trials: list[Trial], labels: dict[str, TrialLabel], tmp_path: Path
 ) -> None:
     path = save_verifier(train_verifier(trials, labels, load_verify_config()), tmp_path / "v.npz")
-    data = bytearray(path.read_bytes())
-    data[len(data) // 2] ^= 0xFF
+    original = path.read_bytes()
     bad = tmp_path / "bad.npz"
-    bad.write_bytes(bytes(data))
-    with pytest.raises(InputError):
-        load_verifier(bad)
+    for k in range(1, 24):  # a flipped byte anywhere: zip structure, zlib stream or content
+        data = bytearray(original)
+        data[len(data) * k // 24] ^= 0xFF
+        bad.write_bytes(bytes(data))
+        with pytest.raises(InputError):
+            load_verifier(bad)
     with pytest.raises(InputError, match="not found"):
         load_verifier(tmp_path / "missing.npz")
 

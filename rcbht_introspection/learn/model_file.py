@@ -13,6 +13,7 @@ import json
 import os
 import threading
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -79,7 +80,7 @@ def read_safe_npz(path: Path, kind: str) -> tuple[dict[str, Any], dict[str, np.n
             arrays = {name: npz[name] for name in npz.files}
     except FileNotFoundError:
         raise InputError(f"{kind} file not found", path) from None
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
         raise InputError(f"not a readable {kind} file ({type(exc).__name__})", path) from None
     if "header" not in arrays:
         raise InputError(f"not an rcbht {kind} file (no header)", path)

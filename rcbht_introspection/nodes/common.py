@@ -7,11 +7,13 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from functools import partial
 from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -20,6 +22,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
+from std_msgs.msg import String
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live.health import ERROR, Health
@@ -344,3 +348,31 @@ class RosSession:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def subscribe_intake(
+    node: Node,
+    arms: Sequence[str],
+    wrench_topics: Sequence[str],
+    phase_topic: str,
+    on_sample: Callable[[str, bytes, dict], None],
+    on_phase: Callable[..., None],
+    qos: QoSProfile,
+    group: Any,
+) -> tuple[list[tuple[str, Subscription]], Subscription]:
+    """The wrench subscription of each arm and the /task_phase subscription of a node that reads
+    the robot's intake (segmenter_node, verifier_node), in `group` (a DrainedGroup: drain() takes
+    them, not executor callbacks). Raw CDR wrench: decoding six doubles and a stamp beats
+    building message objects; on_phase takes (msg, MessageInfo), which rclpy passes to
+    two-argument callbacks."""
+    wrench = [
+        (
+            arm,
+            node.create_subscription(
+                WrenchStamped, topic, partial(on_sample, arm), qos, raw=True, callback_group=group
+            ),
+        )
+        for arm, topic in zip(arms, wrench_topics, strict=True)
+    ]
+    phase = node.create_subscription(String, phase_topic, on_phase, qos, callback_group=group)
+    return wrench, phase

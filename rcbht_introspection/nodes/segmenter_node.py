@@ -37,7 +37,13 @@ from rcbht_introspection.live.health import (
 )
 from rcbht_introspection.live.join import Watermarks, batch_messages
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
-from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
+from rcbht_introspection.nodes.common import (
+    ManagedNode,
+    phase_qos,
+    qos_profile,
+    run,
+    subscribe_intake,
+)
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
 from rcbht_introspection.nodes.draining import DrainedGroup, take
 from rcbht_introspection.nodes.lifetime import StopSignal
@@ -108,26 +114,10 @@ class SegmenterNode(ManagedNode):
         cfg = self.cfg
         # the inputs are taken by drain() (draining.spin_draining), not by executor callbacks
         drained = DrainedGroup()
-        self.wrench_subs = [
-            (
-                arm,
-                # raw CDR: decoding six doubles and a stamp beats building message objects
-                self.create_subscription(
-                    WrenchStamped, topic, partial(self.sample, arm), self.qos, raw=True,
-                    callback_group=drained,
-                ),
-            )
-            for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True)
-        ]  # fmt: skip
-        self.phase_sub = self.create_subscription(
-            String,
-            cfg.phase_topic,
-            # on_phase takes (msg, MessageInfo), which rclpy passes to two-argument callbacks;
-            # its annotation of `callback` names only the one-argument form
-            self.on_phase,  # type: ignore[arg-type]
-            self.qos,
-            callback_group=drained,
-        )
+        self.wrench_subs, self.phase_sub = subscribe_intake(
+            self, cfg.arms, cfg.wrench_topics, cfg.phase_topic, self.sample, self.on_phase,
+            self.qos, drained,
+        )  # fmt: skip
         # the latest pose is what counts: depth 1, served by the executor (at least every 20 ms)
         self.pose_subs = [
             self.create_subscription(

@@ -13,13 +13,13 @@ import math
 import struct
 import sys
 import time
-from functools import partial
 
 from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.msg import Belief as BeliefMsg
 from rcbht_interfaces.msg import Verdict as VerdictMsg
 from rclpy.qos import DurabilityPolicy
 from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
 from std_msgs.msg import String
 
 from rcbht_introspection.errors import InputError
@@ -33,7 +33,7 @@ from rcbht_introspection.live.health import (
     LatencyWindow,
     file_sha256,
 )
-from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run
+from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run, subscribe_intake
 from rcbht_introspection.nodes.conversions import to_time, wrench_sample
 from rcbht_introspection.nodes.draining import DrainedGroup, take
 from rcbht_introspection.nodes.lifetime import StopSignal
@@ -135,26 +135,13 @@ class VerifierNode(ManagedNode):
     def activate(self) -> None:
         cfg = self.cfg
         drained = DrainedGroup()
-        self.wrench_subs = []
+        self.wrench_subs: list[tuple[str, Subscription]] = []
         self.phase_sub = None
         if self.stream is not None:
-            self.wrench_subs = [
-                (
-                    arm,
-                    self.create_subscription(
-                        WrenchStamped, topic, partial(self.sample, arm), self.qos, raw=True,
-                        callback_group=drained,
-                    ),
-                )
-                for arm, topic in zip(cfg.arms, cfg.wrench_topics, strict=True)
-            ]  # fmt: skip
-            self.phase_sub = self.create_subscription(
-                String,
-                cfg.phase_topic,
-                self.on_phase,  # type: ignore[arg-type]  # (msg, MessageInfo), as the segmenter's
-                self.qos,
-                callback_group=drained,
-            )
+            self.wrench_subs, self.phase_sub = subscribe_intake(
+                self, cfg.arms, cfg.wrench_topics, cfg.phase_topic, self.sample, self.on_phase,
+                self.qos, drained,
+            )  # fmt: skip
         self.belief_sub = self.create_subscription(
             BeliefMsg, cfg.belief_topic, self.on_belief, self.qos
         )

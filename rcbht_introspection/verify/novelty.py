@@ -23,6 +23,29 @@ from rcbht_introspection.verify.features import (
 )
 
 
+def pool_ticks(
+    trials: Sequence[TrialFeatures], phase_free: bool = False
+) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The trials' ticks per sub-task in order of first appearance: (elapsed time, features,
+    trial index). `phase_free`: one pool "all" of every tick after the first event, by time
+    into the trial."""
+    parts: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
+    for j, tf in enumerate(trials):
+        for i, name in enumerate(("all",) if phase_free else tf.phases):
+            sel = tf.phase_index >= 0 if phase_free else tf.phase_index == i
+            if np.any(sel):
+                el = tf.times[sel] if phase_free else tf.elapsed[sel]
+                parts.setdefault(name, []).append((el, tf.features[sel], np.full(len(el), j)))
+    return {
+        name: (
+            np.concatenate([q[0] for q in part]),
+            np.vstack([q[1] for q in part]),
+            np.concatenate([q[2] for q in part]),
+        )
+        for name, part in parts.items()
+    }
+
+
 @dataclass
 class EnvelopeModel:
     """Per sub-task: median and spread per bin of time into the sub-task; `phase_free`: one
@@ -40,23 +63,12 @@ class EnvelopeModel:
     def fit(
         cls, trials: Sequence[TrialFeatures], config: VerifyConfig, phase_free: bool = False
     ) -> EnvelopeModel:
-        names: list[str] = []
-        rows: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
-        for tf in trials:
-            for i, name in enumerate(("all",) if phase_free else tf.phases):
-                sel = tf.phase_index >= 0 if phase_free else tf.phase_index == i
-                if not np.any(sel):
-                    continue
-                if name not in rows:
-                    names.append(name)
-                    rows[name] = []
-                elapsed = tf.times[sel] if phase_free else tf.elapsed[sel]
-                rows[name].append((elapsed, tf.features[sel]))
+        pools = pool_ticks(trials, phase_free)
+        names = list(pools)
         bin_s = config.elapsed_bin_s
         medians, scales = [], []
         for name in names:
-            elapsed = np.concatenate([e for e, _ in rows[name]])
-            feats = np.vstack([f for _, f in rows[name]])
+            elapsed, feats, _ = pools[name]
             phase_mad = 1.4826 * np.median(np.abs(feats - np.median(feats, axis=0)), axis=0)
             floor = np.maximum(scale_floors(config, feats.shape[1]), 0.25 * phase_mad)
             n_bins = int(np.ceil((elapsed.max() + 1e-9) / bin_s)) + 1
@@ -226,18 +238,8 @@ class NeighbourModel:
         n_arms = trials[0].features.shape[1] // PER_ARM if trials else 1
         columns = kind_columns(config.novelty_features, n_arms)
         floors = scale_floors(config, n_arms * PER_ARM)[columns]
-        names: list[str] = []
-        pools: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
-        for j, tf in enumerate(trials):
-            for i, name in enumerate(("all",) if phase_free else tf.phases):
-                sel = tf.phase_index >= 0 if phase_free else tf.phase_index == i
-                if not np.any(sel):
-                    continue
-                if name not in pools:
-                    names.append(name)
-                    pools[name] = []
-                el = tf.times[sel] if phase_free else tf.elapsed[sel]
-                pools[name].append((el, tf.features[sel][:, columns], np.full(int(np.sum(sel)), j)))
+        pools = pool_ticks(trials, phase_free)
+        names = list(pools)
         model = cls(
             tuple(names),
             [],
@@ -253,11 +255,11 @@ class NeighbourModel:
             phase_free,
         )
         for p, name in enumerate(names):
-            el = np.concatenate([q[0] for q in pools[name]])
+            el, feats, ids = pools[name]
             order = np.argsort(el, kind="stable")
             model.elapsed.append(el[order])
-            model.points.append(np.vstack([q[1] for q in pools[name]])[order])
-            model.trial_ids.append(np.concatenate([q[2] for q in pools[name]])[order])
+            model.points.append(feats[order][:, columns])
+            model.trial_ids.append(ids[order])
             n_bins = int(np.ceil((el.max() + 1e-9) / model.bin_s)) + 1
             scale = np.empty((n_bins, len(columns)))
             for b in range(n_bins):
