@@ -148,6 +148,8 @@ def _verify_demo(
 ) -> None:
     """Train a verifier on the training successes and a few simulated failures, then replay one
     nominal and one failing held-out trial through the nodes with verifier_node."""
+    import numpy as np
+
     from rcbht_introspection.io.bags import write_trial_bag
     from rcbht_introspection.io.hiro import read_trial
     from rcbht_introspection.plots.failure_timeline import plot_failure_timeline
@@ -156,7 +158,6 @@ def _verify_demo(
     from rcbht_introspection.sim import load_sim_config, simulate_trial
     from rcbht_introspection.taxonomy.batch import label_trial
     from rcbht_introspection.verify.config import load_verify_config
-    from rcbht_introspection.verify.features import trial_features
     from rcbht_introspection.verify.labels import label_of
     from rcbht_introspection.verify.model_file import save_verifier
     from rcbht_introspection.verify.stream import offline_verdicts
@@ -174,13 +175,13 @@ def _verify_demo(
         f"({', '.join(DEMO_FAILURES)})"
     )
     trials = [read_trial(p) for p in train] + failures
-    config = load_verify_config()
-    verifier = train_verifier(trials, {t.name: label_of(t) for t in trials}, config)
+    verifier = train_verifier(trials, {t.name: label_of(t) for t in trials}, load_verify_config())
     verifier_path = save_verifier(verifier, out / "verifier.npz")
     print(f"   {verifier_path}: {json.dumps(verifier.trained_on)}")
     _step("7. replay one nominal and one failing held-out trial with verifier_node")
     bags = []
-    for trial in (read_trial(nominal), failing):
+    replayed = (read_trial(nominal), failing)
+    for trial in replayed:
         bag = out / "bags_verify" / f"{trial.name}.mcap"
         bag.unlink(missing_ok=True)
         write_trial_bag(trial, bag)
@@ -192,19 +193,16 @@ def _verify_demo(
     )
     (out / "verify_eval.json").write_text(json.dumps(result["verifier"], indent=2))
     print(verifier_summary(result["verifier"]))
-    detector = verifier.detector
-    for trial in (read_trial(nominal), failing):
-        verdicts = offline_verdicts(trial, verifier)
-        tf = trial_features(trial, config)
-        d = detector.run(tf)
+    for trial in replayed:
+        verdicts = offline_verdicts(trial, verifier)  # what verifier_node published, tick for tick
         label = label_of(trial)
         plot = plot_failure_timeline(
             trial,
             label_trial(trial),
-            d.times,
-            d.score,
-            d.alarm,
-            d.onset,
+            np.array([v.time for v in verdicts]),
+            np.array([v.score for v in verdicts]),
+            verdicts[-1].alarm_time if verdicts else None,
+            verdicts[-1].onset if verdicts else None,
             [(v.time, v.failure_class) for v in verdicts if v.alarm][::10],
             label.failure_class or "success",
             label.onset,

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections.abc import Callable, Sequence
 from typing import Any, Protocol, runtime_checkable
 
 from rclpy.callback_groups import CallbackGroup
@@ -60,6 +61,29 @@ def take(sub: Subscription) -> tuple[Any, Any] | None:
     """The next delivered message of `sub` as (message, info), or None: what drain() loops on."""
     with sub.handle:
         return sub.handle.take_message(sub.msg_type, sub.raw)
+
+
+MAX_BURST = 1000
+"""Most samples per arm taken in one executor wake-up."""
+
+
+def take_bursts(
+    subs: Sequence[tuple[str, Subscription]],
+    handle: Callable[[str, Any, Any], None],
+    limit: int = MAX_BURST,
+) -> None:
+    """Hand `handle(arm, message, info)` the messages already delivered on each arm's
+    subscription, one per arm in turn (so the arms stay interleaved), until none is left or
+    `limit` rounds: bounded, so the node's timers still run between bursts."""
+    for _ in range(limit):
+        taken = False
+        for arm, sub in subs:
+            got = take(sub)
+            if got is not None:
+                handle(arm, *got)
+                taken = True
+        if not taken:
+            return
 
 
 def serve_ready(executor: Executor, limit: int) -> int:

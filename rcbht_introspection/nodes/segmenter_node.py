@@ -45,15 +45,13 @@ from rcbht_introspection.nodes.common import (
     subscribe_intake,
 )
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
-from rcbht_introspection.nodes.draining import DrainedGroup, take
+from rcbht_introspection.nodes.draining import DrainedGroup, take, take_bursts
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import SegmenterConfig, word_topics
 from rcbht_introspection.task import load_task_file
 from rcbht_introspection.taxonomy.config import load_taxonomy_config, taxonomy_digest
 from rcbht_introspection.taxonomy.words import LEVELS
 
-MAX_BURST = 1000
-"""Most samples per arm taken in one executor wake-up."""
 TARE_SERVICE = "~/tare"
 """Re-tare at the next samples. Type diagnostic_msgs/srv/SelfTest: std_srvs (Trigger) is not among
 the pinned PyPI ROS wheels; SelfTest has Trigger's empty request, and its response says whether
@@ -167,15 +165,7 @@ class SegmenterNode(ManagedNode):
         ahead of two 1 kHz arms. Bounded, so the flush timer still runs.
         """
         self.take_phases()
-        for _ in range(MAX_BURST):
-            taken = False
-            for other, sub in self.wrench_subs:
-                got = take(sub)
-                if got is not None:
-                    self.sample(other, *got)
-                    taken = True
-            if not taken:
-                return
+        take_bursts(self.wrench_subs, self.sample)
 
     def sample(self, arm: str, raw: bytes, info: dict) -> None:
         self.last_sample = time.monotonic()

@@ -35,7 +35,7 @@ from rcbht_introspection.live.health import (
 )
 from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run, subscribe_intake
 from rcbht_introspection.nodes.conversions import to_time, wrench_sample
-from rcbht_introspection.nodes.draining import DrainedGroup, take
+from rcbht_introspection.nodes.draining import DrainedGroup, take, take_bursts
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import VerifierConfig
 from rcbht_introspection.task import load_task_file
@@ -46,9 +46,6 @@ from rcbht_introspection.verify.stream import (
     VerifierOutput,
     VerifierStream,
 )
-
-MAX_BURST = 1000
-"""Most samples per arm taken in one executor wake-up."""
 
 
 def verdict_msg(sv: StreamVerdict, subtask: str) -> VerdictMsg:
@@ -193,15 +190,7 @@ class VerifierNode(ManagedNode):
     def drain(self) -> None:
         """Handle every event and sample already delivered (arms in turn), in order."""
         self.take_phases()
-        for _ in range(MAX_BURST):
-            taken = False
-            for other, sub in self.wrench_subs:
-                got = take(sub)
-                if got is not None:
-                    self.sample(other, *got)
-                    taken = True
-            if not taken:
-                return
+        take_bursts(self.wrench_subs, self.sample)
 
     def sample(self, arm: str, raw: bytes, info: dict) -> None:
         assert self.stream is not None  # subscribed only with a model

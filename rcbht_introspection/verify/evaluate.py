@@ -247,8 +247,9 @@ def verify_runs(
     progress: Callable[[str], None] | None = None,
     train_labels: Mapping[str, TrialLabel] | None = None,
 ) -> dict[str, list[RunResult]]:
-    """Every test run of every method (see verify_eval). Training trials of `train` are kept
-    apart from the test trials even when their names are the same (two simulated sets)."""
+    """Every test run of every method: stratified `folds` over `trials` (None: leave one trial
+    out), or fitted on `train` and tested on `trials` (transfer; training trials are kept apart
+    from the test trials even when their names are the same, as in two simulated sets)."""
     feats = {t.name: trial_features(t, config) for t in trials}
     labels = dict(labels)
     names = [t.name for t in trials]
@@ -313,21 +314,3 @@ def summarise(
         for r in runs[m]
     ]
     return summary, records
-
-
-def verify_eval(
-    trials: Sequence[Trial],
-    labels: Mapping[str, TrialLabel],
-    config: VerifyConfig,
-    folds: int | None = 5,
-    seed: int = 0,
-    train: Sequence[Trial] = (),
-    progress: Callable[[str], None] | None = None,
-    train_labels: Mapping[str, TrialLabel] | None = None,
-) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """Score the verifier and its baselines; returns (summary, per-run records).
-
-    folds None: leave one trial out. `train` given: fit on it, test on `trials` (transfer)."""
-    runs = verify_runs(trials, labels, config, folds, seed, train, progress, train_labels)
-    protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
-    return summarise(runs, config, protocol)

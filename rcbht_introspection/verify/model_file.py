@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from rcbht_introspection.config_files import from_mapping
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.model_file import check_checksum, read_safe_npz, write_safe_npz
 from rcbht_introspection.verify.characterise import Characteriser, LinearHead
@@ -128,11 +129,7 @@ def load_verifier(path: Path | str) -> VerifierModel:
         )
     check_checksum(header, arrays, path, KIND)
     try:
-        raw = dict(header["config"])
-        raw["evidence_s"] = tuple(raw["evidence_s"])
-        raw["novelty_features"] = tuple(raw["novelty_features"])
-        raw["threshold_segments_s"] = tuple(raw["threshold_segments_s"])
-        config = VerifyConfig(**raw)
+        config = from_mapping(VerifyConfig, header["config"], path=path, prefix="config.")
         env = None
         if "envelope" in header:
             e = header["envelope"]
