@@ -165,6 +165,10 @@ def test_segmenter_diagnostics_report_rate_and_rejections(
             diag = DiagnosticsProbe(ros)
             wrench, _ = segmenter_inputs(ros, log)
             assert wait_until(lambda: "segmenter_node: arm R" in diag.latest), log.read_text()
+            # the segmenter's readers matched this probe's writers (what a harness waits for)
+            outputs = "segmenter_node: outputs"
+            matched = lambda: diag.values(outputs).get("intake publishers matched")  # noqa: E731
+            assert wait_until(lambda: matched() == "1", 30), diag.values(outputs)
             for i in range(1500):  # ~3 s of 500 Hz
                 value = float("nan") if i == 700 else math.sin(i / 50)
                 wrench.publish(wrench_msg(BASE_NS + i * 2_000_000, value))
@@ -242,7 +246,7 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
     from std_msgs.msg import String
 
     from rcbht_introspection.nodes.common import RosSession, qos_profile
-    from rcbht_introspection.replay.observer import segmenter_matches
+    from rcbht_introspection.replay.observer import DiagnosticWatch
 
     model = toy_model(tmp_path / "model.rcbht", ("approach", "rotation"))
     seg_log = tmp_path / "segmenter.log"
@@ -261,7 +265,7 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
                 return [b for b in list(beliefs) if b.final]
 
             diag = DiagnosticsProbe(ros)
-            matched = segmenter_matches(ros.node)
+            matched = DiagnosticWatch(ros.node).segmenter_matched
             wrench, phase = segmenter_inputs(ros, seg_log)
             i = 0
 

@@ -302,7 +302,10 @@ def _restart(
     # and the segmenter's matched-reader count (1 Hz /diagnostics) must have seen it leave
     t0 = time.monotonic()
     left = wait_until(
-        lambda: observer.belief_sub.get_publisher_count() == 0 and observer.segmenter_matched() < 2,
+        lambda: (
+            observer.belief_sub.get_publisher_count() == 0
+            and observer.diagnostics.segmenter_matched() < 2
+        ),
         10.0,
     )
     gone = time.monotonic() - t0 if left else None

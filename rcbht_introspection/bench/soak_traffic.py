@@ -28,7 +28,7 @@ from rcbht_introspection.io.bags import (
 from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, word_topics
-from rcbht_introspection.replay.observer import segmenter_matches
+from rcbht_introspection.replay.observer import DiagnosticWatch
 from rcbht_introspection.sim import load_sim_config, simulate_trial
 
 ARMS: tuple[str, ...] = ("L", "R")
@@ -258,7 +258,7 @@ class SoakObserver:
             on_words = functools.partial(self.on_words, arm, level == "primitives")
             self.subs.append(node.create_subscription(WordsMsg, topic, on_words, qos))
         self.subs.append(node.create_subscription(PhaseMsg, self.applied_topic, self.on_phase, qos))
-        self.segmenter_matched = segmenter_matches(node)
+        self.diagnostics = DiagnosticWatch(node)
 
     def on_belief(self, msg: Any) -> None:
         stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
@@ -282,14 +282,16 @@ class SoakObserver:
             self.applied["end" if msg.name == END_PHASE else "subtask"] += 1
 
     def connected(self, node: Any) -> bool:
-        """The nodes publish what this observes, and the segmenter's writers matched both the
-        classifier's readers and this observer's (the graph lists readers before that)."""
+        """The nodes publish what this observes, the segmenter's writers matched both the
+        classifier's readers and this observer's (the graph lists readers before that), and its
+        readers matched the traffic's writers."""
         if not all(s.get_publisher_count() > 0 for s in self.subs):
             return False
         topics = [*self.word_topics.values(), self.applied_topic]
         return (
             all(node.count_subscribers("/" + t) >= 2 for t in topics)
-            and self.segmenter_matched() >= 2
+            and self.diagnostics.segmenter_matched() >= 2
+            and self.diagnostics.intake_matched()
         )
 
 

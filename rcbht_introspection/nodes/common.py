@@ -376,3 +376,14 @@ def subscribe_intake(
     ]
     phase = node.create_subscription(String, phase_topic, on_phase, qos, callback_group=group)
     return wrench, phase
+
+
+def intake_publishers(
+    wrench: Sequence[tuple[str, Subscription]], phase: Subscription | None
+) -> int:
+    """Fewest publishers matched on any intake topic (0 when not subscribed). A harness waits
+    for >= 1 before it plays: a writer can match this reader before this reader matches the
+    writer, and DDS drops what it sends in between."""
+    if not wrench or phase is None:
+        return 0
+    return min(sub.get_publisher_count() for sub in (*(s for _, s in wrench), phase))

@@ -23,6 +23,7 @@ from rcbht_interfaces.msg import Words as WordsMsg
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.publisher import Publisher
 from rclpy.serialization import deserialize_message
+from rclpy.subscription import Subscription
 from std_msgs.msg import String
 
 from rcbht_introspection.io.bags import decode_wrench_sample
@@ -39,6 +40,7 @@ from rcbht_introspection.live.join import Watermarks, batch_messages
 from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
 from rcbht_introspection.nodes.common import (
     ManagedNode,
+    intake_publishers,
     phase_qos,
     qos_profile,
     run,
@@ -107,6 +109,8 @@ class SegmenterNode(ManagedNode):
             PhaseMsg, cfg.applied_phase_topic, phase_qos(cfg.qos_reliability), event_callbacks=quiet
         )
         self.cpu_at_start = time.process_time()
+        self.wrench_subs: list[tuple[str, Subscription]] = []
+        self.phase_sub: Subscription | None = None
 
     def activate(self) -> None:
         cfg = self.cfg
@@ -136,7 +140,9 @@ class SegmenterNode(ManagedNode):
     def deactivate(self) -> None:
         for _, sub in self.wrench_subs:
             self.destroy_subscription(sub)
-        self.destroy_subscription(self.phase_sub)
+        if self.phase_sub is not None:
+            self.destroy_subscription(self.phase_sub)
+        self.phase_sub = None
         for pose_sub in self.pose_subs:
             self.destroy_subscription(pose_sub)
         self.destroy_timer(self.flush_timer)
@@ -155,6 +161,8 @@ class SegmenterNode(ManagedNode):
         The executor serves ready subscriptions in a fixed order, so an event published just
         before a sample could otherwise be handled after it (one sample late).
         """
+        if self.phase_sub is None:
+            return
         while (taken := take(self.phase_sub)) is not None:
             self.on_phase(*taken)
 
@@ -341,16 +349,19 @@ class SegmenterNode(ManagedNode):
             "poses ignored": self.bad_poses,
         }
         out.append(events_health("segmenter_node", events, self.event_watch))
-        out.append(outputs_health(self.word_pubs.values(), self.phase_pub))
+        matched = intake_publishers(self.wrench_subs, self.phase_sub)
+        out.append(outputs_health(self.word_pubs.values(), self.phase_pub, matched))
         return out
 
 
-def outputs_health(word_pubs: Iterable[Publisher], phase_pub: Publisher) -> Health:
-    """Subscribers matched to the outputs: a harness waits for them before it plays a bag."""
+def outputs_health(word_pubs: Iterable[Publisher], phase_pub: Publisher, intake: int) -> Health:
+    """Publishers matched to the inputs and subscribers to the outputs: a harness waits for
+    them before it plays a bag."""
     matched = min(p.get_subscription_count() for p in word_pubs)
     values = (
         ("word subscribers matched", str(matched)),
         ("phase subscribers matched", str(phase_pub.get_subscription_count())),
+        ("intake publishers matched", str(intake)),
     )
     return Health(
         "segmenter_node: outputs", OK, f"{matched} subscribers on every word topic", values

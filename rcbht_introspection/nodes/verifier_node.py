@@ -33,7 +33,13 @@ from rcbht_introspection.live.health import (
     LatencyWindow,
     file_sha256,
 )
-from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run, subscribe_intake
+from rcbht_introspection.nodes.common import (
+    ManagedNode,
+    intake_publishers,
+    qos_profile,
+    run,
+    subscribe_intake,
+)
 from rcbht_introspection.nodes.conversions import to_time, wrench_sample
 from rcbht_introspection.nodes.draining import DrainedGroup, take, take_bursts
 from rcbht_introspection.nodes.lifetime import StopSignal
@@ -272,6 +278,7 @@ class VerifierNode(ManagedNode):
             ("sample to verdict p50 ms", f"{p50:.3f}"),
             ("sample to verdict p99 ms", f"{p99:.3f}"),
             ("verdict subscribers matched", str(self.verdict_pub.get_subscription_count())),
+            ("intake publishers matched", str(intake_publishers(self.wrench_subs, self.phase_sub))),
             *((k, str(v)) for k, v in counts.items()),
         )
         level = WARN if moved else OK

@@ -44,7 +44,7 @@ from rcbht_introspection.nodes.common import RosSession, qos_profile
 from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, VerifierConfig
 from rcbht_introspection.nodes.player import BagPlayer
 from rcbht_introspection.nodes.teach_client import call_teach, teach_client, teach_request
-from rcbht_introspection.replay.observer import Observer, VerdictObserver, segmenter_matches
+from rcbht_introspection.replay.observer import DiagnosticWatch, Observer, VerdictObserver
 from rcbht_introspection.replay.scoring import (
     BagRecord,
     Playback,
@@ -263,12 +263,15 @@ def replay_eval(
                     "/" + seg.applied_phase_topic
                 ]
 
-                matched = segmenter_matches(ros.node)
+                diagnostics = DiagnosticWatch(ros.node)
+                matched = diagnostics.segmenter_matched
 
                 def ready() -> bool:
-                    # the graph shows the classifier's readers before the segmenter's writers
-                    # have matched them; words published in between would be lost, so the
-                    # segmenter's own /diagnostics must count both readers (observer, classifier)
+                    # the graph shows a reader before the writer's side has matched it (and a
+                    # writer before the reader's side has); messages sent in between are lost,
+                    # so the nodes' own /diagnostics must count the segmenter's readers
+                    # (observer, classifier), the verifier's reader (observer) and the
+                    # publishers both nodes' intake matched
                     readers = 2 if verdicts is not None else 1  # segmenter (+ verifier)
                     return (
                         all(
@@ -281,6 +284,8 @@ def replay_eval(
                         )
                         and all(ros.node.count_subscribers(t) >= 2 for t in classifier_inputs)
                         and matched() >= 2
+                        and diagnostics.intake_matched()
+                        and (verdicts is None or diagnostics.verifier_matched())
                     )
 
                 wait_for_nodes(ready, options.startup_timeout, procs, "the nodes to connect")

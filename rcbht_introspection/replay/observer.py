@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Callable
 from functools import partial
 from typing import Any
 
@@ -38,18 +37,35 @@ from rcbht_introspection.replay.scoring import (
 from rcbht_introspection.replay.verify_scoring import VerdictRecord
 
 
-def segmenter_matches(node: Node) -> Callable[[], int]:
-    """A function giving the subscribers the segmenter's writers matched on every word topic."""
-    latest = [0]
+class DiagnosticWatch:
+    """The latest value of each key of each /diagnostics status, by status name: what a harness
+    waits on before it plays (the graph's counts show a match on one side only)."""
 
-    def on_status(msg: Any) -> None:
+    def __init__(self, node: Node) -> None:
+        self.latest: dict[str, dict[str, str]] = {}
+        node.create_subscription(DiagnosticArray, "/diagnostics", self.on_status, 10)
+
+    def on_status(self, msg: Any) -> None:
         for status in msg.status:
-            if status.name == "segmenter_node: outputs":
-                values = {kv.key: kv.value for kv in status.values}
-                latest[0] = int(values.get("word subscribers matched", 0))
+            self.latest[status.name] = {kv.key: kv.value for kv in status.values}
 
-    node.create_subscription(DiagnosticArray, "/diagnostics", on_status, 10)
-    return lambda: latest[0]
+    def count(self, status: str, key: str) -> int:
+        """The integer `key` of `status` last reported (0 before it was)."""
+        return int(self.latest.get(status, {}).get(key, 0))
+
+    def segmenter_matched(self) -> int:
+        """Subscribers the segmenter's writers matched on every word topic."""
+        return self.count("segmenter_node: outputs", "word subscribers matched")
+
+    def intake_matched(self) -> bool:
+        """The segmenter's readers matched a publisher on every input."""
+        return self.count("segmenter_node: outputs", "intake publishers matched") >= 1
+
+    def verifier_matched(self) -> bool:
+        """The verifier's readers matched a publisher on every input and its verdict writer
+        matched a reader."""
+        values = ("intake publishers matched", "verdict subscribers matched")
+        return all(self.count("verifier_node: verifier", key) >= 1 for key in values)
 
 
 class Observer:
