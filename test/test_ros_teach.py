@@ -11,6 +11,7 @@ bags (12 verdicts, each also replayed after the restart) keep the test's DDS tim
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -82,12 +83,14 @@ def test_cold_start_cli_and_topic_refusals(
     log = tmp_path / "classifier.log"
     proc = start_node("classifier_node", params, env, log)
     refused: list[int] = []
+    learner: list[str] = []
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for status in msg.status:
             values = {kv.key: kv.value for kv in status.values}
             if "teach requests refused" in values:
                 refused.append(int(values["teach requests refused"]))
+                learner.append(values["teach learner"])
 
     try:
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
@@ -111,3 +114,8 @@ def test_cold_start_cli_and_topic_refusals(
     assert "empty label" in text
     assert code == 0, text
     assert not model.exists()  # nothing taught, nothing saved
+    # it learned in a process of its own (config/teach.yaml), which ended with the node
+    kind, pid = learner[-1].split()
+    assert kind == "process"
+    with pytest.raises(ProcessLookupError):
+        os.kill(int(pid), 0)

@@ -3,16 +3,21 @@ generated trials' sub-tasks, swaps the taught model in, saves it, and refuses ba
 
 from __future__ import annotations
 
+import os
+import signal
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 from conftest import generated_trials
 
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.learn.learner_process import ProcessLearner
 from rcbht_introspection.learn.live import sample_word_count
 from rcbht_introspection.learn.model_file import load_model
-from rcbht_introspection.learn.online import TeachConfig
+from rcbht_introspection.learn.online import LEARNERS, TeachConfig
 from rcbht_introspection.learn.teaching import Teaching, _Job
 from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker
 from rcbht_introspection.live.classifier import ClassifierSession, PhaseInput, WordsInput
@@ -21,8 +26,9 @@ from rcbht_introspection.live.teach import TeachRequest
 from rcbht_introspection.taxonomy.words import LEVELS, Word
 from rcbht_introspection.waiting import wait_until
 
-CONFIG = TeachConfig(n_estimators=10)
-"""A small forest: the test checks the plumbing, not the accuracy."""
+CONFIG = TeachConfig(n_estimators=10, learner="thread")
+"""A small forest learned in the worker thread: the tests check the queue, not the accuracy
+(the learner's own process is tested on its own and in the first test)."""
 
 
 def _words(trial: Trial) -> list[Word]:
@@ -98,11 +104,12 @@ def trials(request: pytest.FixtureRequest) -> list[Trial]:
     return [read_trial(p) for p in generated_trials(request)[:3]]
 
 
+@pytest.mark.parametrize("learner", LEARNERS)
 def test_cold_start_learns_taught_windows_swaps_and_saves(
-    trials: list[Trial], tmp_path: Path
+    trials: list[Trial], tmp_path: Path, learner: str
 ) -> None:
     saved = tmp_path / "taught.rcbht"
-    teaching = Teaching(CONFIG, None, saved)
+    teaching = Teaching(replace(CONFIG, learner=learner), None, saved)
     session = _session(teaching)
     first, second, held_out = trials
     # no model: every verdict is unknown while nothing is taught
@@ -284,3 +291,40 @@ def test_live_like_windows_hold_only_words_final_by_their_time(trials: list[Tria
     assert wait_until(lambda: teaching.status().pending == 0, timeout=120)
     assert teaching.learner is not None and teaching.learner.taught_live == len(job_live)
     teaching.close()
+
+
+def _samples(trial: Trial) -> list[SubtaskSample]:
+    from rcbht_introspection.grammar.split import split_words
+    from rcbht_introspection.live.offline import trial_words
+
+    words = trial_words(trial.name, {"R": _words(trial)})
+    return split_words(words, trial.state_times, trial.end_time)
+
+
+def test_the_learner_process_answers_failures_and_ends(trials: list[Trial], tmp_path: Path) -> None:
+    """The learner's own process: a teach file it cannot write still gives the model (and says
+    why); a refused teach raises InputError and changes nothing; a killed process is a
+    RuntimeError with its exit code, not a hang; close() ends it."""
+    config = TeachConfig(n_estimators=10)
+    samples = _samples(trials[0])
+    (tmp_path / "a_file").write_text("not a folder")
+    learner = ProcessLearner(config, out_path=tmp_path / "a_file" / "taught.rcbht")
+    try:
+        model, save_error = learner.teach(samples)
+        assert save_error and "\n" not in save_error
+        assert sorted(model.classes_) == sorted({s.subtask for s in samples})
+        with pytest.raises(InputError, match="nothing to teach"):
+            learner.teach([])
+        again, _ = learner.teach(_samples(trials[1]))  # the refusal changed nothing
+        assert sorted(again.classes_) == sorted(model.classes_)
+    finally:
+        learner.close()
+    assert not learner.alive
+    killed = ProcessLearner(config)
+    try:
+        killed.teach(samples)
+        os.kill(killed.pid, signal.SIGKILL)
+        with pytest.raises(RuntimeError, match="exit code -9"):
+            killed.teach(samples)
+    finally:
+        killed.close()

@@ -7,8 +7,9 @@ trials all four at once ("whole trial"). Latency = request accepted -> taught mo
 the live path takes it from at its next belief update.
 
 Belief updates beside teaching: the belief-update loop of bench/belief.py on REAL S-45/46 with
-the taught model, once alone and once while a thread keeps learning (OnlineLearner.teach of
-ten trials' windows over and over, what the worker does while a label is being learned).
+the taught model, once alone and then while a thread keeps learning ten trials' windows over and
+over (what the teach worker does while labels are being learned): learning in that thread
+(TeachConfig.learner 'thread') and in the learner's own process ('process', the default).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from __future__ import annotations
 import os
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -31,8 +33,14 @@ from rcbht_introspection.bench.belief import (
 )
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.hiro import read_trial
+from rcbht_introspection.learn.learner_process import ProcessLearner
 from rcbht_introspection.learn.live import LiveAugmentConfig, load_live_config, stream_factory
-from rcbht_introspection.learn.online import OnlineLearner, TeachConfig, load_teach_config
+from rcbht_introspection.learn.online import (
+    LEARNERS,
+    OnlineLearner,
+    TeachConfig,
+    load_teach_config,
+)
 from rcbht_introspection.learn.teaching import Teaching
 from rcbht_introspection.live.belief import BeliefTracker
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial
@@ -125,21 +133,44 @@ def _samples(streamed: list[StreamedTrial]) -> list[SubtaskSample]:
 def updates_beside_teaching(
     held_out: list[StreamedTrial], model: Any, samples: list[SubtaskSample], config: TeachConfig
 ) -> dict[str, Any]:
-    """Belief-update times alone and while a thread keeps learning `samples`."""
+    """Belief-update times alone and while a thread keeps learning `samples`, for each place
+    the learning can run (TeachConfig.learner): in that thread, or in the learner's process
+    the thread waits on (what the node's teach worker does)."""
     alone: list[float] = []
     for s in held_out:
         alone += timed_updates(s, model, "boundary")[0]
+    out: dict[str, Any] = {"alone": _stats(alone)}
+    for learner in LEARNERS:
+        out[learner] = _updates_while_learning(
+            held_out, model, samples, replace(config, learner=learner)
+        )
+    return out
+
+
+def _updates_while_learning(
+    held_out: list[StreamedTrial], model: Any, samples: list[SubtaskSample], config: TeachConfig
+) -> dict[str, Any]:
+    """Belief-update times while a thread teaches `samples` in fours to a fresh learner, pass
+    after pass: learning in the thread itself, or in a ProcessLearner the thread waits on."""
     stop = threading.Event()
     rounds = [0]
 
     def learn() -> None:
         while not stop.is_set():
+            process = ProcessLearner(config) if config.learner == "process" else None
             learner = OnlineLearner(config)
-            for i in range(0, len(samples), 4):
-                if stop.is_set():
-                    return
-                learner.teach(samples[i : i + 4])
-                rounds[0] += 1
+            try:
+                for i in range(0, len(samples), 4):
+                    if stop.is_set():
+                        return
+                    if process is not None:
+                        process.teach(samples[i : i + 4])
+                    else:
+                        learner.teach(samples[i : i + 4])
+                    rounds[0] += 1
+            finally:
+                if process is not None:
+                    process.close()
 
     worker = threading.Thread(target=learn, daemon=True)
     worker.start()
@@ -152,7 +183,6 @@ def updates_beside_teaching(
         stop.set()
         worker.join()
     return {
-        "alone": _stats(alone),
         "beside_teaching": _stats(beside),
         "teach_updates_during": rounds[0],
         "measured_s": round(time.perf_counter() - t0, 2),
@@ -177,6 +207,7 @@ def run(out_dir: Path) -> dict[str, Any]:
             "n_estimators": config.n_estimators,
             "prefixes": list(config.prefixes),
             "warmup_windows": config.warmup_windows,
+            "learner": config.learner,
         },
         "teach_latency": latencies,
         "belief_update_boundary": updates,

@@ -36,6 +36,10 @@ ONLINE_KEY = "online"
 """Key of the model's `training` header that records the teaching state."""
 
 
+LEARNERS = ("process", "thread")
+"""Where taught windows are learned (TeachConfig.learner)."""
+
+
 @dataclass(frozen=True)
 class TeachConfig:
     """How taught windows become a model (config/teach.yaml, section teach)."""
@@ -54,6 +58,9 @@ class TeachConfig:
     "Memory budget of the Mondrian forest")."""
     max_points: int | None = 5000
     """... and training points it stores for regrowing leaves (None: unbounded)."""
+    learner: str = "process"
+    """Where the classifier node learns: 'process' (a process of its own, so learning never
+    holds the live path's GIL) or 'thread' (a thread of the node's process)."""
 
 
 def _check(cfg: TeachConfig) -> None:
@@ -70,6 +77,10 @@ def _check(cfg: TeachConfig) -> None:
         raise InputError(
             f"must be >= n_estimators ({cfg.n_estimators}: one root per tree), got {cfg.max_nodes}",
             field="max_nodes",
+        )
+    if cfg.learner not in LEARNERS:
+        raise InputError(
+            f"unknown learner {cfg.learner!r} (known: {', '.join(LEARNERS)})", field="learner"
         )
     if cfg.max_points is not None and cfg.max_points < 0:
         raise InputError(f"must be >= 0, got {cfg.max_points}", field="max_points")

@@ -4,7 +4,9 @@ A request names a label (a sub-task name or a failure class) and a window: the s
 ended last, or [start, end] in stream seconds. Its words are taken from the belief tracker when
 the request arrives (on the live path's thread; a window whose words are not all final yet
 waits for them at the next classifications), queued, and learned by an OnlineLearner
-(online.py) in one worker thread. Each new model is saved atomically (when a path is
+(online.py) for one worker thread: in a process of its own (learner_process.py, the default:
+learning then never holds the live path's GIL) or in the worker thread itself
+(TeachConfig.learner). Each new model is saved atomically (when a path is
 given) and put into a one-model slot that the live path takes at its next classification: the
 live path never waits for learning and never sees a half-updated model. A bad request is
 refused with a one-line reason and counted, never raised.
@@ -22,6 +24,7 @@ from pathlib import Path
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
+from rcbht_introspection.learn.learner_process import ProcessLearner
 from rcbht_introspection.learn.live import LiveAugmentConfig, sample_times, sample_word_count
 from rcbht_introspection.learn.model_file import save_model
 from rcbht_introspection.learn.models import SubtaskModel
@@ -108,6 +111,10 @@ class Teaching:
                 )
             except InputError as exc:
                 self.unavailable = str(exc)
+        self.process: ProcessLearner | None = None
+        """The learner's own process (TeachConfig.learner 'process'); the worker waits on it."""
+        if self.learner is not None and config.learner == "process":
+            self.process = ProcessLearner(config, model, save_path, random_state, taxonomy_profile)
         self.slot = ModelSlot()
         self.waiting: list[_Job] = []
         """Accepted jobs whose words are not all final yet (live thread only)."""
@@ -184,6 +191,10 @@ class Teaching:
         errors = self.counts["teach requests refused"] + self.counts["teach updates failed"]
         return TeachStatus(True, message, pending, taught, version, errors)
 
+    def where_learned(self) -> str:
+        """'process PID' (the learner's own process) or 'thread' (the worker thread)."""
+        return f"process {self.process.pid}" if self.process is not None else "thread"
+
     def notes(self) -> list[tuple[str, str]]:
         """(level, line) of what happened since the last call: for the node's log."""
         out = []
@@ -191,9 +202,20 @@ class Teaching:
             out.append(self._notes.popleft())
         return out
 
+    def _save(self, model: SubtaskModel) -> str:
+        """Write `model` to the teach file (when one is given); why not, or ''."""
+        if self.save_path is None:
+            return ""
+        try:
+            save_model(model, self.save_path)
+        except OSError as exc:
+            return str(exc)
+        return ""
+
     def close(self, timeout: float = 10.0) -> None:
-        """Stop the worker once the queued jobs are learned; jobs still waiting for their words
-        are dropped, counted (`teach requests dropped at shutdown`) and noted."""
+        """Stop the worker once the queued jobs are learned, then the learner's process; jobs
+        still waiting for their words are dropped, counted (`teach requests dropped at
+        shutdown`) and noted."""
         if self.waiting:
             dropped = len(self.waiting)
             self.counts["teach requests dropped at shutdown"] = (
@@ -209,6 +231,8 @@ class Teaching:
         self._worker.join(timeout)
         if self._worker.is_alive():
             self._notes.append(("warning", f"the teach worker did not stop within {timeout} s"))
+        if self.process is not None:
+            self.process.close(timeout)
 
     def _refusal(self, req: TeachRequest, tracker: BeliefTracker) -> str:
         """Why `req` cannot be taught, or ''."""
@@ -305,7 +329,11 @@ class Teaching:
         live = [s for j in jobs for s in j.live]
         t0 = time.perf_counter()
         try:
-            model = self.learner.teach(samples, live)
+            if self.process is not None:  # it writes the teach file itself
+                model, save_error = self.process.teach(samples, live)
+            else:
+                model = self.learner.teach(samples, live)
+                save_error = self._save(model)
         except Exception as exc:  # a failed update must not stop the worker or the node
             self.counts["teach updates failed"] += 1
             self._notes.append(("error", f"teach update failed: {type(exc).__name__}: {exc}"))
@@ -313,14 +341,12 @@ class Teaching:
                 self._pending -= len(jobs)
             return
         saved = ""
-        if self.save_path is not None:
-            try:
-                save_model(model, self.save_path)
-                self.saved_sha256 = file_sha256(str(self.save_path))
-                saved = f", saved to {self.save_path}"
-            except OSError as exc:  # the live path still gets the model; the file is as it was
-                self.counts["teach updates failed"] += 1
-                self._notes.append(("error", f"taught model not saved: {self.save_path}: {exc}"))
+        if self.save_path is not None and not save_error:
+            self.saved_sha256 = file_sha256(str(self.save_path))
+            saved = f", saved to {self.save_path}"
+        elif save_error:  # the live path still gets the model; the file is as it was
+            self.counts["teach updates failed"] += 1
+            self._notes.append(("error", f"taught model not saved: {self.save_path}: {save_error}"))
         self.slot.put(model)
         done = time.perf_counter()
         with self._lock:

@@ -203,6 +203,7 @@ class ClassifierNode(ManagedNode):
                 ("taught windows", str(status.taught_windows)),
                 ("teach requests pending", str(status.pending)),
                 ("taught model version", str(status.model_version)),
+                ("teach learner", self.teaching.where_learned()),
             ]
         return [
             classifier_health(
