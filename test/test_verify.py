@@ -219,6 +219,25 @@ def test_verify_eval_cli_reports_the_verifier_beside_both_baselines(
         assert m["failure_runs"] == len(FAILURES)
     assert set(result["baselines"]) == {"raw_wrench", "timing"}
     assert result["protocol"]["onset_source"] == {"label": len(FAILURES)}
+    assert "verifier_mismatch" not in result  # no classifier given
+    # with a sub-task classifier (trained on other trials): the verifier with the mismatch
+    # signal too, on the same runs; it can only add alarms to the verifier's
+    model = tmp_path / "cls.rcbht"
+    successes = tmp_path / "successes"
+    for t in trials[:4]:
+        write_trial(t, successes / t.name)
+    assert main(["train", str(successes), "--out", str(model)]) == 0
+    args = ["verify-eval", str(tmp_path / "set"), "--folds", "2", "--model", str(model)]
+    assert main([*args, "--json", str(out)]) == 0
+    with_model = json.loads(out.read_text())
+    both = with_model["verifier_mismatch"]
+    verifier_runs = [r for r in with_model["runs"] if r["method"] == "verifier"]
+    assert both["runs"] == len(verifier_runs) == len(trials) and 0 <= both["roc_auc"] <= 1
+    alarms = {m: {r["trial"]: r["alarm"] for r in with_model["runs"] if r["method"] == m} for m in ("verifier", "verifier_mismatch")}  # fmt: skip
+    for name, alarm in alarms["verifier"].items():
+        if alarm is not None:
+            assert alarms["verifier_mismatch"][name] is not None
+            assert alarms["verifier_mismatch"][name] <= alarm
 
 
 def test_live_session_with_a_late_first_event_equals_the_batch_detector(
@@ -284,3 +303,54 @@ def test_a_labels_row_naming_no_trial_is_an_error(trials: list[Trial], tmp_path:
     )
     args = ["verify-train", str(tmp_path / "set"), "--labels", str(labels), "--out", "v.npz"]
     assert main(args) == 2
+
+
+def test_contradictions_need_a_confident_final_verdict_on_a_commanded_subtask() -> None:
+    from rcbht_introspection.live.belief import UNKNOWN, Belief
+    from rcbht_introspection.verify.mismatch import contradiction_of
+
+    def belief(subtask: str, p: float, final: bool = True, phase: str = "insertion") -> Belief:
+        other = 1.0 - p
+        return Belief(subtask, (subtask, "x"), (p, other), 2.0, 5.0, "boundary", phase, final)
+
+    c = contradiction_of(belief("rotation", 0.9), 6.5, 0.8)
+    assert c is not None and (c.time, c.start, c.phase, c.subtask) == (
+        6.5,
+        2.0,
+        "insertion",
+        "rotation",
+    )
+    assert c.probability == pytest.approx(0.9)
+    assert contradiction_of(belief("rotation", 0.8), 6.5, 0.8) is None  # not above
+    assert contradiction_of(belief("rotation", 0.9, final=False), 6.5, 0.8) is None  # running
+    assert contradiction_of(belief("insertion", 0.99), 6.5, 0.8) is None  # agrees
+    assert contradiction_of(belief(UNKNOWN, 0.99), 6.5, 0.8) is None
+    assert contradiction_of(belief("rotation", 0.9, phase=""), 6.5, 0.8) is None  # window mode
+
+
+def test_live_session_with_a_contradiction_equals_the_batch_mismatch_rule(
+    trials: list[Trial], labels: dict[str, TrialLabel]
+) -> None:
+    """A contradicting final verdict raises the alarm at the first tick it is known, with the
+    contradicted sub-task's start as onset; the live session and the batch rule agree."""
+    from rcbht_introspection.verify.mismatch import MISMATCH, Contradiction, with_mismatch
+
+    config = load_verify_config()
+    model = train_verifier(trials[1:], labels, config)
+    nominal = trials[0]
+    tf = trial_features(nominal, config)
+    batch_plain = model.detector.run(tf)
+    assert batch_plain.alarm is None, "the held-out success must be quiet for this test"
+    start = float(tf.starts[1])
+    known = float(tf.starts[2]) + 0.3
+    c = Contradiction(known, start, tf.phases[1], tf.phases[0], 0.95)
+    batch = with_mismatch(batch_plain, [c], config)
+    session = VerifierSession(model)
+    session.contradict(c)
+    verdicts = replay(session, nominal)
+    np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
+    assert batch.alarm_signal == MISMATCH and batch.onset == start
+    assert verdicts[-1].alarm_time == batch.alarm == min(t for t in tf.times if t >= known - 1e-9)
+    assert verdicts[-1].onset == start
+    assert all(not v.alarm for v in verdicts if v.time < known - 1e-9)
+    assert verdicts[-1].signals[MISMATCH] == pytest.approx(0.95 / config.mismatch_min_probability)

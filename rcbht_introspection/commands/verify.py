@@ -37,6 +37,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--train", nargs="+", default=[], metavar="DATA", help="train on these, test on DATA"
     )
     ev.add_argument("--plots", type=Path, default=None, metavar="DIR", help="failure timelines")
+    ev.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="sub-task model (rcbht train; trained on other trials): also score the verifier "
+        "with the mismatch signal, from this classifier's final verdicts as the node gives them",
+    )
     ev.add_argument("--seed", type=int, default=0)
     ev.set_defaults(func=cmd_verify_eval)
 
@@ -107,6 +115,7 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     n_nominal = sum(not (train_labels or labels)[t.name].failed for t in (train or trials))
     if n_nominal < 3:
         raise InputError("need at least 3 successful trials to train and calibrate on")
+    contradictions = _contradictions(args.model, trials, config) if args.model else None
     try:
         runs = verify_runs(
             trials,
@@ -117,6 +126,7 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
             train,
             progress=lambda s: print(s, file=sys.stderr),
             train_labels=train_labels,
+            contradictions=contradictions,
         )
     except ValueError as exc:  # e.g. successes without sub-task events to calibrate on
         raise InputError(str(exc)) from None
@@ -131,12 +141,34 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _contradictions(model_file: Path, trials: list[Any], config: Any) -> dict[str, Any]:
+    """Per trial, the contradicting final verdicts `model_file`'s classifier gives live."""
+    from rcbht_introspection.learn.live import load_live_config, stream_factory
+    from rcbht_introspection.learn.model_file import load_model, profile_mismatch
+    from rcbht_introspection.taxonomy.config import default_config
+    from rcbht_introspection.verify.mismatch import trial_contradictions
+
+    model = load_model(model_file)
+    problem = profile_mismatch(model, default_config())
+    if problem:
+        raise InputError(problem, model_file)
+    factory = stream_factory(load_live_config())
+    p = config.mismatch_min_probability
+    out = {}
+    for i, t in enumerate(trials):
+        print(f"classifier verdicts {i + 1}/{len(trials)}", file=sys.stderr)
+        out[t.name] = trial_contradictions(t, model, factory, p)
+    return out
+
+
 def _fmt(v: Any) -> str:
     return "-" if v is None else f"{v:.3f}" if isinstance(v, float) else str(v)
 
 
 def _print(summary: dict[str, Any]) -> None:
     rows = [("verifier", summary), *summary["baselines"].items()]
+    if "verifier_mismatch" in summary:
+        rows.insert(1, ("+mismatch", summary["verifier_mismatch"]))
     keys = (
         "roc_auc",
         "detection_accuracy",

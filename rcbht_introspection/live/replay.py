@@ -119,6 +119,8 @@ class LiveReplay:
     a state rule, for comparison."""
     belief_time_accuracy: float = float("nan")
     """(confidence, correct at that time) of each running belief with evidence (with a trial)."""
+    final_times: list[float] = field(default_factory=list)
+    """Stream time at which each of `finals` was issued (the step that made its words final)."""
 
     @property
     def verdicts(self) -> list[str]:
@@ -140,6 +142,7 @@ def replay_beliefs(
     state = StateFilter(state_config)
     changes: list[tuple[float, str]] = []
     finals: list[Belief] = []
+    final_times: list[float] = []
     running: list[tuple[float, Belief]] = []
     belief_changes: list[tuple[float, str]] = []
     n = 0
@@ -151,7 +154,9 @@ def replay_beliefs(
                 tracker.end_of_stream(batch.arm)
         for p in step.phases:
             tracker.phase(p.name, p.time)
-        finals.extend(tracker.take_finals())
+        issued = tracker.take_finals()
+        finals.extend(issued)
+        final_times.extend(step.t for _ in issued)
         belief = tracker.current()
         n += 1
         if belief.subtask != UNKNOWN and belief.probabilities:
@@ -162,6 +167,7 @@ def replay_beliefs(
             changes.append((step.t, state.state))
     out = LiveReplay(streamed.name, mode, changes, finals, UNKNOWN, n_beliefs=n)
     out.belief_changes = belief_changes
+    out.final_times = final_times
     if trial is not None:
         out.time_accuracy = offline.time_accuracy(trial, changes, initial=UNKNOWN)
         out.belief_time_accuracy = offline.time_accuracy(trial, belief_changes, initial=UNKNOWN)

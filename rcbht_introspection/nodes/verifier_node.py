@@ -40,7 +40,7 @@ from rcbht_introspection.nodes.common import (
     run,
     subscribe_intake,
 )
-from rcbht_introspection.nodes.conversions import to_time, wrench_sample
+from rcbht_introspection.nodes.conversions import belief_from_msg, to_time, wrench_sample
 from rcbht_introspection.nodes.draining import DrainedGroup, take, take_bursts
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import VerifierConfig
@@ -223,8 +223,16 @@ class VerifierNode(ManagedNode):
         self.publish(out)
 
     def on_belief(self, msg: BeliefMsg) -> None:
-        """The classifier's latest believed sub-task: the next verdicts' subtask field."""
+        """The classifier's latest believed sub-task: the next verdicts' subtask field; a final
+        verdict contradicting its commanded sub-task feeds the mismatch signal."""
         self.subtask = msg.subtask
+        if self.stream is not None and msg.final:
+            c = self.stream.belief(belief_from_msg(msg))
+            if c is not None:
+                self.get_logger().info(
+                    f"sub-task {c.phase!r} from {c.start:.3f} s judged {c.subtask!r} "
+                    f"(p {c.probability:.2f}): mismatch from stream time {c.time:.3f} s"
+                )
 
     def on_flush(self) -> None:
         """Apply events that waited longer than the hold time for a later sample (no samples)."""

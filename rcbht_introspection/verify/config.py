@@ -35,6 +35,9 @@ class VerifyConfig:
     calibration_folds: int = 5
     onset_fraction: float = 0.5
     evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
+    mismatch_min_probability: float = 0.45
+    """The mismatch signal (verify/mismatch.py) fires when a final verdict names another
+    sub-task than the commanded one with a probability above this."""
 
 
 def _check(cfg: VerifyConfig) -> None:
@@ -80,6 +83,11 @@ def _check(cfg: VerifyConfig) -> None:
         raise InputError(f"must be in [0, 1), got {cfg.onset_fraction}", field="onset_fraction")
     if not cfg.evidence_s or any(e <= 0 for e in cfg.evidence_s):
         raise InputError("needs at least one span, all > 0", field="evidence_s")
+    if not 0 < cfg.mismatch_min_probability < 1:
+        raise InputError(
+            f"must be in (0, 1), got {cfg.mismatch_min_probability}",
+            field="mismatch_min_probability",
+        )
 
 
 def load_verify_config(path: Path | str | None = None) -> VerifyConfig:

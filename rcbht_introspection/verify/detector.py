@@ -104,6 +104,8 @@ class Detection:
     onset: float | None = None
     """Estimated onset: the last tick before the alarm whose normalised score was below
     onset_fraction (the start of the excursion that raised it)."""
+    signals: tuple[str, ...] = ()
+    """The signal of each column of `normalised`."""
 
     @property
     def score(self) -> np.ndarray:
@@ -206,9 +208,9 @@ def detection_of(
     """The alarm (first tick with a normalised score > 1) and its onset estimate."""
     combined = np.nan_to_num(normalised.max(axis=1), posinf=1e6) if normalised.size else None
     if combined is None or not np.any(combined > 1.0):
-        return Detection(times, normalised, None)
+        return Detection(times, normalised, None, signals=tuple(signals))
     a = int(np.argmax(combined > 1.0))
     below = np.nonzero(combined[:a] < onset_fraction)[0]
     onset = float(times[below[-1] + 1]) if len(below) else float(times[0])
     signal = signals[int(np.nanargmax(np.nan_to_num(normalised[a], posinf=1e6)))]
-    return Detection(times, normalised, float(times[a]), signal, onset)
+    return Detection(times, normalised, float(times[a]), signal, onset, tuple(signals))

@@ -24,6 +24,7 @@ from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detector
 from rcbht_introspection.verify.features import TrialFeatures, trial_features
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
+from rcbht_introspection.verify.mismatch import Contradiction, with_mismatch
 from rcbht_introspection.verify.novelty import TimingModel
 from rcbht_introspection.verify.train import onset_for
 
@@ -36,6 +37,9 @@ METHODS: dict[str, tuple[tuple[str, ...], str]] = {
     "timing": (("timing",), "timing"),
 }
 """Method -> (detector signals, evidence view of its characteriser)."""
+WITH_MISMATCH = "verifier_mismatch"
+"""The verifier with the mismatch signal (verify/mismatch.py): scored when the classifier's
+final verdicts of the test trials are given."""
 CLASS_EVIDENCE_S = (0.0, 0.5, 1.0)
 """Class accuracy is also reported this long after the alarm."""
 
@@ -80,6 +84,7 @@ def _fold_results(
     labels: Mapping[str, TrialLabel],
     config: VerifyConfig,
     seed: int,
+    contradictions: Mapping[str, Sequence[Contradiction]] | None = None,
 ) -> dict[str, list[RunResult]]:
     successes = [feats[n] for n in train if not labels[n].failed]
     timing = TimingModel.fit(successes, config)
@@ -90,8 +95,14 @@ def _fold_results(
         return onset_for(labels[name], feats[name], timing)
 
     out: dict[str, list[RunResult]] = {}
-    for method, (signals, view) in METHODS.items():
-        detector = Detector.fit(successes, config, signals, seed=seed)
+    methods = dict(METHODS)
+    if contradictions is not None:
+        methods[WITH_MISMATCH] = METHODS["verifier"]
+    fitted: dict[tuple[str, ...], Detector] = {}
+    for method, (signals, view) in methods.items():
+        if signals not in fitted:
+            fitted[signals] = Detector.fit(successes, config, signals, seed=seed)
+        detector = fitted[signals]
         ev = view_of(detector, view)
         failures = [(feats[n], labels[n], onset_of(n)[0]) for n in train if labels[n].failed]
         char = (
@@ -106,6 +117,8 @@ def _fold_results(
             tf, label = feats[name], labels[name]
             onset, source = onset_of(name)
             d = detector.run(tf)
+            if method == WITH_MISMATCH and contradictions is not None:
+                d = with_mismatch(d, contradictions.get(name, ()), config)
             predicted, given = "", ""
             dirs: dict[str, str] = {}
             dirs_given: dict[str, str] = {}
@@ -246,10 +259,13 @@ def verify_runs(
     train: Sequence[Trial] = (),
     progress: Callable[[str], None] | None = None,
     train_labels: Mapping[str, TrialLabel] | None = None,
+    contradictions: Mapping[str, Sequence[Contradiction]] | None = None,
 ) -> dict[str, list[RunResult]]:
     """Every test run of every method: stratified `folds` over `trials` (None: leave one trial
     out), or fitted on `train` and tested on `trials` (transfer; training trials are kept apart
-    from the test trials even when their names are the same, as in two simulated sets)."""
+    from the test trials even when their names are the same, as in two simulated sets).
+    `contradictions` (test trial -> the classifier's contradicting final verdicts) adds the
+    verifier with the mismatch signal (WITH_MISMATCH)."""
     feats = {t.name: trial_features(t, config) for t in trials}
     labels = dict(labels)
     names = [t.name for t in trials]
@@ -270,12 +286,13 @@ def verify_runs(
             splits = [
                 ([names[i] for i in a], [names[i] for i in b]) for a, b in kfold.split(names, y)
             ]
-    runs: dict[str, list[RunResult]] = {m: [] for m in METHODS}
+    runs: dict[str, list[RunResult]] = {}
     for k, (tr, te) in enumerate(splits):
         if progress is not None:
             progress(f"fold {k + 1}/{len(splits)}")
-        for method, res in _fold_results(tr, te, feats, labels, config, seed).items():
-            runs[method].extend(res)
+        fold = _fold_results(tr, te, feats, labels, config, seed, contradictions)
+        for method, res in fold.items():
+            runs.setdefault(method, []).extend(res)
     return runs
 
 
@@ -295,6 +312,8 @@ def summarise(
         },
         "baselines": {m: metrics(runs[m]) for m in METHODS if m != "verifier"},
     }
+    if WITH_MISMATCH in runs:
+        summary[WITH_MISMATCH] = metrics(runs[WITH_MISMATCH])
     records = [
         {
             "method": m,
@@ -310,7 +329,7 @@ def summarise(
             "predicted_class": r.predicted_class,
             "directions": r.directions,
         }
-        for m in METHODS
+        for m in runs
         for r in runs[m]
     ]
     return summary, records

@@ -16,6 +16,7 @@ import numpy as np
 
 from rcbht_introspection.verify.detector import SCORE_CAP
 from rcbht_introspection.verify.features import PER_ARM, ArmFeatures, TrialFeatures
+from rcbht_introspection.verify.mismatch import MISMATCH, Contradiction, mismatch_onset
 from rcbht_introspection.verify.model_file import VerifierModel
 
 NOMINAL = "nominal"
@@ -80,6 +81,13 @@ class VerifierSession:
         self.history: list[tuple[float, int, float, np.ndarray]] = []
         """(time, phase index, elapsed, envelope z) per tick: the characterisation's evidence."""
         self.ended = False
+        self.contradictions: list[Contradiction] = []
+        """Final verdicts that contradicted their sub-task (the mismatch signal's evidence)."""
+
+    def contradict(self, contradiction: Contradiction) -> None:
+        """A final verdict contradicted its commanded sub-task: the mismatch signal counts it
+        from the first tick at or after `contradiction.time`."""
+        self.contradictions.append(contradiction)
 
     def phase(self, name: str, t: float) -> None:
         """A sub-task event at stream time t (applies to samples after it)."""
@@ -157,9 +165,15 @@ class VerifierSession:
                 scores.append(min(v, SCORE_CAP))
             else:
                 raise ValueError(f"signal {s!r} is not in the verifier model")
-        thresholds = d.threshold_of(name, elapsed)
-        normalised = np.asarray(scores) / thresholds
-        combined = float(np.nan_to_num(normalised.max(), posinf=1e6)) if len(scores) else 0.0
+        min_p = d.config.mismatch_min_probability
+        mismatch = max(
+            (c.probability / min_p for c in self.contradictions if c.time <= g + 1e-9),
+            default=0.0,
+        )
+        signals = (*d.signals, MISMATCH)
+        thresholds = np.append(d.threshold_of(name, elapsed), min_p)
+        normalised = np.append(np.asarray(scores) / thresholds[:-1], mismatch)
+        combined = float(np.nan_to_num(normalised.max(), posinf=1e6))
         self.history.append((g, i, elapsed, z))
         if len(self.history) > HISTORY_TICKS:
             del self.history[: len(self.history) - HISTORY_TICKS]
@@ -169,15 +183,19 @@ class VerifierSession:
             if combined > 1.0:
                 self.alarm_time = g
                 self.onset = self._excursion
+                if int(np.nanargmax(np.nan_to_num(normalised, posinf=1e6))) == len(signals) - 1:
+                    # raised by the mismatch: the evidence is the contradicted sub-task
+                    self.onset = mismatch_onset(self.contradictions, g, min_p) or self.onset
                 # the evidence is [onset, now] from here on: older ticks are not needed
-                self.history = [h for h in self.history if h[0] >= self._excursion - 1e-9]
+                start = min(self.onset, self._excursion)
+                self.history = [h for h in self.history if h[0] >= start - 1e-9]
             self._prev_below = combined < d.config.onset_fraction
         verdict = Verdict(
             time=g,
             phase=name,
             score=combined,
-            signals={s: float(v) for s, v in zip(d.signals, normalised, strict=True)},
-            thresholds={s: float(v) for s, v in zip(d.signals, thresholds, strict=True)},
+            signals={s: float(v) for s, v in zip(signals, normalised, strict=True)},
+            thresholds={s: float(v) for s, v in zip(signals, thresholds, strict=True)},
             alarm=self.alarm_time is not None,
             alarm_time=self.alarm_time,
             onset=self.onset,

@@ -22,8 +22,10 @@ import numpy as np
 
 from rcbht_introspection.io.bags import END_PHASE, trial_phase_events
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.live.belief import Belief
 from rcbht_introspection.live.segmenter import SegmenterSession
 from rcbht_introspection.taxonomy.words import Word
+from rcbht_introspection.verify.mismatch import Contradiction, contradiction_of
 from rcbht_introspection.verify.model_file import VerifierModel
 from rcbht_introspection.verify.monitor import Verdict, VerifierSession
 
@@ -176,17 +178,37 @@ class VerifierStream:
         out = self.segmenter.phase(name, source_ns)
         return self._take(unknown=out.unknown_phase)
 
+    def belief(self, belief: Belief) -> Contradiction | None:
+        """A belief of the classifier (rcbht/belief): a final verdict contradicting its
+        commanded sub-task feeds the running stream's mismatch signal from the stream's latest
+        sample on (what the next verdicts judge). Returns the contradiction, if any."""
+        stream = self._stream
+        times = (self.segmenter.state[a].last_t for a in self.segmenter.arms)
+        latest = [t for t in times if t is not None]
+        if stream is None or stream.session.ended or not latest:
+            return None
+        known_at = max(latest)
+        c = contradiction_of(belief, known_at, self.model.config.mismatch_min_probability)
+        if c is not None:
+            stream.session.contradict(c)
+        return c
+
     def flush(self, now_ns: int) -> VerifierOutput:
         """Apply events that no later sample will apply (segmenter_node's flush rule)."""
         self.segmenter.flush(now_ns)
         return self._take()
 
 
-def offline_verdicts(trial: Trial, model: VerifierModel) -> list[Verdict]:
+def offline_verdicts(
+    trial: Trial, model: VerifierModel, contradictions: Sequence[Contradiction] = ()
+) -> list[Verdict]:
     """The verdicts of `trial` from one VerifierSession, fed as verify's offline features are
     (stream time from the first sample; each event before the first sample at or after it;
-    the end event last): what verifier_node publishes for the trial's bag."""
+    the end event last): what verifier_node publishes for the trial's bag. `contradictions`
+    (verify/mismatch.py) apply from their times, as the classifier's final verdicts do live."""
     session = VerifierSession(model)
+    for c in contradictions:
+        session.contradict(c)
     time = np.asarray(trial.time, dtype=float) - float(trial.time[0])
     events = [(t - float(trial.time[0]), n) for t, n in trial_phase_events(trial) if n != END_PHASE]
     out: list[Verdict] = []
