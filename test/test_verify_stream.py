@@ -87,3 +87,48 @@ def test_arms_must_be_the_models(verifier: tuple[VerifierModel, list[Trial]]) ->
     model, _ = verifier
     with pytest.raises(ValueError, match="differ from the verifier model"):
         VerifierStream(model, ("L", "R"))
+
+
+def test_a_contradicting_final_belief_raises_the_alarm_from_the_latest_sample(
+    verifier: tuple[VerifierModel, list[Trial]], tmp_path: Path
+) -> None:
+    """What verifier_node does with rcbht/belief: a final verdict that contradicts its sub-task
+    counts from the stream's latest sample on (the offline verifier given the same contradiction
+    at that time agrees); a running belief, or one that agrees, changes nothing."""
+    from rcbht_introspection.live.belief import Belief
+    from rcbht_introspection.verify.mismatch import MISMATCH
+
+    model, held_out = verifier
+    quiet = [t for t in held_out if offline_verdicts(t, model)[-1].alarm_time is None]
+    assert quiet, "no held-out trial without an alarm to test on"
+    trial = quiet[0]
+    bag = tmp_path / f"{trial.name}.mcap"
+    write_trial_bag(trial, bag)
+    messages = [m for m in bag_messages(bag) if m.msgtype == WRENCH_TYPE or m.topic == PHASE_TOPIC]
+    stream = VerifierStream(model, model.arms)
+    got: list[StreamVerdict] = []
+    start = float(trial.state_times[1] - trial.time[0])
+    phase = trial.phase_names[1]
+    other = next(n for n in trial.phase_names if n != phase)
+    contradiction = None
+    for i, m in enumerate(messages):
+        if m.msgtype == WRENCH_TYPE:
+            stamp, frame, values = decode_wrench(m.raw)
+            got += stream.push(arm_of_topic(m.topic, frame), stamp, values).verdicts
+        else:
+            got += stream.phase(decode_string(m.raw)).verdicts
+        if i == len(messages) // 2:
+
+            def belief(name: str, final: bool) -> Belief:
+                return Belief(name, (name,), (0.9,), start, start + 1, "boundary", phase, final)
+
+            assert stream.belief(belief(other, final=False)) is None  # running: not a verdict
+            assert stream.belief(belief(phase, final=True)) is None  # agrees
+            contradiction = stream.belief(belief(other, final=True))
+    assert contradiction is not None and contradiction.start == start
+    verdicts = [sv.verdict for sv in got]
+    assert verdicts == offline_verdicts(trial, model, [contradiction])
+    alarm = verdicts[-1].alarm_time
+    assert alarm is not None and alarm >= contradiction.time - 1e-9
+    assert verdicts[-1].onset == start and verdicts[-1].signals[MISMATCH] > 1
+    assert all(not v.alarm for v in verdicts if v.time < contradiction.time - 1e-9)
