@@ -310,8 +310,8 @@ def test_contradictions_need_a_confident_final_verdict_on_a_commanded_subtask() 
     from rcbht_introspection.verify.mismatch import contradiction_of
 
     def belief(subtask: str, p: float, final: bool = True, phase: str = "insertion") -> Belief:
-        other = 1.0 - p
-        return Belief(subtask, (subtask, "x"), (p, other), 2.0, 5.0, "boundary", phase, final)
+        classes = (subtask, "insertion") if subtask != "insertion" else (subtask, "x")
+        return Belief(subtask, classes, (p, 1.0 - p), 2.0, 5.0, "boundary", phase, final)
 
     c = contradiction_of(belief("rotation", 0.9), 6.5, 0.8)
     assert c is not None and (c.time, c.start, c.phase, c.subtask) == (
@@ -326,6 +326,9 @@ def test_contradictions_need_a_confident_final_verdict_on_a_commanded_subtask() 
     assert contradiction_of(belief("insertion", 0.99), 6.5, 0.8) is None  # agrees
     assert contradiction_of(belief(UNKNOWN, 0.99), 6.5, 0.8) is None
     assert contradiction_of(belief("rotation", 0.9, phase=""), 6.5, 0.8) is None  # window mode
+    # a model that does not know the commanded sub-task cannot contradict it
+    unknown_phase = Belief("rotation", ("rotation", "x"), (0.9, 0.1), 2, 5, "boundary", "new", True)
+    assert contradiction_of(unknown_phase, 6.5, 0.8) is None
 
 
 def test_live_session_with_a_contradiction_equals_the_batch_mismatch_rule(
@@ -341,9 +344,10 @@ def test_live_session_with_a_contradiction_equals_the_batch_mismatch_rule(
     tf = trial_features(nominal, config)
     batch_plain = model.detector.run(tf)
     assert batch_plain.alarm is None, "the held-out success must be quiet for this test"
-    start = float(tf.starts[1])
+    start = float(tf.starts[0])  # the first sub-task: its start, 0.0, is the onset
+    assert start == 0.0
     known = float(tf.starts[2]) + 0.3
-    c = Contradiction(known, start, tf.phases[1], tf.phases[0], 0.95)
+    c = Contradiction(known, start, tf.phases[0], tf.phases[1], 0.95)
     batch = with_mismatch(batch_plain, [c], config)
     session = VerifierSession(model)
     session.contradict(c)

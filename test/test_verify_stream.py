@@ -120,10 +120,13 @@ def test_a_contradicting_final_belief_raises_the_alarm_from_the_latest_sample(
         if i == len(messages) // 2:
 
             def belief(name: str, final: bool) -> Belief:
-                return Belief(name, (name,), (0.9,), start, start + 1, "boundary", phase, final)
+                classes, p = (name, phase), (0.9, 0.1)
+                return Belief(name, classes, p, start, start + 1, "boundary", phase, final)
 
             assert stream.belief(belief(other, final=False)) is None  # running: not a verdict
             assert stream.belief(belief(phase, final=True)) is None  # agrees
+            stale = Belief(other, (other, phase), (0.9, 0.1), start + 0.5, start + 1, "boundary", phase, True)  # fmt: skip
+            assert stream.belief(stale) is None  # not a sub-task of this stream (an older one's)
             contradiction = stream.belief(belief(other, final=True))
     assert contradiction is not None and contradiction.start == start
     verdicts = [sv.verdict for sv in got]

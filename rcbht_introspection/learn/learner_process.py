@@ -46,6 +46,8 @@ class _Start:
     taxonomy_profile: str
     out_path: str
     """Where each taught model is written (the teach file, else a file in a temporary folder)."""
+    fallback_path: str
+    """Where it is written when out_path cannot be (in the parent's temporary folder)."""
 
 
 @dataclass(frozen=True)
@@ -53,38 +55,46 @@ class TaughtFile:
     """The learner's answer to one teach: the model's file, or why there is none."""
 
     path: str = ""
-    error: str = ""
-    """'' on success; else 'Type: message' of what failed (nothing was changed then)."""
     save_error: str = ""
     """The teach file could not be written; the model is then in `path`, a fallback file."""
+    error: str = ""
+    """'' on success; else 'Type: message' of what failed (nothing was changed then)."""
 
 
 def _serve(conn: Connection, start: _Start) -> None:
-    """The learner process: teach what arrives, answer with a TaughtFile, until the pipe closes."""
+    """The learner process: teach what arrives, answer with a TaughtFile, until the connection
+    closes or the parent is gone (then nothing more is written: a restarted node may own the
+    teach file by now)."""
+    parent = os.getppid()
     model = load_model(start.model_path) if start.model_path else None
     learner = OnlineLearner(
         start.config, model, model.task if model else None, start.random_state,
         taxonomy_profile=start.taxonomy_profile,
     )  # fmt: skip
-    fallback = Path(tempfile.mkdtemp(prefix="rcbht-learner-")) / "taught.rcbht"
     conn.send(TaughtFile())
     while True:
         try:
             job = conn.recv()
         except (EOFError, OSError):
-            return  # the parent closed the pipe or is gone
+            return  # the parent closed the connection or is gone
         if job is None:
             return
         samples, live = job
         try:
             taught = learner.teach(samples, live)
         except Exception as exc:  # answered, never raised: the parent counts it
-            conn.send(TaughtFile(error=f"{type(exc).__name__}: {exc}"))
-            continue
+            answer = TaughtFile(error=f"{type(exc).__name__}: {exc}")
+        else:
+            if os.getppid() != parent:
+                return
+            try:
+                answer = TaughtFile(str(save_model(taught, start.out_path)))
+            except OSError as exc:  # the parent still gets the model, from the fallback file
+                answer = TaughtFile(str(save_model(taught, start.fallback_path)), str(exc))
         try:
-            conn.send(TaughtFile(str(save_model(taught, start.out_path))))
-        except OSError as exc:
-            conn.send(TaughtFile(str(save_model(taught, fallback)), save_error=str(exc)))
+            conn.send(answer)
+        except OSError:
+            return  # the parent is gone
 
 
 class ProcessLearner:
@@ -120,7 +130,14 @@ class ProcessLearner:
             )
         self._conn = Connection(ours.detach())
         self._conn.send(
-            _Start(config, start_path, random_state, taxonomy_profile, str(self.out_path))
+            _Start(
+                config,
+                start_path,
+                random_state,
+                taxonomy_profile,
+                str(self.out_path),
+                str(folder / "fallback.rcbht"),
+            )
         )
         self._started = False
 
@@ -163,22 +180,24 @@ class ProcessLearner:
 
     def _gone(self, exc: BaseException) -> str:
         with contextlib.suppress(subprocess.TimeoutExpired):
-            self._process.wait(1.0)
+            self._process.wait(10.0)  # reaped, so the exit code is known
         return (
             f"the learner process ended (exit code {self._process.returncode}): "
             f"{type(exc).__name__}: {exc}"
         )
 
     def close(self, timeout: float = 10.0) -> None:
-        """End the process (it finishes the teach under way first) and remove its files."""
+        """End the process (it finishes the teach under way first, else it is killed after
+        `timeout`) and remove its files. The connection is closed only once the process is gone,
+        so a teach still waiting on it ends with EOF, not on a closed handle."""
         with contextlib.suppress(OSError):  # the process is gone already
             self._conn.send(None)
-        self._conn.close()
         try:
             self._process.wait(timeout)
         except subprocess.TimeoutExpired:
             self._process.kill()
             self._process.wait(timeout)
+        self._conn.close()
         self._folder.cleanup()
 
 

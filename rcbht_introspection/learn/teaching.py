@@ -192,8 +192,10 @@ class Teaching:
         return TeachStatus(True, message, pending, taught, version, errors)
 
     def where_learned(self) -> str:
-        """'process PID' (the learner's own process) or 'thread' (the worker thread)."""
-        return f"process {self.process.pid}" if self.process is not None else "thread"
+        """'process PID' (the learner's own process; '(ended)' when it died) or 'thread'."""
+        if self.process is None:
+            return "thread"
+        return f"process {self.process.pid}" + ("" if self.process.alive else " (ended)")
 
     def notes(self) -> list[tuple[str, str]]:
         """(level, line) of what happened since the last call: for the node's log."""
@@ -229,10 +231,11 @@ class Teaching:
             self.waiting = []
         self._queue.put(None)
         self._worker.join(timeout)
+        if self.process is not None:  # kills a teach still running after `timeout`
+            self.process.close(timeout)
+            self._worker.join(timeout)
         if self._worker.is_alive():
             self._notes.append(("warning", f"the teach worker did not stop within {timeout} s"))
-        if self.process is not None:
-            self.process.close(timeout)
 
     def _refusal(self, req: TeachRequest, tracker: BeliefTracker) -> str:
         """Why `req` cannot be taught, or ''."""

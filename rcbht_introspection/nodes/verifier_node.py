@@ -127,6 +127,8 @@ class VerifierNode(ManagedNode):
                 max_hold_s=cfg.event_max_hold_s,
             )
         self.subtask = ""
+        self.wrench_subs: list[tuple[str, Subscription]] = []
+        self.phase_sub: Subscription | None = None
         self.published_health = ""
         self.last_sample = time.monotonic()
         self.qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
@@ -138,8 +140,6 @@ class VerifierNode(ManagedNode):
     def activate(self) -> None:
         cfg = self.cfg
         drained = DrainedGroup()
-        self.wrench_subs: list[tuple[str, Subscription]] = []
-        self.phase_sub = None
         if self.stream is not None:
             self.wrench_subs, self.phase_sub = subscribe_intake(
                 self, cfg.arms, cfg.wrench_topics, cfg.phase_topic, self.sample, self.on_phase,

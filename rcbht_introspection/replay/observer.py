@@ -157,6 +157,18 @@ class Observer:
             return self.obs.finals_since(index)
 
 
+def _furthest_signal(msg: Any) -> str:
+    """The Verdict's signal furthest over its threshold ('' without signals)."""
+    best, out = -math.inf, ""
+    for name, score, threshold in zip(
+        msg.signals, msg.signal_scores, msg.signal_thresholds, strict=False
+    ):
+        ratio = score / threshold if threshold else math.inf
+        if ratio > best:  # NaN never is
+            best, out = ratio, name
+    return out
+
+
 class VerdictObserver:
     """Subscribes verifier_node's verdicts and health; one VerdictRecord per stream.
 
@@ -198,6 +210,7 @@ class VerdictObserver:
                 msg.failure_class,
                 dict(zip(msg.direction_axes, msg.directions, strict=False)),
                 msg.health,
+                _furthest_signal(msg),
             )
 
     def on_health(self, msg: String, info: dict) -> None:

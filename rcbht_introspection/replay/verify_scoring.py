@@ -20,6 +20,7 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
 from rcbht_introspection.verify.features import trial_features
 from rcbht_introspection.verify.labels import label_of
+from rcbht_introspection.verify.mismatch import MISMATCH
 from rcbht_introspection.verify.model_file import VerifierModel
 from rcbht_introspection.verify.stream import offline_verdicts
 from rcbht_introspection.verify.train import onset_for
@@ -35,6 +36,8 @@ class VerdictRecord:
     alarm_time: float | None = None
     alarm_health: str = ""
     """/task_health's value carried by the alarm's verdict (anomaly or the class then)."""
+    alarm_signal: str = ""
+    """The signal furthest over its threshold at the alarm's verdict."""
     onset_estimate: float | None = None
     final_class: str = ""
     """The class of the stream's last verdict (the most evidence)."""
@@ -57,12 +60,14 @@ class VerdictRecord:
         failure_class: str,
         directions: dict[str, str],
         health: str,
+        signal: str = "",
     ) -> None:
-        """One Verdict message of this stream."""
+        """One Verdict message of this stream (`signal`: its signal furthest over threshold)."""
         self.verdicts += 1
         self.max_score = max(self.max_score, score)
         if alarm_time is not None and self.alarm_time is None:
             self.alarm_time, self.onset_estimate, self.alarm_health = alarm_time, onset, health
+            self.alarm_signal = signal
         if alarm_time is not None:
             self.final_class, self.directions = failure_class, dict(directions)
         self.end_time = max(self.end_time, time)
@@ -149,17 +154,26 @@ def verifier_scores(
             "health_seen": rec.health_seen,
             "verdicts": rec.verdicts,
         }
+        row["alarm_signal"] = rec.alarm_signal
         if offline:
             reference = offline_verdicts(trial, model)
-            row["offline_alarm_time"] = reference[-1].alarm_time if reference else None
+            offline_alarm = reference[-1].alarm_time if reference else None
+            row["offline_alarm_time"] = offline_alarm
             row["offline_final_class"] = next(
                 (v.failure_class for v in reversed(reference) if v.alarm), ""
             )
-            row["matches_offline"] = (
-                row["offline_alarm_time"] == rec.alarm_time
-                and row["offline_final_class"] == rec.final_class
-                and len(reference) == rec.verdicts
-            )
+            if rec.alarm_signal == MISMATCH:
+                # raised by a classifier verdict, at the tick after it arrived over DDS: the
+                # offline verifier (no beliefs) must only not have alarmed before it
+                same = offline_alarm is None or (
+                    rec.alarm_time is not None and offline_alarm >= rec.alarm_time
+                )
+            else:
+                same = (
+                    offline_alarm == rec.alarm_time
+                    and row["offline_final_class"] == rec.final_class
+                )
+            row["matches_offline"] = same and len(reference) == rec.verdicts
         per_run.append(row)
     summary = metrics(runs, gate_s)
     summary.pop("class_accuracy_after_alarm_s", None)  # not observed through the nodes

@@ -44,8 +44,10 @@ def contradiction_of(
     belief: Belief, known_at: float, min_probability: float
 ) -> Contradiction | None:
     """The contradiction `belief` states, or None: it must be a final verdict on a commanded
-    sub-task naming another known sub-task with probability above `min_probability`."""
+    sub-task the model knows, naming another sub-task with probability above `min_probability`."""
     if not belief.final or not belief.phase or belief.subtask in (UNKNOWN, belief.phase):
+        return None
+    if belief.phase not in belief.classes:  # a model that cannot name it cannot contradict it
         return None
     p = dict(zip(belief.classes, belief.probabilities, strict=False)).get(belief.subtask, 0.0)
     if p <= min_probability:
@@ -59,11 +61,17 @@ def trial_contradictions(
     stream_factory: Callable[[str], ArmStream],
     min_probability: float,
 ) -> list[Contradiction]:
-    """The contradictions classifier_node states for `trial` (boundary mode), in issue order."""
-    replay = replay_beliefs(stream_trial(trial, stream_factory), model, "boundary")
+    """The contradictions classifier_node states for `trial` (boundary mode), in issue order,
+    that verifier_node can use: not the verdict on the sub-task the end event closes, which is
+    issued once the stream has ended (the verifier's stream is over by then)."""
+    streamed = stream_trial(trial, stream_factory)
+    replay = replay_beliefs(streamed, model, "boundary")
+    windows = streamed.subtask_windows()
+    last_end = windows[-1][2] if windows else float("inf")
     found = (
         contradiction_of(b, t, min_probability)
         for b, t in zip(replay.finals, replay.final_times, strict=True)
+        if b.end < last_end - 1e-9
     )
     return [c for c in found if c is not None]
 

@@ -185,10 +185,12 @@ class VerifierSession:
                 self.onset = self._excursion
                 if int(np.nanargmax(np.nan_to_num(normalised, posinf=1e6))) == len(signals) - 1:
                     # raised by the mismatch: the evidence is the contradicted sub-task
-                    self.onset = mismatch_onset(self.contradictions, g, min_p) or self.onset
+                    start = mismatch_onset(self.contradictions, g, min_p)
+                    if start is not None:  # 0.0 is a start (the first sub-task's)
+                        self.onset = start
                 # the evidence is [onset, now] from here on: older ticks are not needed
-                start = min(self.onset, self._excursion)
-                self.history = [h for h in self.history if h[0] >= start - 1e-9]
+                first = min(self.onset, self._excursion)
+                self.history = [h for h in self.history if h[0] >= first - 1e-9]
             self._prev_below = combined < d.config.onset_fraction
         verdict = Verdict(
             time=g,

@@ -180,14 +180,22 @@ class VerifierStream:
 
     def belief(self, belief: Belief) -> Contradiction | None:
         """A belief of the classifier (rcbht/belief): a final verdict contradicting its
-        commanded sub-task feeds the running stream's mismatch signal from the stream's latest
-        sample on (what the next verdicts judge). Returns the contradiction, if any."""
+        commanded sub-task, on a sub-task of the running stream, feeds its mismatch signal from
+        the stream's latest sample on (what the next verdicts judge). Returns the contradiction,
+        if any."""
         stream = self._stream
         times = (self.segmenter.state[a].last_t for a in self.segmenter.arms)
         latest = [t for t in times if t is not None]
         if stream is None or stream.session.ended or not latest:
             return None
         known_at = max(latest)
+        # a verdict of this stream: one of its sub-tasks, over before now (a late verdict on
+        # the previous stream's last sub-task must not judge the next stream)
+        ours = any(
+            n == belief.phase and abs(t - belief.start) < 1e-6 for n, t in stream.session.phases
+        )
+        if not ours or belief.end > known_at + 1e-6:
+            return None
         c = contradiction_of(belief, known_at, self.model.config.mismatch_min_probability)
         if c is not None:
             stream.session.contradict(c)
