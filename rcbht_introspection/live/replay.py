@@ -186,6 +186,8 @@ class LiveReplay:
     final_times: list[float] = field(default_factory=list)
     """Stream time at which each of `finals` was issued (the sample whose input made its words
     final)."""
+    beliefs: list[Belief] = field(default_factory=list)
+    """Every belief the node publishes for the trial, in order (verdicts and running beliefs)."""
 
     @property
     def verdicts(self) -> list[str]:
@@ -227,6 +229,7 @@ def replay_beliefs(
             initial,
             n_beliefs=len(running),
             final_times=[(trigger - origin) / 1e9 for _, trigger in finals],
+            beliefs=[b for b, _ in step.beliefs],
         )
         for b in running:
             if b.subtask != (rep.belief_changes[-1][1] if rep.belief_changes else UNKNOWN):
