@@ -150,6 +150,39 @@ def test_session_orders_events_by_source_time() -> None:
     assert session.stream_id == 1 and session.late_phases == 0  # the end event closed stream 0
 
 
+def test_an_event_is_published_between_its_samples_words_and_the_next_ones() -> None:
+    """An event waits for the next sample, so one output can hold the boundary's words, the
+    event and that sample's words (about 1 event in 9 on REAL): the event goes out after the
+    words of the sample it is placed at and before the next sample's; an end event after the
+    stream's last words and before the next stream's."""
+    from rcbht_introspection.live.join import Watermarks
+    from rcbht_introspection.live.publication import WordsOut, publication
+    from rcbht_introspection.live.segmenter import Output, PhaseEvent, WordBatch
+
+    def batch(stamp: int, seq: int, stream: int = 0, end: bool = False) -> WordBatch:
+        word = Word("Fz", Level.PRIMITIVE, "cons", 0.0, stamp / 1e9, arm="R", seq=seq)
+        return WordBatch("R", [word], ORIGIN_NS + stamp, ORIGIN_NS, stream, end_of_stream=end)
+
+    def order(out: Output) -> list[tuple[str, int, int]]:
+        return [
+            ("event", x.stream_id, x.stamp_ns - ORIGIN_NS)
+            if isinstance(x, PhaseEvent)
+            else ("words", x.batch.stream_id, x.batch.stamp_ns - ORIGIN_NS)
+            for x in publication(out, Watermarks())
+            if isinstance(x, PhaseEvent) or x.message.words
+        ]
+
+    rotation = PhaseEvent("rotation", 5e-3, ORIGIN_NS + 5, ORIGIN_NS, 0, end=False)
+    out = Output([batch(5, 1), batch(6, 2)], [rotation])  # the boundary's words, sample 6's
+    assert order(out) == [("words", 0, 5), ("event", 0, 5), ("words", 0, 6)]
+    done = PhaseEvent("done", 9e-3, ORIGIN_NS + 9, ORIGIN_NS, 0, end=True)
+    out = Output([batch(9, 3, end=True), batch(1, 1, stream=1)], [done])
+    assert order(out) == [("words", 0, 9), ("event", 0, 9), ("words", 1, 1)]
+    assert all(
+        isinstance(x, WordsOut) for x in publication(Output([batch(1, 1)], []), Watermarks())
+    )
+
+
 def test_late_event_is_placed_at_the_sample_before_it() -> None:
     from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
 

@@ -1,4 +1,6 @@
-"""The classifier node's protocol without DDS (live/classifier.py): batches, streams, latched events."""
+"""The classifier node's protocol without DDS (live/classifier.py): batches, streams, latched events.
+
+Bursts against one-by-one input on real trials: test_live_replay.py."""
 
 from __future__ import annotations
 
@@ -47,37 +49,44 @@ def _phase(
 
 def test_a_belief_waits_for_every_message_of_the_sample() -> None:
     session = _session()
-    session.receive([_phase("approach", 0.0)])
+    [(empty, trigger)] = session.receive([_phase("approach", 0.0)]).beliefs
+    assert trigger == STREAM[0] and empty.n_words == 0  # the event alone: a window without words
     first = _words(Level.PRIMITIVE, [1, 2], 1.0, batch_size=3)
     second = _words(Level.PRIMITIVE, [3], 1.0, batch_size=3)  # a second piece of the level
     third = _words(Level.COMPOSITION, [4], 1.0, batch_size=3)
-    session.receive([first, second])
-    assert session.classify() is None
-    session.receive([third])
-    step = session.classify()
-    assert step is not None
-    [(belief, trigger)] = step.beliefs
-    assert trigger == STREAM[0]  # the event at t=0 is the earliest evidence behind it
+    assert session.receive([first, second]).beliefs == []
+    [(belief, trigger)] = session.receive([third]).beliefs
+    assert trigger == first.stamp_ns
     assert belief.subtask == UNKNOWN and belief.n_words == 4
-    assert session.classify() is None  # nothing new
+
+
+def test_an_event_waits_for_the_batch_in_flight_and_a_lost_piece_blocks_no_later_sample() -> None:
+    session = _session()
+    session.receive([_phase("approach", 0.0)])
+    first = _words(Level.PRIMITIVE, [1], 1.0, batch_size=2)
+    # the second piece of sample 1.0 never comes; an event and then sample 1.1 do
+    assert session.receive([first, _phase("rotation", 1.0)]).beliefs == []
+    later = _words(Level.PRIMITIVE, [3], 1.1, batch_size=1)
+    [(belief, trigger)] = session.receive([later]).beliefs
+    assert trigger == first.stamp_ns  # the earliest sample behind the evidence
+    assert belief.phase == "rotation" and belief.n_words == 2  # both words reach t=1.0
 
 
 def test_a_watermark_moves_numbering_on_but_is_no_evidence() -> None:
     session = _session()
-    session.receive([_words(Level.BEHAVIOR, [], 1.0, batch_size=0, seq_end=7)])
-    assert session.classify() is None
+    step = session.receive([_words(Level.BEHAVIOR, [], 1.0, batch_size=0, seq_end=7)])
+    assert step.beliefs == []
     assert session.tracker.ledgers["R"].upto[Level.BEHAVIOR] == 7
 
 
 def test_words_of_a_new_stream_issue_the_previous_streams_verdicts() -> None:
     session = _session()
     session.receive([_phase("approach", 0.0), _words(Level.PRIMITIVE, [1], 1.0, batch_size=1)])
-    session.receive([_phase("rotation", 1.0)])
-    assert session.classify() is not None
+    assert session.receive([_phase("rotation", 1.0)]).beliefs
     step = session.receive([_words(Level.PRIMITIVE, [1], 0.5, batch_size=1, stream=NEXT_STREAM)])
-    finals = [b for b, trigger in step.beliefs if b.final]
-    assert [b.phase for b in finals] == ["approach"]  # rotation never ended: no verdict
-    assert all(trigger == 0 for _, trigger in step.beliefs)
+    finals = [(b, trigger) for b, trigger in step.beliefs if b.final]
+    assert [b.phase for b, _ in finals] == ["approach"]  # rotation never ended: no verdict
+    assert all(trigger == 0 for _, trigger in finals)
     assert session.stream == NEXT_STREAM and session.tracker.segments == []
 
 
@@ -102,9 +111,8 @@ def test_lost_words_are_counted_and_blind_the_sub_task() -> None:
         _words(level, [4] if level == Level.PRIMITIVE else [], 2.0, 1, seq_end=4)
         for level in LEVELS
     ]
-    session.receive(late)
-    step = session.classify()
-    assert step is not None and step.lost == 3
+    step = session.receive(late)
+    assert step.lost == 3
     assert session.counts["words lost"] == 3
     assert step.beliefs[-1][0].blind
 
@@ -116,13 +124,14 @@ def test_an_unknown_event_is_reported_not_applied() -> None:
     assert step.ignored_events == ["wobble"] and session.tracker.segments == []
 
 
-def test_a_new_stream_reports_the_state_unknown_once() -> None:
+def test_a_new_stream_keeps_the_state_until_its_first_confident_belief() -> None:
+    """A new stream is a sub-task boundary like the others: no flip to unknown without evidence."""
     session = ClassifierSession(BeliefTracker(None), StateFilter())
     # the previous stream's state: a belief without probabilities counts as certain
     assert session.state.update(9.0, Belief("approach", (), (), 0.0, 9.0, "boundary", n_words=5))
-    session.receive([_phase("approach", 0.0), _words(Level.PRIMITIVE, [1], 1.0, batch_size=1)])
-    step = session.classify()
-    assert step is not None and step.state == UNKNOWN
-    session.receive([_words(Level.PRIMITIVE, [2], 1.1, batch_size=1)])
-    step = session.classify()
-    assert step is not None and step.state is None
+    step = session.receive(
+        [_phase("approach", 0.0), _words(Level.PRIMITIVE, [1], 1.0, batch_size=1)]
+    )
+    assert step.beliefs and step.states == [] and session.state.state == "approach"
+    session.state.update(2.0, Belief(UNKNOWN, (), (), 0.0, 2.0, "boundary", blind=True))
+    assert session.state.state == UNKNOWN  # only proven losses make it unknown at once

@@ -26,8 +26,10 @@ from rcbht_introspection.learn.live import (
 )
 from rcbht_introspection.learn.model_file import load_model, save_model
 from rcbht_introspection.live import offline
-from rcbht_introspection.live.belief import BeliefTracker
-from rcbht_introspection.live.replay import replay_beliefs, stream_trial
+from rcbht_introspection.live.belief import Belief, BeliefTracker
+from rcbht_introspection.live.classifier import ClassifierSession
+from rcbht_introspection.live.replay import node_inputs, node_stream, replay_beliefs, stream_trial
+from rcbht_introspection.live.state import StateFilter
 from rcbht_introspection.taxonomy.words import LEVELS
 
 TEST_TRIAL = "20121127-HIROSA-S-45"
@@ -84,7 +86,7 @@ def test_replay_state_equals_a_fresh_tracker_fed_everything_released_by_t(case: 
     trial, model = case["trial"], case["model"]
     released, events = _independent_release(trial, case["factory"])
     t0 = float(trial.time[0])
-    rep = replay_beliefs(case["streamed"], model, "boundary", trial=trial)
+    [rep] = replay_beliefs(node_stream([trial], case["factory"]), model, trials=[trial])
     # final verdicts come from the complete-sub-task model, running windows from the live head
     assert model.live is not None and model.head(True) is model and model.head(False) is model.live
     words = offline.offline_stream_words(trial, case["factory"])
@@ -109,6 +111,41 @@ def test_replay_state_equals_a_fresh_tracker_fed_everything_released_by_t(case: 
         # /task_state moves only to a confident belief (live/state.py), never back to unknown
         state = [s for when, s in rep.changes if when <= step_t]
         assert not state or state[-1] != "unknown"
+
+
+def test_beliefs_and_task_state_do_not_depend_on_how_inputs_are_grouped(case: dict) -> None:
+    """classifier_node takes what DDS delivered in bursts of any size: the beliefs and /task_state
+    changes equal those of one input at a time, over two successive streams (a second bag),
+    and replay_beliefs reports exactly those changes."""
+    trial, model = case["trial"], case["model"]
+    streamed = node_stream([trial, trial], case["factory"])
+    inputs = [x for s in streamed for x in node_inputs(s)]
+
+    def run(bursts: list[int]) -> tuple[list[Belief], list[tuple[float, str]]]:
+        session = ClassifierSession(BeliefTracker(model), StateFilter())
+        beliefs: list[Belief] = []
+        states: list[tuple[float, str]] = []
+        at = 0
+        for size in bursts:
+            step = session.receive(inputs[at : at + size])
+            beliefs += [b for b, _ in step.beliefs]
+            states += step.states
+            at += size
+        assert at == len(inputs)
+        return beliefs, states
+
+    one_by_one = run([1] * len(inputs))
+    rng = np.random.default_rng(0)
+    sizes = rng.integers(1, 400, size=len(inputs))
+    bursts = [int(n) for n in sizes[: int(np.searchsorted(np.cumsum(sizes), len(inputs))) + 1]]
+    bursts[-1] -= sum(bursts) - len(inputs)
+    assert max(bursts) > 100 and run(bursts) == one_by_one
+    beliefs, states = one_by_one
+    assert sum(b.final for b in beliefs) == 2 * len(trial.subtask_bounds())
+    reps = replay_beliefs(streamed, model, trials=[trial, trial])
+    assert [c for r in reps for c in r.changes] == states and states
+    # the second stream starts from the first's last state: no flip to unknown in between
+    assert reps[1].initial == states[len(reps[0].changes) - 1][1] != "unknown"
 
 
 def test_live_samples_hold_only_words_final_by_t_inside_the_window(case: dict) -> None:

@@ -262,3 +262,43 @@ def test_words_and_verdicts_against_the_offline_run(tmp_path: Path) -> None:
     short = score([with_words(fewer)], [trial], ("R",), "boundary", ref)
     assert short["words_match_offline"] is False
     assert short["per_bag"][0]["words_mismatch"].startswith("arm R primitive: ")
+
+
+def test_task_state_and_beliefs_against_the_nodes_sessions_run_offline(tmp_path: Path) -> None:
+    """Two bags in turn: what the offline run of the nodes' own sessions publishes matches;
+    a state change that differs, or a belief too few, is named per bag."""
+    from rcbht_introspection.bench.stops import toy_model
+    from rcbht_introspection.learn.model_file import load_model
+    from rcbht_introspection.live.replay import node_stream, replay_beliefs
+    from rcbht_introspection.live.segmenter import arm_stream_factory
+    from rcbht_introspection.live.state import TaskStateConfig
+
+    t = np.round(np.arange(0.0, 4.0, 0.005), 6)
+    force = np.column_stack([np.zeros((len(t), 2)), 10 * np.sin(t * 3), np.zeros((len(t), 3))])
+    trials = [Trial(f"wave{k}", t, {"R": force}, state_times=(0.0, 1.0, 2.0, 3.0)) for k in (1, 2)]
+    loose = TaskStateConfig(min_probability=0.0, min_words=0)  # the toy model is never sure
+    ref = Reference(load_model(toy_model(tmp_path / "m.rcbht")), arm_stream_factory(), loose)
+    streamed = node_stream(trials, ref.stream_factory)
+    runs = replay_beliefs(streamed, ref.model, trials=trials, state_config=loose)
+    assert any(r.changes for r in runs)
+
+    def as_received(k: int, changed: str = "", drop: int = 0) -> BagRecord:
+        run = runs[k]
+        beliefs = [ReceivedBelief(WALL0, b, 0, WALL0) for b in run.beliefs][drop:]
+        states = [(WALL0 + i, changed or s) for i, (_, s) in enumerate(run.changes)]
+        return replace(
+            record(trials[k], []), beliefs=beliefs, states=states, initial_state=run.initial
+        )
+
+    same = score([as_received(0), as_received(1)], trials, ("R",), "boundary", ref)
+    assert same["states_match_offline"] is True and same["beliefs_match_offline"] is True
+    assert same["offline_state_changes"] == sum(len(r.changes) for r in runs)
+    assert same["per_bag"][1]["offline_timeline"] == [(round(x, 3), s) for x, s in runs[1].changes]
+    k = next(i for i, r in enumerate(runs) if r.changes)
+    bags = [as_received(0), as_received(1)]
+    bags[k] = as_received(k, changed="mating" if runs[k].changes[0][1] != "mating" else "rotation")
+    other = score(bags, trials, ("R",), "boundary", ref)
+    assert other["states_match_offline"] is False and other["beliefs_match_offline"] is True
+    assert [b["states_match_offline"] for b in other["per_bag"]] == [k != 0, k != 1]
+    fewer = score([as_received(0, drop=1), as_received(1)], trials, ("R",), "boundary", ref)
+    assert fewer["beliefs_match_offline"] is False and fewer["states_match_offline"] is True

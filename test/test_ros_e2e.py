@@ -43,6 +43,13 @@ def test_replay_eval_of_held_out_trials(hiro_data: Path, model: Path, tmp_path: 
     assert result["verdicts_match_offline"], [
         (b["verdicts"], b["offline_verdicts"]) for b in result["per_bag"]
     ]
+    # /task_state and every belief are those of the nodes' own sessions run offline on the same
+    # inputs, whatever bursts DDS delivered (and a second bag starts no flip to 'unknown')
+    assert result["states_match_offline"], [
+        (b["timeline"], b["offline_timeline"]) for b in result["per_bag"]
+    ]
+    assert result["beliefs_match_offline"]
+    assert result["state_changes"] == result["offline_state_changes"]
     assert result["subtasks"] == 4 * len(HELD_OUT)
     assert result["subtask_accuracy"] >= 0.75
     assert 0.0 < result["time_accuracy"] <= 1.0
@@ -52,7 +59,8 @@ def test_replay_eval_of_held_out_trials(hiro_data: Path, model: Path, tmp_path: 
 
 
 def test_two_arm_replay_matches_offline(hiro_data: Path, model: Path, tmp_path: Path) -> None:
-    """Two arms (/L/wrench, /R/wrench at 2 x 1 kHz): per-arm words and verdicts as offline."""
+    """Two arms (/L/wrench, /R/wrench at 2 x 1 kHz): per-arm words, verdicts, beliefs and
+    /task_state as offline."""
     require_ros()
     from rcbht_introspection.bench.ros import two_arm_trial
     from rcbht_introspection.io.bags import write_trial_bag
@@ -68,6 +76,8 @@ def test_two_arm_replay_matches_offline(hiro_data: Path, model: Path, tmp_path: 
     bag = result["per_bag"][0]
     assert result["words_match_offline"], bag["words_mismatch"]
     assert result["verdicts_match_offline"], (bag["verdicts"], bag["offline_verdicts"])
+    assert result["states_match_offline"], (bag["timeline"], bag["offline_timeline"])
+    assert result["beliefs_match_offline"]
     assert result["dropped_wrench"] == 0
     assert result["clean_shutdown"], (result["exit_codes"], result.get("shutdown_logs"))
     assert bag["published_wrench"] == 2 * len(trial.time)

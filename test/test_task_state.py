@@ -84,15 +84,18 @@ def test_hold_still_debounces() -> None:
     assert states(f, seq) == [(0.16, "approach"), (5.16, "insertion")]
 
 
-def test_a_new_stream_starts_unknown_and_the_next_update_reports_it() -> None:
+def test_a_new_stream_keeps_the_state_and_drops_the_pending_candidate() -> None:
+    """A stream's start is a sub-task boundary: the state stays until a confident belief (the
+    old stream's half-held candidate does not carry over)."""
     f = StateFilter(TaskStateConfig(min_probability=0.6, hold_s=0.1))
     assert f.update(0.0, belief("mating", 0.9)) is False  # pending: held 0 s
     assert f.update(0.2, belief("mating", 0.9)) and f.state == "mating"
+    assert not f.update(9.0, belief("approach", 0.9))  # a candidate, held 0 s
     f.new_stream()
-    assert f.state == UNKNOWN
-    assert f.update(0.0, belief("mating", 0.9)) and f.state == UNKNOWN  # reported, still held
-    assert not f.update(0.05, belief("mating", 0.9))
-    assert f.update(0.1, belief("mating", 0.9)) and f.state == "mating"
+    assert f.state == "mating"
+    assert not f.update(0.0, belief(UNKNOWN, 0)) and f.state == "mating"  # no evidence yet
+    assert not f.update(0.05, belief("approach", 0.9))  # a new candidate from 0.05 s
+    assert f.update(0.2, belief("approach", 0.9)) and f.state == "approach"
 
 
 def test_the_rule_is_configured_in_the_classifier_parameters(tmp_path: Path) -> None:

@@ -61,34 +61,28 @@ def _feed(
     finals: list[Belief] = []
     i = 0
 
-    def classify() -> None:
-        step = session.classify()
-        if step is not None:
-            finals.extend(b for b, _ in step.beliefs if b.final)
+    def receive(items: list[WordsInput | PhaseInput]) -> None:
+        finals.extend(b for b, _ in session.receive(items).beliefs if b.final)
 
     for w in _words(trial):
         while i < len(events) and events[i][0] <= w.start:
             t, name = events[i]
-            session.receive([PhaseInput(name, t, key[0] + round(t * 1e9), key)])
+            receive([PhaseInput(name, t, key[0] + round(t * 1e9), key)])
             if after_subtask is not None and i > 0:
                 req = TeachRequest(truth[i - 1], last=True, request_id=f"{stream}-{i}")
                 after_subtask.append(req)
                 assert session.teach(req).accepted
             i += 1
         stamp = key[0] + round(w.end * 1e9)
-        session.receive([WordsInput("R", w.level, [w], w.end, stamp, key, 1, False, 0)])
-        classify()
+        receive([WordsInput("R", w.level, [w], w.end, stamp, key, 1, False, 0)])
     for t, name in events[i:]:
-        session.receive([PhaseInput(name, t, key[0] + round(t * 1e9), key)])
+        receive([PhaseInput(name, t, key[0] + round(t * 1e9), key)])
     if after_subtask is not None:
         req = TeachRequest(truth[-1], last=True, request_id=f"{stream}-end")
         after_subtask.append(req)
         assert session.teach(req).accepted
     end = key[0] + round(trial.end_time * 1e9)
-    session.receive(
-        [WordsInput("R", lv, [], trial.end_time, end, key, 1, True, 0) for lv in LEVELS]
-    )
-    classify()
+    receive([WordsInput("R", lv, [], trial.end_time, end, key, 1, True, 0) for lv in LEVELS])
     return finals
 
 

@@ -1,7 +1,7 @@
 """Belief-update latency of the classifier node's state (BeliefTracker), offline, no ROS.
 
-One update = what classifier_node does per received step: add the words, apply the events,
-take final verdicts, classify the running window (live/replay.py replay_beliefs). Measured on a
+One update = what classifier_node does per wrench sample with words (live/classifier.py): add
+the words, apply the events, take final verdicts, classify the running window. Measured on a
 REAL HIRO trial streamed through the segmenter session, with the model `rcbht train` writes by
 default for REAL trials 1-40 (SVM/compact with its live head; the ROS benchmark's model), in
 boundary and window mode.
@@ -47,7 +47,8 @@ def feed_step(tracker: BeliefTracker, step: Any) -> None:
 def timed_updates(
     streamed: Any, model: SampleClassifier, mode: BeliefMode
 ) -> tuple[list[float], list[str]]:
-    """(seconds per update, belief sub-task per update) of replay_beliefs' loop on `streamed`."""
+    """(seconds per update, belief sub-task per update) of the tracker fed `streamed` step by
+    step (stream_trial's steps: a sample's words with the events after it)."""
 
     tracker = BeliefTracker(model, mode, 2.0, trial=streamed.name)
     times: list[float] = []

@@ -30,8 +30,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "live-eval",
         help="replay held-out trials through the live segmenter + belief tracker offline",
         description="Train on all but the last --held-out trials (without and with live "
-        "augmentation, or use --model), replay the held-out trials through SegmenterSession + "
-        "BeliefTracker + StateFilter exactly as the nodes run them, and report time_accuracy, state "
+        "augmentation, or use --model), replay the held-out trials in turn through the nodes' "
+        "own sessions (SegmenterSession, ClassifierSession) exactly as the nodes run them over "
+        "successive bags, and report time_accuracy, state "
         "changes per sub-task boundary, the expected calibration error and the final "
         "sub-task verdicts.",
     )
@@ -65,9 +66,9 @@ def run_live_eval(args: argparse.Namespace) -> int:
     from rcbht_introspection.learn.model_file import load_model, profile_mismatch
     from rcbht_introspection.live.replay import (
         commanded_phase,
+        node_stream,
         replay_beliefs,
         replay_summary,
-        stream_trial,
     )
     from rcbht_introspection.taxonomy.config import default_config
 
@@ -99,7 +100,8 @@ def run_live_eval(args: argparse.Namespace) -> int:
         models["after"] = train_live_model(samples, live, config, taxonomy, **kw)
         print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{len(live)} live")
     held = [read_any_trial(p) for p in held_paths]
-    streamed = [stream_trial(t, factory) for t in held]
+    # the held-out trials one after another through the nodes' code, as bags played in turn
+    streamed = node_stream(held, factory)
     modes: tuple[BeliefMode, ...] = MODES if args.mode == "both" else (args.mode,)
     result: dict[str, Any] = {
         "train": [p.name for p in train_paths],
@@ -124,10 +126,9 @@ def run_live_eval(args: argparse.Namespace) -> int:
     for name, model in models.items():
         for mode in modes:
             began = time.perf_counter()
-            reps = [
-                replay_beliefs(s, model, mode, args.window_s, trial=t, state_config=state)
-                for s, t in zip(streamed, held, strict=True)
-            ]
+            reps = replay_beliefs(
+                streamed, model, mode, args.window_s, trials=held, state_config=state
+            )
             elapsed = time.perf_counter() - began
             summary = replay_summary(reps, held)
             # classification cost per belief update (window split + encoding + predict): the

@@ -5,10 +5,16 @@ publishes what comes back. Here live: stream switching (words of a new stream is
 stream's verdicts and start a new tracker session), the latched events of earlier streams
 (live/join.LatchedEvents), the Words messages of one wrench sample (a belief once all of them are
 in), proven word losses and /task_state (live/state.py StateFilter).
+
+A classification follows every input that completes its wrench sample's messages, and every
+applied sub-task event (once no sample's messages are half in), whatever the burst it came in:
+the beliefs and /task_state are a function of the input sequence, so the offline replay
+(live/replay.py), fed the same sequence, produces exactly what the node publishes.
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -63,9 +69,12 @@ class Step:
     """What the node publishes after a call, in order."""
 
     beliefs: list[tuple[Belief, int]] = field(default_factory=list)
-    """(belief, trigger stamp ns): verdicts on finished sub-tasks before the running belief."""
-    state: str | None = None
-    """The new /task_state when it changed."""
+    """(belief, trigger stamp ns): per classification, the verdicts on finished sub-tasks, then
+    the running belief."""
+    states: list[tuple[float, str]] = field(default_factory=list)
+    """(stream time, new /task_state) of each change, in order."""
+    update_ms: list[float] = field(default_factory=list)
+    """Time each classification took (the node's belief-update latency)."""
     lost: int = 0
     """Words newly proven lost (a late join or lost messages)."""
     ignored_events: list[str] = field(default_factory=list)
@@ -75,7 +84,7 @@ class Step:
 
 
 class ClassifierSession:
-    """One classifier over successive streams: `receive` a burst, then `classify` once."""
+    """One classifier over successive streams: `receive` inputs (any bursts), beliefs come back."""
 
     def __init__(
         self,
@@ -90,8 +99,8 @@ class ClassifierSession:
         self.state = state
         self.history: LatchedEvents[PhaseInput] = LatchedEvents()
         self.stream: StreamKey | None = None
-        self.batches: dict[tuple[str, int], tuple[int, int]] = {}
-        """(arm, sample stamp) -> (messages received, batch size)."""
+        self.open: dict[tuple[str, int], tuple[int, int]] = {}
+        """(arm, sample stamp) -> (messages received, batch size) of batches not yet complete."""
         self.trigger_ns: int | None = None
         """Earliest sample behind evidence not yet classified (the conservative latency)."""
         self._stale = 0
@@ -105,14 +114,17 @@ class ClassifierSession:
         self.history.rejoin(now_ns)
 
     def receive(self, items: Iterable[WordsInput | PhaseInput]) -> Step:
-        """Take a burst in publication order (each topic is in order, the topics among
-        themselves are not: the node sorts by source timestamp)."""
+        """Take inputs in publication order (each topic is in order, the topics among themselves
+        are not: the node sorts a burst by source timestamp); classify after each that completes
+        a classification point (module doc)."""
         step = Step()
         for item in items:
             if isinstance(item, PhaseInput):
                 self._phase(item, step)
             else:
                 self._words(item, step)
+            if self.trigger_ns is not None and not self.open:
+                self._classify(step)
         self.counts["latched events of earlier streams dropped"] += self.history.stale - self._stale
         self._stale = self.history.stale
         return step
@@ -123,17 +135,10 @@ class ClassifierSession:
             return TeachStatus(False, "teaching is off (parameter teach_enabled)", 0, 0, 0, 0)
         return self.teaching.request(request, self.tracker)
 
-    def classify(self) -> Step | None:
-        """Verdicts, belief and state once every message of the newest sample's batch is in
-        and there is new evidence; None otherwise."""
-        newest = max((stamp for _, stamp in self.batches), default=None)
-        if any(n < size for (_, stamp), (n, size) in self.batches.items() if stamp == newest):
-            return None  # the other messages of this sample are on their way
-        self.batches = {}
-        if self.trigger_ns is None:
-            return None
-        trigger, self.trigger_ns = self.trigger_ns, None
-        step = Step()
+    def _classify(self, step: Step) -> None:
+        """Verdicts, belief and state from the evidence so far."""
+        began = time.perf_counter()
+        trigger, self.trigger_ns = self.trigger_ns or 0, None
         self._count_losses(step)
         if self.teaching is not None:
             model = self.teaching.take_model()
@@ -147,8 +152,8 @@ class ClassifierSession:
         belief = self.tracker.current()
         self._emit(step, belief, trigger)
         if self.state.update(self.tracker.now, belief):
-            step.state = self.state.state
-        return step
+            step.states.append((self.tracker.now, self.state.state))
+        step.update_ms.append((time.perf_counter() - began) * 1e3)
 
     # --- input ---------------------------------------------------------------------------
     def _words(self, item: WordsInput, step: Step) -> None:
@@ -159,8 +164,11 @@ class ClassifierSession:
         if item.end_of_stream:
             self.tracker.end_of_stream(item.arm, item.level)
         key = (item.arm, item.stamp_ns)
-        count, _ = self.batches.get(key, (0, item.batch_size))
-        self.batches[key] = (count + 1, item.batch_size)
+        count, _ = self.open.get(key, (0, item.batch_size))
+        if count + 1 < item.batch_size:
+            self.open[key] = (count + 1, item.batch_size)
+        else:  # complete: a batch still open was published before it, so its missing
+            self.open = {}  # messages never will arrive (lost, or joined late)
         self._trigger(item.stamp_ns)
 
     def _phase(self, item: PhaseInput, step: Step) -> None:
@@ -187,6 +195,7 @@ class ClassifierSession:
         self.tracker.reset()
         self.state.new_stream()
         self.stream = key
+        self.open, self.trigger_ns = {}, None
         for event in self.history.stream_started(key):  # its events the latched topic replayed
             self._apply(event, step)
 

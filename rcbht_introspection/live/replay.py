@@ -1,18 +1,24 @@
-"""Offline live-belief replay: what /task_state the nodes publish for a trial, without ROS.
+"""Offline live-belief replay: what /task_state the nodes publish for trials, without ROS.
 
 `stream_trial` feeds a trial to `SegmenterSession` (the segmenter node's own state) sample by
 sample, each /task_phase event applied right after the last sample before it, and logs every step
 that released words or applied an event, with its stream time: the exact release time of each
-word. `replay_beliefs` drives `BeliefTracker` (the classifier node's own state) with that log as
-the classifier node does (words, then events, then final verdicts, then the current belief; a
-/task_state change by the node's rule, live/state.py) and scores the timeline with
-`offline.time_accuracy`, the state changes per sub-task and the reliability of the probabilities. Differences from a DDS replay: no transport delays (a belief changes at
-the stream time of the sample that caused it) and one classification per step.
+word (what live-like training samples use, learn/live.py). `node_stream` feeds trials one after
+another to one SegmenterSession exactly as segmenter_node is fed by their bags played in turn
+(each message with its publication order as source timestamp, so an event waits for the next
+sample, and the end event for the flush), one step per segmenter output. `replay_beliefs` hands
+what segmenter_node would publish for those steps (live/publication.py) to one
+`ClassifierSession` (the classifier node's own state: words, events, final verdicts, belief,
+/task_state by live/state.py), so the beliefs and /task_state changes are those the nodes
+publish, and scores the timeline with `offline.time_accuracy`, the state changes per sub-task and
+the reliability of the probabilities. The one difference from a DDS replay: no transport delays
+(a belief changes at the stream time of the sample that caused it).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import itertools
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,8 +28,11 @@ from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live import BeliefMode, offline
 from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker, SampleClassifier
+from rcbht_introspection.live.classifier import ClassifierSession, PhaseInput, WordsInput
+from rcbht_introspection.live.join import Watermarks
+from rcbht_introspection.live.publication import classifier_inputs, publication
 from rcbht_introspection.live.reliability import expected_calibration_error, top_label
-from rcbht_introspection.live.segmenter import PhaseEvent, SegmenterSession, WordBatch
+from rcbht_introspection.live.segmenter import Output, PhaseEvent, SegmenterSession, WordBatch
 from rcbht_introspection.live.state import StateFilter, TaskStateConfig
 from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import TrialWords, Word
@@ -101,6 +110,61 @@ def stream_trial(
     return StreamedTrial(trial.name, arms, steps, duration)
 
 
+def node_stream(
+    trials: Sequence[Trial], stream_factory: Callable[[str], ArmStream], end_phase: str = "done"
+) -> list[StreamedTrial]:
+    """The trials' streams as segmenter_node makes them from their bags played in turn, one
+    step per output of the session."""
+    if not trials:
+        return []
+    arms = trials[0].arms
+    session = SegmenterSession(arms, stream_factory, end_phases=(end_phase,))
+    source = itertools.count(1)  # publication order: the DDS source timestamps of the player
+    out = []
+    for trial in trials:
+        if trial.arms != arms:
+            raise ValueError(f"{trial.name}: arms {trial.arms} are not the first trial's {arms}")
+        steps = [
+            StreamStep(t, tuple(o.batches), tuple(o.phases))
+            for t, o in _node_outputs(session, trial, end_phase, source)
+            if o.batches or o.phases
+        ]
+        duration = float(trial.time[-1] - trial.time[0]) if len(trial.time) else 0.0
+        out.append(StreamedTrial(trial.name, arms, steps, duration))
+    return out
+
+
+def _node_outputs(
+    session: SegmenterSession, trial: Trial, end_phase: str, source: Iterator[int]
+) -> Iterator[tuple[float, Output]]:
+    """(stream time, output) of each call, in a trial bag's order (io/bags.write_trial_bag:
+    each arm's sample, then the events before the next sample), each message with its source
+    timestamp; the end event waits for the flush that follows the last sample."""
+    ns = STAMP_ORIGIN_NS + np.rint(np.asarray(trial.time, dtype=float) * 1e9).astype(np.int64)
+    events = trial_phase_events(trial, end_phase)
+    event_ns = [STAMP_ORIGIN_NS + round(t * 1e9) for t, _ in events]
+    ev = 0
+    t = 0.0
+    for i in range(len(ns)):
+        t = (int(ns[i]) - int(ns[0])) / 1e9
+        for arm in trial.arms:
+            yield t, session.push(arm, int(ns[i]), trial.wrench[arm][i], next(source))
+        while ev < len(events) and (i + 1 == len(ns) or event_ns[ev] < ns[i + 1]):
+            yield t, session.phase(events[ev][1], next(source))
+            ev += 1
+    yield t, session.flush(next(source) + session.max_hold_ns)
+
+
+def node_inputs(streamed: StreamedTrial) -> list[WordsInput | PhaseInput]:
+    """What classifier_node receives of a `node_stream` trial, in publication order."""
+    marks = Watermarks()  # numbering restarts with each stream: one per trial gives the node's
+    return [
+        item
+        for s in streamed.steps
+        for item in classifier_inputs(publication(Output(list(s.batches), list(s.phases)), marks))
+    ]
+
+
 @dataclass
 class LiveReplay:
     """The /task_state timeline and verdicts the classifier node produces for one trial."""
@@ -114,13 +178,16 @@ class LiveReplay:
     n_beliefs: int = 0
     extra: dict[str, object] = field(default_factory=dict)
     running: list[tuple[float, bool]] = field(default_factory=list)
+    """(confidence, correct at that time) of each running belief with evidence (with a trial)."""
     belief_changes: list[tuple[float, str]] = field(default_factory=list)
     """Every change of the running belief's sub-task ("unknown" included): /task_state without
     a state rule, for comparison."""
     belief_time_accuracy: float = float("nan")
-    """(confidence, correct at that time) of each running belief with evidence (with a trial)."""
     final_times: list[float] = field(default_factory=list)
-    """Stream time at which each of `finals` was issued (the step that made its words final)."""
+    """Stream time at which each of `finals` was issued (the sample whose input made its words
+    final)."""
+    beliefs: list[Belief] = field(default_factory=list)
+    """Every belief the node publishes for the trial, in order (verdicts and running beliefs)."""
 
     @property
     def verdicts(self) -> list[str]:
@@ -128,53 +195,56 @@ class LiveReplay:
 
 
 def replay_beliefs(
-    streamed: StreamedTrial,
+    streamed: Sequence[StreamedTrial],
     model: SampleClassifier | None,
     mode: BeliefMode = "boundary",
     window_s: float = 2.0,
     end_phase: str = "done",
-    trial: Trial | None = None,
+    trials: Sequence[Trial] | None = None,
     state_config: TaskStateConfig | None = None,
-) -> LiveReplay:
-    """Drive BeliefTracker with the segmenter's steps as classifier_node does (/task_state by
-    `state_config`, default TaskStateConfig()); score vs `trial`."""
-    tracker = BeliefTracker(model, mode, window_s, end_phases=(end_phase,), trial=streamed.name)
-    state = StateFilter(state_config)
-    changes: list[tuple[float, str]] = []
-    finals: list[Belief] = []
-    final_times: list[float] = []
-    running: list[tuple[float, Belief]] = []
-    belief_changes: list[tuple[float, str]] = []
-    n = 0
-    for step in streamed.steps:
-        for batch in step.batches:
-            now = (batch.stamp_ns - batch.origin_ns) / 1e9
-            tracker.add_words(batch.arm, batch.words, now)
-            if batch.end_of_stream:
-                tracker.end_of_stream(batch.arm)
-        for p in step.phases:
-            tracker.phase(p.name, p.time)
-        issued = tracker.take_finals()
-        finals.extend(issued)
-        final_times.extend(step.t for _ in issued)
-        belief = tracker.current()
-        n += 1
-        if belief.subtask != UNKNOWN and belief.probabilities:
-            running.append((step.t, belief))
-        if belief.subtask != (belief_changes[-1][1] if belief_changes else UNKNOWN):
-            belief_changes.append((step.t, belief.subtask))
-        if state.update(tracker.now, belief):
-            changes.append((step.t, state.state))
-    out = LiveReplay(streamed.name, mode, changes, finals, UNKNOWN, n_beliefs=n)
-    out.belief_changes = belief_changes
-    out.final_times = final_times
-    if trial is not None:
-        out.time_accuracy = offline.time_accuracy(trial, changes, initial=UNKNOWN)
-        out.belief_time_accuracy = offline.time_accuracy(trial, belief_changes, initial=UNKNOWN)
-        truth = offline.truth_at(trial, np.asarray([t for t, _ in running], dtype=float))
-        for (_, b), true in zip(running, truth, strict=True):
-            conf, hit = top_label([b.probabilities], b.classes, [str(true)])
-            out.running.append((float(conf[0]), bool(hit[0])))
+    initial_state: str = UNKNOWN,
+) -> list[LiveReplay]:
+    """One classifier session fed what segmenter_node publishes for the streamed trials in turn
+    (`node_stream`: successive streams of one node), /task_state by `state_config` (default
+    TaskStateConfig()) from `initial_state`; each scored vs its trial in `trials`."""
+    tracker = BeliefTracker(model, mode, window_s, end_phases=(end_phase,))
+    session = ClassifierSession(tracker, StateFilter(state_config))
+    session.state.state = initial_state
+    out = []
+    for k, one in enumerate(streamed):
+        trial = trials[k] if trials is not None else None
+        initial = session.state.state
+        inputs = node_inputs(one)
+        if inputs and inputs[0].stream == session.stream:
+            raise ValueError(f"{one.name} continues the previous stream: stream with node_stream")
+        step = session.receive(inputs)
+        running = [b for b, _ in step.beliefs if not b.final]
+        finals = [(b, trigger) for b, trigger in step.beliefs if b.final]
+        origin = inputs[0].stream[0] if inputs else 0
+        rep = LiveReplay(
+            one.name,
+            mode,
+            [(t, s) for t, s in step.states],
+            [b for b, _ in finals],
+            initial,
+            n_beliefs=len(running),
+            final_times=[(trigger - origin) / 1e9 for _, trigger in finals],
+            beliefs=[b for b, _ in step.beliefs],
+        )
+        for b in running:
+            if b.subtask != (rep.belief_changes[-1][1] if rep.belief_changes else UNKNOWN):
+                rep.belief_changes.append((b.end, b.subtask))
+        if trial is not None:
+            rep.time_accuracy = offline.time_accuracy(trial, rep.changes, initial=initial)
+            rep.belief_time_accuracy = offline.time_accuracy(
+                trial, rep.belief_changes, initial=UNKNOWN
+            )
+            scored = [b for b in running if b.subtask != UNKNOWN and b.probabilities]
+            truth = offline.truth_at(trial, np.asarray([b.end for b in scored], dtype=float))
+            for b, true in zip(scored, truth, strict=True):
+                conf, hit = top_label([b.probabilities], b.classes, [str(true)])
+                rep.running.append((float(conf[0]), bool(hit[0])))
+        out.append(rep)
     return out
 
 
@@ -193,9 +263,11 @@ def live_replay(
     window_s: float = 2.0,
     state_config: TaskStateConfig | None = None,
 ) -> LiveReplay:
-    """stream_trial + replay_beliefs for one trial."""
-    streamed = stream_trial(trial, stream_factory)
-    return replay_beliefs(streamed, model, mode, window_s, trial=trial, state_config=state_config)
+    """node_stream + replay_beliefs for one trial."""
+    streamed = node_stream([trial], stream_factory)
+    return replay_beliefs(
+        streamed, model, mode, window_s, trials=[trial], state_config=state_config
+    )[0]
 
 
 def replay_summary(replays: Sequence[LiveReplay], trials: Sequence[Trial]) -> dict[str, Any]:

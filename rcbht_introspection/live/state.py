@@ -2,9 +2,10 @@
 
 A planner acts on every /task_state change, so the state moves to a new sub-task only when the
 running belief's leading class passes every test of `TaskStateConfig` (probability, log ratio
-over the current state, accumulated log-odds, hold). Before the first confident belief of a stream
-the state is "unknown"; a belief without enough evidence (a window of fewer than `min_words` words,
-e.g. right after a sub-task event) keeps the state; a blind belief (words proven lost, live/join.py) makes it "unknown" at once.
+over the current state, accumulated log-odds, hold). Before the first confident belief the state is
+"unknown"; a belief without enough evidence (a window of fewer than `min_words` words, e.g. right
+after a sub-task event or at the start of a new stream) keeps the state; a blind belief (words
+proven lost, live/join.py) makes it "unknown" at once.
 """
 
 from __future__ import annotations
@@ -109,9 +110,9 @@ class StateFilter:
         return changed
 
     def new_stream(self) -> None:
-        """A new stream: "unknown" until its first confident belief (the next update reports it)."""
+        """A new stream: its first sub-task boundary, where the state, as at any other, stays
+        until a confident belief (a pending candidate of the old stream is dropped)."""
         self._drop()
-        self.state = UNKNOWN
 
     def _drop(self) -> None:
         self._candidate, self._evidence = None, 0.0

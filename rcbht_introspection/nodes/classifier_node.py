@@ -262,16 +262,15 @@ class ClassifierNode(ManagedNode):
     def on_words(self, arm: str, msg: WordsMsg, info: dict | None = None) -> None:
         """One Words message (the executor path; drain() takes bursts)."""
         self.publish_step(self.session.receive([words_input(arm, msg)]))
-        self.update()
 
     def on_phase(self, msg: PhaseMsg, info: dict) -> None:
         """One Phase message (the executor path; drain() takes bursts)."""
         self.publish_step(self.session.receive([phase_input(msg, info.get("source_timestamp"))]))
-        self.update()
 
     def drain(self) -> None:
-        """Take every message already delivered, hand it to the session in publication order
-        (DDS source timestamps of the one segmenter), then classify once."""
+        """Take every message already delivered and hand it to the session in publication order
+        (DDS source timestamps of the one segmenter): the session classifies where the inputs
+        say, not once per burst, so /task_state does not depend on how DDS grouped them."""
         taken: list[tuple[int, WordsInput | PhaseInput]] = []
         for _ in range(10000):
             before = len(taken)
@@ -287,23 +286,10 @@ class ClassifierNode(ManagedNode):
                 break
         taken.sort(key=lambda t: t[0])
         self.publish_step(self.session.receive(item for _, item in taken))
-        self.update()
-
-    def update(self) -> None:
-        """Classify once the newest sample's messages are all in: verdicts, belief, state."""
-        t0 = time.perf_counter()
-        step = self.session.classify()
-        if step is None:
-            return
-        self.publish_step(step)
-        self.latency.add((time.perf_counter() - t0) * 1e3)
-        error = self.tracker.last_error
-        if error and error != self.reported_error:
-            self.reported_error = error
-            self.get_logger().error(f"model prediction failed, publishing {UNKNOWN!r}: {error}")
 
     def publish_step(self, step: Step) -> None:
-        """Publish what the session produced, and say what it noticed."""
+        """Publish what the session produced (verdicts and beliefs, then each /task_state
+        change), and say what it noticed."""
         for name in step.ignored_events:
             self.get_logger().warning(f"ignored unknown sub-task event {name!r}")
         if step.lost:
@@ -313,12 +299,18 @@ class ClassifierNode(ManagedNode):
             )
         for belief, trigger_ns in step.beliefs:
             self.publish_belief(belief, trigger_ns)
-        if step.state is not None:
-            self.publish_state()
+        for _, state in step.states:
+            self.state_pub.publish(String(data=state))
+        for ms in step.update_ms:
+            self.latency.add(ms)
         if step.model_swapped and self.teaching is not None and self.teaching.saved_sha256:
             # /diagnostics names the file of the model in use (hashed by the teach worker)
             self.model_source = self.teaching_file()
             self.model_sha256 = self.teaching.saved_sha256
+        error = self.tracker.last_error
+        if error and error != self.reported_error:
+            self.reported_error = error
+            self.get_logger().error(f"model prediction failed, publishing {UNKNOWN!r}: {error}")
 
     def publish_belief(self, belief: Belief, trigger_ns: int) -> None:
         self.beliefs += 1

@@ -36,8 +36,14 @@ from rcbht_introspection.live.health import (
     Health,
     events_health,
 )
-from rcbht_introspection.live.join import Watermarks, batch_messages
-from rcbht_introspection.live.segmenter import Output, SegmenterSession, arm_stream_factory
+from rcbht_introspection.live.join import Watermarks
+from rcbht_introspection.live.publication import publication
+from rcbht_introspection.live.segmenter import (
+    Output,
+    PhaseEvent,
+    SegmenterSession,
+    arm_stream_factory,
+)
 from rcbht_introspection.nodes.common import (
     ManagedNode,
     intake_publishers,
@@ -292,34 +298,32 @@ class SegmenterNode(ManagedNode):
         )
 
     def publish(self, out: Output) -> None:
-        """The Words messages of each batch (live/join.batch_messages), then the applied events."""
+        """The Words messages of each batch and the applied events, in the order of
+        live/publication.py (an event before the words of the samples after it)."""
         now = time.monotonic()
         for batch in out.batches:
-            counts = self.session.counts[batch.arm]
             self.arm_health[batch.arm].words(batch.stream_id, batch.words)
-            top = self.marks.batch(batch.arm, batch.stream_id, batch.words)
-            messages = batch_messages(batch.words, top, batch.end_of_stream)
-            for message in messages:
-                self.marks.published(batch.arm, batch.stream_id, message.level, top, now)
-                self.word_pubs[(batch.arm, message.level)].publish(
-                    words_msg(
-                        batch.arm,
-                        message.level,
-                        message.words,
-                        batch.stamp_ns,
-                        batch.origin_ns,
-                        stream_id=batch.stream_id,
-                        batch_size=len(messages),
-                        end_of_stream=message.end_of_stream,
-                        accepted=counts.accepted,
-                        rejected=counts.rejected_total,
-                        seq_end=message.seq_end,
-                    )
+        for item in publication(out, self.marks, now):
+            if isinstance(item, PhaseEvent):
+                self.phase_pub.publish(phase_msg(item))
+                continue
+            batch, message = item.batch, item.message
+            counts = self.session.counts[batch.arm]
+            self.word_pubs[(batch.arm, message.level)].publish(
+                words_msg(
+                    batch.arm,
+                    message.level,
+                    message.words,
+                    batch.stamp_ns,
+                    batch.origin_ns,
+                    stream_id=batch.stream_id,
+                    batch_size=item.batch_size,
+                    end_of_stream=message.end_of_stream,
+                    accepted=counts.accepted,
+                    rejected=counts.rejected_total,
+                    seq_end=message.seq_end,
                 )
-            if batch.end_of_stream:
-                self.marks.ended(batch.arm, batch.stream_id)
-        for event in out.phases:
-            self.phase_pub.publish(phase_msg(event))
+            )
 
     def health(self, period_s: float) -> list[Health]:
         """Per arm intake (rate, accepted/rejected, gaps, finality backlog), then the events."""

@@ -41,7 +41,12 @@ from rcbht_introspection.live.offline import percentiles_ms
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.live.state import TaskStateConfig
 from rcbht_introspection.nodes.common import RosSession, qos_profile
-from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, VerifierConfig
+from rcbht_introspection.nodes.params import (
+    ClassifierConfig,
+    SegmenterConfig,
+    VerifierConfig,
+    load_node_config,
+)
 from rcbht_introspection.nodes.player import BagPlayer
 from rcbht_introspection.nodes.teach_client import call_teach, teach_client, teach_request
 from rcbht_introspection.replay.observer import DiagnosticWatch, Observer, VerdictObserver
@@ -115,11 +120,7 @@ def _params(
         taxonomy_profile=options.profile,
         taxonomy_config_file=options.taxonomy_config_file,
     )
-    cls_cfg = ClassifierConfig(
-        model_file=str(Path(model_path).resolve()) if model_path else "",
-        mode=options.mode,
-        arms=arms,
-    )
+    model_file = str(Path(model_path).resolve()) if model_path else ""
     seg_params = write_params(
         work / "segmenter.yaml",
         SegmenterConfig,
@@ -132,7 +133,7 @@ def _params(
         },
     )
     values: dict[str, Any] = {
-        "model_file": cls_cfg.model_file,
+        "model_file": model_file,
         "mode": options.mode,
         "arms": list(arms),
         **({"state": dataclasses.asdict(options.state)} if options.state is not None else {}),
@@ -144,6 +145,8 @@ def _params(
             teach_history_s=TEACH_HISTORY_S,
         )
     cls_params = write_params(work / "classifier.yaml", ClassifierConfig, values)
+    # what the node reads from the file (the offline reference runs with its state rule)
+    cls_cfg = load_node_config(ClassifierConfig, cls_params)
     return seg, cls_cfg, seg_params, cls_params
 
 
@@ -356,7 +359,9 @@ def replay_eval(
     scored_trials = trials[options.teach_first :]
     if options.teach_first:
         model_path = teach_path(work, options)
-    result.update(_score(records, scored_trials, model_path, options, arms, accepted_before))
+    result.update(
+        _score(records, scored_trials, model_path, options, cls_cfg, arms, accepted_before)
+    )
     if verifier is not None:
         result["verifier"] = {
             "file": str(options.verifier_file),
@@ -448,11 +453,14 @@ def _restart_summary(first: list[BagRecord], again: list[BagRecord]) -> dict[str
     }
 
 
-def load_reference(model_path: Path, options: ReplayEvalOptions) -> Reference:
-    """The model file and the stream factory that the nodes use (the offline run to compare)."""
+def load_reference(
+    model_path: Path, options: ReplayEvalOptions, classifier: ClassifierConfig
+) -> Reference:
+    """The model file, the stream factory and the classifier settings that the nodes use (the
+    offline run to compare)."""
     taxonomy = load_taxonomy_config(options.profile or None, options.taxonomy_config_file or None)
     factory = arm_stream_factory(stream_profile=options.stream_profile, taxonomy=taxonomy)
-    return Reference(load_model(model_path), factory)
+    return Reference(load_model(model_path), factory, classifier.state, classifier.window_s)
 
 
 def _score(
@@ -460,13 +468,14 @@ def _score(
     trials: list[Trial],
     model_path: Path | None,
     options: ReplayEvalOptions,
+    classifier: ClassifierConfig,
     arms: tuple[str, ...],
     accepted_before: dict[str, int] | None = None,
 ) -> dict[str, Any]:
     """The scores, with the offline reference when asked for and a model was given."""
     reference = None
     if options.offline and model_path is not None:
-        reference = load_reference(model_path, options)
+        reference = load_reference(model_path, options, classifier)
     return score(records, trials, arms, options.mode, reference, accepted_before)
 
 
@@ -507,12 +516,20 @@ def _play_one(
 
     stamps = [decode_wrench(m.raw)[0] for m in msgs if m.msgtype == WRENCH_TYPE]
     end_time = (max(stamps) - min(stamps)) / 1e9 if stamps else 0.0
-    wait_for_nodes(
-        lambda: (
-            observer.ended(stream_id, arms)
-            and len(observer.finals_since(since.beliefs)) >= n_subtasks
+
+    def done() -> bool:
+        if not observer.ended(stream_id, arms):
+            return False
+        finals = observer.finals_since(since.beliefs)
+        return (
+            len(finals) >= n_subtasks
+            # a state change published with the last verdict belongs to this bag
+            and (not finals or observer.state_settled(finals[-1].sent_ns))
             and (verdicts is None or verdicts.reached(stream_id, end_time))
-        ),
+        )
+
+    wait_for_nodes(
+        done,
         options.drain_timeout,
         procs,
         f"the verdicts of {bag.name}",

@@ -78,10 +78,19 @@ class Observer:
         self.lock = threading.Lock()
         self.received: list[tuple[int, str, tuple[str, str], bytes]] = []
         """(wall ns, kind, (arm, level) of words, raw CDR) not yet decoded"""
+        self.last_state_sent = 0
+        """Source timestamp (the classifier's clock) of the latest /task_state message."""
+        self.republished = cls_cfg.publish_rate_hz > 0
+        """The classifier republishes /task_state on a timer (not only on change)."""
         self.types = {"state": String, "belief": BeliefMsg, "phase": PhaseMsg, "words": WordsMsg}
         self.subs = [
             node.create_subscription(
-                self.types[kind], topic, partial(self.on_message, kind, ("", "")), qos, raw=True
+                self.types[kind],
+                topic,
+                # (raw, MessageInfo): rclpy passes the info to two-argument callbacks
+                partial(self.on_message, kind, ("", "")),
+                qos,
+                raw=True,
             )
             for kind, topic in (
                 ("state", cls_cfg.state_topic),
@@ -93,15 +102,28 @@ class Observer:
         for key, topic in self.word_topics.items():
             self.subs.append(
                 node.create_subscription(
-                    WordsMsg, topic, partial(self.on_message, "words", key), qos, raw=True
+                    WordsMsg,
+                    topic,
+                    partial(self.on_message, "words", key),
+                    qos,
+                    raw=True,
                 )
             )
 
-    def on_message(self, kind: str, key: tuple[str, str], raw: bytes) -> None:
+    def on_message(self, kind: str, key: tuple[str, str], raw: bytes, info: Any) -> None:
         """Keep one message's raw CDR and receive time (executor thread)."""
         wall = time.time_ns()
         with self.lock:
             self.received.append((wall, kind, key, raw))
+            if kind == "state":
+                self.last_state_sent = int(info.get("source_timestamp") or 0)
+
+    def state_settled(self, since_ns: int) -> bool:
+        """A /task_state message published after `since_ns` (the classifier's clock) arrived:
+        the topic delivers in order, so every change published before it is in (without the
+        republishing timer there is no such message to wait for)."""
+        with self.lock:
+            return not self.republished or self.last_state_sent > since_ns
 
     def convert(self) -> None:
         """Decode what arrived since the last call into the observations."""

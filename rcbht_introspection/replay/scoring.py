@@ -20,6 +20,8 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live import BeliefMode, offline
 from rcbht_introspection.live.belief import UNKNOWN, Belief
 from rcbht_introspection.live.reliability import expected_calibration_error, top_label
+from rcbht_introspection.live.replay import LiveReplay, node_stream, replay_beliefs
+from rcbht_introspection.live.state import TaskStateConfig
 from rcbht_introspection.nodes.params import LEVEL_TOPICS
 from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import LEVELS, Word
@@ -169,10 +171,14 @@ def bag_record(
 
 @dataclass(frozen=True)
 class Reference:
-    """The offline run to compare with: the model and the arm streams of the nodes' profiles."""
+    """The offline run to compare with: the model, the arm streams of the nodes' profiles and
+    the classifier's settings."""
 
     model: SubtaskModel
     stream_factory: Callable[[str], ArmStream]
+    state: TaskStateConfig | None = None
+    """classifier_node's `state.*` (None: TaskStateConfig())."""
+    window_s: float = 2.0
 
 
 @dataclass
@@ -246,6 +252,26 @@ def _offline_comparison(
     }
 
 
+def _offline_states(
+    records: Sequence[BagRecord], trials: Sequence[Trial], mode: BeliefMode, ref: Reference
+) -> list[LiveReplay]:
+    """The nodes' sessions run offline on the bags in turn, from the first bag's /task_state."""
+    return replay_beliefs(
+        node_stream(trials, ref.stream_factory, END_PHASE),
+        ref.model,
+        mode,
+        ref.window_s,
+        END_PHASE,
+        trials,
+        ref.state,
+        records[0].initial_state if records else UNKNOWN,
+    )
+
+
+def _belief_key(b: Belief) -> tuple[object, ...]:
+    return (b.subtask, b.probabilities, b.start, b.end, b.phase, b.final, b.n_words, b.blind)
+
+
 def score(
     records: Sequence[BagRecord],
     trials: Sequence[Trial],
@@ -269,7 +295,8 @@ def score(
     running_hit: list[bool] = []
     bags_out = []
     prev_accepted = {arm: (accepted_before or {}).get(arm, 0) for arm in arms}
-    for rec, trial in zip(records, trials, strict=True):
+    offline_runs = _offline_states(records, trials, mode, reference) if reference else []
+    for k, (rec, trial) in enumerate(zip(records, trials, strict=True)):
         truth = [s for s, _, _ in trial.subtask_bounds()]
         finals = [r.belief for r in rec.beliefs if r.belief.final]
         verdicts = [b.subtask for b in finals]
@@ -329,9 +356,32 @@ def score(
             words_match &= bag_out["words_match_offline"]
             if mode == "boundary":
                 verdicts_match &= bag_out["verdicts_match_offline"]
+            run = offline_runs[k]
+            bag_out.update(
+                {
+                    "offline_timeline": [(round(t, 3), s) for t, s in run.changes],
+                    "offline_time_accuracy": round(run.time_accuracy, 4),
+                    "states_match_offline": [s for _, s in rec.states]
+                    == [s for _, s in run.changes],
+                    "beliefs_match_offline": [_belief_key(r.belief) for r in rec.beliefs]
+                    == [_belief_key(b) for b in run.beliefs],
+                }
+            )
         bags_out.append(bag_out)
     weight = sum(d for _, d in time_acc) or 1.0
     boundary = mode == "boundary"
+    offline_states: dict[str, Any] = {}
+    if reference is not None:
+        offline_states = {
+            "states_match_offline": all(b["states_match_offline"] for b in bags_out),
+            "beliefs_match_offline": all(b["beliefs_match_offline"] for b in bags_out),
+            "offline_time_accuracy": round(
+                sum(r.time_accuracy * d for r, (_, d) in zip(offline_runs, time_acc, strict=True))
+                / weight,
+                4,
+            ),
+            "offline_state_changes": sum(len(r.changes) for r in offline_runs),
+        }
     return {
         "subtask_accuracy": round(correct / total, 4) if total and boundary else None,
         "subtasks": total,
@@ -347,6 +397,7 @@ def score(
         "dropped_wrench": dropped,
         "rejected_wrench": rejected,
         "words_match_offline": words_match if reference is not None else None,
+        **offline_states,
         "latency_ms": offline.percentiles_ms(latencies.belief),
         "latency_received_ms": offline.percentiles_ms(latencies.received),
         "word_latency_ms": offline.percentiles_ms(latencies.word),
@@ -390,7 +441,10 @@ def summary(result: dict[str, Any], timeline: bool = False) -> str:
         f"({result['state_changes_per_boundary']} per sub-task boundary), "
         f"ECE final {result['expected_calibration_error']['final']} "
         f"running {result['expected_calibration_error']['running']}, verdicts_match_offline {result['verdicts_match_offline']}, "
-        f"words_match_offline {result['words_match_offline']}, dropped_wrench {result['dropped_wrench']}, "
+        f"words_match_offline {result['words_match_offline']}, "
+        f"states_match_offline {result.get('states_match_offline')} (offline time_accuracy "
+        f"{result.get('offline_time_accuracy')}, {result.get('offline_state_changes')} changes), "
+        f"dropped_wrench {result['dropped_wrench']}, "
         f"latency p50 {lat['p50']} ms p99 {lat['p99']} ms (n={lat['n']}), "
         f"clean_shutdown {result['clean_shutdown']}, rate {result['rate']}x, {result['wall_s']} s"
     )

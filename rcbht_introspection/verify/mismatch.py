@@ -17,7 +17,7 @@ import numpy as np
 
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live.belief import UNKNOWN, Belief, SampleClassifier
-from rcbht_introspection.live.replay import replay_beliefs, stream_trial
+from rcbht_introspection.live.replay import node_stream, replay_beliefs
 from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detection, detection_of
@@ -64,8 +64,8 @@ def trial_contradictions(
     """The contradictions classifier_node states for `trial` (boundary mode), in issue order,
     that verifier_node can use: not the verdict on the sub-task the end event closes, which is
     issued once the stream has ended (the verifier's stream is over by then)."""
-    streamed = stream_trial(trial, stream_factory)
-    replay = replay_beliefs(streamed, model, "boundary")
+    [streamed] = node_stream([trial], stream_factory)
+    [replay] = replay_beliefs([streamed], model, "boundary")
     windows = streamed.subtask_windows()
     last_end = windows[-1][2] if windows else float("inf")
     found = (
