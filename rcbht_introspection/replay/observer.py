@@ -22,6 +22,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
+from rcbht_introspection.live.belief import UNKNOWN
 from rcbht_introspection.nodes.conversions import belief_from_msg, msg_to_word, to_ns
 from rcbht_introspection.nodes.params import (
     ClassifierConfig,
@@ -134,7 +135,9 @@ class Observer:
             with self.lock:
                 obs = self.obs
                 if kind == "state":
-                    if not obs.states or obs.states[-1][1] != msg.data:
+                    # a change from the last state seen, or from the classifier's first state
+                    # ('unknown'): its republishing before the first change is no change
+                    if (obs.states[-1][1] if obs.states else UNKNOWN) != msg.data:
                         obs.states.append((wall, msg.data))
                 elif kind == "belief":
                     obs.beliefs.append(
