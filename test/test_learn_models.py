@@ -146,6 +146,28 @@ def test_a_budgeted_forest_with_a_grown_class_set_round_trips(
     )
 
 
+def test_an_uncompressed_model_file_loads_the_same_and_is_checked(
+    samples: Samples, tmp_path: Path
+) -> None:
+    """The teach file is written uncompressed (rewritten at every teach, read by the live
+    node): the same model, the same checks."""
+    train, valid = samples
+    model = train_model(train[:8], "mondrian", "compact")
+    packed = save_model(model, tmp_path / "packed.npz")
+    plain = save_model(model, tmp_path / "plain.npz", compress=False)
+    assert plain.stat().st_size > packed.stat().st_size
+    np.testing.assert_array_equal(
+        load_model(plain).predict_proba_samples(valid), model.predict_proba_samples(valid)
+    )
+    data = bytearray(plain.read_bytes())
+    for where in (len(data) // 3, len(data) // 2, 2 * len(data) // 3):
+        flipped = tmp_path / f"flipped{where}.npz"
+        flipped.write_bytes(data[:where] + bytes([data[where] ^ 0xFF]) + data[where + 1 :])
+        with pytest.raises(InputError) as info:
+            load_model(flipped)
+        assert "\n" not in str(info.value) and str(flipped) in str(info.value)
+
+
 def _rewrite(path: Path, out: Path, edit) -> Path:
     with np.load(path, allow_pickle=False) as npz:
         arrays = {k: npz[k] for k in npz.files}

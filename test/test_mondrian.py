@@ -14,6 +14,7 @@ from sklearn.datasets import make_blobs, make_classification
 from sklearn.utils.estimator_checks import check_estimator
 
 from rcbht_introspection.learn.mondrian import NO_NODE, MondrianForestClassifier
+from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
 
 
 def _reference_proba(forest: MondrianForestClassifier, x: np.ndarray) -> np.ndarray:
@@ -253,7 +254,8 @@ def test_classes_may_grow_through_classes_but_never_drop_one() -> None:
 def _check_within_budget(forest: MondrianForestClassifier) -> None:
     """Nodes and stored points within the budget, no unreachable node, leaves consistent."""
     share = forest.max_nodes // forest.n_estimators
-    per_tree = [forest._count_nodes(int(root)) for root in forest._roots]
+    per_tree = [_nodes_below(forest, int(root)) for root in forest._roots]
+    assert forest._tree_nodes.tolist() == per_tree  # the counts the budget checks
     assert max(per_tree) <= share
     assert sum(per_tree) == forest.n_nodes_ <= forest.max_nodes  # nothing leaked
     if forest.max_points is not None:
@@ -325,6 +327,34 @@ def test_a_budget_never_reached_changes_nothing() -> None:
     assert roomy.n_nodes_ == unbounded.n_nodes_
     assert roomy.n_stored_points_ == unbounded.n_stored_points_ == 1300
     np.testing.assert_array_equal(roomy.predict_proba(X), unbounded.predict_proba(X))
+
+
+def _nodes_below(forest: MondrianForestClassifier, root: int) -> int:
+    """Reference: the tree's nodes, one at a time."""
+    pool, stack, total = forest._pool, [root], 0
+    while stack:
+        node = stack.pop()
+        total += 1
+        if pool.left[node] != NO_NODE:
+            stack += [int(pool.left[node]), int(pool.right[node])]
+    return total
+
+
+@pytest.mark.parametrize("max_nodes", [None, 60])
+def test_a_restored_forest_counts_the_nodes_it_was_trained_with(max_nodes: int | None) -> None:
+    """The per-tree node counts the budget checks are recounted on restore (all trees at once);
+    they equal the counts kept while training and a node-by-node count."""
+    X, labels = _blobs(400, seed=3, std=2.0)
+    forest = MondrianForestClassifier(n_estimators=6, random_state=2, max_nodes=max_nodes)
+    for chunk in np.array_split(np.arange(400), 8):
+        forest.partial_fit(X[chunk], labels[chunk])
+    params, arrays = forest_arrays(forest)
+    restored = forest_from_arrays(params, arrays)
+    expected = [_nodes_below(forest, int(r)) for r in forest._roots]
+    assert forest._tree_nodes.tolist() == expected
+    assert restored._tree_nodes.tolist() == expected
+    assert sum(expected) == forest.n_nodes_ > 6
+    np.testing.assert_array_equal(restored.predict_proba(X), forest.predict_proba(X))
 
 
 def test_forgetting_keeps_counts_and_seals_the_leaf() -> None:

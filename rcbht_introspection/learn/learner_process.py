@@ -88,9 +88,11 @@ def _serve(conn: Connection, start: _Start) -> None:
             if os.getppid() != parent:
                 return
             try:
-                answer = TaughtFile(str(save_model(taught, start.out_path)))
+                answer = TaughtFile(str(save_model(taught, start.out_path, compress=False)))
             except OSError as exc:  # the parent still gets the model, from the fallback file
-                answer = TaughtFile(str(save_model(taught, start.fallback_path)), str(exc))
+                answer = TaughtFile(
+                    str(save_model(taught, start.fallback_path, compress=False)), str(exc)
+                )
         try:
             conn.send(answer)
         except OSError:
@@ -113,7 +115,7 @@ class ProcessLearner:
         folder = Path(self._folder.name)
         start_path = ""
         if model is not None:
-            start_path = str(save_model(model, folder / "start.rcbht"))
+            start_path = str(save_model(model, folder / "start.rcbht", compress=False))
         self.out_path = Path(out_path) if out_path else folder / "taught.rcbht"
         """Where the taught models are written: the teach file when one is given."""
         ours, theirs = socket.socketpair()

@@ -52,9 +52,12 @@ def _checksum(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
     return digest.hexdigest()
 
 
-def write_safe_npz(path: Path, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+def write_safe_npz(
+    path: Path, header: dict[str, Any], arrays: dict[str, np.ndarray], compress: bool = True
+) -> None:
     """Write a JSON header (with the checksum added) and plain arrays as .npz, atomically: to a
-    temporary file beside `path`, then renamed over it."""
+    temporary file beside `path`, then renamed over it. `compress=False` stores the arrays
+    uncompressed (larger, but written and read faster); readers take either."""
     header["checksum"] = _checksum(header, arrays)
     payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -63,7 +66,8 @@ def write_safe_npz(path: Path, header: dict[str, Any], arrays: dict[str, np.ndar
         with tmp.open("wb") as handle:
             # numpy's stub has a bool `allow_pickle` keyword beside **arrays, so mypy takes any
             # str-keyed ** dict as possibly feeding it; the keys here are array names
-            np.savez_compressed(handle, **payload)  # type: ignore[arg-type]
+            write = np.savez_compressed if compress else np.savez
+            write(handle, **payload)  # type: ignore[arg-type]
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(tmp, path)
@@ -103,17 +107,18 @@ def check_checksum(
         )
 
 
-def save_model(model: SubtaskModel, path: Path | str) -> Path:
+def save_model(model: SubtaskModel, path: Path | str, compress: bool = True) -> Path:
     """Write `model` as a safe .npz model file (no pickled objects).
 
     Atomic: written to a temporary file beside `path`, then renamed over it, so a reader (a node
-    restarting while a taught model is saved) finds the old file or the new one, never a part."""
+    restarting while a taught model is saved) finds the old file or the new one, never a part.
+    `compress=False`: the teach file, rewritten at every teach and read by the live node."""
     path = Path(path)
     header, arrays = _model_parts(model)
     if model.live is not None:
         header["live"], live_arrays = _model_parts(model.live)
         arrays.update({LIVE_PREFIX + k: v for k, v in live_arrays.items()})
-    write_safe_npz(path, header, arrays)
+    write_safe_npz(path, header, arrays, compress)
     return path
 
 

@@ -266,20 +266,26 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self._X = state.X
         self._y = state.y
         self.gamma_ = self.discount_factor * n_features
-        self._tree_nodes = np.array([self._count_nodes(int(r)) for r in self._roots])
+        self._tree_nodes = self._count_nodes(self._roots)
         self._new_rows = 0
         self._update_posterior()
         return self
 
-    def _count_nodes(self, root: int) -> int:
-        """Nodes in the tree below `root` (root included)."""
+    def _count_nodes(self, roots: np.ndarray) -> np.ndarray:
+        """Nodes in each tree below `roots` (roots included; NO_NODE counts 0), level by level
+        for all trees at once: a restored model is swapped into a live node, so this stays cheap."""
         left, right = self._pool.left, self._pool.right
-        frontier, total = np.array([root]), 0
+        counts = np.zeros(len(roots), dtype=np.int64)
+        tree = np.flatnonzero(roots != NO_NODE)
+        frontier = roots[tree].astype(np.intp)
         while len(frontier):
-            total += len(frontier)
-            inner = frontier[left[frontier] != NO_NODE]
-            frontier = np.concatenate([left[inner], right[inner]])
-        return total
+            counts += np.bincount(tree, minlength=len(roots))
+            inner = left[frontier] != NO_NODE
+            frontier, tree = (
+                np.concatenate([left[frontier[inner]], right[frontier[inner]]]),
+                np.concatenate([tree[inner], tree[inner]]),
+            )
+        return counts
 
     # ---------------------------------------------------------------- training
     def _start(self, n_features: int) -> None:

@@ -209,7 +209,7 @@ class Teaching:
         if self.save_path is None:
             return ""
         try:
-            save_model(model, self.save_path)
+            save_model(model, self.save_path, compress=False)  # rewritten at every teach
         except OSError as exc:
             return str(exc)
         return ""
