@@ -186,6 +186,20 @@ def test_a_svm_model_cannot_be_taught(trials: list[Trial]) -> None:
     teaching.close()
 
 
+def test_unavailable_teaching_starts_no_learner(trials: list[Trial]) -> None:
+    """The node's reason (a model file it must not overwrite) refuses every request, and no
+    learner process is started for it."""
+    reason = "model file m.rcbht exists but is not usable (corrupt); teaching would overwrite it"
+    teaching = Teaching(replace(CONFIG, learner="process"), unavailable=reason)
+    assert teaching.learner is None and teaching.process is None
+    assert teaching.where_learned() == "none (teaching unavailable)"
+    session = _session(teaching)
+    _feed(session, trials[0], 0)
+    status = session.teach(TeachRequest("approach"))
+    assert not status.accepted and status.message == reason
+    teaching.close()
+
+
 def test_a_resent_request_is_taught_once(trials: list[Trial]) -> None:
     teaching = Teaching(CONFIG)
     session = _session(teaching)

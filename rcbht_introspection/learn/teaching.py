@@ -86,6 +86,7 @@ class Teaching:
         random_state: int = 0,
         taxonomy_profile: str = "reference",
         live_windows: LiveAugmentConfig | None = None,
+        unavailable: str = "",
     ) -> None:
         self.save_path = Path(save_path) if save_path else None
         self.live_windows = live_windows
@@ -95,10 +96,13 @@ class Teaching:
             self.counts.setdefault(name, 0)
         self.saved_sha256 = ""
         """SHA-256 of the last saved model file (for /diagnostics), '' before the first save."""
-        self.unavailable = ""
-        """Why nothing can be taught (a model that is not a Mondrian forest), else ''."""
+        self.unavailable = unavailable
+        """Why nothing can be taught (the caller's reason, or a model that is not a Mondrian
+        forest), else ''. Then no learner (and no learner process) is made."""
         self.learner: OnlineLearner | None = None
-        if model is not None and model.classifier != "mondrian":
+        if self.unavailable:
+            pass
+        elif model is not None and model.classifier != "mondrian":
             self.unavailable = f"teaching needs a Mondrian forest model, not {model.classifier!r}"
         else:
             try:
@@ -192,7 +196,10 @@ class Teaching:
         return TeachStatus(True, message, pending, taught, version, errors)
 
     def where_learned(self) -> str:
-        """'process PID' (the learner's own process; '(ended)' when it died) or 'thread'."""
+        """'process PID' (the learner's own process; '(ended)' when it died), 'thread', or
+        'none (teaching unavailable)'."""
+        if self.learner is None:
+            return "none (teaching unavailable)"
         if self.process is None:
             return "thread"
         return f"process {self.process.pid}" + ("" if self.process.alive else " (ended)")

@@ -108,6 +108,12 @@ class ClassifierNode(ManagedNode):
         config = load_teach_config(cfg.teach_config_file or None)
         save = self.teaching_file()
         profile = cfg.expected_profile or "reference"  # what a cold-started model records
+        unusable = (
+            f"model file {self.model_source} exists but is not usable ({self.model_problem}); "
+            "teaching would overwrite it"
+            if model is None and not cold
+            else ""
+        )
         teaching = Teaching(
             config,
             model,
@@ -115,12 +121,8 @@ class ClassifierNode(ManagedNode):
             self.counts,
             taxonomy_profile=profile,
             live_windows=load_live_config(),  # running windows are taught too (config/live.yaml)
+            unavailable=unusable,  # then no learner process is started
         )
-        if model is None and not cold:
-            teaching.unavailable = (
-                f"model file {self.model_source} exists but is not usable ({self.model_problem}); "
-                "teaching would overwrite it"
-            )
         if teaching.unavailable:
             self.get_logger().error(f"teaching is unavailable: {teaching.unavailable}")
         elif not save:
