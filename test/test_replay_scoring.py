@@ -302,3 +302,13 @@ def test_task_state_and_beliefs_against_the_nodes_sessions_run_offline(tmp_path:
     assert [b["states_match_offline"] for b in other["per_bag"]] == [k != 0, k != 1]
     fewer = score([as_received(0, drop=1), as_received(1)], trials, ("R",), "boundary", ref)
     assert fewer["beliefs_match_offline"] is False and fewer["states_match_offline"] is True
+
+
+@pytest.mark.parametrize("option", ["--teach-beside", "--teach-restart"])
+def test_teaching_options_need_teach_first(option: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """Refused in one line before any node starts."""
+    from rcbht_introspection.cli import main
+
+    assert main(["replay-eval", "bag.mcap", "--model", "m.rcbht", option]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "need --teach-first" in err and "\n" not in err

@@ -43,12 +43,15 @@ def test_cold_started_classifier_learns_through_the_service(
     out = tmp_path / "eval.json"
     saved = tmp_path / "taught.rcbht"
     args = ["replay-eval", *bags, "--teach-first", str(len(TAUGHT)), "--teach-restart"]
+    args += ["--teach-beside"]  # each taught bag is learned while the next one plays
     args += ["--teach-file", str(saved), "--rate", str(RATE), "--json", str(out)]
     assert main(args) == 0
     result = json.loads(out.read_text())
     teach = result["teach"]
     assert teach["taught_trials"] == [f"20121127-HIROSA-S-{i:02d}" for i in TAUGHT]
     assert teach["taught_windows"] == 4 * len(TAUGHT) and teach["errors"] == 0
+    # every taught bag but the first was played while the one before it was being learned
+    assert teach["latency_beside_ms"]["n"] > 0
     assert result["clean_shutdown"], (result["exit_codes"], result.get("shutdown_logs"))
     assert result["dropped_wrench"] == 0
     assert result["subtasks"] == 4 * len(HELD_OUT)

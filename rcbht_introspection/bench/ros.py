@@ -4,8 +4,12 @@ Two scenarios through segmenter_node + classifier_node as separate processes (th
 machinery): one arm at 1 kHz and two arms at 2 x 1 kHz, each for RCBHT_BENCH_ROS_SECONDS of
 playback (default 60); a third plays the one-arm bags with verifier_node beside them, giving
 sample -> verdict latency (the verifier's input is the wrench, not the words) beside word ->
-belief in the same run. The verifier is trained on other successful trials (detection only). The wrench comes from REAL HIRO trials (200 Hz recordings played at 5x =
-1 kHz) when ../shared data is present, else from a synthetic contact signal. The classifier uses
+belief in the same run. The verifier is trained on other successful trials (detection only).
+A fourth plays the one-arm trials (at least three) to a classifier started without a model and
+taught each but the last through its ~/teach service while the next plays (replay-eval
+--teach-first --teach-beside): sample -> belief latency with teaching beside the live path, and
+on the last trial with the taught model alone. The wrench comes from REAL HIRO trials (200 Hz
+recordings played at 5x = 1 kHz) when ../shared data is present, else from a synthetic contact signal. The classifier uses
 the default `rcbht train` model (with its live head) of HIRO trials 1-40 when the data are
 present, else none; RCBHT_BENCH_ROS_MODEL names a model file to use instead (skips the training).
 """
@@ -50,14 +54,14 @@ def synthetic_trial(name: str, seconds: float, seed: int) -> Trial:
     return Trial(name, t, {"R": wrench}, state_times=marks)
 
 
-def _sources(seconds_of_data: float) -> list[Trial]:
-    """Trials (200 Hz) totalling at least `seconds_of_data`."""
+def _sources(seconds_of_data: float, at_least: int = 1) -> list[Trial]:
+    """Trials (200 Hz) totalling at least `seconds_of_data`, at least `at_least` of them."""
     hiro = shared_hiro()
     trials: list[Trial] = []
     total = 0.0
     folders = find_trials([hiro]) if hiro is not None else []
     i = 0
-    while total < seconds_of_data:
+    while total < seconds_of_data or len(trials) < at_least:
         if folders:
             trial = read_trial(folders[(40 + i) % len(folders)])  # held-out trials first
         else:
@@ -173,4 +177,39 @@ def run(out_dir: Path) -> dict[str, Any]:
         if verifier_file is not None:
             results[name]["sample_to_verdict_ms"] = r["verifier"]["sample_to_verdict_ms"]
             results[name]["verdicts"] = sum(v["verdicts"] for v in r["verifier"]["runs"])
+    results["one_arm_1kHz_teaching"] = _teaching_beside(seconds * rate, rate, work)
     return results
+
+
+def _teaching_beside(seconds_of_data: float, rate: float, work: Path) -> dict[str, Any]:
+    """The one-arm trials (at least three) to a cold-started classifier, each but the last
+    taught while the next one plays; the latency beside teaching, and on the last trial with
+    the taught model alone."""
+    bags = []
+    for i, trial in enumerate(_sources(seconds_of_data, at_least=3)):
+        bags.append(work / "one_arm_1kHz_teaching" / f"{i:02d}-{trial.name}.mcap")
+        write_trial_bag(trial, bags[-1])
+    load_before = os.getloadavg()
+    t0 = time.monotonic()
+    options = ReplayEvalOptions(
+        rate=rate,
+        offline=False,
+        log_dir=work / "one_arm_1kHz_teaching_logs",
+        teach_first=len(bags) - 1,
+        teach_beside=True,
+    )
+    r = replay_eval(bags, None, options)
+    teach = r["teach"]
+    return {
+        "taught_trials": len(teach["taught_trials"]),
+        "taught_windows": teach["taught_windows"],
+        "teach_errors": teach["errors"],
+        "learned_per_trial_s": teach["trial_latency_s"],
+        "latency_beside_teaching_ms": teach["latency_beside_ms"],
+        "latency_taught_model_ms": r["latency_ms"],
+        "wrench_dropped": r["dropped_wrench"],
+        "clean_shutdown": r["clean_shutdown"],
+        "wall_s": round(time.monotonic() - t0, 1),
+        "load_avg_before": [round(x, 2) for x in load_before],
+        "load_avg_after": [round(x, 2) for x in os.getloadavg()],
+    }

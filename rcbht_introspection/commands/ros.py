@@ -100,6 +100,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "scored bags again (the verdicts must not change)",
     )
     p.add_argument(
+        "--teach-beside",
+        action="store_true",
+        help="with --teach-first: learn each taught bag while the next one plays (teaching "
+        "beside the live path; those bags' latency is reported as teach.latency_beside_ms)",
+    )
+    p.add_argument(
         "--teach-file",
         type=Path,
         default=None,
@@ -343,6 +349,7 @@ def cmd_replay_eval(args: argparse.Namespace) -> int:
         state=state_from_args(args),
         teach_first=args.teach_first,
         teach_restart=args.teach_restart,
+        teach_beside=args.teach_beside,
         teach_file=args.teach_file.resolve() if args.teach_file else None,
         verifier_file=args.verifier.resolve() if args.verifier else None,
     )
@@ -350,8 +357,8 @@ def cmd_replay_eval(args: argparse.Namespace) -> int:
         raise InputError(
             "give --model (or --teach-first K to teach the classifier, or --verifier FILE)"
         )
-    if (args.teach_restart or args.teach_file) and not args.teach_first:
-        raise InputError("--teach-restart and --teach-file need --teach-first")
+    if (args.teach_restart or args.teach_file or args.teach_beside) and not args.teach_first:
+        raise InputError("--teach-restart, --teach-beside and --teach-file need --teach-first")
     result = replay_eval(_bags(args.bags), args.model, options)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)

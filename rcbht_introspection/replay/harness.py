@@ -12,7 +12,10 @@ bags are played in order and after each one its sub-tasks are taught through the
 applied sub-task events bound), waiting until the node reports nothing pending; the other bags
 are then scored with the taught model (saved by the node, the offline reference). With
 `teach_restart` the classifier is restarted from the saved model and the scored bags are
-played again: the verdicts must be the same.
+played again: the verdicts must be the same. With `teach_beside` a taught bag's sub-tasks are
+learned while the next taught bag plays (the last one's before the scored bags), so the node
+learns beside its live path; those bags' word -> belief latency is reported apart
+(`teach.latency_beside_ms`).
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ from rcbht_introspection.nodes.teach_client import call_teach, teach_client, tea
 from rcbht_introspection.replay.observer import DiagnosticWatch, Observer, VerdictObserver
 from rcbht_introspection.replay.scoring import (
     BagRecord,
+    Latencies,
     Playback,
     Reference,
     bag_record,
@@ -104,6 +108,8 @@ class ReplayEvalOptions:
     """After teaching: restart the classifier from the saved model, replay the scored bags."""
     teach_file: Path | None = None
     """Where the classifier saves the taught model (default: in the work folder)."""
+    teach_beside: bool = False
+    """Learn each taught bag while the next taught bag plays (module doc)."""
     teach_timeout: float = 600.0
     """Longest wait for one bag's sub-tasks to be learned."""
     verifier_file: Path | None = None
@@ -299,15 +305,26 @@ def replay_eval(
                 if k:
                     client = teach_client(ros.node)
                     taught = []
+                    beside = Latencies()  # bags played while the previous one was learned
+                    learning: tuple[BagRecord, Trial, _Sent] | None = None
                     for stream_id, (bag, msgs) in enumerate(plays[:k]):
                         rec, _ = _play_one(
                             bag, msgs, stream_id, player, observer, procs, options, arms, verdicts
                         )
-                        taught.append(_teach_bag(client, rec, trials[stream_id], options))
+                        if learning is not None:
+                            beside.add(rec)
+                            taught.append(_wait_taught(client, *learning, options))
+                        sent = _send_teach(client, rec, trials[stream_id])
+                        learning = (rec, trials[stream_id], sent)
+                        if not options.teach_beside or stream_id == k - 1:
+                            taught.append(_wait_taught(client, *learning, options))
+                            learning = None
                         accepted_before = {
                             a: rec.ends.get((a, "primitives"), (0, 0))[0] for a in arms
                         }
                     result["teach"] = _teach_summary(taught)
+                    if options.teach_beside:
+                        result["teach"]["latency_beside_ms"] = percentiles_ms(beside.belief)
                 played = [
                     _play_one(
                         bag, msgs, stream_id, player, observer, procs, options, arms, verdicts
@@ -389,11 +406,16 @@ def replay_eval(
     return result
 
 
-def _teach_bag(
-    client: Any, rec: BagRecord, trial: Trial, options: ReplayEvalOptions
-) -> dict[str, Any]:
-    """Teach the sub-tasks of a played bag (true names, its verdicts' windows); wait until
-    the classifier has learned them. Returns the latencies."""
+@dataclasses.dataclass(frozen=True)
+class _Sent:
+    """Teach requests sent for one bag: when, and how long each call took (s)."""
+
+    at: float
+    call_s: list[float]
+
+
+def _send_teach(client: Any, rec: BagRecord, trial: Trial) -> _Sent:
+    """Teach the sub-tasks of a played bag (true names, its verdicts' windows)."""
     truth = [s for s, _, _ in trial.subtask_bounds()]
     finals = [r.belief for r in rec.beliefs if r.belief.final]
     if len(finals) != len(truth):
@@ -406,6 +428,13 @@ def _teach_bag(
         calls.append(round(time.monotonic() - sent, 4))
         if not response.accepted:
             raise InputError(f"teaching {label!r} refused: {response.message}", rec.playback.bag)
+    return _Sent(t0, calls)
+
+
+def _wait_taught(
+    client: Any, rec: BagRecord, trial: Trial, sent: _Sent, options: ReplayEvalOptions
+) -> dict[str, Any]:
+    """Wait until the classifier has learned everything sent; the bag's latencies."""
     status = None
 
     def learned() -> bool:
@@ -418,9 +447,9 @@ def _teach_bag(
     assert status is not None
     return {
         "name": trial.name,
-        "subtasks": truth,
-        "call_s": calls,
-        "learned_s": round(time.monotonic() - t0, 3),
+        "subtasks": [s for s, _, _ in trial.subtask_bounds()],
+        "call_s": sent.call_s,
+        "learned_s": round(time.monotonic() - sent.at, 3),
         "taught_windows": status.taught_windows,
         "model_version": status.model_version,
         "errors": status.errors,

@@ -431,6 +431,12 @@ def summary(result: dict[str, Any], timeline: bool = False) -> str:
             f"model version {teach['model_version']}, errors {teach['errors']}); learned in "
             f"{teach['trial_latency_s']} s per trial"
         )
+        if "latency_beside_ms" in teach:
+            beside = teach["latency_beside_ms"]
+            lines.append(
+                f"sample -> belief while learning beside: p50 {beside['p50']} ms, "
+                f"p99 {beside['p99']} ms, max {beside['max']} ms (n {beside['n']})"
+            )
     if "restart" in result:
         lines.append(
             f"after a restart from the saved model: verdicts equal {result['restart']['verdicts_equal']}"
