@@ -14,7 +14,7 @@ are then scored with the taught model (saved by the node, the offline reference)
 `teach_restart` the classifier is restarted from the saved model and the scored bags are
 played again: the verdicts must be the same. With `teach_beside` a taught bag's sub-tasks are
 learned while the next taught bag plays (the last one's before the scored bags), so the node
-learns beside its live path; those bags' word -> belief latency is reported apart
+learns beside its live path; those bags' sample -> belief latency is reported apart
 (`teach.latency_beside_ms`).
 """
 
@@ -406,7 +406,7 @@ def replay_eval(
     return result
 
 
-@dataclasses.dataclass(frozen=True)
+@dataclass(frozen=True)
 class _Sent:
     """Teach requests sent for one bag: when, and how long each call took (s)."""
 
