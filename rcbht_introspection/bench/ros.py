@@ -9,9 +9,9 @@ A fourth plays the one-arm trials (at least three) to a classifier started witho
 taught each but the last through its ~/teach service while the next plays (replay-eval
 --teach-first --teach-beside): sample -> belief latency with teaching beside the live path, and
 on the last trial with the taught model alone. The wrench comes from REAL HIRO trials (200 Hz
-recordings played at 5x = 1 kHz) when ../shared data is present, else from a synthetic contact signal. The classifier uses
-the default `rcbht train` model (with its live head) of HIRO trials 1-40 when the data are
-present, else none; RCBHT_BENCH_ROS_MODEL names a model file to use instead (skips the training).
+recordings played at 5x = 1 kHz) when ../shared data is present, else from a synthetic contact
+signal. The classifier uses the default `rcbht train` model (with its live head) of HIRO trials
+1-40 when the data are present, else none; RCBHT_BENCH_ROS_MODEL names a model file to use instead (skips the training).
 """
 
 from __future__ import annotations
@@ -177,16 +177,17 @@ def run(out_dir: Path) -> dict[str, Any]:
         if verifier_file is not None:
             results[name]["sample_to_verdict_ms"] = r["verifier"]["sample_to_verdict_ms"]
             results[name]["verdicts"] = sum(v["verdicts"] for v in r["verifier"]["runs"])
-    results["one_arm_1kHz_teaching"] = _teaching_beside(seconds * rate, rate, work)
+    results["one_arm_1kHz_teaching"] = _teaching_beside(sources, rate, work)
     return results
 
 
-def _teaching_beside(seconds_of_data: float, rate: float, work: Path) -> dict[str, Any]:
-    """The one-arm trials (at least three) to a cold-started classifier, each but the last
-    taught while the next one plays; the latency beside teaching, and on the last trial with
-    the taught model alone."""
-    bags = []
-    for i, trial in enumerate(_sources(seconds_of_data, at_least=3)):
+def _teaching_beside(sources: list[Trial], rate: float, work: Path) -> dict[str, Any]:
+    """The one-arm bags (at least three: more trials are written when a short run has fewer)
+    to a cold-started classifier, each but the last taught while the next one plays; the
+    latency beside teaching, and on the last trial with the taught model alone."""
+    bags = [work / "one_arm_1kHz" / f"{i:02d}-{t.name}.mcap" for i, t in enumerate(sources)]
+    extra = _sources(0.0, at_least=3)[len(bags) :] if len(bags) < 3 else []
+    for i, trial in enumerate(extra, start=len(bags)):
         bags.append(work / "one_arm_1kHz_teaching" / f"{i:02d}-{trial.name}.mcap")
         write_trial_bag(trial, bags[-1])
     load_before = os.getloadavg()

@@ -100,11 +100,9 @@ class Teaching:
         """Why nothing can be taught (the caller's reason, or a model that is not a Mondrian
         forest), else ''. Then no learner (and no learner process) is made."""
         self.learner: OnlineLearner | None = None
-        if self.unavailable:
-            pass
-        elif model is not None and model.classifier != "mondrian":
+        if not self.unavailable and model is not None and model.classifier != "mondrian":
             self.unavailable = f"teaching needs a Mondrian forest model, not {model.classifier!r}"
-        else:
+        if not self.unavailable:
             try:
                 self.learner = OnlineLearner(
                     config,

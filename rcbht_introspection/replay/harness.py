@@ -408,8 +408,9 @@ def replay_eval(
 
 @dataclass(frozen=True)
 class _Sent:
-    """Teach requests sent for one bag: when, and how long each call took (s)."""
+    """Teach requests sent for one bag: its sub-tasks, when, and how long each call took (s)."""
 
+    subtasks: list[str]
     at: float
     call_s: list[float]
 
@@ -428,7 +429,7 @@ def _send_teach(client: Any, rec: BagRecord, trial: Trial) -> _Sent:
         calls.append(round(time.monotonic() - sent, 4))
         if not response.accepted:
             raise InputError(f"teaching {label!r} refused: {response.message}", rec.playback.bag)
-    return _Sent(t0, calls)
+    return _Sent(truth, t0, calls)
 
 
 def _wait_taught(
@@ -447,7 +448,7 @@ def _wait_taught(
     assert status is not None
     return {
         "name": trial.name,
-        "subtasks": [s for s, _, _ in trial.subtask_bounds()],
+        "subtasks": sent.subtasks,
         "call_s": sent.call_s,
         "learned_s": round(time.monotonic() - sent.at, 3),
         "taught_windows": status.taught_windows,
