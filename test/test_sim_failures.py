@@ -1,9 +1,11 @@
 """Simulated failure labels: the deviation classes, the cycle of `--failures`, the onset rules
-(first contact the nominal twin does not have; a missed snap's stroke end), determinism, and the
-failure record in meta.json, sim_meta.json and a bag's trial info."""
+(first contact the nominal twin does not have, or the twin has and the trial lacks; else the
+stroke's end), determinism, and the failure record in meta.json, sim_meta.json and a bag's
+trial info."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -17,8 +19,8 @@ from rcbht_introspection.sim import SimConfig, load_sim_config, simulate_trial, 
 from rcbht_introspection.sim.contacts import feature_name
 from rcbht_introspection.sim.dataset import trial_plan
 from rcbht_introspection.sim.failures import deviation_signs, failure_classes
-from rcbht_introspection.sim.onset import NOVEL_CONTACT, STROKE_END, ContactLog
-from rcbht_introspection.sim.simulate import draw_trial, run_physics
+from rcbht_introspection.sim.onset import MISSING_CONTACT, NOVEL_CONTACT, STROKE_END, ContactLog
+from rcbht_introspection.sim.simulate import draw_trial, failure_onset, run_physics
 
 DEVIATION_SEED = 7
 DEVIATION_CLASS = "deviation_x-y-"
@@ -76,13 +78,40 @@ def test_second_deviation_family_overrides_only_the_sizes(config: SimConfig) -> 
     assert (a.deviation_xy, a.deviation_yaw) != (b.deviation_xy, b.deviation_yaw)
 
 
+def test_the_cell_repeats_one_program_against_a_fixtured_housing(config: SimConfig) -> None:
+    """config/sim_cell.yaml: every drawn controller value is a constant, the housing's pose
+    error is below the default's, the rest is the default; its deviation_b twin differs from it
+    in the deviation sizes only, and those are config/sim_deviation_b.yaml's."""
+    root = Path(__file__).resolve().parents[1] / "config"
+    cell = load_sim_config(root / "sim_cell.yaml")
+    ranges = [
+        v for v in dataclasses.asdict(cell.controller).values() if isinstance(v, tuple | list)
+    ]
+    assert len(ranges) >= 8 and all(lo == hi for lo, hi in ranges)
+    assert cell.controller != config.controller
+    v, d = cell.variation, config.variation
+    assert v.offset_xy < d.offset_xy and v.offset_z < d.offset_z and v.offset_yaw < d.offset_yaw
+    assert v.friction_scale == d.friction_scale and v.noise_scale == d.noise_scale
+    assert (cell.geometry, cell.physics, cell.failures, cell.sensor) == (
+        config.geometry,
+        config.physics,
+        config.failures,
+        config.sensor,
+    )
+    cell_b = load_sim_config(root / "sim_cell_deviation_b.yaml")
+    other = load_sim_config(root / "sim_deviation_b.yaml")
+    assert dataclasses.replace(cell_b, failures=cell.failures) == cell
+    assert cell_b.failures == other.failures
+
+
 def test_a_deviation_trial_carries_class_onset_and_signed_offsets(
     config: SimConfig, deviated: Trial
 ) -> None:
     assert deviated.outcome == DEVIATION_CLASS and deviated.metadata["latched"] is False
     record = deviated.metadata["failure"]
     assert isinstance(record, dict)
-    assert record["class"] == DEVIATION_CLASS and record["onset_rule"] == NOVEL_CONTACT
+    assert record["class"] == DEVIATION_CLASS
+    assert record["onset_rule"] in (NOVEL_CONTACT, MISSING_CONTACT)
     offsets = record["deviation"]
     lo, hi = config.failures.deviation_xy
     assert -hi <= offsets["x"] <= -lo and -hi <= offsets["y"] <= -lo and offsets["yaw"] == 0.0
@@ -97,8 +126,8 @@ def test_a_deviation_trial_carries_class_onset_and_signed_offsets(
 
 
 def test_the_onset_is_a_contact_of_the_failure_trial(config: SimConfig, deviated: Trial) -> None:
-    """Rerun the accepted draw's physics: the onset lies at or after its first contact, and the
-    part touches the named feature at the onset."""
+    """Rerun the accepted draw's physics: a novel contact lies at or after its first contact
+    and the part touches the named feature at the onset; a missing one it does not touch."""
     attempt = int(deviated.metadata["attempts"]) - 1  # type: ignore[call-overload]
     draw = draw_trial(config, np.random.default_rng([DEVIATION_SEED, attempt]), DEVIATION_CLASS)
     log = ContactLog(config)
@@ -107,20 +136,37 @@ def test_the_onset_is_a_contact_of_the_failure_trial(config: SimConfig, deviated
     first_contact = (touching[0] + 1) * 0.005
     record = deviated.metadata["failure"]
     assert isinstance(record, dict)
-    assert record["onset"] >= first_contact - 0.005
-    at_onset = log.features[round(record["onset"] / 0.005) - 1]
-    assert record["onset_contact"] in {feature_name(f) for f in at_onset}
+    at_onset = {feature_name(f) for f in log.features[round(record["onset"] / 0.005) - 1]}
+    if record["onset_rule"] == NOVEL_CONTACT:  # the trial touches what its twin does not
+        assert record["onset"] >= first_contact - 0.005
+        assert record["onset_contact"] in at_onset
+    else:  # the twin touches what the trial does not
+        assert record["onset_rule"] == MISSING_CONTACT
+        assert record["onset_contact"] not in at_onset
 
 
-def test_missed_snap_onset_is_the_stroke_end_and_successes_have_none(config: SimConfig) -> None:
+def test_missed_snap_onset_is_the_landing_its_twin_makes_and_successes_have_none(
+    config: SimConfig,
+) -> None:
+    """The housing sits lower than believed: the nominal twin lands while the trial's part is
+    still in the air, so the onset is a missing contact, before the trial's approach ends."""
     missed = simulate_trial(config, 5, failure="missed_snap")
     record = missed.metadata["failure"]
-    assert isinstance(record, dict) and record["onset_rule"] == STROKE_END
-    insertion, mating = missed.state_times[2], missed.state_times[3]
-    assert insertion < record["onset"] < mating  # the controller then believes it is done
-    assert record["deviation"] is None
+    assert isinstance(record, dict) and record["onset_rule"] == MISSING_CONTACT
+    assert 0.0 < record["onset"] < missed.state_times[1], (record, missed.state_times)
+    assert record["onset_contact"] and record["deviation"] is None
     success = simulate_trial(config, 5)
     assert success.outcome == "success" and "failure" not in success.metadata
+
+
+def test_contacts_that_never_differ_fall_back_to_the_stroke_end(config: SimConfig) -> None:
+    """A trial observed against itself (its twin has no offset to remove) never diverges; its
+    onset is where the planned stroke ended without a snap, if it did."""
+    draw = draw_trial(config, np.random.default_rng([5, 0]), None)
+    log = ContactLog(config)
+    result = run_physics(config, draw.twin, draw.plan, False, observer=log)
+    onset = failure_onset(config, draw, False, result.state, log)
+    assert onset.rule == STROKE_END and onset.time == result.state.stroke_time
 
 
 def test_failure_record_in_bags_and_sim_meta(tmp_path: Path) -> None:

@@ -1,11 +1,13 @@
-"""Onset of a simulated failure: the first contact that the nominal task would not have.
+"""Onset of a simulated failure: the first moment its contacts differ from the nominal task's.
 
 Every failure trial has a nominal twin: the same draw (start pose, speeds, friction, sensor)
 without the failure's offset. Both runs name the housing features the part touches
 (sim/contacts.py) every CONTACT_CHECK seconds; the onset is the first check at which the
-failure trial touches a feature its twin does not touch at that moment. The twin runs only
-until then. A missed snap never touches anything new: its onset is the moment the planned
-stroke ends with no snap (a nominal insertion snaps before it gets there).
+failure trial touches a feature its twin does not touch at that moment (a novel contact), or
+the twin touches one the failure trial does not (a missing contact: a part that has not landed
+where and when the nominal one does). The twin runs only until then. A trial whose contacts
+never differ (a missed snap can land as its twin does) has its onset where the planned stroke
+ends with no snap, if it does.
 """
 
 from __future__ import annotations
@@ -28,6 +30,8 @@ CONTACT_CHECK = 0.005
 """Seconds between two contact checks (the 200 Hz output grid)."""
 NOVEL_CONTACT = "novel_contact"
 """Onset rule: first contact with a housing feature the nominal twin does not touch then."""
+MISSING_CONTACT = "missing_contact"
+"""Onset rule: first moment the nominal twin touches a feature the failure trial does not."""
 STROKE_END = "stroke_end_without_snap"
 """Onset rule of missed_snap: the planned insertion stroke ends and no snap was felt."""
 
@@ -53,16 +57,17 @@ class ContactLog:
 class Diverged(Exception):
     """Raised by TwinWatch to stop the nominal twin at the failure's onset."""
 
-    def __init__(self, time: float, feature: Feature) -> None:
-        super().__init__(time, feature)
+    def __init__(self, time: float, feature: Feature, rule: str = NOVEL_CONTACT) -> None:
+        super().__init__(time, feature, rule)
         self.time = time
         self.feature = feature
+        self.rule = rule
 
 
 @dataclass
 class TwinWatch:
     """Observer of the nominal twin: raises Diverged at the first check where the failure trial
-    (its ContactLog) touches a feature the twin does not."""
+    (its ContactLog) touches a feature the twin does not, or the twin one the trial does not."""
 
     config: SimConfig
     failure: ContactLog
@@ -82,6 +87,9 @@ class TwinWatch:
         novel = self.failure.features[i] - twin
         if novel:
             raise Diverged((i + 1) * CONTACT_CHECK, min(novel))
+        missing = twin - self.failure.features[i]
+        if missing:
+            raise Diverged((i + 1) * CONTACT_CHECK, min(missing), MISSING_CONTACT)
 
 
 @dataclass(frozen=True)
@@ -93,11 +101,12 @@ class Onset:
     contact: str | None = None
 
 
-def contact_onset(run_twin: Callable[[], object]) -> Onset:
-    """Run the nominal twin (physics observed by a TwinWatch) up to its divergence."""
+def contact_onset(run_twin: Callable[[], object]) -> Onset | None:
+    """Run the nominal twin (physics observed by a TwinWatch) up to its divergence (None: the
+    contacts never differed)."""
     try:
         run_twin()
     except Diverged as d:
         if d.time == d.time:  # not nan
-            return Onset(d.time, NOVEL_CONTACT, feature_name(d.feature))
-    return Onset(None, NOVEL_CONTACT)
+            return Onset(d.time, d.rule, feature_name(d.feature))
+    return None

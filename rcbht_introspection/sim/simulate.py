@@ -218,14 +218,18 @@ def failure_onset(
     draw: TrialDraw,
     two_arm: bool,
     state: ControllerState,
-    log: ContactLog | None,
+    log: ContactLog,
 ) -> Onset:
-    """The failure's onset (sim/onset.py): the stroke end of a missed snap, else the first
-    contact the nominal twin does not have (the twin runs up to that moment)."""
-    if log is None:
-        return Onset(state.stroke_time, STROKE_END)
+    """The failure's onset (sim/onset.py): the first moment its contacts differ from the
+    nominal twin's (the twin runs up to that moment), else the planned stroke's end without a
+    snap (None when neither happened)."""
     watch = TwinWatch(config, log)
-    return contact_onset(lambda: run_physics(config, draw.twin, draw.plan, two_arm, observer=watch))
+    onset = contact_onset(
+        lambda: run_physics(config, draw.twin, draw.plan, two_arm, observer=watch)
+    )
+    if onset is not None:
+        return onset
+    return Onset(state.stroke_time, STROKE_END)
 
 
 def simulate_trial(
@@ -240,7 +244,7 @@ def simulate_trial(
     scen = get_scenario(scenario)
     k = decimation(rate_hz, config.physics.timestep)
     attempts = 0
-    watched = failure is not None and failure != "missed_snap"
+    watched = failure is not None
     while True:
         rng = np.random.default_rng([int(seed), attempts])
         draw = draw_trial(config, rng, failure)
@@ -269,7 +273,11 @@ def simulate_trial(
     else:
         outcome = failure if not latched else "success"
     failed = failure is not None and not latched
-    onset = None if not failed else failure_onset(config, draw, scen.two_arm, result.state, log)
+    onset = (
+        failure_onset(config, draw, scen.two_arm, result.state, log)
+        if failed and log is not None
+        else None
+    )
     metadata: dict[str, object] = {
         "seed": int(seed),
         "scenario": scenario,
