@@ -67,13 +67,14 @@ class LinearHead:
     intercept: np.ndarray
 
     @classmethod
-    def fit(cls, X: np.ndarray, y: Sequence[str]) -> LinearHead:
+    def fit(cls, X: np.ndarray, y: Sequence[str], c: float = 1.0) -> LinearHead:
+        """`c`: inverse L2 strength (scikit-learn's C); small for few failures per class."""
         classes = tuple(sorted(set(y)))
         scaler = StandardScaler().fit(X)
         if len(classes) < 2:
             d = X.shape[1]
             return cls(classes, scaler.mean_, scaler.scale_, np.zeros((1, d)), np.zeros(1))
-        lr = LogisticRegression(C=1.0, max_iter=2000).fit(scaler.transform(X), list(y))
+        lr = LogisticRegression(C=c, max_iter=2000).fit(scaler.transform(X), list(y))
         assert tuple(lr.classes_) == classes
         return cls(classes, scaler.mean_, scaler.scale_, lr.coef_, lr.intercept_)
 
@@ -124,8 +125,12 @@ class Characteriser:
         labelled = [i for i, d in enumerate(dirs) if d is not None]
         if labelled:
             for axis in DIRECTION_AXES:
-                heads[axis] = LinearHead.fit(Xa[labelled], [dirs[i][axis] for i in labelled])  # type: ignore[index]
-        return cls(phases, LinearHead.fit(Xa, y), heads)
+                heads[axis] = LinearHead.fit(
+                    Xa[labelled],
+                    [dirs[i][axis] for i in labelled],  # type: ignore[index]
+                    config.characteriser_c,
+                )
+        return cls(phases, LinearHead.fit(Xa, y, config.characteriser_c), heads)
 
     def predict(
         self, tf: TrialFeatures, z: np.ndarray, onset: float, until: float

@@ -30,11 +30,14 @@ class VerifyConfig:
     scale_floor_force: float = 0.02
     scale_floor_torque: float = 0.001
     top_k: int = 3
-    false_alarm_rate: float = 0.05
+    false_alarm_rate: float = 0.03
     threshold_segments_s: tuple[float, ...] = ()
     calibration_folds: int = 5
     onset_fraction: float = 0.5
     evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
+    characteriser_c: float = 0.03
+    """Inverse L2 regularisation of the characteriser's logistic regressions (scikit-learn C):
+    about ten failures per class against some hundred evidence features."""
     mismatch_min_probability: float = 0.45
     """The mismatch signal (verify/mismatch.py) fires when a final verdict names another
     sub-task than the commanded one with a probability above this."""
@@ -49,6 +52,7 @@ def _check(cfg: VerifyConfig) -> None:
         "elapsed_bin_s",
         "scale_floor_force",
         "scale_floor_torque",
+        "characteriser_c",
     ):
         if getattr(cfg, name) <= 0:
             raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)
