@@ -132,7 +132,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     plot = plot_timelines(result, out / "task_state_timeline.png", durations)
     print(f"plot: {plot}")
     if use_sim and args.task == "snap-assembly":
-        _verify_demo(args, out, train, held[0], model_path)
+        _verify_demo(args, out, model_path)
     else:
         print("(verification: the simulated snap assembly only; it has failure trials)")
     print(f"scores: {out / 'replay_eval.json'}  ({time.monotonic() - started:.0f} s in all)")
@@ -141,17 +141,18 @@ def cmd_demo(args: argparse.Namespace) -> int:
 
 DEMO_FAILURES = ("deviation_x-", "jamming")
 """Failure classes the demo's verifier learns; the held-out failing trial is of the first."""
+CELL_SUCCESSES = 12
+"""Successful cell trials the demo's verifier learns from (config/sim_cell.yaml)."""
 
 
-def _verify_demo(
-    args: argparse.Namespace, out: Path, train: list[Path], nominal: Path, model_path: Path
-) -> None:
-    """Train a verifier on the training successes and a few simulated failures, then replay one
-    nominal and one failing held-out trial through the nodes with verifier_node."""
+def _verify_demo(args: argparse.Namespace, out: Path, model_path: Path) -> None:
+    """Train a verifier on simulated trials of the repeated-program cell (config/sim_cell.yaml:
+    a success spread narrow enough for a slipped part to show at its first contact), then replay
+    one nominal and one failing held-out cell trial through the nodes with verifier_node."""
     import numpy as np
 
+    from rcbht_introspection.config_files import config_path
     from rcbht_introspection.io.bags import write_trial_bag
-    from rcbht_introspection.io.hiro import read_trial
     from rcbht_introspection.plots.failure_timeline import plot_failure_timeline
     from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
     from rcbht_introspection.replay.verify_scoring import verifier_summary
@@ -163,24 +164,29 @@ def _verify_demo(
     from rcbht_introspection.verify.stream import offline_verdicts
     from rcbht_introspection.verify.train import train_verifier
 
-    sim = load_sim_config()
+    sim = load_sim_config(config_path("sim_cell.yaml"))
     base = 1000 * (args.seed + 1)
+    successes = [
+        simulate_trial(sim, base + 100 + i, name=f"CELL-S-{i + 1:02d}")
+        for i in range(CELL_SUCCESSES)
+    ]
     failures = [
-        simulate_trial(sim, base + i, failure=cls, name=f"SIM-ONE-F-{i + 1:02d}-{cls}")
+        simulate_trial(sim, base + i, failure=cls, name=f"CELL-F-{i + 1:02d}-{cls}")
         for i, cls in enumerate(DEMO_FAILURES * 2)
     ]
-    failing = simulate_trial(sim, base + 99, failure=DEMO_FAILURES[0], name="SIM-ONE-F-99-held")
+    nominal = simulate_trial(sim, base + 198, name="CELL-S-98-held")
+    failing = simulate_trial(sim, base + 199, failure=DEMO_FAILURES[0], name="CELL-F-99-held")
     _step(
-        f"6. train a verifier on {len(train)} successes and {len(failures)} failures "
-        f"({', '.join(DEMO_FAILURES)})"
+        f"6. train a verifier on {len(successes)} successes and {len(failures)} failures "
+        f"({', '.join(DEMO_FAILURES)}) of one robot program repeated (config/sim_cell.yaml)"
     )
-    trials = [read_trial(p) for p in train] + failures
+    trials = successes + failures
     verifier = train_verifier(trials, {t.name: label_of(t) for t in trials}, load_verify_config())
     verifier_path = save_verifier(verifier, out / "verifier.npz")
     print(f"   {verifier_path}: {json.dumps(verifier.trained_on)}")
     _step("7. replay one nominal and one failing held-out trial with verifier_node")
     bags = []
-    replayed = (read_trial(nominal), failing)
+    replayed = (nominal, failing)
     for trial in replayed:
         bag = out / "bags_verify" / f"{trial.name}.mcap"
         bag.unlink(missing_ok=True)
