@@ -34,6 +34,20 @@ from rcbht_introspection.taxonomy.stream import StreamConfig, load_stream_config
 from rcbht_introspection.verify.config import VerifyConfig, load_verify_config
 
 TAXONOMY = TaxonomyConfig()
+CELL_PROGRAM = replace(
+    SimConfig().controller,
+    start_height=(0.034, 0.034),
+    approach_speed=(0.0065, 0.0065),
+    tilt=(0.17, 0.17),
+    rotation_speed=(0.0375, 0.0375),
+    rotation_force=(7.0, 7.0),
+    insertion_force_rate=(14.0, 14.0),
+    hold_force=(28.0, 28.0),
+    hold_time=(6.0, 6.0),
+    retract_speed=(0.0002, 0.0002),
+    retract_lateral=(0.00015, 0.00015),
+)
+CELL_FIXTURE = replace(SimConfig().variation, offset_xy=0.0002, offset_z=0.0002, offset_yaw=0.003)
 SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
     "rcbht.yaml": [
         (lambda p: load_taxonomy_config("reference", p), replace(TAXONOMY, profile="reference")),
@@ -68,6 +82,22 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
             load_sim_config,
             replace(
                 SimConfig(),
+                failures=replace(
+                    SimConfig().failures, deviation_xy=(0.0025, 0.0032), deviation_yaw=(0.08, 0.1)
+                ),
+            ),
+        )
+    ],
+    "sim_cell.yaml": [
+        (load_sim_config, replace(SimConfig(), controller=CELL_PROGRAM, variation=CELL_FIXTURE))
+    ],
+    "sim_cell_deviation_b.yaml": [
+        (
+            load_sim_config,
+            replace(
+                SimConfig(),
+                controller=CELL_PROGRAM,
+                variation=CELL_FIXTURE,
                 failures=replace(
                     SimConfig().failures, deviation_xy=(0.0025, 0.0032), deviation_yaw=(0.08, 0.1)
                 ),

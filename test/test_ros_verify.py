@@ -54,6 +54,8 @@ def test_replayed_failures_raise_the_alarm_as_offline_within_the_gate(tmp_path: 
             assert label.onset is not None and run["alarm_time"] is not None, run
             assert 0.0 <= run["alarm_time"] - label.onset <= GATE_S, (label.onset, run)
             alarmed += 1
+        else:  # the nominal bag: never an alarm
+            assert run["alarm_time"] is None, run
     assert alarmed == 2
     summary = result["verifier"]["summary"]
     assert summary["nominal_runs"] == 1 and summary["failure_runs"] == 2

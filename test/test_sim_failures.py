@@ -19,7 +19,17 @@ from rcbht_introspection.sim import SimConfig, load_sim_config, simulate_trial, 
 from rcbht_introspection.sim.contacts import feature_name
 from rcbht_introspection.sim.dataset import trial_plan
 from rcbht_introspection.sim.failures import deviation_signs, failure_classes
-from rcbht_introspection.sim.onset import MISSING_CONTACT, NOVEL_CONTACT, STROKE_END, ContactLog
+from rcbht_introspection.sim.onset import (
+    CONTACT_CHECK,
+    MISSING_CONTACT,
+    NO_ONSET,
+    NOVEL_CONTACT,
+    STROKE_END,
+    ContactLog,
+    Onset,
+    TwinWatch,
+    contact_onset,
+)
 from rcbht_introspection.sim.simulate import draw_trial, failure_onset, run_physics
 
 DEVIATION_SEED = 7
@@ -91,7 +101,9 @@ def test_the_cell_repeats_one_program_against_a_fixtured_housing(config: SimConf
     assert cell.controller != config.controller
     v, d = cell.variation, config.variation
     assert v.offset_xy < d.offset_xy and v.offset_z < d.offset_z and v.offset_yaw < d.offset_yaw
-    assert v.friction_scale == d.friction_scale and v.noise_scale == d.noise_scale
+    assert v == dataclasses.replace(
+        d, offset_xy=v.offset_xy, offset_z=v.offset_z, offset_yaw=v.offset_yaw
+    )
     assert (cell.geometry, cell.physics, cell.failures, cell.sensor) == (
         config.geometry,
         config.physics,
@@ -160,13 +172,29 @@ def test_missed_snap_onset_is_the_landing_its_twin_makes_and_successes_have_none
 
 
 def test_contacts_that_never_differ_fall_back_to_the_stroke_end(config: SimConfig) -> None:
-    """A trial observed against itself (its twin has no offset to remove) never diverges; its
-    onset is where the planned stroke ended without a snap, if it did."""
-    draw = draw_trial(config, np.random.default_rng([5, 0]), None)
+    """A trial watched against its own physics never diverges: a missed snap's onset is then
+    where its planned stroke ended with the part not seated; a trial that seated has none."""
+    missed = draw_trial(config, np.random.default_rng([5, 0]), "missed_snap")
     log = ContactLog(config)
-    result = run_physics(config, draw.twin, draw.plan, False, observer=log)
-    onset = failure_onset(config, draw, False, result.state, log)
-    assert onset.rule == STROKE_END and onset.time == result.state.stroke_time
+    result = run_physics(config, missed.physics, missed.plan, False, observer=log)
+    same = dataclasses.replace(missed, twin=missed.physics)
+    onset = failure_onset(config, same, False, result.state, log)
+    assert result.state.stroke_time is not None and result.state.seat_time is None
+    assert onset == Onset(result.state.stroke_time, STROKE_END)
+    nominal = draw_trial(config, np.random.default_rng([5, 0]), None)
+    log = ContactLog(config)
+    result = run_physics(config, nominal.physics, nominal.plan, False, observer=log)
+    assert result.state.seat_time is not None
+    assert failure_onset(config, nominal, False, result.state, log) == Onset(None, NO_ONSET)
+
+
+def test_contacts_after_the_twin_ended_are_novel(config: SimConfig) -> None:
+    """A failure trial that goes on after its twin ended differs at its next contact."""
+    log = ContactLog(config, features=[frozenset(), frozenset(), frozenset({("floor", -1)})])
+    watch = TwinWatch(config, log)
+    onset = contact_onset(lambda: None, watch)  # a twin that ends before its first check
+    assert onset == Onset(3 * CONTACT_CHECK, NOVEL_CONTACT, feature_name(("floor", -1)))
+    assert contact_onset(lambda: None, TwinWatch(config, ContactLog(config))) is None
 
 
 def test_failure_record_in_bags_and_sim_meta(tmp_path: Path) -> None:

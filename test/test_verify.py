@@ -123,6 +123,7 @@ def test_verifier_file_refuses_tampering(
     original = path.read_bytes()
     bad = tmp_path / "bad.npz"
     header, arrays = read_safe_npz(path, "verifier")
+    loaded = 0
     for k in range(1, 24):  # a flipped byte anywhere: zip structure, zlib stream or content
         data = bytearray(original)
         at = len(data) * k // 24
@@ -134,10 +135,12 @@ def test_verifier_file_refuses_tampering(
             continue
         # loaded: only a byte the zip reader does not use (a local header's copy of a size)
         # may differ, the content must be the original's
+        loaded += 1
         header_bad, arrays_bad = read_safe_npz(bad, "verifier")
         assert header_bad == header and arrays_bad.keys() == arrays.keys(), at
         for name, value in arrays.items():
             np.testing.assert_array_equal(arrays_bad[name], value, err_msg=f"byte {at}")
+    assert loaded <= 2, f"{loaded} of 23 flipped bytes went unnoticed"
     with pytest.raises(InputError, match="not found"):
         load_verifier(tmp_path / "missing.npz")
 

@@ -5,9 +5,9 @@ without the failure's offset. Both runs name the housing features the part touch
 (sim/contacts.py) every CONTACT_CHECK seconds; the onset is the first check at which the
 failure trial touches a feature its twin does not touch at that moment (a novel contact), or
 the twin touches one the failure trial does not (a missing contact: a part that has not landed
-where and when the nominal one does). The twin runs only until then. A trial whose contacts
-never differ (a missed snap can land as its twin does) has its onset where the planned stroke
-ends with no snap, if it does.
+where and when the nominal one does). The twin runs only until then; a failure trial that goes
+on after its twin ended differs at its next contact. A trial whose contacts never differ has its
+onset where the planned stroke ends with the part not seated, if it does, else none.
 """
 
 from __future__ import annotations
@@ -33,7 +33,10 @@ NOVEL_CONTACT = "novel_contact"
 MISSING_CONTACT = "missing_contact"
 """Onset rule: first moment the nominal twin touches a feature the failure trial does not."""
 STROKE_END = "stroke_end_without_snap"
-"""Onset rule of missed_snap: the planned insertion stroke ends and no snap was felt."""
+"""Fallback onset rule: contacts never differed, and the planned stroke ended with the part not
+seated (the controller then believes it is done)."""
+NO_ONSET = "none"
+"""No rule applied: the trial's onset is unknown (null)."""
 
 
 @dataclass
@@ -74,6 +77,11 @@ class TwinWatch:
     _geoms: HousingGeoms | None = None
     _check: int = 0
 
+    @property
+    def checked(self) -> int:
+        """Checks compared so far (the twin's contact checks)."""
+        return self._check
+
     def __call__(self, t: float, phase: str, model: mujoco.MjModel, data: mujoco.MjData) -> None:
         if t + 1e-9 < (self._check + 1) * CONTACT_CHECK:
             return
@@ -101,12 +109,18 @@ class Onset:
     contact: str | None = None
 
 
-def contact_onset(run_twin: Callable[[], object]) -> Onset | None:
-    """Run the nominal twin (physics observed by a TwinWatch) up to its divergence (None: the
-    contacts never differed)."""
+def contact_onset(run_twin: Callable[[], object], watch: TwinWatch) -> Onset | None:
+    """Run the nominal twin (physics observed by `watch`) up to its divergence; when the twin
+    ends first, the failure trial's next contact after that (None: the contacts never differed)."""
     try:
         run_twin()
     except Diverged as d:
         if d.time == d.time:  # not nan
             return Onset(d.time, d.rule, feature_name(d.feature))
+        return None  # the failure trial ended first, every check equal
+    for i in range(watch.checked, len(watch.failure.features)):
+        if watch.failure.features[i]:  # the twin has ended: it touches nothing
+            return Onset(
+                (i + 1) * CONTACT_CHECK, NOVEL_CONTACT, feature_name(min(watch.failure.features[i]))
+            )
     return None

@@ -31,6 +31,7 @@ from rcbht_introspection.sim.failures import (
 )
 from rcbht_introspection.sim.model import ARM_JOINTS, TrialPhysics, build_model
 from rcbht_introspection.sim.onset import (
+    NO_ONSET,
     STROKE_END,
     ContactLog,
     Onset,
@@ -221,15 +222,17 @@ def failure_onset(
     log: ContactLog,
 ) -> Onset:
     """The failure's onset (sim/onset.py): the first moment its contacts differ from the
-    nominal twin's (the twin runs up to that moment), else the planned stroke's end without a
-    snap (None when neither happened)."""
+    nominal twin's (the twin runs up to that moment), else the planned stroke's end when the part
+    never seated there (the controller then takes the snap for done), else none (time None)."""
     watch = TwinWatch(config, log)
     onset = contact_onset(
-        lambda: run_physics(config, draw.twin, draw.plan, two_arm, observer=watch)
+        lambda: run_physics(config, draw.twin, draw.plan, two_arm, observer=watch), watch
     )
     if onset is not None:
         return onset
-    return Onset(state.stroke_time, STROKE_END)
+    if state.stroke_time is not None and state.seat_time is None:
+        return Onset(state.stroke_time, STROKE_END)
+    return Onset(None, NO_ONSET)
 
 
 def simulate_trial(

@@ -8,7 +8,7 @@ A labels file is CSV with a header row; one row per trial, empty cells for unkno
     run-08,success,,,,,
 
 `outcome` is success or failure; `onset_s` is the stream time (s from the trial's first sample)
-of the first contact the nominal task would not have.
+of the first moment the trial's contacts differ from the nominal task's.
 """
 
 from __future__ import annotations
