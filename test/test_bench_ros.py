@@ -33,8 +33,7 @@ def test_ros_benchmark_short(
     assert v["sample_to_verdict_ms"]["n"] > 0 and v["latency_ms"]["n"] > 0
     assert v["verdicts"] > 0
     assert result["model"] == (str(bench_model) if bench_model else None)
-    t = result[
-        "one_arm_1kHz_teaching"
-    ]  # three trials: the second played while the first is learned
+    # three trials: the second played while the first is learned
+    t = result["one_arm_1kHz_teaching"]
     assert t["taught_trials"] == 2 and t["teach_errors"] == 0 and t["clean_shutdown"]
     assert t["latency_beside_teaching_ms"]["n"] > 0 and t["latency_taught_model_ms"]["n"] > 0

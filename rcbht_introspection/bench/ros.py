@@ -11,7 +11,8 @@ taught each but the last through its ~/teach service while the next plays (repla
 on the last trial with the taught model alone. The wrench comes from REAL HIRO trials (200 Hz
 recordings played at 5x = 1 kHz) when ../shared data is present, else from a synthetic contact
 signal. The classifier uses the default `rcbht train` model (with its live head) of HIRO trials
-1-40 when the data are present, else none; RCBHT_BENCH_ROS_MODEL names a model file to use instead (skips the training).
+1-40 when the data are present, else none; RCBHT_BENCH_ROS_MODEL names a model file to use
+instead (skips the training).
 """
 
 from __future__ import annotations
