@@ -95,6 +95,26 @@ def test_live_session_equals_the_batch_detector(
             assert {v.health for v in verdicts} == {NOMINAL}
 
 
+def test_a_saved_characteriser_names_what_the_trained_one_names(
+    trials: list[Trial], labels: dict[str, TrialLabel], tmp_path: Path
+) -> None:
+    config = load_verify_config()
+    trained = train_verifier(trials, labels, config)
+    loaded = load_verifier(save_verifier(trained, tmp_path / "v.npz"))
+    assert trained.characteriser is not None and loaded.characteriser is not None
+    assert set(loaded.characteriser.directions) == {"x", "y", "r"}
+    envelope = trained.detector.models.envelope
+    assert envelope is not None
+    for trial in trials:
+        tf = trial_features(trial, config)
+        z = envelope.z(tf)
+        onset = float(tf.times[len(tf.times) // 2])
+        want = trained.characteriser.predict(tf, z, onset, tf.end)
+        got = loaded.characteriser.predict(tf, z, onset, tf.end)
+        assert got[0] == want[0] and got[2] == want[2]
+        assert got[1] == pytest.approx(want[1], abs=1e-12)
+
+
 def test_an_injected_contact_anomaly_raises_the_alarm_after_it(
     trials: list[Trial], labels: dict[str, TrialLabel]
 ) -> None:

@@ -35,9 +35,8 @@ class VerifyConfig:
     calibration_folds: int = 5
     onset_fraction: float = 0.5
     evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
-    characteriser_c: float = 0.03
-    """Inverse L2 regularisation of the characteriser's logistic regressions (scikit-learn C):
-    about ten failures per class against some hundred evidence features."""
+    characteriser_trees: int = 50
+    """Trees of each characteriser head's Mondrian forest."""
     mismatch_min_probability: float = 0.45
     """The mismatch signal (verify/mismatch.py) fires when a final verdict names another
     sub-task than the commanded one with a probability above this."""
@@ -52,7 +51,6 @@ def _check(cfg: VerifyConfig) -> None:
         "elapsed_bin_s",
         "scale_floor_force",
         "scale_floor_torque",
-        "characteriser_c",
     ):
         if getattr(cfg, name) <= 0:
             raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)
@@ -72,6 +70,10 @@ def _check(cfg: VerifyConfig) -> None:
             )
     if not cfg.novelty_features:
         raise InputError("needs at least one feature kind", field="novelty_features")
+    if cfg.characteriser_trees < 1:
+        raise InputError(
+            f"must be >= 1, got {cfg.characteriser_trees}", field="characteriser_trees"
+        )
     if cfg.top_k < 1:
         raise InputError(f"must be >= 1, got {cfg.top_k}", field="top_k")
     if not 0 < cfg.false_alarm_rate < 1:

@@ -107,7 +107,7 @@ def _fold_results(
         failures = [(feats[n], labels[n], onset_of(n)[0]) for n in train if labels[n].failed]
         char = (
             Characteriser.fit(
-                [(f, lb, float(o)) for f, lb, o in failures if o is not None], ev, config
+                [(f, lb, float(o)) for f, lb, o in failures if o is not None], ev, config, seed
             )
             if failures
             else None

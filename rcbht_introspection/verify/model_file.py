@@ -13,13 +13,15 @@ import numpy as np
 from rcbht_introspection.config_files import from_mapping
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.model_file import check_checksum, read_safe_npz, write_safe_npz
-from rcbht_introspection.verify.characterise import Characteriser, LinearHead
+from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
+from rcbht_introspection.verify.characterise import Characteriser, ForestHead
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detector, SignalModels
 from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, TimingModel
 
 FORMAT = "rcbht-verifier"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""2: the characteriser's heads are Mondrian forests (1: logistic regressions)."""
 KIND = "verifier"
 
 
@@ -37,24 +39,15 @@ class VerifierModel:
         return self.detector.config
 
 
-def _head_parts(prefix: str, head: LinearHead) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    arrays = {
-        f"{prefix}.mean": head.mean,
-        f"{prefix}.scale": head.scale,
-        f"{prefix}.coef": head.coef,
-        f"{prefix}.intercept": head.intercept,
-    }
-    return {"classes": list(head.classes)}, arrays
+def _head_parts(prefix: str, head: ForestHead) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    params, arrays = forest_arrays(head.forest)
+    return params, {f"{prefix}.{name}": a for name, a in arrays.items()}
 
 
-def _head(prefix: str, header: dict[str, Any], arrays: dict[str, np.ndarray]) -> LinearHead:
-    return LinearHead(
-        tuple(str(c) for c in header["classes"]),
-        arrays[f"{prefix}.mean"],
-        arrays[f"{prefix}.scale"],
-        arrays[f"{prefix}.coef"],
-        arrays[f"{prefix}.intercept"],
-    )
+def _head(prefix: str, params: dict[str, Any], arrays: dict[str, np.ndarray]) -> ForestHead:
+    start = f"{prefix}."
+    own = {k[len(start) :]: a for k, a in arrays.items() if k.startswith(start)}
+    return ForestHead(forest_from_arrays(params, own))
 
 
 def save_verifier(model: VerifierModel, path: Path | str) -> Path:

@@ -57,6 +57,7 @@ def train_verifier(
             [(feats[n], labels[n], onset_for(labels[n], feats[n], timing)[0]) for n in failed],
             detector.models.envelope,
             config,
+            seed,
         )
     return VerifierModel(
         arms=arms.pop(),
