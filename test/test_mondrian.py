@@ -357,6 +357,25 @@ def test_a_restored_forest_counts_the_nodes_it_was_trained_with(max_nodes: int |
     np.testing.assert_array_equal(restored.predict_proba(X), forest.predict_proba(X))
 
 
+def test_restoring_refuses_arrays_that_are_not_trees() -> None:
+    """Links that loop, a split on a feature the forest lacks or leaf points past the nodes
+    are refused on restore, before prediction could hang or index out of range."""
+    X, labels = _blobs(120, seed=1, std=2.0)
+    params, arrays = forest_arrays(
+        MondrianForestClassifier(n_estimators=2, random_state=0).fit(X, labels)
+    )
+    inner = int(np.flatnonzero(arrays["mf_left"] != -1)[0])
+    looped = dict(arrays, mf_left=arrays["mf_left"].copy())
+    looped["mf_left"][inner] = int(arrays["mf_roots"][0])  # a child that is a root: a loop
+    wide = dict(arrays, mf_feature=arrays["mf_feature"].copy())
+    wide["mf_feature"][inner] = X.shape[1]
+    stray = dict(arrays, mf_leaf_nodes=arrays["mf_leaf_nodes"] - len(arrays["mf_left"]))
+    for bad, what in ((looped, "parent"), (wide, "feature"), (stray, "leaf nodes")):
+        with pytest.raises(ValueError, match=what):
+            forest_from_arrays(params, bad)
+    forest_from_arrays(params, arrays)  # the untouched arrays restore
+
+
 def test_forgetting_keeps_counts_and_seals_the_leaf() -> None:
     """A pure leaf that forgot its oldest points keeps their counts and never regrows from
     the rest: it takes impure counts instead of splitting."""

@@ -193,7 +193,7 @@ def _model_from_parts(
             raise InputError(f"unknown classifier {classifier!r}", path, field="classifier")
     except InputError:
         raise
-    except (KeyError, ValueError, TypeError, IndexError) as exc:
+    except (KeyError, ValueError, TypeError, IndexError, OverflowError) as exc:
         raise InputError(
             f"inconsistent model content: {exc}", path, field=str(classifier)
         ) from None

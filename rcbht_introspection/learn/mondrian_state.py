@@ -99,10 +99,21 @@ def forest_from_arrays(
     )
     if size == 0 or links.max() >= size or links.min() < NO_NODE:
         raise ValueError("node links point outside the node arrays")
+    _check_trees(pool, arrays["mf_roots"], n_features)
     offsets, flat = arrays["mf_leaf_offsets"], arrays["mf_leaf_points"]
     n_points = len(arrays["mf_y"])
     if len(flat) and (flat.max() >= n_points or flat.min() < 0):
         raise ValueError("leaf points point outside the stored data")
+    leaves = arrays["mf_leaf_nodes"]
+    if len(leaves) and (leaves.min() < 0 or leaves.max() >= size):
+        raise ValueError("leaf nodes point outside the node arrays")
+    if (
+        len(offsets) != len(leaves) + 1
+        or offsets[0] != 0
+        or offsets[-1] != len(flat)
+        or np.any(np.diff(offsets) < 0)
+    ):
+        raise ValueError("leaf point offsets do not partition the stored points")
     for k, node in enumerate(arrays["mf_leaf_nodes"]):
         pool.points[int(node)] = flat[offsets[k] : offsets[k + 1]].astype(np.intp)
     roots = arrays["mf_roots"].astype(np.int32)
@@ -116,3 +127,24 @@ def forest_from_arrays(
         rng=rng,
     )
     return forest.restore(classes, n_features, state)
+
+
+def _check_trees(pool: NodePool, roots: np.ndarray, n_features: int) -> None:
+    """Every split names a feature, and the links form trees: each child's parent is the node
+    that names it and each root has none, so no walk from a root can loop (a crafted file with
+    a valid checksum must not hang or crash prediction)."""
+    size = pool.size
+    inner = np.flatnonzero(pool.left[:size] != NO_NODE)
+    if np.any(pool.right[inner] == NO_NODE) or np.any(
+        pool.right[:size][pool.left[:size] == NO_NODE] != NO_NODE
+    ):
+        raise ValueError("a node has one child")
+    feature = pool.feature[inner]
+    if len(feature) and (feature.min() < 0 or feature.max() >= n_features):
+        raise ValueError("a split names a feature the forest does not have")
+    if np.any(pool.parent[pool.left[inner]] != inner) or np.any(
+        pool.parent[pool.right[inner]] != inner
+    ):
+        raise ValueError("a child's parent is not the node that names it")
+    if np.any(pool.parent[roots] != NO_NODE):
+        raise ValueError("a root has a parent")

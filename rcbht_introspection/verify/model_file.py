@@ -174,6 +174,6 @@ def load_verifier(path: Path | str) -> VerifierModel:
                 _head("failure", c["failure"], arrays),
                 {a: _head(f"direction.{a}", h, arrays) for a, h in c["directions"].items()},
             )
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, IndexError, OverflowError, AttributeError) as exc:
         raise InputError(f"inconsistent verifier content: {exc}", path) from None
     return VerifierModel(tuple(header["arms"]), detector, ch, dict(header.get("trained_on") or {}))
