@@ -114,7 +114,7 @@ def forest_from_arrays(
         or np.any(np.diff(offsets) < 0)
     ):
         raise ValueError("leaf point offsets do not partition the stored points")
-    for k, node in enumerate(arrays["mf_leaf_nodes"]):
+    for k, node in enumerate(leaves):
         pool.points[int(node)] = flat[offsets[k] : offsets[k + 1]].astype(np.intp)
     roots = arrays["mf_roots"].astype(np.int32)
     if len(roots) != forest.n_estimators:

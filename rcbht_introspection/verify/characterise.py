@@ -75,7 +75,7 @@ class ForestHead:
         return self.forest.predict_proba(X)
 
     def predict(self, X: np.ndarray) -> list[str]:
-        return [self.classes[i] for i in np.argmax(self.predict_proba(X), axis=1)]
+        return [str(c) for c in self.forest.predict(X)]
 
 
 @dataclass

@@ -98,20 +98,20 @@ def _fold_results(
     methods = dict(METHODS)
     if contradictions is not None:
         methods[WITH_MISMATCH] = METHODS["verifier"]
+    failures = [(feats[n], labels[n], onset_of(n)[0]) for n in train if labels[n].failed]
+    onsets_known = [(f, lb, float(o)) for f, lb, o in failures if o is not None]
     fitted: dict[tuple[str, ...], Detector] = {}
+    characterisers: dict[tuple[tuple[str, ...], str], Characteriser | None] = {}
     for method, (signals, view) in methods.items():
         if signals not in fitted:
             fitted[signals] = Detector.fit(successes, config, signals, seed=seed)
         detector = fitted[signals]
         ev = view_of(detector, view)
-        failures = [(feats[n], labels[n], onset_of(n)[0]) for n in train if labels[n].failed]
-        char = (
-            Characteriser.fit(
-                [(f, lb, float(o)) for f, lb, o in failures if o is not None], ev, config, seed
+        if (signals, view) not in characterisers:  # the mismatch variant shares the verifier's
+            characterisers[signals, view] = (
+                Characteriser.fit(onsets_known, ev, config, seed) if failures else None
             )
-            if failures
-            else None
-        )
+        char = characterisers[signals, view]
         results = []
         for name in test:
             tf, label = feats[name], labels[name]
