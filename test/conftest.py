@@ -118,6 +118,14 @@ def _release_ros_domains() -> Iterator[None]:
         supervision.release_domain()
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Under pytest-xdist (`make test`, `--dist loadgroup`) the ROS tests run one at a time on
+    one worker: two tests' node processes at once on 2 cores fall behind a 20x replay."""
+    for item in items:
+        if item.get_closest_marker("ros") is not None:
+            item.add_marker(pytest.mark.xdist_group("ros"))
+
+
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
     if report.skipped:
         _skipped.append(report.nodeid)
