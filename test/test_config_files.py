@@ -91,6 +91,19 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
     "sim_cell.yaml": [
         (load_sim_config, replace(SimConfig(), controller=CELL_PROGRAM, variation=CELL_FIXTURE))
     ],
+    "sim_cell_deviation_a.yaml": [
+        (
+            load_sim_config,
+            replace(
+                SimConfig(),
+                controller=CELL_PROGRAM,
+                variation=CELL_FIXTURE,
+                failures=replace(
+                    SimConfig().failures, deviation_xy=(0.0015, 0.00205), deviation_yaw=(0.04, 0.06)
+                ),
+            ),
+        )
+    ],
     "sim_cell_deviation_b.yaml": [
         (
             load_sim_config,
@@ -99,7 +112,7 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
                 controller=CELL_PROGRAM,
                 variation=CELL_FIXTURE,
                 failures=replace(
-                    SimConfig().failures, deviation_xy=(0.0025, 0.0032), deviation_yaw=(0.08, 0.1)
+                    SimConfig().failures, deviation_xy=(0.00205, 0.0025), deviation_yaw=(0.06, 0.08)
                 ),
             ),
         )

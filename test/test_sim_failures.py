@@ -90,8 +90,8 @@ def test_second_deviation_family_overrides_only_the_sizes(config: SimConfig) -> 
 
 def test_the_cell_repeats_one_program_against_a_fixtured_housing(config: SimConfig) -> None:
     """config/sim_cell.yaml: every drawn controller value is a constant, the housing's pose
-    error is below the default's, the rest is the default; its deviation_b twin differs from it
-    in the deviation sizes only, and those are config/sim_deviation_b.yaml's."""
+    error is below the default's, the rest is the default; its deviation_a and deviation_b twins
+    differ from it in the deviation sizes only: the lower and the upper half of its own."""
     root = Path(__file__).resolve().parents[1] / "config"
     cell = load_sim_config(root / "sim_cell.yaml")
     ranges = [
@@ -110,10 +110,17 @@ def test_the_cell_repeats_one_program_against_a_fixtured_housing(config: SimConf
         config.failures,
         config.sensor,
     )
-    cell_b = load_sim_config(root / "sim_cell_deviation_b.yaml")
-    other = load_sim_config(root / "sim_deviation_b.yaml")
-    assert dataclasses.replace(cell_b, failures=cell.failures) == cell
-    assert cell_b.failures == other.failures
+    low = load_sim_config(root / "sim_cell_deviation_a.yaml")
+    high = load_sim_config(root / "sim_cell_deviation_b.yaml")
+    for half in (low, high):
+        assert dataclasses.replace(half, failures=cell.failures) == cell
+    # the two halves split the cell's deviation sizes where one ends and the other starts
+    f, lo, hi = cell.failures, low.failures, high.failures
+    for key in ("deviation_xy", "deviation_yaw"):
+        (a0, a1), (b0, b1), (c0, c1) = getattr(f, key), getattr(lo, key), getattr(hi, key)
+        assert a0 == b0 < b1 == c0 < c1 == a1, key
+    assert dataclasses.replace(lo, deviation_xy=f.deviation_xy, deviation_yaw=f.deviation_yaw) == f
+    assert dataclasses.replace(hi, deviation_xy=f.deviation_xy, deviation_yaw=f.deviation_yaw) == f
 
 
 def test_a_deviation_trial_carries_class_onset_and_signed_offsets(
