@@ -48,6 +48,14 @@ CELL_PROGRAM = replace(
     retract_lateral=(0.00015, 0.00015),
 )
 CELL_FIXTURE = replace(SimConfig().variation, offset_xy=0.0002, offset_z=0.0002, offset_yaw=0.003)
+
+
+def cell_with_slips(xy: tuple[float, float], yaw: tuple[float, float]) -> SimConfig:
+    """The cell (sim_cell.yaml) with other deviation sizes (m, rad)."""
+    failures = replace(SimConfig().failures, deviation_xy=xy, deviation_yaw=yaw)
+    return replace(SimConfig(), controller=CELL_PROGRAM, variation=CELL_FIXTURE, failures=failures)
+
+
 SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
     "rcbht.yaml": [
         (lambda p: load_taxonomy_config("reference", p), replace(TAXONOMY, profile="reference")),
@@ -92,30 +100,10 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
         (load_sim_config, replace(SimConfig(), controller=CELL_PROGRAM, variation=CELL_FIXTURE))
     ],
     "sim_cell_deviation_a.yaml": [
-        (
-            load_sim_config,
-            replace(
-                SimConfig(),
-                controller=CELL_PROGRAM,
-                variation=CELL_FIXTURE,
-                failures=replace(
-                    SimConfig().failures, deviation_xy=(0.0015, 0.00205), deviation_yaw=(0.04, 0.06)
-                ),
-            ),
-        )
+        (load_sim_config, cell_with_slips((0.0015, 0.00205), (0.04, 0.06)))
     ],
     "sim_cell_deviation_b.yaml": [
-        (
-            load_sim_config,
-            replace(
-                SimConfig(),
-                controller=CELL_PROGRAM,
-                variation=CELL_FIXTURE,
-                failures=replace(
-                    SimConfig().failures, deviation_xy=(0.00205, 0.0025), deviation_yaw=(0.06, 0.08)
-                ),
-            ),
-        )
+        (load_sim_config, cell_with_slips((0.00205, 0.0025), (0.06, 0.08)))
     ],
     "sim_peg.yaml": [(load_peg_config, PegConfig())],
     "live.yaml": [(load_live_config, LiveAugmentConfig())],
