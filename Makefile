@@ -37,10 +37,10 @@ $(VENV)/.pkg-stamp: $(VENV)/.msgs-stamp $(PKG_SOURCES)
 demo: setup
 	$(VENV)/bin/rcbht demo --out demo_out
 
-# Two workers (pytest-xdist): the ROS tests, which mostly wait on node processes and DDS, one
-# at a time on one worker (test/conftest.py), the rest beside them on the other.
+# Two workers (pytest-xdist): the ROS tests, which mostly wait on node processes and DDS, run one
+# at a time (a lock in test/conftest.py), the other tests beside them.
 test: lint
-	$(PY) -m pytest -q -n 2 --dist loadgroup --durations=25
+	$(PY) -m pytest -q -n 2 --durations=25
 
 bench: setup
 	$(PY) -m rcbht_introspection.bench --out bench_out

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from random import Random
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -204,6 +205,7 @@ def test_a_stream_numbers_its_words_without_gaps() -> None:
     assert sorted(w.seq for w in words) == list(range(1, len(words) + 1))
 
 
+@pytest.mark.leases_domains  # takes every free domain for a moment
 def test_ros_domains_leased_by_one_process_are_not_given_to_another() -> None:
     """Concurrent tests, replays and benchmarks each get a DDS domain of their own."""
     import json
