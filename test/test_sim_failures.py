@@ -91,7 +91,7 @@ def test_second_deviation_family_overrides_only_the_sizes(config: SimConfig) -> 
 def test_the_cell_repeats_one_program_against_a_fixtured_housing(config: SimConfig) -> None:
     """config/sim_cell.yaml: every drawn controller value is a constant, the housing's pose
     error is below the default's, the rest is the default; its deviation_a and deviation_b twins
-    differ from it in the deviation sizes only: the lower and the upper half of its own."""
+    differ from it in the deviation sizes only: the lower and the upper part of its own."""
     root = Path(__file__).resolve().parents[1] / "config"
     cell = load_sim_config(root / "sim_cell.yaml")
     ranges = [
@@ -112,9 +112,9 @@ def test_the_cell_repeats_one_program_against_a_fixtured_housing(config: SimConf
     )
     low = load_sim_config(root / "sim_cell_deviation_a.yaml")
     high = load_sim_config(root / "sim_cell_deviation_b.yaml")
-    for half in (low, high):
-        assert dataclasses.replace(half, failures=cell.failures) == cell
-    # the two halves split the cell's deviation sizes where one ends and the other starts
+    for part in (low, high):
+        assert dataclasses.replace(part, failures=cell.failures) == cell
+    # the two parts split the cell's deviation sizes where one ends and the other starts
     f, lo, hi = cell.failures, low.failures, high.failures
     for key in ("deviation_xy", "deviation_yaw"):
         (a0, a1), (b0, b1), (c0, c1) = getattr(f, key), getattr(lo, key), getattr(hi, key)
