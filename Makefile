@@ -37,10 +37,17 @@ $(VENV)/.pkg-stamp: $(VENV)/.msgs-stamp $(PKG_SOURCES)
 demo: setup
 	$(VENV)/bin/rcbht demo --out demo_out
 
-# Two workers (pytest-xdist): the ROS tests, which mostly wait on node processes and DDS, run one
-# at a time (a lock in test/conftest.py), the other tests beside them.
+# Two pytest processes side by side: the ROS tests (and the one that leases every free ROS
+# domain), which mostly wait on node processes and DDS, one at a time in one; the other tests in
+# the other. The ROS process's report is printed when both have ended.
+ROS_TESTS := ros or leases_domains
 test: lint
-	$(PY) -m pytest -q -n 2 --durations=25
+	mkdir -p build
+	$(PY) -m pytest -q -m "$(ROS_TESTS)" --durations=15 > build/pytest-ros.log 2>&1 & ros=$$!; \
+	core=0; $(PY) -m pytest -q -m "not ($(ROS_TESTS))" --durations=10 || core=$$?; \
+	ros_rc=0; wait $$ros || ros_rc=$$?; \
+	echo "--- ROS tests (build/pytest-ros.log) ---"; cat build/pytest-ros.log; \
+	exit $$(( core || ros_rc ))
 
 bench: setup
 	$(PY) -m rcbht_introspection.bench --out bench_out

@@ -3,7 +3,6 @@ rule that a skip is a failure."""
 
 from __future__ import annotations
 
-import fcntl
 import os
 import sys
 from collections.abc import Iterator, Sequence
@@ -117,27 +116,6 @@ def _release_ros_domains() -> Iterator[None]:
     supervision = sys.modules.get("rcbht_introspection.replay.supervision")
     if supervision is not None:
         supervision.release_domain()
-
-
-@pytest.fixture(autouse=True)
-def _one_ros_test_at_a_time(
-    request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory
-) -> Iterator[None]:
-    """Under pytest-xdist (`make test`) the ROS tests, and the tests that lease ROS domains, hold
-    a lock the workers share, so they run one at a time: two tests' node processes at once on
-    2 cores fell behind a 20x replay. (xdist's `--dist loadgroup` does not group under pytest 9.)"""
-    node = request.node
-    exclusive = node.get_closest_marker("ros") or node.get_closest_marker("leases_domains")
-    if exclusive is None or "PYTEST_XDIST_WORKER" not in os.environ:
-        yield
-        return
-    lock = tmp_path_factory.getbasetemp().parent / "ros-tests.lock"
-    with open(lock, "a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def pytest_runtest_logreport(report: pytest.TestReport) -> None:
