@@ -39,11 +39,14 @@ demo: setup
 
 # Two pytest processes side by side: the ROS tests (and the one that leases every free ROS
 # domain), which mostly wait on node processes and DDS, one at a time in one; the other tests in
-# the other. The ROS process's report is printed when both have ended.
+# the other. The ROS process's report is printed when both have ended. A background job of a
+# script ignores Ctrl-C unless told otherwise (trap - INT): Ctrl-C then ends both, make waits.
 ROS_TESTS := ros or leases_domains
 test: lint
 	mkdir -p build
-	$(PY) -m pytest -q -m "$(ROS_TESTS)" --durations=15 > build/pytest-ros.log 2>&1 & ros=$$!; \
+	( trap - INT; exec $(PY) -m pytest -q -m "$(ROS_TESTS)" --durations=15 ) \
+	  > build/pytest-ros.log 2>&1 & ros=$$!; \
+	trap 'wait $$ros; exit 130' INT; \
 	core=0; $(PY) -m pytest -q -m "not ($(ROS_TESTS))" --durations=10 || core=$$?; \
 	ros_rc=0; wait $$ros || ros_rc=$$?; \
 	echo "--- ROS tests (build/pytest-ros.log) ---"; cat build/pytest-ros.log; \
