@@ -112,15 +112,19 @@ def test_the_cell_repeats_one_program_against_a_fixtured_housing(config: SimConf
     )
     low = load_sim_config(root / "sim_cell_deviation_a.yaml")
     high = load_sim_config(root / "sim_cell_deviation_b.yaml")
+    f = cell.failures
+    sizes = {"deviation_xy": f.deviation_xy, "deviation_yaw": f.deviation_yaw}
     for part in (low, high):
         assert dataclasses.replace(part, failures=cell.failures) == cell
+        assert dataclasses.replace(part.failures, **sizes) == f
     # the two parts split the cell's deviation sizes where one ends and the other starts
-    f, lo, hi = cell.failures, low.failures, high.failures
-    for key in ("deviation_xy", "deviation_yaw"):
-        (a0, a1), (b0, b1), (c0, c1) = getattr(f, key), getattr(lo, key), getattr(hi, key)
+    for key in sizes:
+        (a0, a1), (b0, b1), (c0, c1) = (
+            sizes[key],
+            getattr(low.failures, key),
+            getattr(high.failures, key),
+        )
         assert a0 == b0 < b1 == c0 < c1 == a1, key
-    assert dataclasses.replace(lo, deviation_xy=f.deviation_xy, deviation_yaw=f.deviation_yaw) == f
-    assert dataclasses.replace(hi, deviation_xy=f.deviation_xy, deviation_yaw=f.deviation_yaw) == f
 
 
 def test_a_deviation_trial_carries_class_onset_and_signed_offsets(
