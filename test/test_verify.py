@@ -122,18 +122,54 @@ def test_an_injected_contact_anomaly_raises_the_alarm_after_it(
     successes = [t for t in trials if not labels[t.name].failed]
     held = successes[-1]
     detector = Detector.fit([trial_features(t, config) for t in successes[:-1]], config)
-    start = float(held.state_times[1])  # rotation: the part presses on the housing
-    onset = start + 1.0
-    wrench = held.wrench["R"].copy()
-    after = np.asarray(held.time) >= onset
-    wrench[after, 2] += 30.0  # a jam: 30 N more push on the part ...
-    wrench[after, 4] += 0.5  # ... wedged about 17 mm off-centre
-    bumped = dataclasses.replace(held, wrench={"R": wrench})
+    onset = float(held.state_times[1]) + 1.0  # in rotation: the part presses on the housing
+    bumped = _jammed(held, onset)
     plain = detector.run(trial_features(held, config))
     hit = detector.run(trial_features(bumped, config))
     assert hit.alarm is not None and onset <= hit.alarm <= onset + GATE_S
     assert hit.onset is not None and hit.onset <= hit.alarm
     assert plain.alarm is None or plain.alarm > hit.alarm
+
+
+def _jammed(trial: Trial, onset: float) -> Trial:
+    """The trial with a jam from `onset`: 30 N more push, wedged about 17 mm off-centre."""
+    wrench = trial.wrench["R"].copy()
+    after = np.asarray(trial.time) >= onset
+    wrench[after, 2] += 30.0
+    wrench[after, 4] += 0.5
+    return dataclasses.replace(trial, wrench={"R": wrench})
+
+
+@pytest.fixture(scope="module")
+def cell_successes() -> list[Trial]:
+    """Ten successes of the repeated-program cell (config/sim_cell.yaml), whose nominal runs
+    are alike, as a fixed robot program's are."""
+    cell = load_sim_config(Path(__file__).resolve().parents[1] / "config" / "sim_cell.yaml")
+    return [simulate_trial(cell, 500 + i, name=f"S-{i:02d}") for i in range(10)]
+
+
+@pytest.mark.parametrize("fence", [3.0, 0.0])
+def test_a_success_unlike_the_others_is_left_out_of_the_nominal_model(
+    cell_successes: list[Trial], fence: float
+) -> None:
+    """A 'success' that jammed and still ended well (as a slip that snapped in) among the
+    training successes: left out and named, the same jam on a held-out trial raises the alarm
+    within the gate; kept (fence 0), it hides that jam."""
+    config = dataclasses.replace(load_verify_config(), nominal_fence_iqr=fence)
+    first, held = cell_successes[0], cell_successes[-1]
+    odd = _jammed(first, float(first.state_times[1]) + 1.0)
+    train = [odd, *cell_successes[1:-1]]
+    detector = Detector.fit([trial_features(t, config) for t in train], config)
+    onset = float(held.state_times[1]) + 1.0
+    hit = detector.run(trial_features(_jammed(held, onset), config))
+    assert detector.run(trial_features(held, config)).alarm is None
+    if fence:
+        assert detector.left_out == (odd.name,)
+        assert detector.calibration["successes"] == len(train) - 1
+        assert hit.alarm is not None and onset <= hit.alarm <= onset + GATE_S
+    else:
+        assert detector.left_out == ()
+        assert hit.alarm is None or hit.alarm > onset + GATE_S
 
 
 def test_verifier_file_refuses_tampering(

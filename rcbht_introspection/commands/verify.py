@@ -116,6 +116,7 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     if n_nominal < 3:
         raise InputError("need at least 3 successful trials to train and calibrate on")
     contradictions = _contradictions(args.model, trials, config) if args.model else None
+    left_out: list[str] = []
     try:
         runs = verify_runs(
             trials,
@@ -127,11 +128,12 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
             progress=lambda s: print(s, file=sys.stderr),
             train_labels=train_labels,
             contradictions=contradictions,
+            left_out=left_out,
         )
     except ValueError as exc:  # e.g. successes without sub-task events to calibrate on
         raise InputError(str(exc)) from None
     protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
-    summary, records = summarise(runs, config, protocol)
+    summary, records = summarise(runs, config, protocol, left_out)
     _print(summary)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
@@ -183,6 +185,9 @@ def _print(summary: dict[str, Any]) -> None:
         print(f"{name:<13} " + "  ".join(f"{c:>18}" for c in cells))
     src = summary["protocol"]["onset_source"]
     print(f"runs {summary['runs']} ({summary['nominal_runs']} nominal); onsets from: {src}")
+    if summary["protocol"]["successes_left_out"]:
+        left = summary["protocol"]["successes_left_out"]
+        print(f"successes left out of the nominal model (folds): {left}")
 
 
 def _plots(out: Path, trials: list[Any], labels: dict[str, Any], runs: list[Any]) -> None:

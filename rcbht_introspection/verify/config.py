@@ -33,6 +33,9 @@ class VerifyConfig:
     false_alarm_rate: float = 0.03
     threshold_segments_s: tuple[float, ...] = ()
     calibration_folds: int = 5
+    nominal_fence_iqr: float = 3.0
+    """Successes whose held-out score lies beyond Q3 + this * IQR of the others' (log scale) are
+    left out of the nominal model (0: keep every success)."""
     onset_fraction: float = 0.5
     evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
     characteriser_trees: int = 50
@@ -85,6 +88,8 @@ def _check(cfg: VerifyConfig) -> None:
         )
     if cfg.calibration_folds < 2:
         raise InputError(f"must be >= 2, got {cfg.calibration_folds}", field="calibration_folds")
+    if cfg.nominal_fence_iqr < 0:
+        raise InputError(f"must be >= 0, got {cfg.nominal_fence_iqr}", field="nominal_fence_iqr")
     if not 0 <= cfg.onset_fraction < 1:
         raise InputError(f"must be in [0, 1), got {cfg.onset_fraction}", field="onset_fraction")
     if not cfg.evidence_s or any(e <= 0 for e in cfg.evidence_s):

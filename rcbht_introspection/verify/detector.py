@@ -13,6 +13,8 @@ run's largest such ratio is its combined score; the thresholds are those quartil
 conformal (1 - false_alarm_rate) quantile of the combined scores, so the alarm - the first tick
 at which any signal exceeds its threshold - fires on at most about `false_alarm_rate` of nominal
 runs (1 / (n + 1) with n successes when n is too small for the quantile: the largest is used).
+A success whose combined score lies beyond the far-out fence of the others' (nominal_fence_iqr)
+is left out of the models and the calibration, and named in `left_out`.
 """
 
 from __future__ import annotations
@@ -82,7 +84,7 @@ class SignalModels:
         return np.minimum(np.column_stack(cols), SCORE_CAP)  # inf (unknown sub-task) -> the cap
 
 
-def conformal_threshold(run_maxima: Sequence[float], level: float) -> float:
+def conformal_threshold(run_maxima: Sequence[float] | np.ndarray, level: float) -> float:
     """The ceil((n + 1) * level)-th smallest run maximum (the largest when n is too small)."""
     values = np.sort(np.asarray(run_maxima, dtype=float))
     if len(values) == 0:
@@ -115,6 +117,58 @@ class Detection:
         return np.nan_to_num(self.normalised.max(axis=1), posinf=1e6)
 
 
+def _held_out_scores(
+    successes: Sequence[TrialFeatures],
+    config: VerifyConfig,
+    signals: tuple[str, ...],
+    phases: tuple[str, ...],
+    seed: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Cross-fitted calibration: each success scored by models fitted without it. Returns the
+    scale of each (signal, sub-task, segment) - the upper quartile of its held-out maxima - and
+    each success's maxima in those units (successes, signals, sub-tasks, segments)."""
+    n = len(successes)
+    folds = min(config.calibration_folds, n)
+    if folds < 2:
+        raise ValueError(f"need at least 2 successful trials to calibrate, got {n}")
+    edges = np.asarray(config.threshold_segments_s, dtype=float)
+    n_seg = len(edges) + 1
+    order = np.random.default_rng(seed).permutation(n)
+    maxima = np.zeros((n, len(signals), len(phases), n_seg))
+    for k in range(folds):
+        held = set(order[k::folds].tolist())
+        models = SignalModels.fit([successes[i] for i in order if i not in held], config, signals)
+        for i in held:
+            tf = successes[i]
+            s = models.scores(tf, signals)
+            seg = np.searchsorted(edges, tf.elapsed, side="right")
+            for j, name in enumerate(tf.phases):
+                if name not in phases:
+                    continue
+                p = phases.index(name)
+                for g in range(n_seg):
+                    sel = (tf.phase_index == j) & (seg == g)
+                    if np.any(sel):
+                        maxima[i, :, p, g] = np.maximum(maxima[i, :, p, g], s[sel].max(axis=0))
+    floor = np.array([SIGNAL_FLOOR[s] for s in signals])[:, None, None]
+    scale = np.maximum(np.quantile(maxima, SCALE_QUANTILE, axis=0), floor)
+    return scale, maxima / scale[None]
+
+
+def _unlike_the_others(ratios: np.ndarray, signals: tuple[str, ...], fence_iqr: float) -> list[int]:
+    """Indices of successes whose largest wrench ratio lies beyond the far-out fence of all
+    successes' on a log scale, Q3 + fence_iqr * IQR (Tukey's far-out fence at 3); none when
+    fence_iqr is 0. Timing is left out of the test: some success always has the shortest or
+    longest sub-task, and an otherwise nominal duration scores 0, so its spread says nothing."""
+    wrench = [i for i, s in enumerate(signals) if s != "timing"]
+    if fence_iqr <= 0 or not wrench or len(ratios) < 4:
+        return []
+    largest = ratios[:, wrench].reshape(len(ratios), -1).max(axis=1)
+    logs = np.log(np.maximum(largest, 1e-12))
+    q1, q3 = np.quantile(logs, [0.25, 0.75])
+    return [int(i) for i in np.nonzero(logs > q3 + fence_iqr * (q3 - q1))[0]]
+
+
 @dataclass
 class Detector:
     """Signals fitted on successes, with thresholds calibrated on held-out successes."""
@@ -127,6 +181,8 @@ class Detector:
     config: VerifyConfig
     phases: tuple[str, ...] = ()
     calibration: dict[str, object] = field(default_factory=dict)
+    left_out: tuple[str, ...] = ()
+    """Successes left out of the models and the calibration (unlike the others)."""
 
     @classmethod
     def fit(
@@ -137,39 +193,30 @@ class Detector:
         seed: int = 0,
     ) -> Detector:
         signals = tuple(signals)
-        n = len(successes)
-        folds = min(config.calibration_folds, n)
-        if folds < 2:
-            raise ValueError(f"need at least 2 successful trials to calibrate, got {n}")
+        successes = list(successes)
+        if min(config.calibration_folds, len(successes)) < 2:
+            raise ValueError(
+                f"need at least 2 successful trials to calibrate, got {len(successes)}"
+            )
         phases = tuple(dict.fromkeys(p for tf in successes for p in tf.phases))
         if not phases:
             raise ValueError("the successful trials have no sub-task events to calibrate on")
-        edges = np.asarray(config.threshold_segments_s, dtype=float)
-        n_seg = len(edges) + 1
-        order = np.random.default_rng(seed).permutation(n)
-        maxima = np.zeros((n, len(signals), len(phases), n_seg))
-        for k in range(folds):
-            held = set(order[k::folds].tolist())
-            models = SignalModels.fit(
-                [successes[i] for i in order if i not in held], config, signals
+        scale, ratios = _held_out_scores(successes, config, signals, phases, seed)
+        left_out = _unlike_the_others(ratios, signals, config.nominal_fence_iqr)
+        if left_out and len(successes) - len(left_out) >= 2:
+            # fitted and calibrated again without them: a success unlike all others (a slip
+            # that still snapped in) would widen the nominal model and lift every threshold
+            dropped = set(left_out)
+            keep = [i for i in range(len(successes)) if i not in dropped]
+            scale, ratios = _held_out_scores(
+                [successes[i] for i in keep], config, signals, phases, seed
             )
-            for i in held:
-                tf = successes[i]
-                s = models.scores(tf, signals)
-                seg = np.searchsorted(edges, tf.elapsed, side="right")
-                for j, name in enumerate(tf.phases):
-                    if name not in phases:
-                        continue
-                    p = phases.index(name)
-                    for g in range(n_seg):
-                        sel = (tf.phase_index == j) & (seg == g)
-                        if np.any(sel):
-                            maxima[i, :, p, g] = np.maximum(maxima[i, :, p, g], s[sel].max(axis=0))
-        # each (signal, sub-task, segment) in units of its held-out maxima's upper quartile,
-        # then one conformal threshold on the run maximum over all of them
-        floor = np.array([SIGNAL_FLOOR[s] for s in signals])[:, None, None]
-        scale = np.maximum(np.quantile(maxima, SCALE_QUANTILE, axis=0), floor)
-        combined = (maxima / scale[None]).reshape(n, -1).max(axis=1)
+            left_names = [successes[i].trial for i in left_out]
+            successes = [successes[i] for i in keep]
+        else:
+            left_names = []
+        n = len(successes)
+        combined = ratios.reshape(n, -1).max(axis=1)  # each run's largest ratio
         thresholds = scale * conformal_threshold(combined, 1.0 - config.false_alarm_rate)
         return cls(
             signals,
@@ -177,7 +224,12 @@ class Detector:
             thresholds,
             config,
             phases,
-            {"successes": n, "folds": folds, "level": 1.0 - config.false_alarm_rate},
+            {
+                "successes": n,
+                "folds": min(config.calibration_folds, n),
+                "level": 1.0 - config.false_alarm_rate,
+            },
+            tuple(left_names),
         )
 
     def threshold_of(self, phase: str, elapsed: float) -> np.ndarray:

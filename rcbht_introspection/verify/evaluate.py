@@ -85,6 +85,7 @@ def _fold_results(
     config: VerifyConfig,
     seed: int,
     contradictions: Mapping[str, Sequence[Contradiction]] | None = None,
+    left_out: list[str] | None = None,
 ) -> dict[str, list[RunResult]]:
     successes = [feats[n] for n in train if not labels[n].failed]
     timing = TimingModel.fit(successes, config)
@@ -105,6 +106,8 @@ def _fold_results(
     for method, (signals, view) in methods.items():
         if signals not in fitted:
             fitted[signals] = Detector.fit(successes, config, signals, seed=seed)
+            if method == "verifier" and left_out is not None:
+                left_out.extend(fitted[signals].left_out)
         detector = fitted[signals]
         ev = view_of(detector, view)
         if (signals, view) not in characterisers:  # the mismatch variant shares the verifier's
@@ -260,12 +263,14 @@ def verify_runs(
     progress: Callable[[str], None] | None = None,
     train_labels: Mapping[str, TrialLabel] | None = None,
     contradictions: Mapping[str, Sequence[Contradiction]] | None = None,
+    left_out: list[str] | None = None,
 ) -> dict[str, list[RunResult]]:
     """Every test run of every method: stratified `folds` over `trials` (None: leave one trial
     out), or fitted on `train` and tested on `trials` (transfer; training trials are kept apart
     from the test trials even when their names are the same, as in two simulated sets).
     `contradictions` (test trial -> the classifier's contradicting final verdicts) adds the
-    verifier with the mismatch signal (WITH_MISMATCH)."""
+    verifier with the mismatch signal (WITH_MISMATCH). `left_out` collects the successes each
+    fold's verifier left out of its nominal model (Detector.fit)."""
     feats = {t.name: trial_features(t, config) for t in trials}
     labels = dict(labels)
     names = [t.name for t in trials]
@@ -290,16 +295,20 @@ def verify_runs(
     for k, (tr, te) in enumerate(splits):
         if progress is not None:
             progress(f"fold {k + 1}/{len(splits)}")
-        fold = _fold_results(tr, te, feats, labels, config, seed, contradictions)
+        fold = _fold_results(tr, te, feats, labels, config, seed, contradictions, left_out)
         for method, res in fold.items():
             runs.setdefault(method, []).extend(res)
     return runs
 
 
 def summarise(
-    runs: Mapping[str, Sequence[RunResult]], config: VerifyConfig, protocol: str
+    runs: Mapping[str, Sequence[RunResult]],
+    config: VerifyConfig,
+    protocol: str,
+    left_out: Sequence[str] = (),
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """The JSON summary (the verifier's numbers, the baselines beside) and per-run records."""
+    """The JSON summary (the verifier's numbers, the baselines beside) and per-run records;
+    `left_out`: successes left out of a fold's nominal model, counted per trial."""
     main = metrics(runs["verifier"])
     sources = [r.onset_source for r in runs["verifier"] if r.label.failed]
     summary: dict[str, Any] = {
@@ -309,6 +318,7 @@ def summarise(
             "gate_s": GATE_S,
             "false_alarm_rate_target": config.false_alarm_rate,
             "onset_source": {s: sources.count(s) for s in sorted(set(sources))},
+            "successes_left_out": {n: left_out.count(n) for n in sorted(set(left_out))},
         },
         "baselines": {m: metrics(runs[m]) for m in METHODS if m != "verifier"},
     }

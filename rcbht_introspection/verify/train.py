@@ -65,6 +65,7 @@ def train_verifier(
         characteriser=characteriser,
         trained_on={
             "successes": len(successes),
+            "successes_left_out": list(detector.left_out),
             "failures": len(failed),
             "classes": sorted({labels[n].failure_class for n in failed}),
         },
