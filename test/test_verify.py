@@ -289,6 +289,9 @@ def test_verify_eval_cli_reports_the_verifier_beside_both_baselines(
         assert m["failure_runs"] == len(FAILURES)
     assert set(result["baselines"]) == {"raw_wrench", "timing"}
     assert result["protocol"]["onset_source"] == {"label": len(FAILURES)}
+    left = result["protocol"]["successes_left_out"]  # per method: trial -> folds (of 2)
+    assert set(left) <= {"verifier", "raw_wrench", "timing"}
+    assert all(1 <= folds <= 2 for trials in left.values() for folds in trials.values())
     assert "verifier_mismatch" not in result  # no classifier given
     # with a sub-task classifier (trained on other trials): the verifier with the mismatch
     # signal too, on the same runs; it can only add alarms to the verifier's

@@ -116,7 +116,7 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     if n_nominal < 3:
         raise InputError("need at least 3 successful trials to train and calibrate on")
     contradictions = _contradictions(args.model, trials, config) if args.model else None
-    left_out: list[str] = []
+    left_out: list[tuple[str, str]] = []
     try:
         runs = verify_runs(
             trials,
@@ -185,9 +185,8 @@ def _print(summary: dict[str, Any]) -> None:
         print(f"{name:<13} " + "  ".join(f"{c:>18}" for c in cells))
     src = summary["protocol"]["onset_source"]
     print(f"runs {summary['runs']} ({summary['nominal_runs']} nominal); onsets from: {src}")
-    if summary["protocol"]["successes_left_out"]:
-        left = summary["protocol"]["successes_left_out"]
-        print(f"successes left out of the nominal model (folds): {left}")
+    for method, left in summary["protocol"]["successes_left_out"].items():
+        print(f"{method}: successes left out of the nominal model (folds): {left}")
 
 
 def _plots(out: Path, trials: list[Any], labels: dict[str, Any], runs: list[Any]) -> None:

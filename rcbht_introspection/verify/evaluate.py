@@ -85,7 +85,7 @@ def _fold_results(
     config: VerifyConfig,
     seed: int,
     contradictions: Mapping[str, Sequence[Contradiction]] | None = None,
-    left_out: list[str] | None = None,
+    left_out: list[tuple[str, str]] | None = None,
 ) -> dict[str, list[RunResult]]:
     successes = [feats[n] for n in train if not labels[n].failed]
     timing = TimingModel.fit(successes, config)
@@ -106,8 +106,8 @@ def _fold_results(
     for method, (signals, view) in methods.items():
         if signals not in fitted:
             fitted[signals] = Detector.fit(successes, config, signals, seed=seed)
-            if method == "verifier" and left_out is not None:
-                left_out.extend(fitted[signals].left_out)
+            if left_out is not None:
+                left_out.extend((method, name) for name in fitted[signals].left_out)
         detector = fitted[signals]
         ev = view_of(detector, view)
         if (signals, view) not in characterisers:  # the mismatch variant shares the verifier's
@@ -263,14 +263,14 @@ def verify_runs(
     progress: Callable[[str], None] | None = None,
     train_labels: Mapping[str, TrialLabel] | None = None,
     contradictions: Mapping[str, Sequence[Contradiction]] | None = None,
-    left_out: list[str] | None = None,
+    left_out: list[tuple[str, str]] | None = None,
 ) -> dict[str, list[RunResult]]:
     """Every test run of every method: stratified `folds` over `trials` (None: leave one trial
     out), or fitted on `train` and tested on `trials` (transfer; training trials are kept apart
     from the test trials even when their names are the same, as in two simulated sets).
     `contradictions` (test trial -> the classifier's contradicting final verdicts) adds the
-    verifier with the mismatch signal (WITH_MISMATCH). `left_out` collects the successes each
-    fold's verifier left out of its nominal model (Detector.fit)."""
+    verifier with the mismatch signal (WITH_MISMATCH). `left_out` collects (method, trial) for the
+    successes each fold's detectors left out of their nominal model (Detector.fit)."""
     feats = {t.name: trial_features(t, config) for t in trials}
     labels = dict(labels)
     names = [t.name for t in trials]
@@ -305,10 +305,11 @@ def summarise(
     runs: Mapping[str, Sequence[RunResult]],
     config: VerifyConfig,
     protocol: str,
-    left_out: Sequence[str] = (),
+    left_out: Sequence[tuple[str, str]] = (),
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """The JSON summary (the verifier's numbers, the baselines beside) and per-run records;
-    `left_out`: successes left out of a fold's nominal model, counted per trial."""
+    `left_out`: (method, trial) of each success a fold's detector left out of its nominal
+    model, counted per method and trial."""
     main = metrics(runs["verifier"])
     sources = [r.onset_source for r in runs["verifier"] if r.label.failed]
     summary: dict[str, Any] = {
@@ -318,7 +319,10 @@ def summarise(
             "gate_s": GATE_S,
             "false_alarm_rate_target": config.false_alarm_rate,
             "onset_source": {s: sources.count(s) for s in sorted(set(sources))},
-            "successes_left_out": {n: left_out.count(n) for n in sorted(set(left_out))},
+            "successes_left_out": {
+                m: {n: left_out.count((m, n)) for n in sorted({n for k, n in left_out if k == m})}
+                for m in sorted({m for m, _ in left_out})
+            },
         },
         "baselines": {m: metrics(runs[m]) for m in METHODS if m != "verifier"},
     }
