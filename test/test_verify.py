@@ -159,7 +159,9 @@ def test_a_success_unlike_the_others_is_left_out_of_the_nominal_model(
     first, held = cell_successes[0], cell_successes[-1]
     odd = _jammed(first, float(first.state_times[1]) + 1.0)
     train = [odd, *cell_successes[1:-1]]
-    detector = Detector.fit([trial_features(t, config) for t in train], config)
+    model = train_verifier(train, {t.name: label_of(t) for t in train}, config)
+    detector = model.detector
+    assert model.trained_on["successes_left_out"] == list(detector.left_out)
     onset = float(held.state_times[1]) + 1.0
     hit = detector.run(trial_features(_jammed(held, onset), config))
     assert detector.run(trial_features(held, config)).alarm is None

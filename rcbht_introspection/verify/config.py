@@ -34,8 +34,8 @@ class VerifyConfig:
     threshold_segments_s: tuple[float, ...] = ()
     calibration_folds: int = 5
     nominal_fence_iqr: float = 3.0
-    """Successes whose held-out score lies beyond Q3 + this * IQR of the others' (log scale) are
-    left out of the nominal model (0: keep every success)."""
+    """Successes whose largest held-out wrench ratio lies beyond Q3 + this * IQR of all
+    successes' (log scale) are left out of the nominal model (0: keep every success)."""
     onset_fraction: float = 0.5
     evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
     characteriser_trees: int = 50

@@ -13,8 +13,9 @@ run's largest such ratio is its combined score; the thresholds are those quartil
 conformal (1 - false_alarm_rate) quantile of the combined scores, so the alarm - the first tick
 at which any signal exceeds its threshold - fires on at most about `false_alarm_rate` of nominal
 runs (1 / (n + 1) with n successes when n is too small for the quantile: the largest is used).
-A success whose combined score lies beyond the far-out fence of the others' (nominal_fence_iqr)
-is left out of the models and the calibration, and named in `left_out`.
+A success whose largest wrench ratio (timing aside) lies beyond the far-out fence of all
+successes' (nominal_fence_iqr) is left out of the models and the calibration, and named in
+`left_out`.
 """
 
 from __future__ import annotations

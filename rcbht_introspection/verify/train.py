@@ -52,7 +52,7 @@ def train_verifier(
     failed = [t.name for t in trials if labels[t.name].failed]
     characteriser = None
     if failed and detector.models.envelope is not None:
-        timing = detector.models.timing or TimingModel.fit(successes, config)
+        timing = TimingModel.fit(successes, config)  # all successes, as verify-eval's onsets
         characteriser = Characteriser.fit(
             [(feats[n], labels[n], onset_for(labels[n], feats[n], timing)[0]) for n in failed],
             detector.models.envelope,
