@@ -127,11 +127,10 @@ def _held_out_scores(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Cross-fitted calibration: each success scored by models fitted without it. Returns the
     scale of each (signal, sub-task, segment) - the upper quartile of its held-out maxima - and
-    each success's maxima in those units (successes, signals, sub-tasks, segments)."""
+    each success's maxima in those units (successes, signals, sub-tasks, segments). Needs at
+    least 2 successes (Detector.fit checks)."""
     n = len(successes)
     folds = min(config.calibration_folds, n)
-    if folds < 2:
-        raise ValueError(f"need at least 2 successful trials to calibrate, got {n}")
     edges = np.asarray(config.threshold_segments_s, dtype=float)
     n_seg = len(edges) + 1
     order = np.random.default_rng(seed).permutation(n)

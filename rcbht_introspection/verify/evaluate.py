@@ -10,6 +10,7 @@ wrench features for the whole trial) and `timing` (sub-task durations only).
 from __future__ import annotations
 
 import warnings
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -312,6 +313,9 @@ def summarise(
     model, counted per method and trial."""
     main = metrics(runs["verifier"])
     sources = [r.onset_source for r in runs["verifier"] if r.label.failed]
+    left: dict[str, dict[str, int]] = {}  # method -> trial -> folds that left it out
+    for (method, trial), folds in sorted(Counter(left_out).items()):
+        left.setdefault(method, {})[trial] = folds
     summary: dict[str, Any] = {
         **main,
         "protocol": {
@@ -319,10 +323,7 @@ def summarise(
             "gate_s": GATE_S,
             "false_alarm_rate_target": config.false_alarm_rate,
             "onset_source": {s: sources.count(s) for s in sorted(set(sources))},
-            "successes_left_out": {
-                m: {n: left_out.count((m, n)) for n in sorted({n for k, n in left_out if k == m})}
-                for m in sorted({m for m, _ in left_out})
-            },
+            "successes_left_out": left,
         },
         "baselines": {m: metrics(runs[m]) for m in METHODS if m != "verifier"},
     }
