@@ -19,6 +19,7 @@ from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import read_safe_npz
 from rcbht_introspection.sim import load_sim_config, simulate_trial
+from rcbht_introspection.verify.characterise import contact_geometry, wrench_means
 from rcbht_introspection.verify.config import load_verify_config
 from rcbht_introspection.verify.detector import Detector, conformal_threshold
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
@@ -87,7 +88,9 @@ def test_live_session_equals_the_batch_detector(
         assert verdicts[-1].onset == batch.onset
         if batch.alarm is not None and batch.onset is not None:
             z = model.detector.models.envelope.z(tf)  # type: ignore[union-attr]
-            cls, probs, _ = model.characteriser.predict(tf, z, batch.onset, tf.end)
+            cls, probs, _ = model.characteriser.predict(
+                tf, z, batch.onset, tf.end, wrench_means(tf)
+            )
             assert verdicts[-1].failure_class == cls
             assert verdicts[-1].class_probabilities == pytest.approx(probs)
             assert verdicts[-1].health == cls
@@ -103,16 +106,33 @@ def test_a_saved_characteriser_names_what_the_trained_one_names(
     loaded = load_verifier(save_verifier(trained, tmp_path / "v.npz"))
     assert trained.characteriser is not None and loaded.characteriser is not None
     assert set(loaded.characteriser.directions) == {"x", "y", "r"}
+    assert set(loaded.characteriser.contact) == {"class", "x", "y"}
     envelope = trained.detector.models.envelope
     assert envelope is not None
     for trial in trials:
         tf = trial_features(trial, config)
         z = envelope.z(tf)
         onset = float(tf.times[len(tf.times) // 2])
-        want = trained.characteriser.predict(tf, z, onset, tf.end)
-        got = loaded.characteriser.predict(tf, z, onset, tf.end)
+        want = trained.characteriser.predict(tf, z, onset, tf.end, wrench_means(tf))
+        got = loaded.characteriser.predict(tf, z, onset, tf.end, wrench_means(tf))
         assert got[0] == want[0] and got[2] == want[2]
         assert got[1] == pytest.approx(want[1], abs=1e-12)
+
+
+def test_contact_geometry_reads_where_the_part_touched() -> None:
+    """A 5 N push with 0.5 N along x at (3, -2) mm, from onset, over a constant sensor bias:
+    the contact point, the yaw lever and the force shares come back; before onset, nothing."""
+    config = load_verify_config()
+    times = np.arange(0.0, 2.0, config.step_s)
+    bias = np.array([0.3, -0.2, 1.0, 0.01, -0.02, 0.005])
+    force, point = np.array([0.5, 0.0, 5.0]), np.array([0.003, -0.002, 0.0])
+    arm = np.tile(bias, (len(times), 1))
+    arm[times >= 1.0] += np.concatenate([force, np.cross(point, force)])
+    still = np.tile(bias, (len(times), 1))
+    means = np.hstack([arm, still])  # two arms: the second never touches
+    got = contact_geometry(times, means, 1.0, 2.0, config)
+    assert got == pytest.approx([-2.0, 3.0, 0.2, 10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], abs=1e-9)
+    assert not np.any(contact_geometry(times, means, 0.3, 0.9, config))
 
 
 def test_an_injected_contact_anomaly_raises_the_alarm_after_it(

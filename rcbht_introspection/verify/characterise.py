@@ -6,22 +6,40 @@ nominal envelope), the commanded sub-task at onset and the time into it. One of 
 forests (learn/mondrian.py) per head (class; one per deviation axis with '-', '0', '+'): on the
 cell set it names the class of 0.90 of failures where a logistic regression on the same evidence
 named 0.79 (docs/verification.md), and it is stored as plain arrays.
+
+The class head also reads where the part first touched (`contact_geometry`), through a second
+forest of its own: a Mondrian tree picks a split feature in proportion to its range, so among a
+hundred envelope features a 2 mm shift of the contact point would seldom be chosen.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 from rcbht_introspection.verify.config import VerifyConfig
-from rcbht_introspection.verify.features import TrialFeatures
+from rcbht_introspection.verify.features import (
+    PER_ARM,
+    RATIO_MIN_FORCE,
+    TrialFeatures,
+    kind_columns,
+)
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
 
 Z_CLIP = 50.0
+CONTACT_PER_ARM = 5
+"""Contact geometry per arm: contact point y and x, yaw lever (mm), lateral force shares (%)."""
+CONTACT_CLIP = 30.0
+"""Contact features are clipped to +-this (mm, %): a lever over a near-zero force is noise."""
+FAILURE = "class"
+"""The failure-class head's name among the heads (the others: the deviation axes)."""
+CONTACT_HEADS = (FAILURE, "x", "y")
+"""Heads that also read contact geometry. Not yaw: weighed in at 0.3 on the cell sets, it cost
+the r head 1-4 points of direction accuracy."""
 
 
 class EvidenceView(Protocol):
@@ -55,6 +73,50 @@ def evidence_features(
     )
 
 
+def wrench_means(tf: TrialFeatures) -> np.ndarray:
+    """(ticks, 6 * arms) window mean wrench of every arm: what contact geometry is read from."""
+    n_arms = tf.features.shape[1] // PER_ARM if tf.features.shape[1] else 0
+    return tf.features[:, kind_columns(("mean",), n_arms)]
+
+
+def contact_geometry(
+    times: np.ndarray, means: np.ndarray, onset: float, until: float, config: VerifyConfig
+) -> np.ndarray:
+    """Where and how the part touched, per arm: the change of the mean wrench since the tick
+    `contact_reference_s` before onset (free motion: sensor bias and gripper load cancel),
+    over the evidence's first `contact_s`, as the contact point y and x (dMx/dFz, -dMy/dFz),
+    the yaw moment's lever (dMz/dFz) in mm and the lateral force shares (dFx/dFz, dFy/dFz) in
+    %, averaged over the ticks whose |dFz| exceeds RATIO_MIN_FORCE (zeros without one)."""
+    n_arms = means.shape[1] // 6
+    if len(times) == 0:
+        return np.zeros(CONTACT_PER_ARM * n_arms)
+    ref = max(
+        int(np.searchsorted(times, onset - config.contact_reference_s + 1e-9, "right")) - 1, 0
+    )
+    end = min(until, onset + config.contact_s)
+    sel = (times >= onset - 1e-9) & (times <= end + 1e-9)
+    out = []
+    for a in range(n_arms):
+        d = means[sel, 6 * a : 6 * a + 6] - means[ref, 6 * a : 6 * a + 6]
+        touching = np.abs(d[:, 2]) > RATIO_MIN_FORCE
+        if not np.any(touching):
+            out.append(np.zeros(CONTACT_PER_ARM))
+            continue
+        d = d[touching]
+        fz = d[:, 2]
+        geometry = np.column_stack(
+            [
+                d[:, 3] / fz * 1e3,
+                -d[:, 4] / fz * 1e3,
+                d[:, 5] / fz * 1e3,
+                d[:, 0] / fz * 100,
+                d[:, 1] / fz * 100,
+            ]
+        )
+        out.append(np.clip(geometry, -CONTACT_CLIP, CONTACT_CLIP).mean(axis=0))
+    return np.concatenate(out)
+
+
 @dataclass
 class ForestHead:
     """Evidence features -> class probabilities: a Mondrian forest, which splits where the
@@ -80,11 +142,15 @@ class ForestHead:
 
 @dataclass
 class Characteriser:
-    """The failure-class head and, when deviation labels exist, one direction head per axis."""
+    """The failure-class head and, when deviation labels exist, one direction head per axis.
+    `contact`: per head in CONTACT_HEADS, a forest on contact geometry whose probabilities
+    weigh `config.contact_weight` in that head's (empty: a view without wrench, or weight 0)."""
 
     phases: tuple[str, ...]
     failure: ForestHead
     directions: dict[str, ForestHead]
+    config: VerifyConfig
+    contact: dict[str, ForestHead] = field(default_factory=dict)
 
     @classmethod
     def fit(
@@ -93,38 +159,62 @@ class Characteriser:
         view: EvidenceView,
         config: VerifyConfig,
         seed: int = 0,
+        contact: bool = True,
     ) -> Characteriser:
         """Learn from labelled failures: (features, label, onset) per trial, evidence spans
-        config.evidence_s after onset and the whole rest of the trial."""
+        config.evidence_s after onset and the whole rest of the trial. `contact`: the view
+        may read the wrench (not the timing baseline's)."""
         phases = view.phases
-        X, y, dirs = [], [], []
+        contact = contact and config.contact_weight > 0
+        X, C, y, dirs = [], [], [], []
         for tf, label, onset in failures:
             z = view.z(tf)
+            means = wrench_means(tf) if contact else None
             for span in (*config.evidence_s, np.inf):
-                X.append(evidence_features(tf, z, phases, onset, min(onset + span, tf.end)))
+                until = min(onset + span, tf.end)
+                X.append(evidence_features(tf, z, phases, onset, until))
+                if means is not None:
+                    C.append(contact_geometry(tf.times, means, onset, until, config))
                 y.append(label.failure_class)
                 dirs.append(label.directions())
         if not X:
             raise ValueError("no failure trials to learn failure classes from")
-        Xa = np.vstack(X)
-        heads = {}
+        targets: dict[str, tuple[list[int], list[str]]] = {FAILURE: (list(range(len(y))), y)}
         labelled = [i for i, d in enumerate(dirs) if d is not None]
         if labelled:
             for axis in DIRECTION_AXES:
-                heads[axis] = ForestHead.fit(
-                    Xa[labelled],
-                    [dirs[i][axis] for i in labelled],  # type: ignore[index]
-                    config.characteriser_trees,
-                    seed,
-                )
-        return cls(phases, ForestHead.fit(Xa, y, config.characteriser_trees, seed), heads)
+                targets[axis] = (labelled, [dirs[i][axis] for i in labelled])  # type: ignore[index]
+        trees = config.characteriser_trees
+        Xa, Ca = np.vstack(X), np.vstack(C) if C else None
+        heads = {h: ForestHead.fit(Xa[rows], t, trees, seed) for h, (rows, t) in targets.items()}
+        geometry = {
+            h: ForestHead.fit(Ca[rows], t, trees, seed + 1)
+            for h, (rows, t) in targets.items()
+            if Ca is not None and h in CONTACT_HEADS
+        }
+        failure = heads.pop(FAILURE)
+        return cls(phases, failure, heads, config, geometry)
 
     def predict(
-        self, tf: TrialFeatures, z: np.ndarray, onset: float, until: float
+        self, tf: TrialFeatures, z: np.ndarray, onset: float, until: float, means: np.ndarray
     ) -> tuple[str, dict[str, float], dict[str, str]]:
-        """(class, class probabilities, direction per axis) from the evidence [onset, until]."""
+        """(class, class probabilities, direction per axis) from the evidence [onset, until];
+        `means`: the ticks' mean wrench (`wrench_means`), read when there are contact forests."""
         x = evidence_features(tf, z, self.phases, onset, until)[None, :]
-        p = self.failure.predict_proba(x)[0]
+        g = (
+            contact_geometry(tf.times, means, onset, until, self.config)[None, :]
+            if self.contact
+            else None
+        )
+
+        def proba(name: str, head: ForestHead) -> np.ndarray:
+            p = head.predict_proba(x)[0]
+            if g is not None and name in self.contact:
+                w = self.config.contact_weight
+                p = (1 - w) * p + w * self.contact[name].predict_proba(g)[0]
+            return p
+
+        p = proba(FAILURE, self.failure)
         probs = {c: float(v) for c, v in zip(self.failure.classes, p, strict=True)}
-        dirs = {a: h.predict(x)[0] for a, h in self.directions.items()}
+        dirs = {a: h.classes[int(np.argmax(proba(a, h)))] for a, h in self.directions.items()}
         return self.failure.classes[int(np.argmax(p))], probs, dirs

@@ -40,6 +40,12 @@ class VerifyConfig:
     evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
     characteriser_trees: int = 50
     """Trees of each characteriser head's Mondrian forest."""
+    contact_weight: float = 0.2
+    """Share of the contact-geometry forest in the class probabilities (0: envelope only)."""
+    contact_s: float = 0.5
+    """Contact geometry is read over the evidence's first contact_s ..."""
+    contact_reference_s: float = 0.3
+    """... against the mean wrench this long before onset (free motion)."""
     mismatch_min_probability: float = 0.45
     """The mismatch signal (verify/mismatch.py) fires when a final verdict names another
     sub-task than the commanded one with a probability above this."""
@@ -94,6 +100,11 @@ def _check(cfg: VerifyConfig) -> None:
         raise InputError(f"must be in [0, 1), got {cfg.onset_fraction}", field="onset_fraction")
     if not cfg.evidence_s or any(e <= 0 for e in cfg.evidence_s):
         raise InputError("needs at least one span, all > 0", field="evidence_s")
+    if not 0 <= cfg.contact_weight <= 1:
+        raise InputError(f"must be in [0, 1], got {cfg.contact_weight}", field="contact_weight")
+    for name in ("contact_s", "contact_reference_s"):
+        if getattr(cfg, name) <= 0:
+            raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)
     if not 0 < cfg.mismatch_min_probability < 1:
         raise InputError(
             f"must be in (0, 1), got {cfg.mismatch_min_probability}",

@@ -20,7 +20,7 @@ from sklearn.metrics import roc_auc_score
 from sklearn.model_selection import StratifiedKFold
 
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.verify.characterise import Characteriser, EvidenceView
+from rcbht_introspection.verify.characterise import Characteriser, EvidenceView, wrench_means
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detector
 from rcbht_introspection.verify.features import TrialFeatures, trial_features
@@ -113,7 +113,9 @@ def _fold_results(
         ev = view_of(detector, view)
         if (signals, view) not in characterisers:  # the mismatch variant shares the verifier's
             characterisers[signals, view] = (
-                Characteriser.fit(onsets_known, ev, config, seed) if failures else None
+                Characteriser.fit(onsets_known, ev, config, seed, contact=view != "timing")
+                if failures
+                else None
             )
         char = characterisers[signals, view]
         results = []
@@ -129,18 +131,20 @@ def _fold_results(
             by_evidence: dict[str, str] = {}
             over_time: list[tuple[float, str]] = []
             if char is not None and label.failed:
-                z = ev.z(tf)
+                z, means = ev.z(tf), wrench_means(tf)
                 if d.alarm is not None and d.onset is not None:
-                    predicted, _, dirs = char.predict(tf, z, d.onset, tf.end)
+                    predicted, _, dirs = char.predict(tf, z, d.onset, tf.end, means)
                     for span in CLASS_EVIDENCE_S:
                         by_evidence[str(span)] = char.predict(
-                            tf, z, d.onset, min(d.alarm + span, tf.end)
+                            tf, z, d.onset, min(d.alarm + span, tf.end), means
                         )[0]
                     ticks = tf.times[tf.times >= d.alarm]
                     for g in ticks[:: max(1, len(ticks) // 40)]:
-                        over_time.append((float(g), char.predict(tf, z, d.onset, float(g))[0]))
+                        over_time.append(
+                            (float(g), char.predict(tf, z, d.onset, float(g), means)[0])
+                        )
                 if onset is not None:
-                    given, _, dirs_given = char.predict(tf, z, onset, tf.end)
+                    given, _, dirs_given = char.predict(tf, z, onset, tf.end, means)
             results.append(
                 RunResult(
                     trial=name,

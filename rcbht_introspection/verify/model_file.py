@@ -14,14 +14,15 @@ from rcbht_introspection.config_files import from_mapping
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.model_file import check_checksum, read_safe_npz, write_safe_npz
 from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
-from rcbht_introspection.verify.characterise import Characteriser, ForestHead
+from rcbht_introspection.verify.characterise import FAILURE, Characteriser, ForestHead
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detector, SignalModels
 from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, TimingModel
 
 FORMAT = "rcbht-verifier"
-FORMAT_VERSION = 2
-"""2: the characteriser's heads are Mondrian forests (1: logistic regressions)."""
+FORMAT_VERSION = 3
+"""3: contact-geometry forests beside the class and x, y heads (2: Mondrian heads; 1: logistic
+regressions)."""
 KIND = "verifier"
 
 
@@ -103,6 +104,11 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
             h, a = _head_parts(f"direction.{axis}", head)
             header["characteriser"]["directions"][axis] = h
             arrays.update(a)
+        header["characteriser"]["contact"] = {}
+        for name, head in ch.contact.items():
+            h, a = _head_parts(f"contact.{name}", head)
+            header["characteriser"]["contact"][name] = h
+            arrays.update(a)
     write_safe_npz(path, header, arrays)
     return path
 
@@ -173,7 +179,13 @@ def load_verifier(path: Path | str) -> VerifierModel:
                 tuple(c["phases"]),
                 _head("failure", c["failure"], arrays),
                 {a: _head(f"direction.{a}", h, arrays) for a, h in c["directions"].items()},
+                config,
+                {n: _head(f"contact.{n}", h, arrays) for n, h in c["contact"].items()},
             )
+            for name, head in ch.contact.items():
+                own = ch.failure if name == FAILURE else ch.directions[name]
+                if head.classes != own.classes:
+                    raise ValueError(f"the {name} head's contact forest names other classes")
     except (KeyError, TypeError, ValueError, IndexError, OverflowError, AttributeError) as exc:
         raise InputError(f"inconsistent verifier content: {exc}", path) from None
     return VerifierModel(tuple(header["arms"]), detector, ch, dict(header.get("trained_on") or {}))

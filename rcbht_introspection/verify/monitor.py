@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rcbht_introspection.verify.detector import SCORE_CAP
-from rcbht_introspection.verify.features import PER_ARM, ArmFeatures, TrialFeatures
+from rcbht_introspection.verify.features import PER_ARM, ArmFeatures, TrialFeatures, kind_columns
 from rcbht_introspection.verify.mismatch import MISMATCH, Contradiction, mismatch_onset
 from rcbht_introspection.verify.model_file import VerifierModel
 
@@ -68,6 +68,7 @@ class VerifierSession:
         self.arms = {a: ArmFeatures(cfg) for a in self.model.arms}
         self.pending: dict[str, dict[int, tuple[float, np.ndarray]]] = {a: {} for a in self.arms}
         self.last_rows = {a: np.zeros(PER_ARM) for a in self.arms}
+        self._mean_columns = kind_columns(("mean",), len(self.arms))
         self.held_rows = 0
         """Ticks at which an arm had sent nothing for MAX_ARM_LAG_TICKS while another had:
         its last row stood in (counted, not silent)."""
@@ -78,8 +79,9 @@ class VerifierSession:
         """First tick of the running excursion above onset_fraction (the onset estimate)."""
         self._prev_below = False
         self.tick = 0
-        self.history: list[tuple[float, int, float, np.ndarray]] = []
-        """(time, phase index, elapsed, envelope z) per tick: the characterisation's evidence."""
+        self.history: list[tuple[float, int, float, np.ndarray, np.ndarray]] = []
+        """(time, phase index, elapsed, envelope z, mean wrench of every arm) per tick: the
+        characterisation's evidence."""
         self.ended = False
         self.contradictions: list[Contradiction] = []
         """Final verdicts that contradicted their sub-task (the mismatch signal's evidence)."""
@@ -174,7 +176,7 @@ class VerifierSession:
         thresholds = np.append(d.threshold_of(name, elapsed), min_p)
         normalised = np.append(np.asarray(scores) / thresholds[:-1], mismatch)
         combined = float(np.nan_to_num(normalised.max(), posinf=1e6))
-        self.history.append((g, i, elapsed, z))
+        self.history.append((g, i, elapsed, z, features[self._mean_columns]))
         if len(self.history) > HISTORY_TICKS:
             del self.history[: len(self.history) - HISTORY_TICKS]
         if self.alarm_time is None:
@@ -188,9 +190,11 @@ class VerifierSession:
                     start = mismatch_onset(self.contradictions, g, min_p)
                     if start is not None:  # 0.0 is a start (the first sub-task's)
                         self.onset = start
-                # the evidence is [onset, now] from here on: older ticks are not needed
-                first = min(self.onset, self._excursion)
-                self.history = [h for h in self.history if h[0] >= first - 1e-9]
+                # the evidence is [onset, now] from here on, and contact geometry's reference
+                # tick before it: older ticks are not needed
+                cfg = d.config
+                first = min(self.onset, self._excursion) - cfg.contact_reference_s - cfg.step_s
+                self.history = [h for h in self.history if h[0] >= first - 1e-6]
             self._prev_below = combined < d.config.onset_fraction
         verdict = Verdict(
             time=g,
@@ -204,7 +208,8 @@ class VerifierSession:
         )
         if self.alarm_time is None or self.model.characteriser is None or self.onset is None:
             return verdict
-        cls, probs, dirs = self.model.characteriser.predict(*self._evidence(), self.onset, g)
+        tf, z, means = self._evidence()
+        cls, probs, dirs = self.model.characteriser.predict(tf, z, self.onset, g, means)
         return Verdict(
             **{
                 **verdict.__dict__,
@@ -214,7 +219,7 @@ class VerifierSession:
             }
         )
 
-    def _evidence(self) -> tuple[TrialFeatures, np.ndarray]:
+    def _evidence(self) -> tuple[TrialFeatures, np.ndarray, np.ndarray]:
         times = np.array([h[0] for h in self.history])
         tf = TrialFeatures(
             trial="live",
@@ -226,4 +231,4 @@ class VerifierSession:
             features=np.zeros((len(times), 0)),
             end=float(times[-1]),
         )
-        return tf, np.vstack([h[3] for h in self.history])
+        return tf, np.vstack([h[3] for h in self.history]), np.vstack([h[4] for h in self.history])
