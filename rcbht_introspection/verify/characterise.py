@@ -39,7 +39,7 @@ FAILURE = "class"
 """The failure-class head's name among the heads (the others: the deviation axes)."""
 CONTACT_HEADS = (FAILURE, "x", "y")
 """Heads that also read contact geometry. Not yaw: weighed in at 0.3 on the cell sets, it cost
-the r head 1-4 points of direction accuracy."""
+the r head up to 9 points of direction accuracy (0.912-1.000, against 1.000)."""
 
 
 class EvidenceView(Protocol):
