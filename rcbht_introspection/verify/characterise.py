@@ -7,9 +7,10 @@ forests (learn/mondrian.py) per head (class; one per deviation axis with '-', '0
 cell set it names the class of 0.90 of failures where a logistic regression on the same evidence
 named 0.79 (docs/verification.md), and it is stored as plain arrays.
 
-The class head also reads where the part first touched (`contact_geometry`), through a second
-forest of its own: a Mondrian tree picks a split feature in proportion to its range, so among a
-hundred envelope features a 2 mm shift of the contact point would seldom be chosen.
+The class head and the x and y heads also read where the part first touched
+(`contact_geometry`), each through a second forest of its own: a Mondrian tree picks a split
+feature in proportion to its range, so among a hundred envelope features a 2 mm shift of the
+contact point would seldom be chosen.
 """
 
 from __future__ import annotations
