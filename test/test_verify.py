@@ -88,12 +88,15 @@ def test_live_session_equals_the_batch_detector(
         assert verdicts[-1].onset == batch.onset
         if batch.alarm is not None and batch.onset is not None:
             z = model.detector.models.envelope.z(tf)  # type: ignore[union-attr]
-            cls, probs, _ = model.characteriser.predict(
-                tf, z, batch.onset, tf.end, wrench_means(tf)
-            )
-            assert verdicts[-1].failure_class == cls
-            assert verdicts[-1].class_probabilities == pytest.approx(probs)
-            assert verdicts[-1].health == cls
+            means = wrench_means(tf)
+            for v in verdicts[:: max(1, len(verdicts) // 25)] + verdicts[-1:]:
+                if v.alarm:  # every head, contact forests included, as the batch path names it
+                    cls, probs, dirs = model.characteriser.predict(
+                        tf, z, batch.onset, v.time, means
+                    )
+                    assert (v.failure_class, v.directions) == (cls, dirs)
+                    assert v.class_probabilities == pytest.approx(probs)
+            assert verdicts[-1].health == verdicts[-1].failure_class
         else:
             assert {v.health for v in verdicts} == {NOMINAL}
 
@@ -133,6 +136,15 @@ def test_contact_geometry_reads_where_the_part_touched() -> None:
     got = contact_geometry(times, means, 1.0, 2.0, config)
     assert got == pytest.approx([-2.0, 3.0, 0.2, 10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], abs=1e-9)
     assert not np.any(contact_geometry(times, means, 0.3, 0.9, config))
+    # what comes after contact_s, and a tick pressing no more than RATIO_MIN_FORCE, do not count
+    later = means.copy()
+    later[times > 1.0 + config.contact_s + 1e-9, 0] += 3.0
+    later[np.isclose(times, 1.0), :6] = bias + np.array([5.0, 0.0, 0.5, 0.0, 0.0, 0.0])
+    assert contact_geometry(times, later, 1.0, 2.0, config) == pytest.approx(got, abs=1e-9)
+    # a lever over a weak push is clipped
+    weak = np.tile(bias, (len(times), 1))
+    weak[times >= 1.0] += [0.0, 0.0, 1.5, -1.0, 0.0, 0.0]
+    assert contact_geometry(times, weak, 1.0, 2.0, config)[0] == pytest.approx(-30.0)
 
 
 def test_an_injected_contact_anomaly_raises_the_alarm_after_it(

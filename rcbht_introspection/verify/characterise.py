@@ -33,7 +33,8 @@ from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
 
 Z_CLIP = 50.0
 CONTACT_PER_ARM = 5
-"""Contact geometry per arm: contact point y and x, yaw lever (mm), lateral force shares (%)."""
+"""Contact geometry per arm: contact point y and x, yaw moment per pressing force (mm), lateral
+force shares (%)."""
 CONTACT_CLIP = 30.0
 """Contact features are clipped to +-this (mm, %): a lever over a near-zero force is noise."""
 FAILURE = "class"
@@ -76,8 +77,7 @@ def evidence_features(
 
 def wrench_means(tf: TrialFeatures) -> np.ndarray:
     """(ticks, 6 * arms) window mean wrench of every arm: what contact geometry is read from."""
-    n_arms = tf.features.shape[1] // PER_ARM if tf.features.shape[1] else 0
-    return tf.features[:, kind_columns(("mean",), n_arms)]
+    return tf.features[:, kind_columns(("mean",), tf.features.shape[1] // PER_ARM)]
 
 
 def contact_geometry(
@@ -85,9 +85,12 @@ def contact_geometry(
 ) -> np.ndarray:
     """Where and how the part touched, per arm: the change of the mean wrench since the tick
     `contact_reference_s` before onset (free motion: sensor bias and gripper load cancel),
-    over the evidence's first `contact_s`, as the contact point y and x (dMx/dFz, -dMy/dFz),
-    the yaw moment's lever (dMz/dFz) in mm and the lateral force shares (dFx/dFz, dFy/dFz) in
-    %, averaged over the ticks whose |dFz| exceeds RATIO_MIN_FORCE (zeros without one)."""
+    over the evidence's first `contact_s`, as the y and x where the contact force's line of
+    action crosses the sensor's x-y plane (dMx/dFz, -dMy/dFz; the contact point, up to its
+    height times the lateral force share), the yaw moment per pressing force (dMz/dFz), both
+    in mm, and the lateral force shares (dFx/dFz, dFy/dFz) in %: each tick's clipped to
+    +-CONTACT_CLIP, then averaged over the ticks whose |dFz| exceeds RATIO_MIN_FORCE (zeros
+    without one)."""
     n_arms = means.shape[1] // 6
     if len(times) == 0:
         return np.zeros(CONTACT_PER_ARM * n_arms)
@@ -136,9 +139,6 @@ class ForestHead:
 
     def predict_proba(self, X: np.ndarray) -> np.ndarray:
         return self.forest.predict_proba(X)
-
-    def predict(self, X: np.ndarray) -> list[str]:
-        return [str(c) for c in self.forest.predict(X)]
 
 
 @dataclass

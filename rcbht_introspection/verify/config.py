@@ -41,7 +41,8 @@ class VerifyConfig:
     characteriser_trees: int = 50
     """Trees of each characteriser head's Mondrian forest."""
     contact_weight: float = 0.2
-    """Share of the contact-geometry forest in the class probabilities (0: envelope only)."""
+    """Share of the contact-geometry forests in the class, x and y heads' probabilities (0: the
+    envelope forests alone)."""
     contact_s: float = 0.5
     """Contact geometry is read over the evidence's first contact_s ..."""
     contact_reference_s: float = 0.3
@@ -103,7 +104,7 @@ def _check(cfg: VerifyConfig) -> None:
     if not 0 <= cfg.contact_weight <= 1:
         raise InputError(f"must be in [0, 1], got {cfg.contact_weight}", field="contact_weight")
     for name in ("contact_s", "contact_reference_s"):
-        if getattr(cfg, name) <= 0:
+        if not getattr(cfg, name) > 0:  # NaN too
             raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)
     if not 0 < cfg.mismatch_min_probability < 1:
         raise InputError(

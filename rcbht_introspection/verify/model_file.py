@@ -14,7 +14,13 @@ from rcbht_introspection.config_files import from_mapping
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.model_file import check_checksum, read_safe_npz, write_safe_npz
 from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
-from rcbht_introspection.verify.characterise import FAILURE, Characteriser, ForestHead
+from rcbht_introspection.verify.characterise import (
+    CONTACT_HEADS,
+    CONTACT_PER_ARM,
+    FAILURE,
+    Characteriser,
+    ForestHead,
+)
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detector, SignalModels
 from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, TimingModel
@@ -182,10 +188,15 @@ def load_verifier(path: Path | str) -> VerifierModel:
                 config,
                 {n: _head(f"contact.{n}", h, arrays) for n, h in c["contact"].items()},
             )
+            width = CONTACT_PER_ARM * len(header["arms"])
             for name, head in ch.contact.items():
+                if name not in CONTACT_HEADS:
+                    raise ValueError(f"a contact forest for {name!r}, which is not a contact head")
                 own = ch.failure if name == FAILURE else ch.directions[name]
                 if head.classes != own.classes:
                     raise ValueError(f"the {name} head's contact forest names other classes")
+                if head.forest.n_features_in_ != width:
+                    raise ValueError(f"the {name} head's contact forest reads other features")
     except (KeyError, TypeError, ValueError, IndexError, OverflowError, AttributeError) as exc:
         raise InputError(f"inconsistent verifier content: {exc}", path) from None
     return VerifierModel(tuple(header["arms"]), detector, ch, dict(header.get("trained_on") or {}))
