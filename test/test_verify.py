@@ -124,7 +124,7 @@ def test_a_saved_characteriser_names_what_the_trained_one_names(
 
 def test_contact_geometry_reads_where_the_part_touched() -> None:
     """A 5 N push with 0.5 N along x at (3, -2) mm, from onset, over a constant sensor bias:
-    the contact point, the yaw lever and the force shares come back; before onset, nothing."""
+    the contact point, the yaw moment per pressing force and the force shares come back; before onset, nothing."""
     config = load_verify_config()
     times = np.arange(0.0, 2.0, config.step_s)
     bias = np.array([0.3, -0.2, 1.0, 0.01, -0.02, 0.005])
