@@ -109,7 +109,8 @@ def test_a_saved_characteriser_names_what_the_trained_one_names(
     loaded = load_verifier(save_verifier(trained, tmp_path / "v.npz"))
     assert trained.characteriser is not None and loaded.characteriser is not None
     assert set(loaded.characteriser.directions) == {"x", "y", "r"}
-    assert set(loaded.characteriser.contact) == {"class", "x", "y"}
+    # x is '0' for both deviations here: one class, so no contact forest for it
+    assert set(loaded.characteriser.contact) == {"class", "y"}
     envelope = trained.detector.models.envelope
     assert envelope is not None
     for trial in trials:
@@ -135,7 +136,7 @@ def test_contact_geometry_reads_where_the_part_touched() -> None:
     means = np.hstack([arm, still])  # two arms: the second never touches
     got = contact_geometry(times, means, 1.0, 2.0, config)
     assert got == pytest.approx([-2.0, 3.0, 0.2, 10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], abs=1e-9)
-    assert not np.any(contact_geometry(times, means, 0.3, 0.9, config))
+    assert contact_geometry(times, means, 0.3, 0.9, config) is None
     # what comes after contact_s, and a tick pressing no more than RATIO_MIN_FORCE, do not count
     later = means.copy()
     later[times > 1.0 + config.contact_s + 1e-9, 0] += 3.0
@@ -144,7 +145,38 @@ def test_contact_geometry_reads_where_the_part_touched() -> None:
     # a lever over a weak push is clipped
     weak = np.tile(bias, (len(times), 1))
     weak[times >= 1.0] += [0.0, 0.0, 1.5, -1.0, 0.0, 0.0]
-    assert contact_geometry(times, weak, 1.0, 2.0, config)[0] == pytest.approx(-30.0)
+    clipped = contact_geometry(times, weak, 1.0, 2.0, config)
+    assert clipped is not None and clipped[0] == pytest.approx(-30.0)
+
+
+def test_contact_forests_vote_only_where_the_part_touched(
+    trials: list[Trial], labels: dict[str, TrialLabel]
+) -> None:
+    """Without contact weights there are no contact forests, and the envelope forests are the
+    same; with them, evidence where nothing touched is named by the envelope forests alone."""
+    config = load_verify_config()
+    trained = train_verifier(trials, labels, config)
+    with_contact = trained.characteriser
+    plain = dataclasses.replace(config, contact_weights={})
+    without = train_verifier(trials, labels, plain).characteriser
+    assert with_contact is not None and without is not None
+    assert with_contact.contact and not without.contact
+    envelope_only = dataclasses.replace(with_contact, contact={})
+    model = trained.detector.models.envelope
+    assert model is not None
+    touched = 0
+    for trial in trials:
+        tf = trial_features(trial, config)
+        z, means = model.z(tf), wrench_means(tf)
+        onset = float(tf.times[len(tf.times) // 2])
+        want = envelope_only.predict(tf, z, onset, tf.end, means)
+        assert without.predict(tf, z, onset, tf.end, means) == want
+        still = np.repeat(means[:1], len(means), axis=0)  # nothing touched
+        assert with_contact.predict(tf, z, onset, tf.end, still) == envelope_only.predict(
+            tf, z, onset, tf.end, still
+        )
+        touched += with_contact.predict(tf, z, onset, tf.end, means)[1] != want[1]
+    assert touched  # and where the part touched, the contact forests do weigh in
 
 
 def test_an_injected_contact_anomaly_raises_the_alarm_after_it(

@@ -7,10 +7,10 @@ forests (learn/mondrian.py) per head (class; one per deviation axis with '-', '0
 cell set it names the class of 0.90 of failures where a logistic regression on the same evidence
 named 0.79 (docs/verification.md), and it is stored as plain arrays.
 
-The class head and the x and y heads also read where the part first touched
-(`contact_geometry`), each through a second forest of its own: a Mondrian tree picks a split
-feature in proportion to its range, so among a hundred envelope features a 2 mm shift of the
-contact point would seldom be chosen.
+Heads given a contact weight (the class, x and y by default) also read where the part first
+touched (`contact_geometry`), each through a second forest of its own: a Mondrian tree picks a
+split feature in proportion to its range, so among a hundred envelope features a 2 mm shift of
+the contact point would seldom be chosen. Evidence without a touch gives that forest no vote.
 """
 
 from __future__ import annotations
@@ -39,9 +39,6 @@ CONTACT_CLIP = 30.0
 """Contact features are clipped to +-this (mm, %): a lever over a near-zero force is noise."""
 FAILURE = "class"
 """The failure-class head's name among the heads (the others: the deviation axes)."""
-CONTACT_HEADS = (FAILURE, "x", "y")
-"""Heads that also read contact geometry. Not yaw: weighed in at 0.3 on the cell sets, it cost
-the r head up to 9 points of direction accuracy (0.912-1.000, against 1.000)."""
 
 
 class EvidenceView(Protocol):
@@ -82,7 +79,7 @@ def wrench_means(tf: TrialFeatures) -> np.ndarray:
 
 def contact_geometry(
     times: np.ndarray, means: np.ndarray, onset: float, until: float, config: VerifyConfig
-) -> np.ndarray:
+) -> np.ndarray | None:
     """Where and how the part touched, per arm: the change of the mean wrench since the tick
     `contact_reference_s` before onset (free motion: sensor bias and gripper load cancel),
     over the evidence's first `contact_s`, as the y and x where the contact force's line of
@@ -90,22 +87,23 @@ def contact_geometry(
     height times the lateral force share), the yaw moment per pressing force (dMz/dFz), both
     in mm, and the lateral force shares (dFx/dFz, dFy/dFz) in %: each tick's clipped to
     +-CONTACT_CLIP, then averaged over the ticks whose |dFz| exceeds RATIO_MIN_FORCE (zeros
-    without one)."""
+    for an arm without one). None when no arm touched: no contact, no geometry."""
     n_arms = means.shape[1] // 6
     if len(times) == 0:
-        return np.zeros(CONTACT_PER_ARM * n_arms)
+        return None
     ref = max(
         int(np.searchsorted(times, onset - config.contact_reference_s + 1e-9, "right")) - 1, 0
     )
     end = min(until, onset + config.contact_s)
     sel = (times >= onset - 1e-9) & (times <= end + 1e-9)
-    out = []
+    out, touched = [], False
     for a in range(n_arms):
         d = means[sel, 6 * a : 6 * a + 6] - means[ref, 6 * a : 6 * a + 6]
         touching = np.abs(d[:, 2]) > RATIO_MIN_FORCE
         if not np.any(touching):
             out.append(np.zeros(CONTACT_PER_ARM))
             continue
+        touched = True
         d = d[touching]
         fz = d[:, 2]
         geometry = np.column_stack(
@@ -118,7 +116,7 @@ def contact_geometry(
             ]
         )
         out.append(np.clip(geometry, -CONTACT_CLIP, CONTACT_CLIP).mean(axis=0))
-    return np.concatenate(out)
+    return np.concatenate(out) if touched else None
 
 
 @dataclass
@@ -140,12 +138,18 @@ class ForestHead:
     def predict_proba(self, X: np.ndarray) -> np.ndarray:
         return self.forest.predict_proba(X)
 
+    def proba_over(self, classes: Sequence[str], X: np.ndarray) -> np.ndarray:
+        """Probabilities of one row over `classes` (a superset of this head's: 0 for the others)."""
+        p = dict(zip(self.classes, self.predict_proba(X)[0], strict=True))
+        return np.array([p.get(c, 0.0) for c in classes])
+
 
 @dataclass
 class Characteriser:
     """The failure-class head and, when deviation labels exist, one direction head per axis.
-    `contact`: per head in CONTACT_HEADS, a forest on contact geometry whose probabilities
-    weigh `config.contact_weight` in that head's (empty: a view without wrench, or weight 0)."""
+    `contact`: per head with a contact weight, a forest on contact geometry, trained on the
+    evidence where the part touched, whose probabilities weigh `config.contact_weights[head]`
+    in that head's when the evidence touched (empty: a view without wrench, or no weights)."""
 
     phases: tuple[str, ...]
     failure: ForestHead
@@ -166,8 +170,9 @@ class Characteriser:
         config.evidence_s after onset and the whole rest of the trial. `contact`: the view
         may read the wrench (not the timing baseline's)."""
         phases = view.phases
-        contact = contact and config.contact_weight > 0
-        X, C, y, dirs = [], [], [], []
+        contact = contact and any(w > 0 for w in config.contact_weights.values())
+        X, y, dirs = [], [], []
+        C: list[np.ndarray | None] = []
         for tf, label, onset in failures:
             z = view.z(tf)
             means = wrench_means(tf) if contact else None
@@ -186,13 +191,16 @@ class Characteriser:
             for axis in DIRECTION_AXES:
                 targets[axis] = (labelled, [dirs[i][axis] for i in labelled])  # type: ignore[index]
         trees = config.characteriser_trees
-        Xa, Ca = np.vstack(X), np.vstack(C) if C else None
+        Xa = np.vstack(X)
         heads = {h: ForestHead.fit(Xa[rows], t, trees, seed) for h, (rows, t) in targets.items()}
-        geometry = {
-            h: ForestHead.fit(Ca[rows], t, trees, seed + 1)
-            for h, (rows, t) in targets.items()
-            if Ca is not None and h in CONTACT_HEADS
-        }
+        geometry = {}
+        for h, (rows, t) in targets.items():
+            touched = [
+                (g, c) for i, c in zip(rows, t, strict=True) if C and (g := C[i]) is not None
+            ]
+            if config.contact_weights.get(h, 0.0) > 0 and len({c for _, c in touched}) > 1:
+                G = np.vstack([g for g, _ in touched])
+                geometry[h] = ForestHead.fit(G, [c for _, c in touched], trees, seed + 1)
         failure = heads.pop(FAILURE)
         return cls(phases, failure, heads, config, geometry)
 
@@ -202,17 +210,13 @@ class Characteriser:
         """(class, class probabilities, direction per axis) from the evidence [onset, until];
         `means`: the ticks' mean wrench (`wrench_means`), read when there are contact forests."""
         x = evidence_features(tf, z, self.phases, onset, until)[None, :]
-        g = (
-            contact_geometry(tf.times, means, onset, until, self.config)[None, :]
-            if self.contact
-            else None
-        )
+        g = contact_geometry(tf.times, means, onset, until, self.config) if self.contact else None
 
         def proba(name: str, head: ForestHead) -> np.ndarray:
             p = head.predict_proba(x)[0]
             if g is not None and name in self.contact:
-                w = self.config.contact_weight
-                p = (1 - w) * p + w * self.contact[name].predict_proba(g)[0]
+                w = self.config.contact_weights[name]
+                p = (1 - w) * p + w * self.contact[name].proba_over(head.classes, g[None, :])
             return p
 
         p = proba(FAILURE, self.failure)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from rcbht_introspection.config_files import config_path, load_config
@@ -13,6 +13,8 @@ KINDS = ("mean", "std", "change", "change_max", "change_min", "ratio")
 """Feature kinds of an arm (verify/features.py), six axes each."""
 
 VERIFY_CONFIG_FILE = "verify.yaml"
+CHARACTERISER_HEADS = ("class", "x", "y", "r")
+"""The characteriser's heads: the failure class and each deviation axis."""
 
 
 @dataclass(frozen=True)
@@ -40,9 +42,11 @@ class VerifyConfig:
     evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0)
     characteriser_trees: int = 50
     """Trees of each characteriser head's Mondrian forest."""
-    contact_weight: float = 0.2
-    """Share of the contact-geometry forests in the class, x and y heads' probabilities (0: the
-    envelope forests alone)."""
+    contact_weights: dict[str, float] = field(
+        default_factory=lambda: {"class": 0.2, "x": 0.2, "y": 0.4}
+    )
+    """Per head, the share of its contact-geometry forest in its probabilities when the part
+    touched (a head not named, or 0: its envelope forest alone)."""
     contact_s: float = 0.5
     """Contact geometry is read over the evidence's first contact_s ..."""
     contact_reference_s: float = 0.3
@@ -101,8 +105,14 @@ def _check(cfg: VerifyConfig) -> None:
         raise InputError(f"must be in [0, 1), got {cfg.onset_fraction}", field="onset_fraction")
     if not cfg.evidence_s or any(e <= 0 for e in cfg.evidence_s):
         raise InputError("needs at least one span, all > 0", field="evidence_s")
-    if not 0 <= cfg.contact_weight <= 1:
-        raise InputError(f"must be in [0, 1], got {cfg.contact_weight}", field="contact_weight")
+    for head, weight in cfg.contact_weights.items():
+        if head not in CHARACTERISER_HEADS:
+            raise InputError(
+                f"unknown head {head!r} (known: {', '.join(CHARACTERISER_HEADS)})",
+                field=f"contact_weights.{head}",
+            )
+        if not 0 <= weight <= 1:  # NaN too
+            raise InputError(f"must be in [0, 1], got {weight}", field=f"contact_weights.{head}")
     for name in ("contact_s", "contact_reference_s"):
         if not getattr(cfg, name) > 0:  # NaN too
             raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)

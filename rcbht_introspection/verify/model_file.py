@@ -15,7 +15,6 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.model_file import check_checksum, read_safe_npz, write_safe_npz
 from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
 from rcbht_introspection.verify.characterise import (
-    CONTACT_HEADS,
     CONTACT_PER_ARM,
     FAILURE,
     Characteriser,
@@ -26,9 +25,9 @@ from rcbht_introspection.verify.detector import Detector, SignalModels
 from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, TimingModel
 
 FORMAT = "rcbht-verifier"
-FORMAT_VERSION = 3
-"""3: contact-geometry forests beside the class and x, y heads (2: Mondrian heads; 1: logistic
-regressions)."""
+FORMAT_VERSION = 4
+"""4: contact forests trained on touching evidence only, weighed per head (3: contact-geometry
+forests beside the class and x, y heads; 2: Mondrian heads; 1: logistic regressions)."""
 KIND = "verifier"
 
 
@@ -190,10 +189,10 @@ def load_verifier(path: Path | str) -> VerifierModel:
             )
             width = CONTACT_PER_ARM * len(header["arms"])
             for name, head in ch.contact.items():
-                if name not in CONTACT_HEADS:
-                    raise ValueError(f"a contact forest for {name!r}, which is not a contact head")
+                if not config.contact_weights.get(name, 0.0) > 0:
+                    raise ValueError(f"a contact forest for {name!r}, which has no contact weight")
                 own = ch.failure if name == FAILURE else ch.directions[name]
-                if head.classes != own.classes:
+                if not set(head.classes) <= set(own.classes):
                     raise ValueError(f"the {name} head's contact forest names other classes")
                 if head.forest.n_features_in_ != width:
                     raise ValueError(f"the {name} head's contact forest reads other features")
