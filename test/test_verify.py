@@ -19,7 +19,11 @@ from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import read_safe_npz
 from rcbht_introspection.sim import load_sim_config, simulate_trial
-from rcbht_introspection.verify.characterise import contact_geometry, wrench_means
+from rcbht_introspection.verify.characterise import (
+    Characteriser,
+    contact_geometry,
+    wrench_means,
+)
 from rcbht_introspection.verify.config import load_verify_config
 from rcbht_introspection.verify.detector import Detector, conformal_threshold
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
@@ -153,7 +157,8 @@ def test_contact_forests_vote_only_where_the_part_touched(
     trials: list[Trial], labels: dict[str, TrialLabel]
 ) -> None:
     """Without contact weights there are no contact forests, and the envelope forests are the
-    same; with them, evidence where nothing touched is named by the envelope forests alone."""
+    same; with them, evidence where nothing touched is named by the envelope forests alone;
+    the timing view, which reads no wrench, gets none."""
     config = load_verify_config()
     trained = train_verifier(trials, labels, config)
     with_contact = trained.characteriser
@@ -177,6 +182,14 @@ def test_contact_forests_vote_only_where_the_part_touched(
         )
         touched += with_contact.predict(tf, z, onset, tf.end, means)[1] != want[1]
     assert touched  # and where the part touched, the contact forests do weigh in
+    timing = trained.detector.models.timing
+    assert timing is not None
+    failed = [
+        (trial_features(t, config), labels[t.name], labels[t.name].onset)
+        for t in trials
+        if labels[t.name].failed
+    ]
+    assert not Characteriser.fit(failed, timing, config).contact  # a view of no wrench
 
 
 def test_an_injected_contact_anomaly_raises_the_alarm_after_it(

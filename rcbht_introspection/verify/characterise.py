@@ -48,6 +48,11 @@ class EvidenceView(Protocol):
     @property
     def phases(self) -> tuple[str, ...]: ...
 
+    @property
+    def reads_wrench(self) -> bool:
+        """The view is of the wrench: contact geometry may be read beside it."""
+        ...
+
     def z(self, tf: TrialFeatures) -> np.ndarray: ...
 
 
@@ -164,13 +169,12 @@ class Characteriser:
         view: EvidenceView,
         config: VerifyConfig,
         seed: int = 0,
-        contact: bool = True,
     ) -> Characteriser:
         """Learn from labelled failures: (features, label, onset) per trial, evidence spans
-        config.evidence_s after onset and the whole rest of the trial. `contact`: the view
-        may read the wrench (not the timing baseline's)."""
+        config.evidence_s after onset and the whole rest of the trial; contact forests only
+        where the view reads the wrench (not the timing baseline's)."""
         phases = view.phases
-        contact = contact and any(w > 0 for w in config.contact_weights.values())
+        contact = view.reads_wrench and any(w > 0 for w in config.contact_weights.values())
         X, y, dirs = [], [], []
         C: list[np.ndarray | None] = []
         for tf, label, onset in failures:

@@ -113,9 +113,7 @@ def _fold_results(
         ev = view_of(detector, view)
         if (signals, view) not in characterisers:  # the mismatch variant shares the verifier's
             characterisers[signals, view] = (
-                Characteriser.fit(onsets_known, ev, config, seed, contact=view != "timing")
-                if failures
-                else None
+                Characteriser.fit(onsets_known, ev, config, seed) if failures else None
             )
         char = characterisers[signals, view]
         results = []

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -51,6 +52,8 @@ class EnvelopeModel:
     """Per sub-task: median and spread per bin of time into the sub-task; `phase_free`: one
     envelope over time into the trial (no state machine: the raw-wrench baseline)."""
 
+    reads_wrench: ClassVar[bool] = True
+    """A characteriser reading evidence through it may read the wrench's contact geometry."""
     phases: tuple[str, ...]
     median: list[np.ndarray]
     """Per phase, (bins, features)."""
@@ -121,6 +124,8 @@ class EnvelopeModel:
 class TimingModel:
     """Nominal duration range of each sub-task, with a spread to score excursions in."""
 
+    reads_wrench: ClassVar[bool] = False
+    """The timing baseline's characteriser reads durations only, no contact geometry."""
     phases: tuple[str, ...]
     low: np.ndarray
     high: np.ndarray
