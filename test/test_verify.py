@@ -21,13 +21,16 @@ from rcbht_introspection.learn.model_file import read_safe_npz
 from rcbht_introspection.sim import load_sim_config, simulate_trial
 from rcbht_introspection.verify.characterise import (
     Characteriser,
+    EvidenceTick,
+    RunningEvidence,
     contact_geometry,
+    evidence_features,
     wrench_means,
 )
 from rcbht_introspection.verify.config import load_verify_config
 from rcbht_introspection.verify.detector import Detector, conformal_threshold
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
-from rcbht_introspection.verify.features import trial_features
+from rcbht_introspection.verify.features import TrialFeatures, trial_features
 from rcbht_introspection.verify.labels import TrialLabel, label_of, read_labels
 from rcbht_introspection.verify.model_file import load_verifier, save_verifier
 from rcbht_introspection.verify.monitor import NOMINAL, VerifierSession
@@ -151,6 +154,50 @@ def test_contact_geometry_reads_where_the_part_touched() -> None:
     weak[times >= 1.0] += [0.0, 0.0, 1.5, -1.0, 0.0, 0.0]
     clipped = contact_geometry(times, weak, 1.0, 2.0, config)
     assert clipped is not None and clipped[0] == pytest.approx(-30.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), onset_tick=st.integers(0, 59), kept=st.integers(0, 59))
+def test_running_evidence_is_the_evidence_of_the_whole_span(
+    seed: int, onset_tick: int, kept: int
+) -> None:
+    """The live verifier's running evidence, begun from the ticks kept at the alarm and fed one
+    tick at a time, gives the batch `evidence_features` and `contact_geometry` bit for bit."""
+    config = load_verify_config()
+    rng = np.random.default_rng(seed)
+    n = 60
+    times = np.arange(n) * config.step_s
+    z = rng.normal(0.0, 40.0, (n, 9))
+    z[rng.random(z.shape) < 0.1] = np.nan
+    means = rng.normal(0.0, 2.0, (n, 12))  # two arms
+    means[:, 2] += np.where(times > 1.5, 5.0, 0.0)  # the first arm presses from 1.5 s
+    index = np.where(times < 1.0, 0, 1)
+    starts = np.array([0.0, 1.0])
+    tf = TrialFeatures(
+        trial="t",
+        phases=("approach", "insertion"),
+        starts=starts,
+        times=times,
+        phase_index=index,
+        elapsed=times - starts[index],
+        features=np.zeros((n, 0)),
+        end=float(times[-1]),
+    )
+    phases = ("insertion", "approach", "mating")  # the characteriser's order, not the trial's
+    onset = float(times[onset_tick])
+    ticks = [
+        EvidenceTick(times[i], tf.phases[index[i]], tf.elapsed[i], z[i], means[i]) for i in range(n)
+    ]
+    alarm = max(onset_tick, kept)
+    ev = RunningEvidence.begin(phases, onset, config, ticks[: alarm + 1])
+    for i in range(alarm, n):
+        if i > alarm:
+            ev.add(ticks[i])
+        until = float(times[i])
+        assert np.array_equal(ev.features(), evidence_features(tf, z, phases, onset, until))
+        want = contact_geometry(times, means, onset, until, config)
+        got = ev.geometry(until)
+        assert (got is None and want is None) or np.array_equal(got, want)
 
 
 def test_contact_forests_vote_only_where_the_part_touched(

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 
@@ -75,6 +75,96 @@ def evidence_features(
     return np.concatenate(
         [part.mean(axis=0), part.max(axis=0), part.min(axis=0), onehot, [tf.elapsed[first]]]
     )
+
+
+class EvidenceTick(NamedTuple):
+    """One tick as the live verifier keeps it for the characterisation."""
+
+    time: float
+    phase: str
+    """The commanded sub-task ('' before the first)."""
+    elapsed: float
+    z: np.ndarray
+    """Envelope z of every feature."""
+    means: np.ndarray
+    """Window mean wrench of every arm (`wrench_means`)."""
+
+
+@dataclass
+class RunningEvidence:
+    """`evidence_features` and `contact_geometry` of [onset, now], kept one tick at a time (the
+    live verifier): the same numbers as over the whole span, in constant time and memory per
+    tick, however long the span grows."""
+
+    phases: tuple[str, ...]
+    onset: float
+    config: VerifyConfig
+    total: np.ndarray | None = None
+    high: np.ndarray | None = None
+    low: np.ndarray | None = None
+    count: int = 0
+    first: np.ndarray | None = None
+    """The one-hot commanded sub-task and the time into it at the first tick."""
+    contact_times: list[float] = field(default_factory=list)
+    contact_means: list[np.ndarray] = field(default_factory=list)
+    """The reference tick before onset and the ticks of the contact span after it."""
+
+    @classmethod
+    def begin(
+        cls,
+        phases: tuple[str, ...],
+        onset: float,
+        config: VerifyConfig,
+        ticks: Sequence[EvidenceTick],
+    ) -> RunningEvidence:
+        """From the ticks kept so far: those at or after onset, measured against the last at or
+        before onset - contact_reference_s (the first kept if none), as `contact_geometry`."""
+        ev = cls(phases, onset, config)
+        if not ticks:
+            return ev
+        times = [t.time for t in ticks]
+        ref = int(np.searchsorted(times, onset - config.contact_reference_s + 1e-9, "right")) - 1
+        ev.contact_times, ev.contact_means = [ticks[max(ref, 0)].time], [ticks[max(ref, 0)].means]
+        for t in ticks:
+            if t.time >= onset - 1e-9:
+                ev.add(t)
+        return ev
+
+    def add(self, tick: EvidenceTick) -> None:
+        """The next tick at or after onset."""
+        part = np.clip(np.nan_to_num(tick.z, nan=0.0), -Z_CLIP, Z_CLIP)
+        if self.total is None or self.high is None or self.low is None:
+            self.total, self.high, self.low = part.copy(), part.copy(), part.copy()
+            onehot = np.zeros(len(self.phases))
+            if tick.phase in self.phases:
+                onehot[self.phases.index(tick.phase)] = 1.0
+            self.first = np.append(onehot, tick.elapsed)
+        else:
+            self.total += part
+            np.maximum(self.high, part, out=self.high)
+            np.minimum(self.low, part, out=self.low)
+        self.count += 1
+        if tick.time <= self.onset + self.config.contact_s + 1e-9 and self.contact_times:
+            self.contact_times.append(tick.time)
+            self.contact_means.append(tick.means)
+
+    def features(self) -> np.ndarray:
+        """`evidence_features` of the span so far (at least one tick)."""
+        if self.total is None or self.high is None or self.low is None or self.first is None:
+            raise ValueError("no evidence yet: a tick at or after onset comes first")
+        return np.concatenate([self.total / self.count, self.high, self.low, self.first])
+
+    def geometry(self, until: float) -> np.ndarray | None:
+        """`contact_geometry` of the span so far."""
+        if not self.contact_times:
+            return None
+        return contact_geometry(
+            np.array(self.contact_times),
+            np.vstack(self.contact_means),
+            self.onset,
+            until,
+            self.config,
+        )
 
 
 def wrench_means(tf: TrialFeatures) -> np.ndarray:
@@ -213,8 +303,16 @@ class Characteriser:
     ) -> tuple[str, dict[str, float], dict[str, str]]:
         """(class, class probabilities, direction per axis) from the evidence [onset, until];
         `means`: the ticks' mean wrench (`wrench_means`), read when there are contact forests."""
-        x = evidence_features(tf, z, self.phases, onset, until)[None, :]
+        x = evidence_features(tf, z, self.phases, onset, until)
         g = contact_geometry(tf.times, means, onset, until, self.config) if self.contact else None
+        return self.name(x, g)
+
+    def name(
+        self, x: np.ndarray, g: np.ndarray | None
+    ) -> tuple[str, dict[str, float], dict[str, str]]:
+        """(class, class probabilities, direction per axis) from evidence features `x`
+        (`evidence_features`) and contact geometry `g` (None: nothing touched)."""
+        x = x[None, :]
 
         def proba(name: str, head: ForestHead) -> np.ndarray:
             p = head.predict_proba(x)[0]

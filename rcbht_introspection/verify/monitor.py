@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rcbht_introspection.verify.characterise import EvidenceTick, RunningEvidence
 from rcbht_introspection.verify.detector import SCORE_CAP
-from rcbht_introspection.verify.features import PER_ARM, ArmFeatures, TrialFeatures, kind_columns
+from rcbht_introspection.verify.features import PER_ARM, ArmFeatures, kind_columns
 from rcbht_introspection.verify.mismatch import MISMATCH, Contradiction, mismatch_onset
 from rcbht_introspection.verify.model_file import VerifierModel
 
@@ -24,7 +25,9 @@ ANOMALY = "anomaly"
 MAX_ARM_LAG_TICKS = 20
 """An arm this many ticks behind the others (1 s at 20 Hz) is held, so verdicts do not stall."""
 HISTORY_TICKS = 20_000
-"""Ticks of evidence kept for the characterisation (1000 s at 20 Hz); older ones are dropped."""
+"""Ticks kept before the alarm for the evidence from onset on (1000 s at 20 Hz): an onset
+further back than this is read from the ticks kept. After the alarm the evidence is running
+sums (`RunningEvidence`), whatever its length."""
 
 
 @dataclass(frozen=True)
@@ -79,9 +82,10 @@ class VerifierSession:
         """First tick of the running excursion above onset_fraction (the onset estimate)."""
         self._prev_below = False
         self.tick = 0
-        self.history: list[tuple[float, int, float, np.ndarray, np.ndarray]] = []
-        """(time, phase index, elapsed, envelope z, mean wrench of every arm) per tick: the
-        characterisation's evidence."""
+        self.history: list[EvidenceTick] = []
+        """The ticks before the alarm: where the characterisation's evidence begins."""
+        self.evidence: RunningEvidence | None = None
+        """From the alarm on: the evidence [onset, now]."""
         self.ended = False
         self.contradictions: list[Contradiction] = []
         """Final verdicts that contradicted their sub-task (the mismatch signal's evidence)."""
@@ -176,9 +180,13 @@ class VerifierSession:
         thresholds = np.append(d.threshold_of(name, elapsed), min_p)
         normalised = np.append(np.asarray(scores) / thresholds[:-1], mismatch)
         combined = float(np.nan_to_num(normalised.max(), posinf=1e6))
-        self.history.append((g, i, elapsed, z, features[self._mean_columns]))
-        if len(self.history) > HISTORY_TICKS:
-            del self.history[: len(self.history) - HISTORY_TICKS]
+        tick = EvidenceTick(g, name, elapsed, z, features[self._mean_columns])
+        if self.evidence is not None:
+            self.evidence.add(tick)
+        elif self.alarm_time is None:
+            self.history.append(tick)
+            if len(self.history) > HISTORY_TICKS:
+                del self.history[: len(self.history) - HISTORY_TICKS]
         if self.alarm_time is None:
             if self._excursion is None or self._prev_below:
                 self._excursion = g  # a tick below onset_fraction ended the previous excursion
@@ -190,11 +198,7 @@ class VerifierSession:
                     start = mismatch_onset(self.contradictions, g, min_p)
                     if start is not None:  # 0.0 is a start (the first sub-task's)
                         self.onset = start
-                # the evidence is [onset, now] from here on, and contact geometry's reference
-                # tick before it: older ticks are not needed
-                cfg = d.config
-                first = min(self.onset, self._excursion) - cfg.contact_reference_s - cfg.step_s
-                self.history = [h for h in self.history if h[0] >= first - 1e-6]
+                self._start_evidence(self.onset)
             self._prev_below = combined < d.config.onset_fraction
         verdict = Verdict(
             time=g,
@@ -206,10 +210,11 @@ class VerifierSession:
             alarm_time=self.alarm_time,
             onset=self.onset,
         )
-        if self.alarm_time is None or self.model.characteriser is None or self.onset is None:
+        if self.evidence is None or self.model.characteriser is None:  # no alarm yet
             return verdict
-        tf, z, means = self._evidence()
-        cls, probs, dirs = self.model.characteriser.predict(tf, z, self.onset, g, means)
+        cls, probs, dirs = self.model.characteriser.name(
+            self.evidence.features(), self.evidence.geometry(g)
+        )
         return Verdict(
             **{
                 **verdict.__dict__,
@@ -219,16 +224,9 @@ class VerifierSession:
             }
         )
 
-    def _evidence(self) -> tuple[TrialFeatures, np.ndarray, np.ndarray]:
-        times = np.array([h[0] for h in self.history])
-        tf = TrialFeatures(
-            trial="live",
-            phases=tuple(n for n, _ in self.phases),
-            starts=np.array([s for _, s in self.phases]),
-            times=times,
-            phase_index=np.array([h[1] for h in self.history]),
-            elapsed=np.array([h[2] for h in self.history]),
-            features=np.zeros((len(times), 0)),
-            end=float(times[-1]),
-        )
-        return tf, np.vstack([h[3] for h in self.history]), np.vstack([h[4] for h in self.history])
+    def _start_evidence(self, onset: float) -> None:
+        """At the alarm: the evidence from the kept ticks (later ones are added as they come)."""
+        ch = self.model.characteriser
+        if ch is not None:
+            self.evidence = RunningEvidence.begin(ch.phases, onset, self.model.config, self.history)
+        self.history = []
