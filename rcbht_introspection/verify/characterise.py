@@ -305,9 +305,9 @@ class Characteriser:
         `means`: the ticks' mean wrench (`wrench_means`), read when there are contact forests."""
         x = evidence_features(tf, z, self.phases, onset, until)
         g = contact_geometry(tf.times, means, onset, until, self.config) if self.contact else None
-        return self.name(x, g)
+        return self.predict_from(x, g)
 
-    def name(
+    def predict_from(
         self, x: np.ndarray, g: np.ndarray | None
     ) -> tuple[str, dict[str, float], dict[str, str]]:
         """(class, class probabilities, direction per axis) from evidence features `x`

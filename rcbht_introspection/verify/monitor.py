@@ -210,9 +210,9 @@ class VerifierSession:
             alarm_time=self.alarm_time,
             onset=self.onset,
         )
-        if self.evidence is None or self.model.characteriser is None:  # no alarm yet
+        if self.evidence is None or not self.evidence.count or self.model.characteriser is None:
             return verdict
-        cls, probs, dirs = self.model.characteriser.name(
+        cls, probs, dirs = self.model.characteriser.predict_from(
             self.evidence.features(), self.evidence.geometry(g)
         )
         return Verdict(
