@@ -17,21 +17,23 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.learn.model_file import read_safe_npz
+from rcbht_introspection.learn.model_file import read_safe_npz, write_safe_npz
 from rcbht_introspection.sim import load_sim_config, simulate_trial
 from rcbht_introspection.verify.characterise import (
+    FAILURE,
     Characteriser,
     EvidenceTick,
+    ForestHead,
     RunningEvidence,
     contact_geometry,
     evidence_features,
     wrench_means,
 )
-from rcbht_introspection.verify.config import load_verify_config
+from rcbht_introspection.verify.config import CHARACTERISER_HEADS, load_verify_config
 from rcbht_introspection.verify.detector import Detector, conformal_threshold
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
 from rcbht_introspection.verify.features import TrialFeatures, trial_features
-from rcbht_introspection.verify.labels import TrialLabel, label_of, read_labels
+from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel, label_of, read_labels
 from rcbht_introspection.verify.model_file import load_verifier, save_verifier
 from rcbht_introspection.verify.monitor import NOMINAL, VerifierSession
 from rcbht_introspection.verify.train import train_verifier
@@ -156,13 +158,20 @@ def test_contact_geometry_reads_where_the_part_touched() -> None:
     assert clipped is not None and clipped[0] == pytest.approx(-30.0)
 
 
-@settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), onset_tick=st.integers(0, 59), kept=st.integers(0, 59))
+@settings(max_examples=60, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    onset_tick=st.integers(0, 59),
+    offset=st.sampled_from([0.0, 0.013, -0.02]),
+    alarm_tick=st.integers(0, 59),
+    first_kept=st.integers(0, 59),
+)
 def test_running_evidence_is_the_evidence_of_the_whole_span(
-    seed: int, onset_tick: int, kept: int
+    seed: int, onset_tick: int, offset: float, alarm_tick: int, first_kept: int
 ) -> None:
-    """The live verifier's running evidence, begun from the ticks kept at the alarm and fed one
-    tick at a time, gives the batch `evidence_features` and `contact_geometry` bit for bit."""
+    """The live verifier's running evidence, begun at the alarm from the ticks kept and fed one
+    tick at a time, gives the batch `evidence_features` and `contact_geometry` bit for bit, as
+    long as the kept ticks reach back to the reference tick (onsets between ticks too)."""
     config = load_verify_config()
     rng = np.random.default_rng(seed)
     n = 60
@@ -184,12 +193,16 @@ def test_running_evidence_is_the_evidence_of_the_whole_span(
         end=float(times[-1]),
     )
     phases = ("insertion", "approach", "mating")  # the characteriser's order, not the trial's
-    onset = float(times[onset_tick])
+    onset = max(float(times[onset_tick]) + offset, 0.0)
     ticks = [
         EvidenceTick(times[i], tf.phases[index[i]], tf.elapsed[i], z[i], means[i]) for i in range(n)
     ]
-    alarm = max(onset_tick, kept)
-    ev = RunningEvidence.begin(phases, onset, config, ticks[: alarm + 1])
+    alarm = max(onset_tick, alarm_tick)
+    reference = np.searchsorted(times, onset - config.contact_reference_s + 1e-9, "right") - 1
+    first = min(first_kept, max(int(reference), 0), alarm)  # kept from the reference on
+    ev = RunningEvidence.begin(phases, onset, config, ticks[first : alarm + 1])
+    if times[alarm] < onset - 1e-9:
+        return  # no tick of the evidence yet: the live session names no class
     for i in range(alarm, n):
         if i > alarm:
             ev.add(ticks[i])
@@ -198,6 +211,34 @@ def test_running_evidence_is_the_evidence_of_the_whole_span(
         want = contact_geometry(times, means, onset, until, config)
         got = ev.geometry(until)
         assert (got is None and want is None) or np.array_equal(got, want)
+
+
+def test_a_contact_forest_of_fewer_classes_gives_the_others_nothing() -> None:
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(40, 2))
+    head = ForestHead.fit(X, ["a" if x[0] > 0 else "c" for x in X], trees=5)
+    p = head.predict_proba(X[:1])[0]
+    assert head.proba_over(("a", "b", "c"), X[:1]) == pytest.approx([p[0], 0.0, p[1]])
+    assert head.proba_over(("c", "a"), X[:1]) == pytest.approx([p[1], p[0]])
+
+
+@pytest.mark.parametrize(
+    "weights, field",
+    [
+        ("{z: 0.2}", "contact_weights.z"),
+        ("{y: 1.5}", "contact_weights.y"),
+        ("{y: .nan}", "contact_weights.y"),
+    ],
+)
+def test_contact_weights_are_checked(tmp_path: Path, weights: str, field: str) -> None:
+    path = tmp_path / "verify.yaml"
+    path.write_text(f"verify:\n  contact_weights: {weights}\n")
+    with pytest.raises(InputError, match=f"line 2, field verify.{field}: "):
+        load_verify_config(path)
+
+
+def test_the_config_names_the_characteriser_heads() -> None:
+    assert (FAILURE, *DIRECTION_AXES) == CHARACTERISER_HEADS
 
 
 def test_contact_forests_vote_only_where_the_part_touched(
@@ -325,6 +366,16 @@ def test_verifier_file_refuses_tampering(
     assert loaded <= 2, f"{loaded} of 23 flipped bytes went unnoticed"
     with pytest.raises(InputError, match="not found"):
         load_verifier(tmp_path / "missing.npz")
+    # a consistent file (checksum rewritten) whose contact weights do not fit its forests
+    for weights, match in (
+        ({"class": 0.2, "x": 0.2, "y": 2.0}, "field config.contact_weights.y"),
+        ({"class": 0.2}, "'y', which has no contact weight"),
+    ):
+        edited = json.loads(json.dumps(header))
+        edited["config"]["contact_weights"] = weights
+        write_safe_npz(bad, edited, arrays)
+        with pytest.raises(InputError, match=match):
+            load_verifier(bad)
 
 
 @settings(max_examples=60, deadline=None)

@@ -21,7 +21,7 @@ from rcbht_introspection.config_files import config_path
 from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim import load_sim_config, simulate_trial
-from rcbht_introspection.sim.config import failure_classes
+from rcbht_introspection.sim.config import SimConfig, failure_classes
 from rcbht_introspection.verify.config import load_verify_config
 from rcbht_introspection.verify.labels import label_of
 from rcbht_introspection.verify.monitor import VerifierSession
@@ -37,7 +37,7 @@ TEST_SEEDS = range(9000, 9010)
 TEST_CLASS = "deviation_x+y+"
 
 
-def _train_set() -> tuple[list[Trial], Any]:
+def _train_set() -> tuple[list[Trial], SimConfig]:
     config = load_sim_config(config_path("sim_cell.yaml"))
     trials = [simulate_trial(config, seed, name=f"S-{seed}") for seed in range(TRAIN_SUCCESSES)]
     for k, failure in enumerate(failure_classes(config.failures)):

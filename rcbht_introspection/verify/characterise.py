@@ -90,7 +90,7 @@ class EvidenceTick(NamedTuple):
     """Window mean wrench of every arm (`wrench_means`)."""
 
 
-@dataclass
+@dataclass(eq=False)
 class RunningEvidence:
     """`evidence_features` and `contact_geometry` of [onset, now], kept one tick at a time (the
     live verifier): the same numbers as over the whole span, in constant time and memory per
@@ -106,8 +106,10 @@ class RunningEvidence:
     first: np.ndarray | None = None
     """The one-hot commanded sub-task and the time into it at the first tick."""
     contact_times: list[float] = field(default_factory=list)
+    """The reference tick before onset and the ticks of the contact span after it ..."""
     contact_means: list[np.ndarray] = field(default_factory=list)
-    """The reference tick before onset and the ticks of the contact span after it."""
+    """... and their mean wrench (the reference may repeat the first tick after onset: its
+    change is then 0, below RATIO_MIN_FORCE, as in `contact_geometry`)."""
 
     @classmethod
     def begin(
@@ -131,7 +133,9 @@ class RunningEvidence:
         return ev
 
     def add(self, tick: EvidenceTick) -> None:
-        """The next tick at or after onset."""
+        """The next tick (one before onset is not evidence)."""
+        if tick.time < self.onset - 1e-9:
+            return
         part = np.clip(np.nan_to_num(tick.z, nan=0.0), -Z_CLIP, Z_CLIP)
         if self.total is None or self.high is None or self.low is None:
             self.total, self.high, self.low = part.copy(), part.copy(), part.copy()
@@ -139,7 +143,7 @@ class RunningEvidence:
             if tick.phase in self.phases:
                 onehot[self.phases.index(tick.phase)] = 1.0
             self.first = np.append(onehot, tick.elapsed)
-        else:
+        else:  # row by row, as numpy's mean over axis 0 of a 2-D array adds them
             self.total += part
             np.maximum(self.high, part, out=self.high)
             np.minimum(self.low, part, out=self.low)
@@ -287,16 +291,16 @@ class Characteriser:
         trees = config.characteriser_trees
         Xa = np.vstack(X)
         heads = {h: ForestHead.fit(Xa[rows], t, trees, seed) for h, (rows, t) in targets.items()}
-        geometry = {}
+        contact_forests: dict[str, ForestHead] = {}
         for h, (rows, t) in targets.items():
             touched = [
                 (g, c) for i, c in zip(rows, t, strict=True) if C and (g := C[i]) is not None
             ]
             if config.contact_weights.get(h, 0.0) > 0 and len({c for _, c in touched}) > 1:
                 G = np.vstack([g for g, _ in touched])
-                geometry[h] = ForestHead.fit(G, [c for _, c in touched], trees, seed + 1)
+                contact_forests[h] = ForestHead.fit(G, [c for _, c in touched], trees, seed + 1)
         failure = heads.pop(FAILURE)
-        return cls(phases, failure, heads, config, geometry)
+        return cls(phases, failure, heads, config, contact_forests)
 
     def predict(
         self, tf: TrialFeatures, z: np.ndarray, onset: float, until: float, means: np.ndarray
@@ -311,8 +315,11 @@ class Characteriser:
         self, x: np.ndarray, g: np.ndarray | None
     ) -> tuple[str, dict[str, float], dict[str, str]]:
         """(class, class probabilities, direction per axis) from evidence features `x`
-        (`evidence_features`) and contact geometry `g` (None: nothing touched)."""
+        (`evidence_features`) and contact geometry `g` (None: nothing touched; a non-finite
+        one, from overflowing wrench, is read as none)."""
         x = x[None, :]
+        if g is not None and not np.all(np.isfinite(g)):
+            g = None
 
         def proba(name: str, head: ForestHead) -> np.ndarray:
             p = head.predict_proba(x)[0]

@@ -20,7 +20,7 @@ from rcbht_introspection.verify.characterise import (
     Characteriser,
     ForestHead,
 )
-from rcbht_introspection.verify.config import VerifyConfig
+from rcbht_introspection.verify.config import VerifyConfig, check_verify_config
 from rcbht_introspection.verify.detector import Detector, SignalModels
 from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, TimingModel
 
@@ -134,6 +134,10 @@ def load_verifier(path: Path | str) -> VerifierModel:
     check_checksum(header, arrays, path, KIND)
     try:
         config = from_mapping(VerifyConfig, header["config"], path=path, prefix="config.")
+        try:
+            check_verify_config(config)
+        except InputError as exc:
+            raise InputError(exc.message, path, field=f"config.{exc.field}") from None
         env = None
         if "envelope" in header:
             e = header["envelope"]
@@ -192,7 +196,7 @@ def load_verifier(path: Path | str) -> VerifierModel:
                 if not config.contact_weights.get(name, 0.0) > 0:
                     raise ValueError(f"a contact forest for {name!r}, which has no contact weight")
                 own = ch.failure if name == FAILURE else ch.directions[name]
-                if not set(head.classes) <= set(own.classes):
+                if not set(head.classes) <= set(own.classes) or len(head.classes) < 2:
                     raise ValueError(f"the {name} head's contact forest names other classes")
                 if head.forest.n_features_in_ != width:
                     raise ValueError(f"the {name} head's contact forest reads other features")
