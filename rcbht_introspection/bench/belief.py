@@ -14,8 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from rcbht_introspection.bench.durations import ms_summary
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.live import LiveAugmentConfig, live_training, stream_factory
@@ -62,16 +61,6 @@ def timed_updates(
     return times, states
 
 
-def _stats(times: list[float]) -> dict[str, float]:
-    ms = 1000.0 * np.asarray(times)
-    return {
-        "updates": len(ms),
-        "median_ms": round(float(np.median(ms)), 3),
-        "p99_ms": round(float(np.percentile(ms, 99)), 3),
-        "max_ms": round(float(ms.max()), 3),
-    }
-
-
 def run(out_dir: Path) -> dict[str, Any]:
     """Median / p99 / max ms per belief update, per mode, over the held-out REAL trials."""
     if not (HIRO / REAL).is_dir():
@@ -89,7 +78,7 @@ def run(out_dir: Path) -> dict[str, Any]:
         times: list[float] = []
         for s in streamed:
             times += timed_updates(s, model, mode)[0]
-        out[mode] = _stats(times)
+        out[mode] = ms_summary(times, "updates")
     out["loadavg"] = [round(x, 2) for x in os.getloadavg()]
     return out
 

@@ -27,10 +27,10 @@ from rcbht_introspection.bench.belief import (
     HIRO,
     REAL,
     TEST_TRIALS,
-    _stats,
     feed_step,
     timed_updates,
 )
+from rcbht_introspection.bench.durations import ms_summary
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.hiro import read_trial
 from rcbht_introspection.learn.learner_process import ProcessLearner
@@ -139,7 +139,7 @@ def updates_beside_teaching(
     alone: list[float] = []
     for s in held_out:
         alone += timed_updates(s, model, "boundary")[0]
-    out: dict[str, Any] = {"alone": _stats(alone)}
+    out: dict[str, Any] = {"alone": ms_summary(alone, "updates")}
     for learner in LEARNERS:
         out[learner] = _updates_while_learning(
             held_out, model, samples, replace(config, learner=learner)
@@ -183,7 +183,7 @@ def _updates_while_learning(
         stop.set()
         worker.join()
     return {
-        "beside_teaching": _stats(beside),
+        "beside_teaching": ms_summary(beside, "updates"),
         "teach_updates_during": rounds[0],
         "measured_s": round(time.perf_counter() - t0, 2),
     }

@@ -10,21 +10,24 @@ from the whole evidence since onset, so its cost must not grow with that evidenc
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from rcbht_introspection.bench.durations import ms_summary
 from rcbht_introspection.config_files import config_path
-from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim import load_sim_config, simulate_trial
 from rcbht_introspection.sim.config import SimConfig, failure_classes
 from rcbht_introspection.verify.config import load_verify_config
 from rcbht_introspection.verify.labels import label_of
 from rcbht_introspection.verify.monitor import VerifierSession
+from rcbht_introspection.verify.stream import sample_steps
 from rcbht_introspection.verify.train import train_verifier
 
 TRAIN_SUCCESSES = 12
@@ -50,38 +53,25 @@ def _train_set() -> tuple[list[Trial], SimConfig]:
 def _feed(session: VerifierSession, trial: Trial, hold_s: float) -> list[tuple[float, float]]:
     """(tick time - alarm time, seconds spent) per verdict, for the ticks after the alarm; the
     trial's samples, then its last one held for hold_s."""
-    t0 = float(trial.time[0])
-    times = np.asarray(trial.time) - t0
-    events = [(t - t0, n) for t, n in trial_phase_events(trial) if n != "done"]
+    times = np.asarray(trial.time, dtype=float) - float(trial.time[0])
     dt = float(np.median(np.diff(times)))
     arm = trial.arms[0]
     wrench = np.asarray(trial.wrench[arm])
+    held: Iterator[tuple[int, float, list[tuple[float, str]]]] = (
+        (len(times) - 1, float(times[-1]) + j * dt, []) for j in range(1, round(hold_s / dt) + 1)
+    )
     out: list[tuple[float, float]] = []
-    k = 0
     clock = time.perf_counter
-    n_held = round(hold_s / dt)
-    for i in range(len(times) + n_held):
-        t = float(times[i]) if i < len(times) else float(times[-1]) + (i - len(times) + 1) * dt
-        while k < len(events) and events[k][0] <= t:
-            session.phase(events[k][1], events[k][0])
-            k += 1
+    for i, t, due in itertools.chain(sample_steps(trial), held):
+        for when, name in due:
+            session.phase(name, when)
         began = clock()
-        verdicts = session.push(arm, t, wrench[min(i, len(times) - 1)])
+        verdicts = session.push(arm, t, wrench[i])
         spent = clock() - began
         for v in verdicts:
             if v.alarm_time is not None and v.time > v.alarm_time:
                 out.append((v.time - v.alarm_time, spent / len(verdicts)))
     return out
-
-
-def _stats(seconds: list[float]) -> dict[str, float]:
-    ms = 1000.0 * np.asarray(seconds)
-    return {
-        "ticks": len(ms),
-        "median_ms": round(float(np.median(ms)), 3),
-        "p99_ms": round(float(np.percentile(ms, 99)), 3),
-        "max_ms": round(float(ms.max()), 3),
-    }
 
 
 def run(out_dir: Path) -> dict[str, Any]:
@@ -104,6 +94,6 @@ def run(out_dir: Path) -> dict[str, Any]:
         "train_s": round(trained_s, 1),
         "test_trial": trial.name,
         "evidence_s_at_end": round(last, 1),
-        "first_window": _stats([s for t, s in ticks if t <= WINDOW_S]),
-        "last_window": _stats([s for t, s in ticks if t > last - WINDOW_S]),
+        "first_window": ms_summary([s for t, s in ticks if t <= WINDOW_S], "ticks"),
+        "last_window": ms_summary([s for t, s in ticks if t > last - WINDOW_S], "ticks"),
     }

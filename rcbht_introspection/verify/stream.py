@@ -15,7 +15,7 @@ the cost of one sample period of latency.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -217,14 +217,25 @@ def offline_verdicts(
     session = VerifierSession(model)
     for c in contradictions:
         session.contradict(c)
-    time = np.asarray(trial.time, dtype=float) - float(trial.time[0])
-    events = [(t - float(trial.time[0]), n) for t, n in trial_phase_events(trial) if n != END_PHASE]
     out: list[Verdict] = []
-    ev = 0
-    for i, t in enumerate(time):
-        while ev < len(events) and events[ev][0] <= t:
-            session.phase(events[ev][1], events[ev][0])
-            ev += 1
+    for i, t, due in sample_steps(trial):
+        for when, name in due:
+            session.phase(name, when)
         for arm in model.arms:
-            out += session.push(arm, float(t), trial.wrench[arm][i])
+            out += session.push(arm, t, trial.wrench[arm][i])
     return out + session.end()
+
+
+def sample_steps(trial: Trial) -> Iterator[tuple[int, float, list[tuple[float, str]]]]:
+    """(sample index, stream time from the first sample, the sub-task events (time, name) due
+    before it) per sample, as a verifier is fed a trial: an event before the first sample at or
+    after it; the end event is left to the caller."""
+    t0 = float(trial.time[0])
+    events = [(t - t0, n) for t, n in trial_phase_events(trial) if n != END_PHASE]
+    k = 0
+    for i, t in enumerate(np.asarray(trial.time, dtype=float) - t0):
+        due = []
+        while k < len(events) and events[k][0] <= t:
+            due.append(events[k])
+            k += 1
+        yield i, float(t), due
