@@ -56,6 +56,27 @@ class EvidenceView(Protocol):
     def z(self, tf: TrialFeatures) -> np.ndarray: ...
 
 
+def _clipped(z: np.ndarray) -> np.ndarray:
+    """Envelope z as the evidence reads it: NaN (a tick of no known sub-task) 0, clipped."""
+    return np.clip(np.nan_to_num(z, nan=0.0), -Z_CLIP, Z_CLIP)
+
+
+def _start_features(phase: str, phases: Sequence[str], elapsed: float) -> np.ndarray:
+    """The evidence's first tick: its commanded sub-task one-hot over `phases`, time into it."""
+    onehot = np.zeros(len(phases) + 1)
+    if phase in phases:
+        onehot[list(phases).index(phase)] = 1.0
+    onehot[-1] = elapsed
+    return onehot
+
+
+def reference_tick(times: np.ndarray | Sequence[float], onset: float, config: VerifyConfig) -> int:
+    """Index of the tick contact geometry is measured against: the last at or before onset -
+    contact_reference_s, else the first."""
+    at = onset - config.contact_reference_s + 1e-9
+    return max(int(np.searchsorted(times, at, "right")) - 1, 0)
+
+
 def evidence_features(
     tf: TrialFeatures, z: np.ndarray, phases: Sequence[str], onset: float, until: float
 ) -> np.ndarray:
@@ -64,17 +85,13 @@ def evidence_features(
     if not np.any(sel):
         sel = tf.times <= until + 1e-9
         sel[: max(int(np.sum(sel)) - 1, 0)] = False
-    part = np.clip(np.nan_to_num(z[sel], nan=0.0), -Z_CLIP, Z_CLIP)
+    part = _clipped(z[sel])
     if len(part) == 0:
         part = np.zeros((1, z.shape[1]))
     first = int(np.argmax(sel)) if np.any(sel) else 0
     i = int(tf.phase_index[first])
-    onehot = np.zeros(len(phases))
-    if i >= 0 and tf.phases[i] in phases:
-        onehot[list(phases).index(tf.phases[i])] = 1.0
-    return np.concatenate(
-        [part.mean(axis=0), part.max(axis=0), part.min(axis=0), onehot, [tf.elapsed[first]]]
-    )
+    start = _start_features(tf.phases[i] if i >= 0 else "", phases, tf.elapsed[first])
+    return np.concatenate([part.mean(axis=0), part.max(axis=0), part.min(axis=0), start])
 
 
 class EvidenceTick(NamedTuple):
@@ -124,9 +141,8 @@ class RunningEvidence:
         ev = cls(phases, onset, config)
         if not ticks:
             return ev
-        times = [t.time for t in ticks]
-        ref = int(np.searchsorted(times, onset - config.contact_reference_s + 1e-9, "right")) - 1
-        ev.contact_times, ev.contact_means = [ticks[max(ref, 0)].time], [ticks[max(ref, 0)].means]
+        ref = ticks[reference_tick([t.time for t in ticks], onset, config)]
+        ev.contact_times, ev.contact_means = [ref.time], [ref.means]
         for t in ticks:
             if t.time >= onset - 1e-9:
                 ev.add(t)
@@ -136,13 +152,10 @@ class RunningEvidence:
         """The next tick (one before onset is not evidence)."""
         if tick.time < self.onset - 1e-9:
             return
-        part = np.clip(np.nan_to_num(tick.z, nan=0.0), -Z_CLIP, Z_CLIP)
+        part = _clipped(tick.z)
         if self.total is None or self.high is None or self.low is None:
             self.total, self.high, self.low = part.copy(), part.copy(), part.copy()
-            onehot = np.zeros(len(self.phases))
-            if tick.phase in self.phases:
-                onehot[self.phases.index(tick.phase)] = 1.0
-            self.first = np.append(onehot, tick.elapsed)
+            self.first = _start_features(tick.phase, self.phases, tick.elapsed)
         else:  # row by row, as numpy's mean over axis 0 of a 2-D array adds them
             self.total += part
             np.maximum(self.high, part, out=self.high)
@@ -190,9 +203,7 @@ def contact_geometry(
     n_arms = means.shape[1] // 6
     if len(times) == 0:
         return None
-    ref = max(
-        int(np.searchsorted(times, onset - config.contact_reference_s + 1e-9, "right")) - 1, 0
-    )
+    ref = reference_tick(times, onset, config)
     end = min(until, onset + config.contact_s)
     sel = (times >= onset - 1e-9) & (times <= end + 1e-9)
     out, touched = [], False
