@@ -14,7 +14,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import read_safe_npz, write_safe_npz
@@ -36,6 +35,7 @@ from rcbht_introspection.verify.features import TrialFeatures, trial_features
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel, label_of, read_labels
 from rcbht_introspection.verify.model_file import load_verifier, save_verifier
 from rcbht_introspection.verify.monitor import NOMINAL, VerifierSession
+from rcbht_introspection.verify.stream import offline_verdicts
 from rcbht_introspection.verify.train import train_verifier
 
 FAILURES = ("deviation_r+", "deviation_y-", "misalignment")
@@ -57,20 +57,6 @@ def labels(trials: list[Trial]) -> dict[str, TrialLabel]:
     return {t.name: label_of(t) for t in trials}
 
 
-def replay(session: VerifierSession, trial: Trial) -> list:
-    """Feed a trial to the live session as the verifier node is fed a replayed bag."""
-    t0 = float(trial.time[0])
-    events = [(t - t0, n) for t, n in trial_phase_events(trial) if n != "done"]
-    out, k = [], 0
-    for i, t in enumerate(np.asarray(trial.time) - t0):
-        while k < len(events) and events[k][0] <= t:
-            session.phase(events[k][1], events[k][0])
-            k += 1
-        for arm in trial.arms:
-            out += session.push(arm, float(t), trial.wrench[arm][i])
-    return out + session.end()
-
-
 def test_failure_labels_come_from_the_simulator(labels: dict[str, TrialLabel]) -> None:
     failed = [lb for lb in labels.values() if lb.failed]
     assert [lb.failure_class for lb in failed] == list(FAILURES)
@@ -90,7 +76,7 @@ def test_live_session_equals_the_batch_detector(
     for trial in (trials[0], trials[-1]):
         tf = trial_features(trial, config)
         batch = model.detector.run(tf)
-        verdicts = replay(VerifierSession(model), trial)
+        verdicts = offline_verdicts(trial, model)
         assert [v.time for v in verdicts] == pytest.approx(list(tf.times), abs=1e-9)
         np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
         assert verdicts[-1].alarm_time == batch.alarm
@@ -501,7 +487,7 @@ def test_live_session_with_a_late_first_event_equals_the_batch_detector(
     late = dataclasses.replace(failing, state_times=(0.5, *failing.state_times[1:]))
     tf = trial_features(late, config)
     batch = model.detector.run(tf)
-    verdicts = replay(VerifierSession(model), late)
+    verdicts = offline_verdicts(late, model)
     np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
     assert verdicts[-1].alarm_time == batch.alarm
     assert verdicts[0].phase == "" and verdicts[-1].phase != ""
@@ -599,9 +585,7 @@ def test_live_session_with_a_contradiction_equals_the_batch_mismatch_rule(
     known = float(tf.starts[2]) + 0.3
     c = Contradiction(known, start, tf.phases[0], tf.phases[1], 0.95)
     batch = with_mismatch(batch_plain, [c], config)
-    session = VerifierSession(model)
-    session.contradict(c)
-    verdicts = replay(session, nominal)
+    verdicts = offline_verdicts(nominal, model, [c])
     np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
     assert batch.alarm_signal == MISMATCH and batch.onset == start
     assert verdicts[-1].alarm_time == batch.alarm == min(t for t in tf.times if t >= known - 1e-9)
