@@ -24,14 +24,16 @@ from rcbht_introspection.verify.characterise import (
     EvidenceTick,
     ForestHead,
     RunningEvidence,
+    channel_columns,
     contact_geometry,
     evidence_features,
+    sign_table,
     wrench_means,
 )
-from rcbht_introspection.verify.config import CHARACTERISER_HEADS, load_verify_config
+from rcbht_introspection.verify.config import CHARACTERISER_HEADS, KINDS, load_verify_config
 from rcbht_introspection.verify.detector import Detector, conformal_threshold
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
-from rcbht_introspection.verify.features import TrialFeatures, trial_features
+from rcbht_introspection.verify.features import TrialFeatures, feature_names, trial_features
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel, label_of, read_labels
 from rcbht_introspection.verify.model_file import load_verifier, save_verifier
 from rcbht_introspection.verify.monitor import NOMINAL, VerifierSession
@@ -106,6 +108,8 @@ def test_a_saved_characteriser_names_what_the_trained_one_names(
     assert set(loaded.characteriser.directions) == {"x", "y", "r"}
     # x is '0' for both deviations here: one class, so no contact forest for it
     assert set(loaded.characteriser.contact) == {"class", "y"}
+    assert set(loaded.characteriser.columns) == set(config.direction_channels) == {"x", "r"}
+    assert loaded.characteriser.signs == trained.characteriser.signs
     envelope = trained.detector.models.envelope
     assert envelope is not None
     for trial in trials:
@@ -221,6 +225,93 @@ def test_contact_weights_are_checked(tmp_path: Path, weights: str, field: str) -
     path.write_text(f"verify:\n  contact_weights: {weights}\n")
     with pytest.raises(InputError, match=f"line 2, field verify.{field}: "):
         load_verify_config(path)
+
+
+def test_channel_columns_read_only_the_named_wrench_axes() -> None:
+    phases = ("approach", "insertion")
+    names = feature_names(["right", "left"])
+    evidence = [f"{b}:{n}" for b in ("mean", "max", "min") for n in names]
+    evidence += [*(f"start:{p}" for p in phases), "start:elapsed"]
+    cols = channel_columns(len(evidence), len(phases), ("Fx", "My"))
+    picked = [evidence[c] for c in cols]
+    assert picked[-3:] == ["start:approach", "start:insertion", "start:elapsed"]
+    assert all(n.endswith((".Fx", ".My")) for n in picked[:-3])
+    assert len(picked) - 3 == 3 * 2 * len(KINDS) * 2  # blocks x arms x kinds x axes
+
+
+def test_a_direction_head_with_channels_ignores_the_other_axes(
+    trials: list[Trial], labels: dict[str, TrialLabel]
+) -> None:
+    config = load_verify_config()
+    model = train_verifier(trials, labels, config)
+    ch, envelope = model.characteriser, model.detector.models.envelope
+    assert ch is not None and envelope is not None
+    tf = trial_features(trials[-1], config)
+    x = evidence_features(tf, envelope.z(tf), ch.phases, float(tf.times[5]), tf.end)
+    for axis in ("x", "r"):
+        assert ch.directions[axis].forest.n_features_in_ == len(ch.columns[axis]) < len(x)
+        other = np.setdiff1d(np.arange(len(x)), ch.columns[axis])
+        moved = x.copy()
+        moved[other] += 7.0
+        want = ch.directions[axis].predict_proba(x[None, ch.columns[axis]])
+        got = ch.directions[axis].predict_proba(moved[None, ch.columns[axis]])
+        assert np.array_equal(got, want)
+        assert ch.predict_from(moved, None)[2][axis] == ch.predict_from(x, None)[2][axis]
+    plain = dataclasses.replace(config, direction_channels={})
+    every = train_verifier(trials, labels, plain).characteriser
+    assert every is not None and not every.columns
+    assert every.directions["x"].forest.n_features_in_ == len(x)
+
+
+def test_the_sign_table_ties_signs_to_a_class_only_when_unambiguous() -> None:
+    def fail(cls: str, dev: tuple[float, float, float] | None) -> TrialLabel:
+        return TrialLabel("t", "failure", cls, 1.0, dev)
+
+    table = sign_table(
+        [
+            fail("slip_x", (0.002, 0.0, 0.0)),
+            fail("slip_x", (0.003, 0.0, 0.0)),
+            fail("slip_xy", (0.002, 0.002, 0.0)),
+            fail("slip_xy", (0.002, -0.002, 0.0)),  # two sign patterns: not in the table
+            fail("twist", (0.0, 0.0, 0.05)),
+            fail("turn", (0.0, 0.0, 0.06)),  # the same signs as twist: neither is
+            fail("jam", None),
+            fail("half", (0.0, 0.002, 0.0)),
+            fail("half", None),  # not every trial has a deviation
+        ]
+    )
+    assert table == {("+", "0", "0"): "slip_x"}
+
+
+def test_direction_signs_pick_which_deviation_the_class_head_names() -> None:
+    """Real forests on two features: the class by the first, the signs by the second; where
+    the class head names one deviation and the signs another, the signs' class is named and
+    takes the class head's probability for it."""
+    rng = np.random.default_rng(5)
+    X = rng.uniform(-3, 3, size=(300, 2))
+    klass = ["dev_a" if a > 1 else "dev_b" if a > 0 else "jam" for a in X[:, 0]]
+    pos = X[:, 1] > 0
+    config = dataclasses.replace(load_verify_config(), contact_weights={}, direction_channels={})
+    directions = {
+        "x": ForestHead.fit(X, ["+" if p else "0" for p in pos], 10),
+        "y": ForestHead.fit(X, ["0" if p else "-" for p in pos], 10),
+        "r": ForestHead.fit(X, ["0" if p else "+" for p in pos], 10),
+    }
+    signs = {("0", "-", "+"): "dev_a", ("+", "0", "0"): "dev_b"}
+    ch = Characteriser((), ForestHead.fit(X, klass, 10), directions, config, signs=signs)
+    alone = dataclasses.replace(ch, config=dataclasses.replace(config, compose_deviation=False))
+    for row, head_says, named in (
+        ([2.5, 2.0], "dev_a", "dev_b"),  # signs + 0 0: dev_b
+        ([2.5, -2.0], "dev_a", "dev_a"),  # signs 0 - +: dev_a, as the class head says
+        ([-2.5, 2.0], "jam", "jam"),  # not a deviation: the signs do not rename it
+    ):
+        x = np.array(row)
+        first, p_head, _ = alone.predict_from(x, None)
+        cls, probs, _ = ch.predict_from(x, None)
+        assert first == head_says and cls == named
+        assert probs[cls] == max(probs.values()) == p_head[head_says]
+        assert probs[head_says] == p_head[cls]
+        assert sum(probs.values()) == pytest.approx(1.0)
 
 
 def test_the_config_names_the_characteriser_heads() -> None:
@@ -362,6 +453,16 @@ def test_verifier_file_refuses_tampering(
         write_safe_npz(bad, edited, arrays)
         with pytest.raises(InputError, match=match):
             load_verifier(bad)
+    # ... whose direction head reads other columns, or whose sign table names no known class
+    cols = dict(arrays, **{"columns.x": arrays["columns.x"][1:]})
+    write_safe_npz(bad, header, cols)
+    with pytest.raises(InputError, match="the x head reads other columns"):
+        load_verifier(bad)
+    edited = json.loads(json.dumps(header))
+    edited["characteriser"]["signs"] = [["0", "-", "+", "no_such_class"]]
+    write_safe_npz(bad, edited, arrays)
+    with pytest.raises(InputError, match="unknown class 'no_such_class'"):
+        load_verifier(bad)
 
 
 @settings(max_examples=60, deadline=None)

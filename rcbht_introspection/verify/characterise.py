@@ -11,6 +11,11 @@ Heads given a contact weight (the class, x and y by default) also read where the
 touched (`contact_geometry`), each through a second forest of its own: a Mondrian tree picks a
 split feature in proportion to its range, so among a hundred envelope features a 2 mm shift of
 the contact point would seldom be chosen. Evidence without a touch gives that forest no vote.
+
+A direction head given channels (`direction_channels`: x reads Fx and My, yaw Mz) reads only
+those wrench axes of the envelope, not what the controller did next on the others, which changes
+with the slip's size. When the class head names a deviation class, the direction heads' signs
+pick which one (`compose_deviation`), by the sign-to-class table of the training labels.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from typing import NamedTuple, Protocol
 import numpy as np
 
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
-from rcbht_introspection.verify.config import VerifyConfig
+from rcbht_introspection.verify.config import WRENCH_AXES, VerifyConfig
 from rcbht_introspection.verify.features import (
     PER_ARM,
     RATIO_MIN_FORCE,
@@ -92,6 +97,33 @@ def evidence_features(
     i = int(tf.phase_index[first])
     start = _start_features(tf.phases[i] if i >= 0 else "", phases, tf.elapsed[first])
     return np.concatenate([part.mean(axis=0), part.max(axis=0), part.min(axis=0), start])
+
+
+def channel_columns(width: int, n_phases: int, channels: Sequence[str]) -> np.ndarray:
+    """Columns of `evidence_features` (of `width`, over `n_phases` sub-tasks) that read the
+    given wrench axes: their mean, maximum and minimum z of every kind and arm, and the start
+    features."""
+    n_z = (width - n_phases - 1) // 3
+    keep = [WRENCH_AXES.index(c) for c in channels]
+    z_cols = [c for c in range(n_z) if c % 6 in keep]
+    blocks = [b * n_z + c for b in range(3) for c in z_cols]
+    return np.array([*blocks, *range(3 * n_z, width)], dtype=int)
+
+
+def sign_table(labels: Sequence[TrialLabel]) -> dict[tuple[str, ...], str]:
+    """Direction signs (x, y, r) -> failure class, from labelled failures: a class whose every
+    trial carries a deviation of the same signs, and whose signs no other class shares."""
+    signs: dict[str, set[tuple[str, ...] | None]] = {}
+    for lb in labels:
+        d = lb.directions()
+        signs.setdefault(lb.failure_class, set()).add(
+            None if d is None else tuple(d[a] for a in DIRECTION_AXES)
+        )
+    owners: dict[tuple[str, ...], list[str]] = {}
+    for cls, found in signs.items():
+        if len(found) == 1 and (only := next(iter(found))) is not None:
+            owners.setdefault(only, []).append(cls)
+    return {key: names[0] for key, names in owners.items() if len(names) == 1}
 
 
 class EvidenceTick(NamedTuple):
@@ -259,13 +291,17 @@ class Characteriser:
     """The failure-class head and, when deviation labels exist, one direction head per axis.
     `contact`: per head with a contact weight, a forest on contact geometry, trained on the
     evidence where the part touched, whose probabilities weigh `config.contact_weights[head]`
-    in that head's when the evidence touched (empty: a view without wrench, or no weights)."""
+    in that head's when the evidence touched (empty: a view without wrench, or no weights).
+    `columns`: per direction head reading only some wrench axes, its evidence columns
+    (`channel_columns`); `signs`: the training labels' direction signs -> class (`sign_table`)."""
 
     phases: tuple[str, ...]
     failure: ForestHead
     directions: dict[str, ForestHead]
     config: VerifyConfig
     contact: dict[str, ForestHead] = field(default_factory=dict)
+    columns: dict[str, np.ndarray] = field(default_factory=dict)
+    signs: dict[tuple[str, ...], str] = field(default_factory=dict)
 
     @classmethod
     def fit(
@@ -301,7 +337,15 @@ class Characteriser:
                 targets[axis] = (labelled, [dirs[i][axis] for i in labelled])  # type: ignore[index]
         trees = config.characteriser_trees
         Xa = np.vstack(X)
-        heads = {h: ForestHead.fit(Xa[rows], t, trees, seed) for h, (rows, t) in targets.items()}
+        columns = {
+            axis: channel_columns(Xa.shape[1], len(phases), channels)
+            for axis, channels in config.direction_channels.items()
+            if view.reads_wrench and axis in targets
+        }
+        heads = {
+            h: ForestHead.fit(Xa[rows][:, columns[h]] if h in columns else Xa[rows], t, trees, seed)
+            for h, (rows, t) in targets.items()
+        }
         contact_forests: dict[str, ForestHead] = {}
         for h, (rows, t) in targets.items():
             touched = [
@@ -311,7 +355,8 @@ class Characteriser:
                 G = np.vstack([g for g, _ in touched])
                 contact_forests[h] = ForestHead.fit(G, [c for _, c in touched], trees, seed + 1)
         failure = heads.pop(FAILURE)
-        return cls(phases, failure, heads, config, contact_forests)
+        signs = sign_table([label for _, label, _ in failures]) if heads else {}
+        return cls(phases, failure, heads, config, contact_forests, columns, signs)
 
     def predict(
         self, tf: TrialFeatures, z: np.ndarray, onset: float, until: float, means: np.ndarray
@@ -333,7 +378,7 @@ class Characteriser:
             g = None
 
         def proba(name: str, head: ForestHead) -> np.ndarray:
-            p = head.predict_proba(x)[0]
+            p = head.predict_proba(x[:, self.columns[name]] if name in self.columns else x)[0]
             if g is not None and name in self.contact:
                 w = self.config.contact_weights[name]
                 p = (1 - w) * p + w * self.contact[name].proba_over(head.classes, g[None, :])
@@ -342,4 +387,10 @@ class Characteriser:
         p = proba(FAILURE, self.failure)
         probs = {c: float(v) for c, v in zip(self.failure.classes, p, strict=True)}
         dirs = {a: h.classes[int(np.argmax(proba(a, h)))] for a, h in self.directions.items()}
-        return self.failure.classes[int(np.argmax(p))], probs, dirs
+        named = self.failure.classes[int(np.argmax(p))]
+        if self.config.compose_deviation and named in self.signs.values():
+            composed = self.signs.get(tuple(dirs.get(a, "") for a in DIRECTION_AXES), named)
+            # the direction heads pick which deviation carries the class head's vote
+            probs[named], probs[composed] = probs[composed], probs[named]
+            named = composed
+        return named, probs, dirs

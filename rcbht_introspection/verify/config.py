@@ -8,12 +8,15 @@ from pathlib import Path
 
 from rcbht_introspection.config_files import config_path, load_config
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.verify.labels import DIRECTION_AXES
 
 KINDS = ("mean", "std", "change", "change_max", "change_min", "ratio")
 """Feature kinds of an arm (verify/features.py), six axes each."""
+WRENCH_AXES = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
+"""The six axes of a wrench, in the order of every kind's columns."""
 
 VERIFY_CONFIG_FILE = "verify.yaml"
-CHARACTERISER_HEADS = ("class", "x", "y", "r")
+CHARACTERISER_HEADS = ("class", *DIRECTION_AXES)
 """The characteriser's heads: the failure class and each deviation axis."""
 
 
@@ -48,6 +51,15 @@ class VerifyConfig:
     """Per head, the share of its contact-geometry forest in its probabilities when the part
     touched (a head not named, or 0: its envelope forest alone). Not yaw by default: weighed in
     at 0.3, contact geometry cost the r head up to 9 points on the cell sets."""
+    direction_channels: dict[str, tuple[str, ...]] = field(
+        default_factory=lambda: {"x": ("Fx", "My"), "r": ("Mz",)}, hash=False
+    )
+    """Per deviation axis, the wrench axes its head's envelope evidence reads (an axis not
+    named reads all six): a slip in x pushes along x and tips about y; what the controller does
+    next shows on every axis and changes with the slip's size (docs/verification.md)."""
+    compose_deviation: bool = True
+    """A deviation class named by the class head is renamed to the class the direction heads'
+    signs name, when the training labels tie those signs to one class."""
     contact_s: float = 0.5
     """Contact geometry is read over the evidence's first contact_s ..."""
     contact_reference_s: float = 0.3
@@ -59,6 +71,7 @@ class VerifyConfig:
     def __post_init__(self) -> None:
         # a copy of its own: configs made by dataclasses.replace do not share one mapping
         object.__setattr__(self, "contact_weights", dict(self.contact_weights))
+        object.__setattr__(self, "direction_channels", dict(self.direction_channels))
 
 
 def check_verify_config(cfg: VerifyConfig) -> None:
@@ -118,6 +131,20 @@ def check_verify_config(cfg: VerifyConfig) -> None:
             )
         if not 0 <= weight <= 1:  # NaN too
             raise InputError(f"must be in [0, 1], got {weight}", field=f"contact_weights.{head}")
+    for axis, channels in cfg.direction_channels.items():
+        if axis not in DIRECTION_AXES:
+            raise InputError(
+                f"unknown deviation axis {axis!r} (known: {', '.join(DIRECTION_AXES)})",
+                field=f"direction_channels.{axis}",
+            )
+        if not channels:
+            raise InputError("needs at least one wrench axis", field=f"direction_channels.{axis}")
+        for i, c in enumerate(channels):
+            if c not in WRENCH_AXES:
+                raise InputError(
+                    f"unknown wrench axis {c!r} (known: {', '.join(WRENCH_AXES)})",
+                    field=f"direction_channels.{axis}[{i}]",
+                )
     for name in ("contact_s", "contact_reference_s"):
         if not getattr(cfg, name) > 0:  # NaN too
             raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)

@@ -18,7 +18,7 @@ import numpy as np
 
 from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.verify.config import KINDS, VerifyConfig
+from rcbht_introspection.verify.config import KINDS, WRENCH_AXES, VerifyConfig
 
 PER_ARM = 36
 """Features per arm: window mean (6), window std (6), change since baseline (6), its max (6),
@@ -49,9 +49,7 @@ def scale_floors(config: VerifyConfig, n_columns: int) -> np.ndarray:
 
 def feature_names(arms: Sequence[str]) -> list[str]:
     """Names of the feature columns, arms in the given order."""
-    axes = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
-    kinds = KINDS
-    return [f"{arm}.{k}.{a}" for arm in arms for k in kinds for a in axes]
+    return [f"{arm}.{k}.{a}" for arm in arms for k in KINDS for a in WRENCH_AXES]
 
 
 def ratios(mean: np.ndarray) -> np.ndarray:

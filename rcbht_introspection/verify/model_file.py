@@ -22,11 +22,12 @@ from rcbht_introspection.verify.characterise import (
 )
 from rcbht_introspection.verify.config import VerifyConfig, check_verify_config
 from rcbht_introspection.verify.detector import Detector, SignalModels
+from rcbht_introspection.verify.labels import DIRECTION_AXES, DIRECTIONS
 from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, TimingModel
 
 FORMAT = "rcbht-verifier"
-FORMAT_VERSION = 4
-"""4: contact forests trained on touching evidence only, weighed per head (3: contact-geometry
+FORMAT_VERSION = 5
+"""5: direction heads reading some wrench axes, the sign-to-class table (4: contact forests trained on touching evidence only, weighed per head (3: contact-geometry
 forests beside the class and x, y heads; 2: Mondrian heads; 1: logistic regressions)."""
 KIND = "verifier"
 
@@ -114,6 +115,9 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
             h, a = _head_parts(f"contact.{name}", head)
             header["characteriser"]["contact"][name] = h
             arrays.update(a)
+        header["characteriser"]["columns"] = sorted(ch.columns)
+        arrays.update({f"columns.{axis}": cols for axis, cols in ch.columns.items()})
+        header["characteriser"]["signs"] = [[*key, cls] for key, cls in ch.signs.items()]
     write_safe_npz(path, header, arrays)
     return path
 
@@ -190,7 +194,21 @@ def load_verifier(path: Path | str) -> VerifierModel:
                 {a: _head(f"direction.{a}", h, arrays) for a, h in c["directions"].items()},
                 config,
                 {n: _head(f"contact.{n}", h, arrays) for n, h in c["contact"].items()},
+                {a: np.asarray(arrays[f"columns.{a}"], dtype=int) for a in c["columns"]},
+                {tuple(str(v) for v in row[:-1]): str(row[-1]) for row in c["signs"]},
             )
+            evidence_width = ch.failure.forest.n_features_in_
+            for axis, cols in ch.columns.items():
+                head = ch.directions[axis]
+                if cols.ndim != 1 or len(cols) != head.forest.n_features_in_:
+                    raise ValueError(f"the {axis} head reads other columns than it names")
+                if len(cols) and (cols.min() < 0 or cols.max() >= evidence_width):
+                    raise ValueError(f"the {axis} head names columns beyond the evidence")
+            for key, cls in ch.signs.items():
+                if len(key) != len(DIRECTION_AXES) or not set(key) <= set(DIRECTIONS):
+                    raise ValueError(f"direction signs {list(key)} are not one of -, 0, + per axis")
+                if cls not in ch.failure.classes:
+                    raise ValueError(f"direction signs name the unknown class {cls!r}")
             width = CONTACT_PER_ARM * len(header["arms"])
             for name, head in ch.contact.items():
                 if not config.contact_weights.get(name, 0.0) > 0:
