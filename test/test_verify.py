@@ -108,7 +108,7 @@ def test_a_saved_characteriser_names_what_the_trained_one_names(
     assert set(loaded.characteriser.directions) == {"x", "y", "r"}
     # x is '0' for both deviations here: one class, so no contact forest for it
     assert set(loaded.characteriser.contact) == {"class", "y"}
-    assert set(loaded.characteriser.columns) == set(config.direction_channels) == {"x", "r"}
+    assert set(loaded.characteriser.narrow) == set(config.direction_channels) == {"x", "r"}
     assert loaded.characteriser.signs == trained.characteriser.signs
     envelope = trained.detector.models.envelope
     assert envelope is not None
@@ -239,28 +239,34 @@ def test_channel_columns_read_only_the_named_wrench_axes() -> None:
     assert len(picked) - 3 == 3 * 2 * len(KINDS) * 2  # blocks x arms x kinds x axes
 
 
-def test_a_direction_head_with_channels_ignores_the_other_axes(
+def test_narrow_direction_heads_ignore_the_other_axes_and_phase_in(
     trials: list[Trial], labels: dict[str, TrialLabel]
 ) -> None:
+    """A narrow head reads only its wrench axes; at onset it has no say, from
+    direction_ramp_s on it names the direction alone (no contact geometry here)."""
     config = load_verify_config()
     model = train_verifier(trials, labels, config)
     ch, envelope = model.characteriser, model.detector.models.envelope
     assert ch is not None and envelope is not None
+    full = dataclasses.replace(ch, narrow={}, columns={})
+    ramp = config.direction_ramp_s
     tf = trial_features(trials[-1], config)
     x = evidence_features(tf, envelope.z(tf), ch.phases, float(tf.times[5]), tf.end)
+    assert ch.predict_from(x, None, 0.0) == full.predict_from(x, None, 0.0)
     for axis in ("x", "r"):
-        assert ch.directions[axis].forest.n_features_in_ == len(ch.columns[axis]) < len(x)
-        other = np.setdiff1d(np.arange(len(x)), ch.columns[axis])
+        narrow, cols = ch.narrow[axis], ch.columns[axis]
+        assert narrow.forest.n_features_in_ == len(cols) < len(x)
         moved = x.copy()
-        moved[other] += 7.0
-        want = ch.directions[axis].predict_proba(x[None, ch.columns[axis]])
-        got = ch.directions[axis].predict_proba(moved[None, ch.columns[axis]])
-        assert np.array_equal(got, want)
-        assert ch.predict_from(moved, None)[2][axis] == ch.predict_from(x, None)[2][axis]
+        moved[np.setdiff1d(np.arange(len(x)), cols)] += 7.0
+        assert np.array_equal(
+            narrow.predict_proba(moved[None, cols]), narrow.predict_proba(x[None, cols])
+        )
+        alone = narrow.classes[int(np.argmax(narrow.predict_proba(x[None, cols])[0]))]
+        assert ch.predict_from(moved, None, ramp)[2][axis] == alone
+        assert ch.predict_from(x, None, 2 * ramp)[2][axis] == alone
     plain = dataclasses.replace(config, direction_channels={})
     every = train_verifier(trials, labels, plain).characteriser
-    assert every is not None and not every.columns
-    assert every.directions["x"].forest.n_features_in_ == len(x)
+    assert every is not None and not every.narrow and not every.columns
 
 
 def test_the_sign_table_ties_signs_to_a_class_only_when_unambiguous() -> None:
@@ -283,32 +289,37 @@ def test_the_sign_table_ties_signs_to_a_class_only_when_unambiguous() -> None:
     assert table == {("+", "0", "0"): "slip_x"}
 
 
-def test_direction_signs_pick_which_deviation_the_class_head_names() -> None:
-    """Real forests on two features: the class by the first, the signs by the second; where
-    the class head names one deviation and the signs another, the signs' class is named and
-    takes the class head's probability for it."""
+def test_direction_signs_weigh_in_on_which_deviation_is_named() -> None:
+    """Real forests on two features: the class by the first, the signs by the second. Where
+    the class head names one deviation and the direction heads are sure of another's signs,
+    that one is named and takes the class head's probability for its pick; where they cannot
+    tell, or the class head names no deviation, the class head's pick stands."""
     rng = np.random.default_rng(5)
-    X = rng.uniform(-3, 3, size=(300, 2))
+    X = rng.uniform(-3, 3, size=(400, 2))
     klass = ["dev_a" if a > 1 else "dev_b" if a > 0 else "jam" for a in X[:, 0]]
     pos = X[:, 1] > 0
+    noisy = pos ^ (np.abs(X[:, 1]) < 0.5) & (rng.random(len(X)) < 0.5)  # no sign near 0
     config = dataclasses.replace(load_verify_config(), contact_weights={}, direction_channels={})
     directions = {
-        "x": ForestHead.fit(X, ["+" if p else "0" for p in pos], 10),
-        "y": ForestHead.fit(X, ["0" if p else "-" for p in pos], 10),
-        "r": ForestHead.fit(X, ["0" if p else "+" for p in pos], 10),
+        "x": ForestHead.fit(X, ["+" if p else "0" for p in noisy], 20),
+        "y": ForestHead.fit(X, ["0" if p else "-" for p in noisy], 20),
+        "r": ForestHead.fit(X, ["0" if p else "+" for p in noisy], 20),
     }
     signs = {("0", "-", "+"): "dev_a", ("+", "0", "0"): "dev_b"}
-    ch = Characteriser((), ForestHead.fit(X, klass, 10), directions, config, signs=signs)
-    alone = dataclasses.replace(ch, config=dataclasses.replace(config, compose_deviation=False))
+    ch = Characteriser((), ForestHead.fit(X, klass, 20), directions, config, signs=signs)
+    alone = dataclasses.replace(ch, config=dataclasses.replace(config, direction_weight=0.0))
+    late = config.direction_ramp_s
     for row, head_says, named in (
-        ([2.5, 2.0], "dev_a", "dev_b"),  # signs + 0 0: dev_b
-        ([2.5, -2.0], "dev_a", "dev_a"),  # signs 0 - +: dev_a, as the class head says
-        ([-2.5, 2.0], "jam", "jam"),  # not a deviation: the signs do not rename it
+        ([2.5, 2.5], "dev_a", "dev_b"),  # sure of + 0 0: dev_b
+        ([2.5, -2.5], "dev_a", "dev_a"),  # sure of 0 - +: dev_a, as the class head says
+        ([2.5, 0.0], "dev_a", "dev_a"),  # unsure: the class head's pick
+        ([-2.5, 2.5], "jam", "jam"),  # not a deviation: the signs do not rename it
     ):
         x = np.array(row)
-        first, p_head, _ = alone.predict_from(x, None)
-        cls, probs, _ = ch.predict_from(x, None)
-        assert first == head_says and cls == named
+        first, p_head, _ = alone.predict_from(x, None, late)
+        assert ch.predict_from(x, None, 0.0)[0] == first  # at onset the signs have no say
+        cls, probs, _ = ch.predict_from(x, None, late)
+        assert first == head_says and cls == named, row
         assert probs[cls] == max(probs.values()) == p_head[head_says]
         assert probs[head_says] == p_head[cls]
         assert sum(probs.values()) == pytest.approx(1.0)
@@ -453,10 +464,10 @@ def test_verifier_file_refuses_tampering(
         write_safe_npz(bad, edited, arrays)
         with pytest.raises(InputError, match=match):
             load_verifier(bad)
-    # ... whose direction head reads other columns, or whose sign table names no known class
+    # ... whose narrow direction head reads other columns, or whose sign table names no class
     cols = dict(arrays, **{"columns.x": arrays["columns.x"][1:]})
     write_safe_npz(bad, header, cols)
-    with pytest.raises(InputError, match="the x head reads other columns"):
+    with pytest.raises(InputError, match="the narrow x head reads other columns"):
         load_verifier(bad)
     edited = json.loads(json.dumps(header))
     edited["characteriser"]["signs"] = [["0", "-", "+", "no_such_class"]]

@@ -12,10 +12,11 @@ touched (`contact_geometry`), each through a second forest of its own: a Mondria
 split feature in proportion to its range, so among a hundred envelope features a 2 mm shift of
 the contact point would seldom be chosen. Evidence without a touch gives that forest no vote.
 
-A direction head given channels (`direction_channels`: x reads Fx and My, yaw Mz) reads only
-those wrench axes of the envelope, not what the controller did next on the others, which changes
-with the slip's size. When the class head names a deviation class, the direction heads' signs
-pick which one (`compose_deviation`), by the sign-to-class table of the training labels.
+An axis given channels (`direction_channels`: x Fx and My, yaw Mz) has a second, narrow
+direction head reading only those wrench axes, not what the controller did next on the others,
+which changes with the slip's size; it takes over from the head reading all six as the evidence
+grows (`direction_ramp_s`). When the class head names a deviation class, the direction heads'
+signs weigh in on which one (`direction_weight`), through the training labels' sign table.
 """
 
 from __future__ import annotations
@@ -292,14 +293,16 @@ class Characteriser:
     `contact`: per head with a contact weight, a forest on contact geometry, trained on the
     evidence where the part touched, whose probabilities weigh `config.contact_weights[head]`
     in that head's when the evidence touched (empty: a view without wrench, or no weights).
-    `columns`: per direction head reading only some wrench axes, its evidence columns
-    (`channel_columns`); `signs`: the training labels' direction signs -> class (`sign_table`)."""
+    `narrow`: per axis with channels, a direction head reading only its `columns` of the
+    evidence (`channel_columns`); `signs`: the training labels' direction signs -> class
+    (`sign_table`)."""
 
     phases: tuple[str, ...]
     failure: ForestHead
     directions: dict[str, ForestHead]
     config: VerifyConfig
     contact: dict[str, ForestHead] = field(default_factory=dict)
+    narrow: dict[str, ForestHead] = field(default_factory=dict)
     columns: dict[str, np.ndarray] = field(default_factory=dict)
     signs: dict[tuple[str, ...], str] = field(default_factory=dict)
 
@@ -342,9 +345,10 @@ class Characteriser:
             for axis, channels in config.direction_channels.items()
             if view.reads_wrench and axis in targets
         }
-        heads = {
-            h: ForestHead.fit(Xa[rows][:, columns[h]] if h in columns else Xa[rows], t, trees, seed)
-            for h, (rows, t) in targets.items()
+        heads = {h: ForestHead.fit(Xa[rows], t, trees, seed) for h, (rows, t) in targets.items()}
+        narrow = {
+            h: ForestHead.fit(Xa[targets[h][0]][:, cols], targets[h][1], trees, seed)
+            for h, cols in columns.items()
         }
         contact_forests: dict[str, ForestHead] = {}
         for h, (rows, t) in targets.items():
@@ -356,7 +360,7 @@ class Characteriser:
                 contact_forests[h] = ForestHead.fit(G, [c for _, c in touched], trees, seed + 1)
         failure = heads.pop(FAILURE)
         signs = sign_table([label for _, label, _ in failures]) if heads else {}
-        return cls(phases, failure, heads, config, contact_forests, columns, signs)
+        return cls(phases, failure, heads, config, contact_forests, narrow, columns, signs)
 
     def predict(
         self, tf: TrialFeatures, z: np.ndarray, onset: float, until: float, means: np.ndarray
@@ -365,20 +369,24 @@ class Characteriser:
         `means`: the ticks' mean wrench (`wrench_means`), read when there are contact forests."""
         x = evidence_features(tf, z, self.phases, onset, until)
         g = contact_geometry(tf.times, means, onset, until, self.config) if self.contact else None
-        return self.predict_from(x, g)
+        return self.predict_from(x, g, until - onset)
 
     def predict_from(
-        self, x: np.ndarray, g: np.ndarray | None
+        self, x: np.ndarray, g: np.ndarray | None, span: float
     ) -> tuple[str, dict[str, float], dict[str, str]]:
         """(class, class probabilities, direction per axis) from evidence features `x`
-        (`evidence_features`) and contact geometry `g` (None: nothing touched; a non-finite
-        one, from overflowing wrench, is read as none)."""
+        (`evidence_features`) of `span` seconds since onset and contact geometry `g` (None:
+        nothing touched; a non-finite one, from overflowing wrench, is read as none)."""
         x = x[None, :]
         if g is not None and not np.all(np.isfinite(g)):
             g = None
+        ramp = min(max(span, 0.0) / self.config.direction_ramp_s, 1.0)
 
         def proba(name: str, head: ForestHead) -> np.ndarray:
-            p = head.predict_proba(x[:, self.columns[name]] if name in self.columns else x)[0]
+            p = head.predict_proba(x)[0]
+            if name in self.narrow:
+                narrow = self.narrow[name].proba_over(head.classes, x[:, self.columns[name]])
+                p = (1 - ramp) * p + ramp * narrow
             if g is not None and name in self.contact:
                 w = self.config.contact_weights[name]
                 p = (1 - w) * p + w * self.contact[name].proba_over(head.classes, g[None, :])
@@ -386,11 +394,25 @@ class Characteriser:
 
         p = proba(FAILURE, self.failure)
         probs = {c: float(v) for c, v in zip(self.failure.classes, p, strict=True)}
-        dirs = {a: h.classes[int(np.argmax(proba(a, h)))] for a, h in self.directions.items()}
+        direction_p = {
+            a: dict(zip(h.classes, proba(a, h), strict=True)) for a, h in self.directions.items()
+        }
+        dirs = {a: max(q, key=q.__getitem__) for a, q in direction_p.items()}
         named = self.failure.classes[int(np.argmax(p))]
-        if self.config.compose_deviation and named in self.signs.values():
-            composed = self.signs.get(tuple(dirs.get(a, "") for a in DIRECTION_AXES), named)
-            # the direction heads pick which deviation carries the class head's vote
-            probs[named], probs[composed] = probs[composed], probs[named]
-            named = composed
+        weight = self.config.direction_weight * ramp
+        if weight > 0 and named in self.signs.values():
+
+            def signs_p(key: tuple[str, ...]) -> float:
+                """How much the direction heads believe in the signs `key` (x, y, r)."""
+                found = [
+                    direction_p.get(a, {}).get(s, 0.0)
+                    for a, s in zip(DIRECTION_AXES, key, strict=True)
+                ]
+                return float(np.prod(found))
+
+            score = {cls: probs[cls] * signs_p(key) ** weight for key, cls in self.signs.items()}
+            best = max(score, key=score.__getitem__)
+            # the best deviation takes the class head's vote for its pick: still the most probable
+            probs[named], probs[best] = probs[best], probs[named]
+            named = best
         return named, probs, dirs

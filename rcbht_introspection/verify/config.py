@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -54,12 +55,18 @@ class VerifyConfig:
     direction_channels: dict[str, tuple[str, ...]] = field(
         default_factory=lambda: {"x": ("Fx", "My"), "r": ("Mz",)}, hash=False
     )
-    """Per deviation axis, the wrench axes its head's envelope evidence reads (an axis not
-    named reads all six): a slip in x pushes along x and tips about y; what the controller does
+    """Per deviation axis, the wrench axes a second, narrow direction head reads of the
+    envelope evidence: a slip in x pushes along x and tips about y; what the controller does
     next shows on every axis and changes with the slip's size (docs/verification.md)."""
-    compose_deviation: bool = True
-    """A deviation class named by the class head is renamed to the class the direction heads'
-    signs name, when the training labels tie those signs to one class."""
+    direction_weight: float = 2.0
+    """When the class head names a deviation class, the deviation classes of the training
+    labels' sign table are scored by the class head's probability times the direction heads'
+    probabilities of their signs to this power (times the ramp), and the best is named (0: the
+    class head's pick)."""
+    direction_ramp_s: float = 4.0
+    """The narrow direction heads (`direction_channels`) and `direction_weight` phase in
+    linearly over this much evidence since onset: at first the slip's own axes have not moved
+    yet, and the heads reading all six name the direction more often."""
     contact_s: float = 0.5
     """Contact geometry is read over the evidence's first contact_s ..."""
     contact_reference_s: float = 0.3
@@ -145,7 +152,11 @@ def check_verify_config(cfg: VerifyConfig) -> None:
                     f"unknown wrench axis {c!r} (known: {', '.join(WRENCH_AXES)})",
                     field=f"direction_channels.{axis}[{i}]",
                 )
-    for name in ("contact_s", "contact_reference_s"):
+    if not 0 <= cfg.direction_weight < math.inf:  # NaN too
+        raise InputError(
+            f"must be >= 0 and finite, got {cfg.direction_weight}", field="direction_weight"
+        )
+    for name in ("contact_s", "contact_reference_s", "direction_ramp_s"):
         if not getattr(cfg, name) > 0:  # NaN too
             raise InputError(f"must be > 0, got {getattr(cfg, name)}", field=name)
     if not 0 < cfg.mismatch_min_probability < 1:

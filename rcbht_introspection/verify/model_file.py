@@ -27,7 +27,7 @@ from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, Ti
 
 FORMAT = "rcbht-verifier"
 FORMAT_VERSION = 5
-"""5: direction heads reading some wrench axes, the sign-to-class table (4: contact forests trained on touching evidence only, weighed per head (3: contact-geometry
+"""5: narrow direction heads reading some wrench axes, the sign-to-class table (4: contact forests trained on touching evidence only, weighed per head (3: contact-geometry
 forests beside the class and x, y heads; 2: Mondrian heads; 1: logistic regressions)."""
 KIND = "verifier"
 
@@ -115,8 +115,12 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
             h, a = _head_parts(f"contact.{name}", head)
             header["characteriser"]["contact"][name] = h
             arrays.update(a)
-        header["characteriser"]["columns"] = sorted(ch.columns)
-        arrays.update({f"columns.{axis}": cols for axis, cols in ch.columns.items()})
+        header["characteriser"]["narrow"] = {}
+        for axis, head in ch.narrow.items():
+            h, a = _head_parts(f"narrow.{axis}", head)
+            header["characteriser"]["narrow"][axis] = h
+            arrays.update(a)
+            arrays[f"columns.{axis}"] = ch.columns[axis]
         header["characteriser"]["signs"] = [[*key, cls] for key, cls in ch.signs.items()]
     write_safe_npz(path, header, arrays)
     return path
@@ -194,14 +198,17 @@ def load_verifier(path: Path | str) -> VerifierModel:
                 {a: _head(f"direction.{a}", h, arrays) for a, h in c["directions"].items()},
                 config,
                 {n: _head(f"contact.{n}", h, arrays) for n, h in c["contact"].items()},
-                {a: np.asarray(arrays[f"columns.{a}"], dtype=int) for a in c["columns"]},
+                {a: _head(f"narrow.{a}", h, arrays) for a, h in c["narrow"].items()},
+                {a: np.asarray(arrays[f"columns.{a}"], dtype=int) for a in c["narrow"]},
                 {tuple(str(v) for v in row[:-1]): str(row[-1]) for row in c["signs"]},
             )
             evidence_width = ch.failure.forest.n_features_in_
             for axis, cols in ch.columns.items():
-                head = ch.directions[axis]
+                head = ch.narrow[axis]
+                if not set(head.classes) <= set(ch.directions[axis].classes):
+                    raise ValueError(f"the narrow {axis} head names other classes")
                 if cols.ndim != 1 or len(cols) != head.forest.n_features_in_:
-                    raise ValueError(f"the {axis} head reads other columns than it names")
+                    raise ValueError(f"the narrow {axis} head reads other columns than it names")
                 if len(cols) and (cols.min() < 0 or cols.max() >= evidence_width):
                     raise ValueError(f"the {axis} head names columns beyond the evidence")
             for key, cls in ch.signs.items():

@@ -213,7 +213,7 @@ class VerifierSession:
         if self.evidence is None or not self.evidence.count or self.model.characteriser is None:
             return verdict
         cls, probs, dirs = self.model.characteriser.predict_from(
-            self.evidence.features(), self.evidence.geometry(g)
+            self.evidence.features(), self.evidence.geometry(g), g - self.evidence.onset
         )
         return Verdict(
             **{
