@@ -27,8 +27,9 @@ from rcbht_introspection.verify.novelty import EnvelopeModel, NeighbourModel, Ti
 
 FORMAT = "rcbht-verifier"
 FORMAT_VERSION = 5
-"""5: narrow direction heads reading some wrench axes, the sign-to-class table (4: contact forests trained on touching evidence only, weighed per head (3: contact-geometry
-forests beside the class and x, y heads; 2: Mondrian heads; 1: logistic regressions)."""
+"""5: narrow direction heads reading some wrench axes and the sign-to-class table (4: contact
+forests trained on touching evidence only, weighed per head; 3: contact-geometry forests beside
+the class and x, y heads; 2: Mondrian heads; 1: logistic regressions)."""
 KIND = "verifier"
 
 
