@@ -248,7 +248,7 @@ def test_narrow_direction_heads_ignore_the_other_axes_and_phase_in(
     model = train_verifier(trials, labels, config)
     ch, envelope = model.characteriser, model.detector.models.envelope
     assert ch is not None and envelope is not None
-    full = dataclasses.replace(ch, narrow={}, columns={})
+    full = dataclasses.replace(ch, narrow={})
     ramp = config.direction_ramp_s
     tf = trial_features(trials[-1], config)
     x = evidence_features(tf, envelope.z(tf), ch.phases, float(tf.times[5]), tf.end)
@@ -464,9 +464,11 @@ def test_verifier_file_refuses_tampering(
         write_safe_npz(bad, edited, arrays)
         with pytest.raises(InputError, match=match):
             load_verifier(bad)
-    # ... whose narrow direction head reads other columns, or whose sign table names no class
-    cols = dict(arrays, **{"columns.x": arrays["columns.x"][1:]})
-    write_safe_npz(bad, header, cols)
+    # ... whose narrow direction head reads other columns than its config names, or whose sign
+    # table names no class
+    edited = json.loads(json.dumps(header))
+    edited["config"]["direction_channels"]["x"] = ["Fx"]
+    write_safe_npz(bad, edited, arrays)
     with pytest.raises(InputError, match="the narrow x head reads other columns"):
         load_verifier(bad)
     edited = json.loads(json.dumps(header))

@@ -294,8 +294,8 @@ class Characteriser:
     evidence where the part touched, whose probabilities weigh `config.contact_weights[head]`
     in that head's when the evidence touched (empty: a view without wrench, or no weights).
     `narrow`: per axis with channels, a direction head reading only its `columns` of the
-    evidence (`channel_columns`); `signs`: the training labels' direction signs -> class
-    (`sign_table`)."""
+    evidence (`channel_columns` of `config.direction_channels`, derived, not stored); `signs`:
+    the training labels' direction signs -> class (`sign_table`)."""
 
     phases: tuple[str, ...]
     failure: ForestHead
@@ -303,8 +303,15 @@ class Characteriser:
     config: VerifyConfig
     contact: dict[str, ForestHead] = field(default_factory=dict)
     narrow: dict[str, ForestHead] = field(default_factory=dict)
-    columns: dict[str, np.ndarray] = field(default_factory=dict)
     signs: dict[tuple[str, ...], str] = field(default_factory=dict)
+    columns: dict[str, np.ndarray] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        width = self.failure.forest.n_features_in_
+        self.columns = {
+            axis: channel_columns(width, len(self.phases), self.config.direction_channels[axis])
+            for axis in self.narrow
+        }
 
     @classmethod
     def fit(
@@ -360,7 +367,7 @@ class Characteriser:
                 contact_forests[h] = ForestHead.fit(G, [c for _, c in touched], trees, seed + 1)
         failure = heads.pop(FAILURE)
         signs = sign_table([label for _, label, _ in failures]) if heads else {}
-        return cls(phases, failure, heads, config, contact_forests, narrow, columns, signs)
+        return cls(phases, failure, heads, config, contact_forests, narrow, signs)
 
     def predict(
         self, tf: TrialFeatures, z: np.ndarray, onset: float, until: float, means: np.ndarray

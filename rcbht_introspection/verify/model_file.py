@@ -121,7 +121,6 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
             h, a = _head_parts(f"narrow.{axis}", head)
             header["characteriser"]["narrow"][axis] = h
             arrays.update(a)
-            arrays[f"columns.{axis}"] = ch.columns[axis]
         header["characteriser"]["signs"] = [[*key, cls] for key, cls in ch.signs.items()]
     write_safe_npz(path, header, arrays)
     return path
@@ -200,18 +199,14 @@ def load_verifier(path: Path | str) -> VerifierModel:
                 config,
                 {n: _head(f"contact.{n}", h, arrays) for n, h in c["contact"].items()},
                 {a: _head(f"narrow.{a}", h, arrays) for a, h in c["narrow"].items()},
-                {a: np.asarray(arrays[f"columns.{a}"], dtype=int) for a in c["narrow"]},
                 {tuple(str(v) for v in row[:-1]): str(row[-1]) for row in c["signs"]},
             )
-            evidence_width = ch.failure.forest.n_features_in_
             for axis, cols in ch.columns.items():
                 head = ch.narrow[axis]
                 if not set(head.classes) <= set(ch.directions[axis].classes):
                     raise ValueError(f"the narrow {axis} head names other classes")
-                if cols.ndim != 1 or len(cols) != head.forest.n_features_in_:
+                if len(cols) != head.forest.n_features_in_:
                     raise ValueError(f"the narrow {axis} head reads other columns than it names")
-                if len(cols) and (cols.min() < 0 or cols.max() >= evidence_width):
-                    raise ValueError(f"the {axis} head names columns beyond the evidence")
             for key, cls in ch.signs.items():
                 if len(key) != len(DIRECTION_AXES) or not set(key) <= set(DIRECTIONS):
                     raise ValueError(f"direction signs {list(key)} are not one of -, 0, + per axis")
