@@ -13,9 +13,12 @@ MSG_SOURCES := $(wildcard msg_defs/msg/*.msg msg_defs/srv/*.srv msg_defs/CMakeLi
 
 setup: $(VENV)/.pkg-stamp
 
-$(VENV)/.deps-stamp: requirements.txt requirements-ros.txt
+# requirements-peers.txt (the `peers` extra: hmmlearn, aeon) is resolved together with the rest,
+# so its pins and requirements.txt's cannot disagree.
+$(VENV)/.deps-stamp: requirements.txt requirements-ros.txt requirements-peers.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt $(PIP_QUIET)
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt \
+	  -r requirements-peers.txt $(PIP_QUIET)
 	touch $@
 
 $(VENV)/.msgs-stamp: $(VENV)/.deps-stamp $(MSG_SOURCES)

@@ -20,6 +20,9 @@ setup(
         (f"lib/{package_name}", ["scripts/segmenter_node", "scripts/classifier_node", "scripts/verifier_node"]),
     ],
     install_requires=["setuptools"],
+    # peer baselines (rcbht_introspection/peers/): the pins of requirements-peers.txt, which
+    # `make setup` installs; the core and the nodes never import them
+    extras_require={"peers": ["hmmlearn==0.3.3", "aeon==1.6.0"]},
     python_requires=">=3.10",
     zip_safe=True,
     maintainer="rcbht_introspection maintainers",
