@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pytest
-from conftest import require
+from conftest import HIRO, require
 from ros_support import have
 
 from rcbht_introspection.cli import main
@@ -570,3 +570,132 @@ def test_a_wrench_without_header_takes_receive_times(
     assert (
         f"{path}, field /raw_wrench: no header to take a stamp from (use --stamps receive)" in err
     )
+
+
+IDLE = 9
+OUT_MAP = f"{IDLE}=-,0=reach,1=grasp,2=insert"
+
+
+def idle_recording(seed: int, n_before: int = 40, n_after: int = 25) -> Recording:
+    """recording(seed) with the robot idle (tag IDLE, outside the task) for its first `n_before`
+    samples and its last `n_after`, as a state machine's idle state before and after the task."""
+    rec = recording(seed, n_end=n_after)
+    tags = [IDLE if t == len(PHASES) else t for t in rec.tags]
+    tags[:n_before] = [IDLE] * n_before
+    return replace(rec, tags=tags)
+
+
+def test_phases_outside_the_task_are_cut_and_counted(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`--phase-map 9=-`: the idle before the first task phase and after the last one is cut and
+    counted; idle is neither a sub-task nor the end phase, so the trial ends where it begins."""
+    from rcbht_introspection.io.bags import read_trial_bag
+
+    rec = idle_recording(11)
+    bag = write_tagged_ros1(tmp_path / "idle.bag", rec)
+    out = tmp_path / "out"
+    assert import_cli(str(bag), "--out", str(out), *WS.split(), *TAG.split()[:2],
+                      "--phase-map", OUT_MAP) == 0  # fmt: skip
+    printed = capsys.readouterr().out
+    assert "end out_of_task" in printed and "40 outside the task before the first phase" in printed
+    trial = read_trial_bag(out / "idle.mcap")
+    assert trial.phases == PHASES
+    first, end = rec.first(0), len(rec.tags) - 25  # the first idle sample after the task ends it
+    np.testing.assert_array_equal(trial.wrench["R"], rec.wrench[first : end + 1])
+    report = trial.metadata["import"]
+    assert isinstance(report, dict) and report["time_origin_ns"] == rec.stamps[first]
+    assert report["arms"]["R"]["before_first_phase"] == 40
+    assert report["arms"]["R"]["after_end"] == 24
+    assert report["phase_counts"] == {
+        "events": len(rec.tags),
+        "repeated": end - first - len(PHASES),
+        "empty": 0,
+        "after_end": 24,
+        "end": "out_of_task",
+        "before_first_phase": 40,
+        "resumed": 0,
+    }
+    assert report["subtasks"] == list(PHASES) and report["findings"] == []
+
+
+def test_idle_as_the_end_phase_names_the_way_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Idle at the start mapped to the end phase leaves no sub-task: the error says how to name a
+    value outside the task. A task that resumes after idle ends at the idle, with a warning."""
+    rec = idle_recording(12)
+    bag = write_tagged_ros1(tmp_path / "idle.bag", rec)
+    args = [*WS.split(), *TAG.split()[:2]]
+    as_end = f"{IDLE}=,0=reach,1=grasp,2=insert"
+    assert import_cli(str(bag), "--out", str(tmp_path / "o1"), *args, "--phase-map", as_end) == 2
+    err = capsys.readouterr().err
+    assert "no sub-task phase before the end phase" in err and "--phase-map 0=-" in err
+    pause = rec.first(1) + 50
+    rec.tags[pause : pause + 30] = [IDLE] * 30  # idle inside grasp, then grasp and insert go on
+    bag = write_tagged_ros1(tmp_path / "pause.bag", rec)
+    out = tmp_path / "o2"
+    assert import_cli(str(bag), "--out", str(out), *args, "--phase-map", OUT_MAP) == 0
+    err = capsys.readouterr().err
+    resumed = sum(t != IDLE for t in rec.tags[pause:])
+    assert f"warning: pause.mcap: {resumed} task phase events after the trial's end" in err
+    from rcbht_introspection.io.bags import read_trial_bag
+
+    trial = read_trial_bag(out / "pause.mcap")
+    assert trial.phases == ("reach", "grasp") and len(trial.time) == pause - rec.first(0) + 1
+    report = trial.metadata["import"]
+    assert isinstance(report, dict) and report["phase_counts"]["resumed"] == resumed
+
+
+def test_a_phase_csv_and_string_names_outside_the_task(tmp_path: Path) -> None:
+    """A CSV row `-` and a name given in out_of_task (`idle`) are both outside the task."""
+    from rcbht_introspection.io.bag_import import ImportOptions, read_foreign_bag
+
+    bag, _ = tagged_bag(tmp_path, seed=13)
+    csv = tmp_path / "p.csv"
+    csv.write_text("time,phase\n0,-\n0.5,reach\n2.25,grasp\n4.0,insert\n6.5,idle\n7.0,idle\n")
+    options = ImportOptions(
+        wrench={"R": "/tag_multimodal.wrench_stamped"}, phase_csv=csv, out_of_task=("idle",)
+    )
+    trial, report = read_foreign_bag(bag, options)
+    assert trial.phases == PHASES and trial.end_time <= 6.0 + 0.013
+    counts = report.phase_counts
+    assert (counts.end, counts.before_first_phase, counts.after_end) == ("out_of_task", 1, 1)
+    with pytest.raises(InputError, match="idle' cannot end the trial and be outside the task"):
+        read_foreign_bag(bag, replace(options, end_phases=("idle",)))
+
+
+BAXTER = HIRO.parent / "baxter_pick_and_place"
+BAXTER_MAP = "0=-,1=approach,2=grasp,5=lift,3=transport,4=place"
+"""The Baxter state machine's tags (birl_baxter_tasks): 1 to the hover pose above the object, 2
+down and close the gripper, 5 back up, 3 to the hover pose above the target, 4 down, open, up."""
+
+
+@pytest.mark.shared_data
+def test_the_baxter_bags_import_with_one_command_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The real Baxter ROS 1 bags (idle tag 0 before and after the task): one command line, no
+    CSV, imports all 19; `rcbht evaluate` on session_a then learns the five sub-tasks."""
+    import json
+
+    require(BAXTER.is_dir(), f"Baxter bags not found at {BAXTER}")
+    bags = sorted(BAXTER.glob("session_a/*.bag")) + sorted(BAXTER.glob("other_sessions/*.bag"))
+    assert len(bags) == 19
+    out = tmp_path / "baxter"
+    assert import_cli(*map(str, bags), "--out", str(out), *WS.split(), "--phase",
+                      "/tag_multimodal.tag", "--phase-map", BAXTER_MAP) == 0  # fmt: skip
+    printed = capsys.readouterr().out
+    assert (
+        printed.count("phases approach > grasp > lift > transport > place (end out_of_task") == 19
+    )
+    assert len(list(out.glob("*.mcap"))) == 19
+    session_a = sorted(out.glob("s??.mcap"))
+    result = tmp_path / "eval.json"
+    assert main(["evaluate", *map(str, session_a), "--permutations", "4", "--json", str(result),
+                 "--no-progress"]) == 0  # fmt: skip
+    curve = json.loads(result.read_text())
+    assert curve["task"]["subtasks"] == ["approach", "grasp", "lift", "transport", "place"]
+    assert curve["n_trials"] == 15
+    assert curve["steady_state_accuracy"]["mean"] >= 0.95
+    assert curve["duration_baseline"]["mean"] < curve["steady_state_accuracy"]["mean"] - 0.2

@@ -134,7 +134,17 @@ Stamps: a stamp equal to the previous kept one is dropped (the first is kept), o
 dropped, a zero header stamp is dropped; samples before the first phase and after the end phase
 are cut. Each count is printed and stored in the bag's trial info ("import"). Phase events: an
 event naming the running phase continues it, a phase without samples is dropped, events after
-the end phase are not used. Details: docs/bags.md, "Importing bags from another robot".
+the end phase are not used.
+
+Outside the task: a phase named '-' (--phase-map 0=-) or listed in --out-of-task, e.g. the robot
+idle before and after the task, is neither a sub-task nor the end phase. Such events before the
+first task phase are skipped; the first one after a task phase ends the trial there. Details:
+docs/bags.md, "Importing bags from another robot".
+
+Example (the Baxter pick-and-place bags: tag 0 idle, then 1, 2, 5, 3, 4):
+  rcbht bag import session_a/*.bag other_sessions/*.bag --out baxter/ \
+      --wrench /tag_multimodal.wrench_stamped --phase /tag_multimodal.tag \
+      --phase-map 0=-,1=approach,2=grasp,5=lift,3=transport,4=place
 """
 
 
@@ -170,7 +180,15 @@ def _register_import(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--phase-map",
         metavar="V=NAME,...",
-        help="names of integer phase values, e.g. 0=reach,1=grasp,3= (empty name: the end)",
+        help="names of integer phase values, e.g. 0=-,1=reach,2=grasp,3= (empty name: the end; "
+        "'-': outside the task)",
+    )
+    p.add_argument(
+        "--out-of-task",
+        default="",
+        metavar="NAME,...",
+        help="phase names outside the task (string phases or a phase CSV), e.g. idle; "
+        "'-' always is",
     )
     p.add_argument(
         "--end-phase",
@@ -249,6 +267,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         phase=args.phase or "",
         phase_map=parse_phase_map(args.phase_map) if args.phase_map is not None else None,
         phase_csv=args.phase_csv,
+        out_of_task=tuple(n.strip() for n in args.out_of_task.split(",") if n.strip()),
         end_phases=end_phases,
         stamps=args.stamps,
         rate_hz=args.rate,

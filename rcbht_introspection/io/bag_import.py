@@ -4,7 +4,8 @@ rosbags' AnyReader reads both formats and registers the message definitions the 
 custom message types decode without the robot's packages. The wrench of each arm comes from a
 topic or field path (msg_paths), the sub-task phases from a string or integer field or a CSV file
 (phase_events), the samples follow one counted stamp policy (wrench_samples) and are cut to
-the phases: from the first phase's start to the end phase. Every count goes into an ImportReport,
+the phases: from the first task phase's start to the end phase or the first phase outside the
+task (`-`) after it. Every count goes into an ImportReport,
 which the output bag's trial info stores as its "import" record.
 """
 
@@ -30,11 +31,13 @@ from rcbht_introspection.io.msg_paths import (
     topic_listing,
 )
 from rcbht_introspection.io.phase_events import (
+    OUT,
     PhaseCounts,
     PhaseCsv,
-    cut_at_end,
+    TaskSpan,
     phase_name,
     read_phase_csv,
+    task_span,
     usable_phases,
 )
 from rcbht_introspection.io.sensor_checks import frozen_runs
@@ -59,7 +62,10 @@ class ImportOptions:
     phase: str = ""
     """Topic or field path of a string phase, or of an integer phase (with phase_map)."""
     phase_map: Mapping[int, str] | None = None
-    """Integer phase value -> name ('' = the end phase)."""
+    """Integer phase value -> name ('' = the end phase, '-' = outside the task)."""
+    out_of_task: tuple[str, ...] = ()
+    """Phase names outside the task (besides '-'), e.g. ('idle',): skipped before the first task
+    phase; the first after a task phase ends the trial."""
     phase_csv: Path | None = None
     """A `time,phase` or `stamp,phase` CSV file instead of `phase`."""
     end_phases: tuple[str, ...] = (END_PHASE,)
@@ -88,6 +94,9 @@ class ImportOptions:
                 raise InputError(f"not an arm name (letters, digits, _): {arm!r}", field="--wrench")
         if not self.end_phases or not all(n.strip() for n in self.end_phases):
             raise InputError("the end phase needs a name", field="--end-phase")
+        both = sorted(set(self.end_phases) & {OUT, *self.out_of_task})
+        if both:
+            raise InputError(f"{both[0]!r} cannot end the trial and be outside the task")
 
 
 def parse_wrench_specs(items: Sequence[str]) -> dict[str, str]:
@@ -150,9 +159,11 @@ class ImportReport:
                 + (f", dropped {', '.join(dropped)}" if dropped else "")
             )
         p = self.phase_counts
+        outside = f"{p.before_first_phase} outside the task before the first phase, "
         parts.append(
             f"phases {' > '.join(self.subtasks)} (end {p.end}; {p.events} events, "
-            f"{p.repeated} repeated, {p.empty} empty, {p.after_end} after the end)"
+            f"{p.repeated} repeated, {p.empty} empty, "
+            f"{outside if p.before_first_phase else ''}{p.after_end} after the end)"
         )
         if self.rate_hz is not None:
             parts.append(f"resampled at {self.rate_hz:g} Hz")
@@ -292,7 +303,8 @@ def _named_events(
     if not timed:
         raise InputError("no phase events", bag, field=source)
     named = [
-        (s, phase_name(v, options.phase_map, options.end_phases, bag, source)) for s, v in timed
+        (s, phase_name(v, options.phase_map, options.end_phases, bag, source, options.out_of_task))
+        for s, v in timed
     ]
     for _, name in named:
         if name == END_PHASE:  # not an end phase here, but the end phase of the written bag
@@ -302,6 +314,63 @@ def _named_events(
                 field=source,
             )
     return named, source
+
+
+def _span(named: list[tuple[int, str | None]], bag: Path, source: str) -> TaskSpan:
+    """The task span of the named events; none is an error."""
+    span = task_span(named)
+    if not span.phases:
+        what = "end phase" if span.end == "source" else "end of the phase events"
+        raise InputError(
+            f"no sub-task phase before the {what} (name values outside the task '-', e.g. "
+            "--phase-map 0=-, or in --out-of-task)",
+            bag,
+            field=source,
+        )
+    return span
+
+
+def _cut(
+    samples: Mapping[str, WrenchSamples], span: TaskSpan, options: ImportOptions, bag: Path
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, ArmCounts]]:
+    """(stamps ns, wrench per arm, counts per arm) of the samples inside the span."""
+    cut: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    counts: dict[str, ArmCounts] = {}
+    for arm, s in samples.items():
+        stamps_ns, values, counts[arm] = s.cut(span.phases[0][0], span.end_ns, arm, bag)
+        cut[arm] = (stamps_ns, values)
+    stamp_ns, wrench = align(cut, options.rate_hz, bag)
+    return stamp_ns, wrench, counts
+
+
+def _check_task(options: ImportOptions, names: Sequence[str], bag: Path, source: str) -> None:
+    """Every phase name is a sub-task of the --task file, if there is one."""
+    if options.task is None:
+        return
+    strangers = sorted(set(names) - set(options.task.subtasks))
+    if strangers:
+        raise InputError(
+            f"phases {strangers} are not sub-tasks of the task ({', '.join(options.task.subtasks)})",
+            bag,
+            field=source,
+        )
+
+
+def _findings(
+    options: ImportOptions, time: np.ndarray, wrench: Mapping[str, np.ndarray], span: TaskSpan
+) -> tuple[str, ...]:
+    """Frozen-sensor runs of the written wrench and task phases after the end, one line each."""
+    found = [
+        run.describe(arm, len(time))
+        for arm in sorted(wrench)
+        for run in (frozen_runs(time, wrench[arm], *options.frozen) if options.frozen else ())
+    ]
+    if span.resumed:
+        found.append(
+            f"{span.resumed} task phase events after the trial's end ({span.end}): the task went "
+            "on after it, and those phases are not in this trial"
+        )
+    return tuple(found)
 
 
 def read_foreign_bag(path: Path | str, options: ImportOptions) -> tuple[Trial, ImportReport]:
@@ -318,46 +387,30 @@ def read_foreign_bag(path: Path | str, options: ImportOptions) -> tuple[Trial, I
         samples, events = _read(reader, arms, phase, stamps, path)
     first_ns = samples[next(iter(arms))].stamps[0]
     named, source = _named_events(options, phase, events, table, first_ns, path)
-    phases, end_ns, after_end = cut_at_end(named)
-    if not phases:
-        raise InputError("no sub-task phase before the end phase", path, field=source)
-    cut: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    counts: dict[str, ArmCounts] = {}
-    for arm, s in samples.items():
-        stamps_ns, values, counts[arm] = s.cut(phases[0][0], end_ns, arm, path)
-        cut[arm] = (stamps_ns, values)
-    stamp_ns, wrench = align(cut, options.rate_hz, path)
+    span = _span(named, path, source)
+    stamp_ns, wrench, counts = _cut(samples, span, options, path)
     origin = int(stamp_ns[0])
     time = (stamp_ns - origin) / _NS
-    starts = [(max(0.0, (s - origin) / _NS), name) for s, name in phases]
+    starts = [(max(0.0, (s - origin) / _NS), name) for s, name in span.phases]
     usable, repeated, empty = usable_phases(starts, float(time[-1]))
     if not usable:
         raise InputError("no phase has samples", path, field=source)
-    if options.task is not None:
-        strangers = sorted({n for _, n in usable} - set(options.task.subtasks))
-        if strangers:
-            raise InputError(
-                f"phases {strangers} are not sub-tasks of the task ({', '.join(options.task.subtasks)})",
-                path,
-                field=source,
-            )
+    _check_task(options, [n for _, n in usable], path, source)
+    phase_counts = PhaseCounts(
+        len(named), repeated, empty, span.after_end, span.end, span.before_first_phase,
+        span.resumed,
+    )  # fmt: skip
     report = ImportReport(
         bag=str(path),
         stamps=stamps,
         arms=counts,
         phase_source=source,
-        phase_counts=PhaseCounts(
-            len(named), repeated, empty, after_end, "source" if end_ns is not None else "appended"
-        ),
+        phase_counts=phase_counts,
         subtasks=tuple(n for _, n in usable),
         samples=len(time),
         rate_hz=options.rate_hz,
         time_origin_ns=origin,
-        findings=tuple(
-            run.describe(arm, len(time))
-            for arm in sorted(wrench)
-            for run in (frozen_runs(time, wrench[arm], *options.frozen) if options.frozen else ())
-        ),
+        findings=_findings(options, time, wrench, span),
     )
     metadata: dict[str, object] = {"import": report.to_dict()}
     if options.task is not None:
@@ -389,9 +442,12 @@ def import_bags(
     A phase CSV folder holds `<name>.csv` for each bag; a CSV file serves a single bag only."""
     inputs = [Path(p) for p in paths]
     names = [import_name(p) for p in inputs]
-    twice = sorted({n for n in names if names.count(n) > 1})
-    if twice:
-        raise InputError(f"several input bags are named {', '.join(twice)}: one output each")
+    for i, name in enumerate(names):
+        if name in names[:i]:
+            first = inputs[names.index(name)]
+            raise InputError(
+                f"two input bags are named {name!r}, {first} and {inputs[i]}: one output each"
+            )
     csv = options.phase_csv
     if csv is not None and not csv.is_dir() and len(inputs) > 1:
         raise InputError("one CSV for several bags: give a folder of <bag name>.csv", csv)

@@ -1,10 +1,12 @@
 """Sub-task phases of an imported bag: integer phase maps, phase CSV files, and the rule that
 turns timed phase events into a trial's phases.
 
-Rule (docs/bags.md, "Importing bags from another robot"): events are taken in order; an end
-phase ends the trial and later events are counted, not used; an event naming the phase that is
-running continues it (counted as repeated); a phase with no sample (the next one starts at the
-same time, or it starts at or after the last sample) is dropped and counted.
+Rule (docs/bags.md, "Importing bags from another robot"): events are taken in order; events
+outside the task (OUT) before the first task phase are skipped and counted; the trial then runs
+until an end phase or the next event outside the task, and later events are counted, not used; an
+event naming the phase that is running continues it (counted as repeated); a phase with no sample
+(the next one starts at the same time, or it starts at or after the last sample) is dropped and
+counted.
 """
 
 from __future__ import annotations
@@ -19,6 +21,9 @@ from rcbht_introspection.errors import InputError
 
 END = ""
 """Name of a phase-map value that means 'the end phase' (written `3=`)."""
+OUT = "-"
+"""Name of a phase outside the task (written `0=-`; a string phase or CSV row `-`): the robot idle
+before or after the task. It is neither a sub-task nor the end phase."""
 CSV_COLUMNS = {"time": False, "stamp": True}
 """First column of a phase CSV -> its times are absolute stamps (else seconds from the bag's
 first wrench sample)."""
@@ -102,21 +107,28 @@ def phase_name(
     end_phases: Collection[str],
     bag: Path | str,
     source: str,
+    out_of_task: Collection[str] = (),
 ) -> str | None:
-    """The phase a source value names (None: an end phase); an integer goes through the map."""
+    """The phase a source value names: None for an end phase, OUT for a phase outside the task
+    (`-`, or a name in `out_of_task`); an integer goes through the map."""
     if phase_map is not None:
         assert isinstance(value, int)
         if value not in phase_map:
             named = ", ".join(map(str, sorted(phase_map)))
             raise InputError(
-                f"value {value} has no name in --phase-map (named: {named})", bag, field=source
+                f"value {value} has no name in --phase-map (named: {named}); a value outside "
+                "the task is named '-'",
+                bag,
+                field=source,
             )
         name = phase_map[value]
-        return None if name == END or name in end_phases else name
-    name = str(value).strip()
-    if not name:
-        raise InputError("an empty phase name", bag, field=source)
-    return None if name in end_phases else name
+    else:
+        name = str(value).strip()
+        if not name:
+            raise InputError("an empty phase name", bag, field=source)
+    if name == OUT or name in out_of_task:
+        return OUT
+    return None if name == END or name in end_phases else name
 
 
 @dataclass(frozen=True)
@@ -130,19 +142,51 @@ class PhaseCounts:
     empty: int
     """Phases without a sample: dropped."""
     after_end: int
-    """Events after the end phase: not used."""
+    """Events after the end (the end phase or the first event outside the task): not used."""
     end: str
-    """'source': the source named the end phase; 'appended': it ends at the last sample."""
+    """'source': the source named the end phase; 'out_of_task': the first event outside the
+    task after a task phase ended the trial; 'appended': it ends at the last sample."""
+    before_first_phase: int = 0
+    """Events outside the task before the first task phase: skipped."""
+    resumed: int = 0
+    """Task phase events among those after the end (the task went on after an end phase or an
+    out-of-task stretch): not in the trial."""
 
 
-def cut_at_end(
-    events: Sequence[tuple[int, str | None]],
-) -> tuple[list[tuple[int, str]], int | None, int]:
-    """(phases before the first end event, its stamp or None, number of events after it)."""
+@dataclass(frozen=True)
+class TaskSpan:
+    """The phase events of the trial: from the first task phase to the end."""
+
+    phases: list[tuple[int, str]]
+    """(stamp, name) of each task phase event before the end."""
+    end_ns: int | None
+    """Stamp of the event that ended the trial; None: no event did (it ends at the last sample)."""
+    end: str
+    """PhaseCounts.end: 'source', 'out_of_task' or 'appended'."""
+    before_first_phase: int
+    """Events outside the task before the first task phase."""
+    after_end: int
+    resumed: int
+
+
+def task_span(events: Sequence[tuple[int, str | None]]) -> TaskSpan:
+    """The span of (stamp, name) events whose name is a task phase, None (an end phase) or OUT:
+    events outside the task are skipped until the first task phase, after which an end phase or
+    an event outside the task ends the trial. An end phase before any task phase leaves no
+    phases."""
+    phases: list[tuple[int, str]] = []
+    before = 0
     for i, (stamp, name) in enumerate(events):
-        if name is None:
-            return [(s, n) for s, n in events[:i] if n is not None], stamp, len(events) - i - 1
-    return [(s, n) for s, n in events if n is not None], None, 0
+        if name == OUT and not phases:
+            before += 1
+            continue
+        if name is None or name == OUT:
+            rest = events[i + 1 :]
+            resumed = sum(n is not None and n != OUT for _, n in rest)
+            end = "source" if name is None else "out_of_task"
+            return TaskSpan(phases, stamp, end, before, len(rest), resumed)
+        phases.append((stamp, name))
+    return TaskSpan(phases, None, "appended", before, 0, 0)
 
 
 def _merge_repeats(phases: list[tuple[float, str]]) -> tuple[list[tuple[float, str]], int]:
