@@ -18,6 +18,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "rcbht_introspection.commands.taxonomy",  # label, conformance, plot
     "rcbht_introspection.commands.calibrate",  # calibrate
     "rcbht_introspection.commands.learn",  # train, evaluate
+    "rcbht_introspection.commands.audit",  # audit (data quality before training)
     "rcbht_introspection.commands.live",  # live-eval (offline live /task_state replay)
     "rcbht_introspection.commands.sim",  # sim, sim-report
     "rcbht_introspection.commands.ros",  # bag, replay-eval
