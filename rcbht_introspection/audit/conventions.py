@@ -173,10 +173,11 @@ def describe_agreement(found: Finding, agreement: Agreement) -> str:
     if renamed:
         return "classifier check: " + "; ".join(renamed)
     if agreeing:
-        low, high = 100 * min(agreeing), 100 * max(agreeing)
+        low, high = f"{100 * min(agreeing):.0f}", f"{100 * max(agreeing):.0f}"
+        shares = low if low == high else f"{low}-{high}"
         return (
             f"classifier check: each side's model gives the other side's {', '.join(found.subtasks)} "
-            f"time its own label ({low:.0f}-{high:.0f} %)"
+            f"time its own label ({shares} %)"
         )
     return ""
 

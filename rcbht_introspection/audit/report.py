@@ -199,6 +199,8 @@ def report_text(report: AuditReport) -> list[str]:
     named = "; ".join(
         f"{'|'.join(f.subtasks)} between {' and '.join(f.between or ())}" for f in conventions
     )
-    lines.append(f"convention changes: {len(conventions)}" + (f" ({named})" if named else ""))
+    lines.append(
+        f"convention changes: {len(conventions)} ({named})" if named else "convention changes: none"
+    )
     lines.append(f"findings: {len(report.findings)}")
     return lines

@@ -51,7 +51,7 @@ def _durations_panel(ax: Axes, report: dict[str, Any], index: dict[str, int], su
         a, b = index[part["first"]], index[part["last"]]
         ax.hlines(part["median_s"], a - 0.4, b + 0.4, color="#55a868", linewidth=1.5)
     _change_lines(ax, report, index, subtask)
-    if np.all(y > 0):
+    if np.all(y > 0) and y.max() > 3 * y.min():  # log where lengths differ by factors
         ax.set_yscale("log")
     ax.set_ylabel(f"{subtask} (s)", fontsize=8)
     ax.grid(alpha=0.3)
