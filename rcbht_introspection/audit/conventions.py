@@ -174,10 +174,10 @@ def describe_agreement(found: Finding, agreement: Agreement) -> str:
         return "classifier check: " + "; ".join(renamed)
     if agreeing:
         low, high = f"{100 * min(agreeing):.0f}", f"{100 * max(agreeing):.0f}"
-        shares = low if low == high else f"{low}-{high}"
+        agreed = low if low == high else f"{low}-{high}"
         return (
             f"classifier check: each side's model gives the other side's {', '.join(found.subtasks)} "
-            f"time its own label ({shares} %)"
+            f"time its own label ({agreed} %)"
         )
     return ""
 
