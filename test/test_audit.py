@@ -166,7 +166,7 @@ def test_the_changepoint_test_holds_its_level_under_the_null() -> None:
 def test_binary_segmentation_finds_two_steps() -> None:
     steps = np.r_[np.zeros(15), np.full(15, 3.0), np.full(15, 6.0)]
     x = steps + np.random.default_rng(2).normal(0, 0.3, 45)
-    changes = find_changes(x, 0.01, 999, 0)
+    changes = find_changes(x, 0.01, 999, 0).changes
     assert [c.split for c in changes] == [15, 30]
     assert all(c.p_adjusted <= 0.01 for c in changes)
 

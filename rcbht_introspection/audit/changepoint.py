@@ -107,6 +107,22 @@ def best_split(x: np.ndarray, min_segment: int = MIN_SEGMENT) -> int:
     return best
 
 
+@dataclass(frozen=True)
+class WholeTest:
+    """The test of the whole sequence, significant or not: how far from a change it is."""
+
+    statistic: float
+    p_value: float
+    p_adjusted: float
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    changes: list[Change]
+    whole: WholeTest | None
+    """None: too few values to test (fewer than 2 x min_segment)."""
+
+
 def find_changes(
     x: np.ndarray,
     alpha: float,
@@ -115,16 +131,18 @@ def find_changes(
     tests: int = 1,
     min_segment: int = MIN_SEGMENT,
     accept: Callable[[int, int, int], bool] | None = None,
-) -> list[Change]:
+) -> Segmentation:
     """Binary segmentation of `x` ((n,) or (n, c)): every split whose p-value times `tests`
     (Bonferroni over the sequences tested together) is at most `alpha`, and that `accept(start,
-    split, stop)` keeps (e.g. an effect above the measurement's resolution), in order.
+    split, stop)` keeps (e.g. an effect above the measurement's resolution), in order; and the
+    test of the whole sequence.
 
     Each tested part draws its permutations from a generator seeded by (`seed`, start, stop),
     so the result does not depend on the order of the work."""
     values = _as_channels(x)
     seeds = [seed] if isinstance(seed, int) else list(seed)
     found: list[Change] = []
+    whole: WholeTest | None = None
     todo = [(0, len(values))]
     while todo:
         start, stop = todo.pop()
@@ -134,6 +152,8 @@ def find_changes(
         part = values[start:stop]
         statistic, p = permutation_p(part, permutations, rng, min_segment)
         p_adjusted = min(1.0, p * tests)
+        if start == 0 and stop == len(values):
+            whole = WholeTest(statistic, p, p_adjusted)
         if p_adjusted > alpha:
             continue
         split = start + best_split(_robust_scaled(part), min_segment)
@@ -141,7 +161,7 @@ def find_changes(
             continue
         found.append(Change(start, split, stop, statistic, p, p_adjusted))
         todo.extend([(start, split), (split, stop)])
-    return sorted(found, key=lambda c: c.split)
+    return Segmentation(sorted(found, key=lambda c: c.split), whole)
 
 
 def _robust_scaled(x: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import norm
 
-from rcbht_introspection.audit.changepoint import Change, find_changes, robust_sigma
+from rcbht_introspection.audit.changepoint import Change, WholeTest, find_changes, robust_sigma
 from rcbht_introspection.audit.facts import TrialFacts
 from rcbht_introspection.audit.settings import AuditSettings
 from rcbht_introspection.task import Task
@@ -66,6 +66,8 @@ class SubtaskDurations:
     parts: list[Part] = field(default_factory=list)
     outliers: list[tuple[int, float, float]] = field(default_factory=list)
     """(index, robust z, Bonferroni p) of each outlying duration."""
+    whole: WholeTest | None = None
+    """The changepoint test of all its trials (None: too few)."""
 
 
 def between(r: SubtaskDurations, c: DurationChange) -> tuple[str, str]:
@@ -110,7 +112,7 @@ def analyse_subtask(
     def resolved(start: int, split: int, stop: int) -> bool:
         return abs(np.median(d[split:stop]) - np.median(d[start:split])) > period * (1 + 1e-9)
 
-    changes = find_changes(
+    segmentation = find_changes(
         x,
         settings.alpha,
         settings.permutations,
@@ -119,6 +121,8 @@ def analyse_subtask(
         settings.min_segment,
         resolved,
     )
+    changes = segmentation.changes
+    result.whole = segmentation.whole
     for c in changes:
         before = make_part(d, c.start, c.split, period)
         after = make_part(d, c.split, c.stop, period)
@@ -167,12 +171,20 @@ def analyse_durations(
     return results
 
 
+def whole_dict(whole: WholeTest | None) -> dict[str, float] | None:
+    """The test of a whole sequence as JSON (None: too few trials to test)."""
+    if whole is None:
+        return None
+    return {"z": whole.statistic, "p": whole.p_value, "p_bonferroni": whole.p_adjusted}
+
+
 def durations_dict(results: list[SubtaskDurations]) -> dict[str, object]:
     """The JSON of the durations: per sub-task, its parts, changes and outliers."""
     out: dict[str, object] = {}
     for r in results:
         out[r.subtask] = {
             "trials": len(r.trials),
+            "test": whole_dict(r.whole),
             "median_s": float(np.median(r.seconds)) if r.seconds else None,
             "parts": [
                 {

@@ -138,7 +138,7 @@ def trial_dict(f: TrialFacts) -> dict[str, Any]:
         "name": f.name,
         "path": f.path,
         "phases": list(f.phases),
-        "durations_s": f.durations,
+        "durations_s": {name: round(d, 6) for name, d in f.durations.items()},
         "cut": f.cut,
         "samples": t.samples,
         "rate_hz": t.rate_hz,
@@ -172,8 +172,36 @@ def report_dict(report: AuditReport) -> dict[str, Any]:
         "durations": durations_dict(report.durations),
         "sessions": sessions_dict(report.sessions),
         "findings": [f.to_dict() for f in report.findings],
+        "notes": notes(report),
         "summary": counts,
     }
+
+
+def whole_set_lines(report: AuditReport) -> list[str]:
+    """The test of every whole sequence, significant or not (how far from a change each is)."""
+    tested = [(r.subtask, r.whole) for r in report.durations if r.whole is not None]
+    durations = ", ".join(f"{name} z {w.statistic:.2f} p {w.p_adjusted:.2g}" for name, w in tested)
+    whole = report.sessions.whole
+    level = f"z {whole.statistic:.2f} p {whole.p_value:.2g}" if whole else "too few trials"
+    return [
+        f"changepoint test of all trials, durations (Bonferroni x{len(tested)}): "
+        + (durations or "too few trials"),
+        f"changepoint test of all trials, free-motion level: {level}; "
+        f"sessions: {len(report.sessions.changes) + 1}",
+    ]
+
+
+def notes(report: AuditReport) -> list[str]:
+    """What limits the audit itself: permutations too few for any change to be significant."""
+    tested = sum(1 for r in report.durations if r.whole is not None)
+    smallest = max(tested, 1) / (1 + report.settings.permutations)
+    if smallest > report.settings.alpha:
+        return [
+            f"with {report.settings.permutations} permutations the smallest p-value after "
+            f"Bonferroni x{tested} is {smallest:.2g}, above alpha {report.settings.alpha}: no "
+            "change of the durations can be found; give more --permutations"
+        ]
+    return []
 
 
 def report_text(report: AuditReport) -> list[str]:
@@ -188,7 +216,8 @@ def report_text(report: AuditReport) -> list[str]:
         f"{len(facts)} trial(s), {len(report.unreadable)} unreadable; sub-tasks "
         f"{' > '.join(report.task.subtasks)}; {rate}",
         f"median durations: {medians}",
-        f"sessions: {len(report.sessions.changes) + 1}",
+        *whole_set_lines(report),
+        *(f"note: {note}" for note in notes(report)),
     ]
     for f in report.findings:
         lines.append(f"[{f.kind}] {f.message}")

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rcbht_introspection.audit.changepoint import Change, find_changes, robust_sigma
+from rcbht_introspection.audit.changepoint import Change, WholeTest, find_changes, robust_sigma
 from rcbht_introspection.audit.facts import TrialFacts
 from rcbht_introspection.audit.findings import Finding, sigmas
 from rcbht_introspection.audit.settings import AuditSettings
@@ -49,6 +49,8 @@ class Sessions:
     channels: list[str]
     levels: np.ndarray
     changes: list[tuple[Change, list[ChannelShift]]] = field(default_factory=list)
+    whole: WholeTest | None = None
+    """The test of all the trials' levels (None: too few trials)."""
 
 
 def level_matrix(facts: list[TrialFacts]) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -89,7 +91,7 @@ def analyse_sessions(facts: list[TrialFacts], settings: AuditSettings) -> Sessio
     result = Sessions([f.name for f in facts], channels, levels)
     if not channels:
         return result
-    changes = find_changes(
+    segmentation = find_changes(
         levels,
         settings.alpha,
         settings.permutations,
@@ -97,7 +99,8 @@ def analyse_sessions(facts: list[TrialFacts], settings: AuditSettings) -> Sessio
         1,
         settings.min_segment,
     )
-    result.changes = [(c, channel_shifts(levels, channels, floor, c)) for c in changes]
+    result.whole = segmentation.whole
+    result.changes = [(c, channel_shifts(levels, channels, floor, c)) for c in segmentation.changes]
     return result
 
 
@@ -160,4 +163,6 @@ def sessions_dict(sessions: Sessions) -> dict[str, object]:
                     "level": [float(v) for v in median],
                 }
             )
-    return {"channels": sessions.channels, "sessions": parts}
+    whole = sessions.whole
+    test = {"z": whole.statistic, "p": whole.p_value} if whole else None
+    return {"channels": sessions.channels, "test": test, "sessions": parts}
