@@ -115,7 +115,8 @@ def test_state_time_past_the_data_is_a_named_error(tmp_path: Path) -> None:
     write_trial(trial, tmp_path / "trial")
     (tmp_path / "trial" / "R_State.dat").write_text("0\n0.9\n0.5\n")
     with pytest.raises(InputError, match=r"R_State\.dat, line 3, field state time: state time out"):
-        read_trial(tmp_path / "trial")
+        read_trial(tmp_path / "trial", strict=True)
+    assert read_trial(tmp_path / "trial").state_times == (0.0, 0.9)  # by default: dropped
 
 
 def test_trial_folder_with_a_task_file_and_model_carry_the_names(tmp_path: Path) -> None:

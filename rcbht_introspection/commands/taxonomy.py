@@ -12,7 +12,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_or_default
-from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy, warn
+from rcbht_introspection.commands.sensor import (
+    add_repeated_stamps,
+    add_strict,
+    repeated_policy,
+    report_dropped,
+    warn,
+)
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.taxonomy.words import Level
 
@@ -35,6 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_taxonomy_options(p)
     p.add_argument("--engine", choices=ENGINES, default="batch")
     add_repeated_stamps(p)
+    add_strict(p)
     p.set_defaults(func=run_label)
 
     p = subparsers.add_parser(
@@ -44,6 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_taxonomy_options(p)
     p.add_argument("--engine", choices=ENGINES, default="batch")
     add_repeated_stamps(p)
+    add_strict(p)
     p.set_defaults(func=run_conformance)
 
     p = subparsers.add_parser("plot", help="draw a trial's primitives, MCs and LLBs per axis")
@@ -67,9 +75,12 @@ def labeller(engine: str, config: TaxonomyConfig) -> Callable:
 # --------------------------------------------------------------------------- label
 
 
-def checked_reader(command: str, args: argparse.Namespace) -> Callable[[Path], Trial]:
-    """folder -> Trial read with `--repeated-stamps`, its sensor findings printed as warnings."""
-    from rcbht_introspection.io.hiro import read_trial
+def checked_reader(
+    command: str, args: argparse.Namespace, dropped: dict[str, int] | None = None
+) -> Callable[[Path], Trial]:
+    """folder -> Trial read with `--repeated-stamps` and `--strict`, its sensor findings printed
+    as warnings and the state times dropped from it counted in `dropped` (trial -> count)."""
+    from rcbht_introspection.io.hiro import dropped_state_times, read_trial
     from rcbht_introspection.io.sensor_checks import trial_findings
     from rcbht_introspection.live.intake import load_intake_config
 
@@ -77,8 +88,10 @@ def checked_reader(command: str, args: argparse.Namespace) -> Callable[[Path], T
     policy = repeated_policy(args)
 
     def read(folder: Path) -> Trial:
-        trial = read_trial(folder, policy)
+        trial = read_trial(folder, policy, args.strict)
         warn(command, folder.name, trial_findings(trial, checks.frozen_samples, checks.frozen_s))
+        if dropped is not None:
+            dropped[trial.name] = dropped_state_times(trial)
         return trial
 
     return read
@@ -90,7 +103,8 @@ def run_label(args: argparse.Namespace) -> int:
     from rcbht_introspection.io.words_jsonl import write_jsonl
 
     label = labeller(args.engine, taxonomy_or_default(args))
-    read = checked_reader("label", args)
+    dropped: dict[str, int] = {}
+    read = checked_reader("label", args, dropped)
     trials = find_trials(args.trials)
     if not trials:
         raise InputError("no trial folders found", path=args.trials[0])
@@ -100,6 +114,7 @@ def run_label(args: argparse.Namespace) -> int:
             write_trial_words(words, args.out / folder.name)
         else:
             write_jsonl(words, args.out / folder.name / "words.jsonl")
+    report_dropped("label", dropped)
     print(f"labelled {len(trials)} trial(s) into {args.out}")
     return 0
 
@@ -113,7 +128,8 @@ def run_conformance(args: argparse.Namespace) -> int:
 
     config = taxonomy_or_default(args)
     label = labeller(args.engine, config)
-    read = checked_reader("conformance", args)
+    dropped: dict[str, int] = {}
+    read = checked_reader("conformance", args, dropped)
     trials = [t for t in find_trials([args.dataset]) if (t / "golden").is_dir()]
     if not trials:
         raise InputError("no trial folders with golden/ outputs", path=args.dataset)
@@ -130,6 +146,7 @@ def run_conformance(args: argparse.Namespace) -> int:
             else:
                 where = f"{folder.name} {arm}" if two_arms else folder.name
                 failures.append(f"{where} {level.value} {axis}: {diff}")
+    report_dropped("conformance", dropped)
     for line in failures:
         print(f"DIFF {line}")
     names = {Level.COMPOSITION: "Composites", Level.BEHAVIOR: "llBehaviors"}

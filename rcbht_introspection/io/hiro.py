@@ -1,6 +1,9 @@
 """HIRO trial folders: `<arm>_Torques.dat` (t Fx Fy Fz Mx My Mz) and `<arm>_State.dat`.
 
 Malformed input raises InputError naming file, line and field (the CLI prints it, exit code 2).
+State times policy (docs/your-robot.md): a state time after the trial's last sample, or before
+the previous kept one, is dropped and recorded in the trial's metadata (DROPPED_STATE_TIMES);
+with `strict` each is an error, as is any other malformed line.
 """
 
 from __future__ import annotations
@@ -10,7 +13,10 @@ import json
 import math
 import os
 import warnings
+from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 import yaml
@@ -28,6 +34,9 @@ META_FILE = "meta.json"
 """A trial folder's metadata (the simulator's draw); read_trial takes its failure record."""
 FAILURE_RECORD = "failure"
 """Metadata key of a failed trial's class, onset and deviation (verify/labels.py)."""
+DROPPED_STATE_TIMES = "dropped_state_times"
+"""Metadata key of the state times read_trial dropped: a list of {line, time, reason}."""
+DropReason = Literal["after the data", "out of order"]
 
 COLUMNS: tuple[str, ...] = ("t", *AXES)
 ARMS: tuple[str, ...] = ("L", "R")
@@ -96,11 +105,50 @@ def read_table(
     return np.asarray(rows, dtype=np.float64)
 
 
-def read_state(path: Path) -> tuple[float, ...]:
-    """Sub-task start times, one per line (may be empty for failed trials)."""
-    if not path.is_file():
-        return ()
-    times: list[float] = []
+@dataclass(frozen=True)
+class DroppedStateTime:
+    """A state time the policy dropped: its line in the state file, value and why."""
+
+    line: int
+    time: float
+    reason: DropReason
+
+    def to_dict(self) -> dict[str, object]:
+        return {"line": self.line, "time": self.time, "reason": self.reason}
+
+
+@dataclass(frozen=True)
+class StateTimes:
+    """The state times of a state file that the policy kept, and the ones it dropped."""
+
+    times: tuple[float, ...] = ()
+    positions: tuple[int, ...] = ()
+    """Position of each kept time among the file's times (0: its first): the sub-task it starts."""
+    dropped: tuple[DroppedStateTime, ...] = ()
+    path: Path | None = None
+
+    def named(self, task: Task) -> tuple[tuple[float, ...], tuple[str, ...]]:
+        """(times, phase names) of the kept times for `task`; names () mean HIRO's in order. A
+        time keeps the sub-task of its position, so a time dropped in the middle leaves that
+        sub-task out instead of shifting the names after it; times beyond the task's sub-tasks
+        are left out, except HIRO's own extra lines when nothing is missing."""
+        if self.positions == tuple(range(len(self.times))):
+            if task == HIRO_TASK:
+                return self.times, ()
+            times = self.times[: len(task.subtasks)]
+            return times, task.subtasks[: len(times)]
+        named = [
+            (t, task.subtasks[p])
+            for t, p in zip(self.times, self.positions, strict=True)
+            if p < len(task.subtasks)
+        ]
+        return tuple(t for t, _ in named), tuple(n for _, n in named)
+
+
+def _state_lines(path: Path) -> list[tuple[int, float]]:
+    """(line number, value) of every non-empty line; a line that is not a finite number is an
+    error."""
+    values: list[tuple[int, float]] = []
     for lineno, line in enumerate(path.read_text().splitlines(), start=1):
         if not line.strip():
             continue
@@ -110,17 +158,74 @@ def read_state(path: Path) -> tuple[float, ...]:
             raise InputError(
                 f"not a number: {line.strip()!r}", path, lineno, "state time"
             ) from None
-        if not math.isfinite(value) or (times and value < times[-1]):
-            raise InputError(f"state time out of order: {value}", path, lineno, "state time")
+        if not math.isfinite(value):
+            raise InputError(f"not a finite number: {value}", path, lineno, "state time")
+        values.append((lineno, value))
+    return values
+
+
+def read_state_times(path: Path, end_time: float | None = None, strict: bool = False) -> StateTimes:
+    """Sub-task start times of a state file, one per line (none: an empty StateTimes; failed
+    trials may have none). A time after `end_time` (the last sample) or before the previous kept
+    time is dropped and recorded; with `strict` a time out of order is an error, and one after
+    the data is kept (read_trial's check_phases names it)."""
+    if not path.is_file():
+        return StateTimes(path=path)
+    times: list[float] = []
+    positions: list[int] = []
+    dropped: list[DroppedStateTime] = []
+    for position, (lineno, value) in enumerate(_state_lines(path)):
+        reason: DropReason | None = None
+        if times and value < times[-1]:
+            if strict:
+                raise InputError(f"state time out of order: {value}", path, lineno, "state time")
+            reason = "out of order"
+        if not strict and end_time is not None and value > end_time:
+            reason = "after the data"
+        if reason is not None:
+            dropped.append(DroppedStateTime(lineno, value, reason))
+            continue
         times.append(value)
-    return tuple(times)
+        positions.append(position)
+    return StateTimes(tuple(times), tuple(positions), tuple(dropped), path)
 
 
-def read_trial(folder: Path | str, repeated: RepeatedPolicy | None = None) -> Trial:
+def read_state(path: Path) -> tuple[float, ...]:
+    """Sub-task start times, one per line (may be empty for failed trials); a time out of order
+    is an error (read_state_times drops it instead)."""
+    return read_state_times(path, strict=True).times
+
+
+def trial_state_times(folder: Path, end_time: float | None, strict: bool = False) -> StateTimes:
+    """The state times of a trial folder: R_State.dat's, else L_State.dat's (read_state_times)."""
+    state = read_state_times(folder / "R_State.dat", end_time, strict)
+    if state.times or state.dropped:
+        return state
+    return read_state_times(folder / "L_State.dat", end_time, strict)
+
+
+def dropped_state_times(trial: Trial) -> int:
+    """How many state times read_trial dropped from the trial (0 for a bag or a clean folder)."""
+    dropped = trial.metadata.get(DROPPED_STATE_TIMES)
+    return len(dropped) if isinstance(dropped, list) else 0
+
+
+def dropped_per_trial(counts: Mapping[str, int]) -> dict[str, object]:
+    """The JSON record of dropped state times: {"total": n, "per_trial": {trial: n}} (trials
+    that dropped none left out)."""
+    per_trial = {name: n for name, n in counts.items() if n}
+    return {"total": sum(per_trial.values()), "per_trial": per_trial}
+
+
+def read_trial(
+    folder: Path | str, repeated: RepeatedPolicy | None = None, strict: bool = False
+) -> Trial:
     """Load a HIRO trial folder (one arm R_*, or two arms L_* and R_*).
 
     A time equal to the previous row's is an error, or with a `repeated` policy resolved by
-    io/sensor_checks (counts per arm in metadata['repeated_stamps'])."""
+    io/sensor_checks (counts per arm in metadata['repeated_stamps']). A state time after the
+    last sample or out of order is dropped (metadata[DROPPED_STATE_TIMES]; StateTimes.named
+    keeps the others' sub-tasks), or with `strict` an error."""
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError("not a trial folder", folder)
@@ -141,17 +246,15 @@ def read_trial(folder: Path | str, repeated: RepeatedPolicy | None = None) -> Tr
         wrench[arm] = np.ascontiguousarray(values)
     if time is None:
         raise InputError("no R_Torques.dat or L_Torques.dat", folder)
-    state = read_state(folder / "R_State.dat")
-    if not state:
-        state = read_state(folder / "L_State.dat")
+    states = trial_state_times(folder, float(time[-1]), strict)
     outcome_file = folder / "outcome.txt"
     outcome = outcome_file.read_text().strip() if outcome_file.is_file() else "success"
     task = task_of_folder(folder)
-    phases: tuple[str, ...] = ()
+    state, phases = states.named(task)  # HIRO's own trials keep their extra lines
     metadata: dict[str, object] = {REPEATED_METADATA: repeats} if repeats else {}
-    if task != HIRO_TASK:  # HIRO's own trials keep the default names (and their extra lines)
-        state = state[: len(task.subtasks)]
-        phases = task.subtasks[: len(state)]
+    if states.dropped:
+        metadata[DROPPED_STATE_TIMES] = [d.to_dict() for d in states.dropped]
+    if task != HIRO_TASK:
         metadata["task"] = task.to_dict()  # a bag written from the trial keeps its task
     failure = _failure_record(folder / META_FILE)
     if failure is not None:

@@ -10,7 +10,13 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample, split_words
 from rcbht_introspection.io import bags
 from rcbht_introspection.io.conformance import golden_roots
-from rcbht_introspection.io.hiro import ARMS, find_trials, read_state, read_trial
+from rcbht_introspection.io.hiro import (
+    ARMS,
+    dropped_state_times,
+    find_trials,
+    read_trial,
+    trial_state_times,
+)
 from rcbht_introspection.io.rcbht_format import read_trial_words
 from rcbht_introspection.io.sensor_checks import RepeatedPolicy, trial_findings
 from rcbht_introspection.io.trial import Trial
@@ -37,6 +43,9 @@ class TrialSamples:
     """Problems of the trial's wrench (io/sensor_checks.trial_findings), when it was read."""
     repeated: RepeatedPolicy | None = None
     """The repeated-stamp policy the trial was read with (None: a repeated stamp is an error)."""
+    dropped_state_times: int = 0
+    """State times the trial's state file had after its last sample or out of order: dropped
+    (io/hiro.read_state_times)."""
 
     @property
     def complete(self) -> bool:
@@ -83,6 +92,7 @@ def load_trial_samples(
     repeated: RepeatedPolicy | None = None,
     checks: IntakeConfig | None = None,
     stream: StreamConfig | None = None,
+    strict: bool = False,
 ) -> TrialSamples:
     """Samples of one trial folder or bag; `words` picks golden files or the batch engine.
 
@@ -92,6 +102,8 @@ def load_trial_samples(
     and 'golden' is an error.
     A trial whose wrench is read (engine words) is resolved with the `repeated` stamp policy
     and checked for a frozen sensor (thresholds of `checks`, default IntakeConfig()).
+    A state time after the last sample or out of order is dropped and counted, or with `strict`
+    an error (io/hiro.read_state_times).
     """
     if words not in WORD_SOURCES:
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
@@ -113,35 +125,52 @@ def load_trial_samples(
     if path.is_file() and bags.is_bag(path):
         if words == "golden":
             raise InputError("a bag has no golden label files; use words='engine'", path)
-        trial = bags.read_trial_bag(path, repeated=repeated)
-        samples = split_words(
-            label_trial(trial, taxonomy, stream),
-            trial.state_times,
-            trial.end_time,
-            trial.phase_names,
-        )
-        found = tuple(trial_findings(trial, checks.frozen_samples, checks.frozen_s))
-        task = task_of_bag(trial)
-        return TrialSamples(trial.name, path, "engine", samples, task, found, repeated)
+        return _bag_samples(path, taxonomy, repeated, checks, stream)
     golden = list(golden_roots(path).items()) if reference else []
     if words == "golden" or (words == "auto" and golden):
         if not golden:
             raise InputError("no golden/ label files in this trial", path)
-        trial_words = TrialWords(name=path.name)
-        for arm, root in golden:
-            part = read_trial_words(root, name=path.name, arm=arm, levels=LEVELS)
-            trial_words.words.update(part.words)
-        state = read_state(path / "R_State.dat") or read_state(path / "L_State.dat")
-        task = task_of_folder(path)
-        samples = split_words(trial_words, state, _end_time(path), task.subtasks)
-        return TrialSamples(path.name, path, "golden", samples, task)
-    trial = read_trial(path, repeated)
+        return _golden_samples(path, golden, strict)
+    trial = read_trial(path, repeated, strict)
     samples = split_words(
         label_trial(trial, taxonomy, stream), trial.state_times, trial.end_time, trial.phase_names
     )
     found = tuple(trial_findings(trial, checks.frozen_samples, checks.frozen_s))
     task = task_of_folder(path)
-    return TrialSamples(trial.name, path, "engine", samples, task, found, repeated)
+    dropped = dropped_state_times(trial)
+    return TrialSamples(trial.name, path, "engine", samples, task, found, repeated, dropped)
+
+
+def _bag_samples(
+    path: Path,
+    taxonomy: TaxonomyConfig | None,
+    repeated: RepeatedPolicy | None,
+    checks: IntakeConfig,
+    stream: StreamConfig | None,
+) -> TrialSamples:
+    """Samples of a trial bag, with engine words."""
+    trial = bags.read_trial_bag(path, repeated=repeated)
+    samples = split_words(
+        label_trial(trial, taxonomy, stream), trial.state_times, trial.end_time, trial.phase_names
+    )
+    found = tuple(trial_findings(trial, checks.frozen_samples, checks.frozen_s))
+    return TrialSamples(trial.name, path, "engine", samples, task_of_bag(trial), found, repeated)
+
+
+def _golden_samples(path: Path, golden: list[tuple[str, Path]], strict: bool) -> TrialSamples:
+    """Samples of a trial folder from its golden label files (the words of the original code)."""
+    trial_words = TrialWords(name=path.name)
+    for arm, root in golden:
+        part = read_trial_words(root, name=path.name, arm=arm, levels=LEVELS)
+        trial_words.words.update(part.words)
+    end = _end_time(path)
+    states = trial_state_times(path, end, strict)
+    task = task_of_folder(path)
+    times, phases = states.named(task)
+    samples = split_words(trial_words, times, end, phases or task.subtasks)
+    return TrialSamples(
+        path.name, path, "golden", samples, task, dropped_state_times=len(states.dropped)
+    )
 
 
 def task_of_bag(trial: Trial) -> Task:
@@ -152,12 +181,15 @@ def task_of_bag(trial: Trial) -> Task:
     return task_of_names([trial.phase_names])
 
 
-def read_any_trial(path: Path | str, repeated: RepeatedPolicy | None = None) -> Trial:
+def read_any_trial(
+    path: Path | str, repeated: RepeatedPolicy | None = None, strict: bool = False
+) -> Trial:
     """A trial folder or a bag (as find_inputs lists them) as a Trial (`repeated`: the
-    repeated-stamp policy, None: a repeated stamp is an error)."""
+    repeated-stamp policy, None: a repeated stamp is an error; `strict`: a state time after the
+    data or out of order is an error instead of dropped, io/hiro.read_trial)."""
     if Path(path).is_file() and bags.is_bag(path):
         return bags.read_trial_bag(path, repeated=repeated)
-    return read_trial(path, repeated)
+    return read_trial(path, repeated, strict)
 
 
 def find_inputs(paths: Iterable[Path | str]) -> list[Path]:
@@ -190,12 +222,14 @@ def load_trials(
     repeated: RepeatedPolicy | None = None,
     checks: IntakeConfig | None = None,
     stream: StreamConfig | None = None,
+    strict: bool = False,
 ) -> list[TrialSamples]:
     """Per-trial samples of every trial under `paths` (see load_trial_samples)."""
     if words not in WORD_SOURCES:
         raise InputError(f"unknown word source {words!r} (known: {', '.join(WORD_SOURCES)})")
     return [
-        load_trial_samples(p, words, taxonomy, repeated, checks, stream) for p in find_inputs(paths)
+        load_trial_samples(p, words, taxonomy, repeated, checks, stream, strict)
+        for p in find_inputs(paths)
     ]
 
 
