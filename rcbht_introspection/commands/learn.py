@@ -6,12 +6,17 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, get_args
 
 from rcbht_introspection.commands.options import add_taxonomy_options, taxonomy_from_args
-from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy, warn
+from rcbht_introspection.commands.sensor import (
+    add_repeated_stamps,
+    add_strict,
+    repeated_policy,
+    report_dropped,
+    warn,
+)
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
@@ -173,6 +178,7 @@ def _common(parser: argparse.ArgumentParser) -> None:
         "word final within its finality bound); not reference: golden files are not used",
     )
     add_repeated_stamps(parser)
+    add_strict(parser)
 
 
 def forest_budget(args: argparse.Namespace, n_estimators: int = 100) -> dict[str, int | None]:
@@ -195,18 +201,34 @@ def load_checked(
     args: argparse.Namespace, command: str, taxonomy: TaxonomyConfig | None
 ) -> list[TrialSamples]:
     """The trials of `args.inputs` (engine words labelled by `taxonomy`) read with
-    `--repeated-stamps`; their sensor findings printed as warnings (frozen-sensor thresholds from
-    config/segmenter.yaml's intake section)."""
+    `--repeated-stamps` and `--strict`; their sensor findings printed as warnings (frozen-sensor
+    thresholds from config/segmenter.yaml's intake section), and the state times dropped from
+    them summarised (commands/sensor.report_dropped)."""
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.live.intake import load_intake_config
     from rcbht_introspection.taxonomy.stream import load_stream_config
 
     policy = repeated_policy(args)
     stream = load_stream_config(args.stream_profile)
-    trials = load_trials(args.inputs, args.words, taxonomy, policy, load_intake_config(), stream)
+    trials = load_trials(
+        args.inputs, args.words, taxonomy, policy, load_intake_config(), stream, args.strict
+    )
     for trial in trials:
         warn(command, trial.trial, trial.findings)
+    report_dropped(command, dropped_counts(trials))
     return trials
+
+
+def dropped_counts(trials: list[TrialSamples]) -> dict[str, int]:
+    """Trial -> state times dropped from it (the JSON's input.dropped_state_times)."""
+    return {t.trial: t.dropped_state_times for t in trials}
+
+
+def input_record(trials: list[TrialSamples]) -> dict[str, Any]:
+    """The JSON's `input` record: what the reading dropped from the trials."""
+    from rcbht_introspection.io.hiro import dropped_per_trial
+
+    return {"dropped_state_times": dropped_per_trial(dropped_counts(trials))}
 
 
 def run_train(args: argparse.Namespace) -> int:
@@ -263,6 +285,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     n_estimators = 100 if args.n_estimators is None else args.n_estimators
     budget = forest_budget(args, n_estimators)
     trials = load_checked(args, "evaluate", taxonomy)
+    read = input_record(trials)
     if args.trials is not None:
         trials = trials[: args.trials]
     protocol = Protocol(
@@ -290,12 +313,18 @@ def run_evaluate(args: argparse.Namespace) -> int:
         lambda progress: evaluate(trials, protocol, progress=progress),
     )
     result["datasets"] = [str(p) for p in args.inputs]
+    result["input"] = read
     result["words"] = args.words
     result["stream_profile"] = args.stream_profile
     if args.classifier == "mondrian":
         result["forest_budget"] = budget
     result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"
-    result = _clean(result)
+    _report_curve(args, _clean(result))
+    return 0
+
+
+def _report_curve(args: argparse.Namespace, result: dict[str, Any]) -> None:
+    """Print the learning curve's summary; write its JSON and plot when asked."""
     ss, base = result["steady_state_accuracy"], result["duration_baseline"]
     print(
         f"{args.classifier}/{args.encoding}: steady state {ss['mean']:.4f} +- {ss['std']:.4f}, "
@@ -313,14 +342,10 @@ def run_evaluate(args: argparse.Namespace) -> int:
         from rcbht_introspection.plots.learning_curve import plot_learning_curve
 
         plot_learning_curve([result], args.plot, title=", ".join(p.name for p in args.inputs))
-    return 0
 
 
 def run_prequential(args: argparse.Namespace) -> int:
     """`rcbht evaluate --protocol prequential`: online teaching scored against batch models."""
-    from dataclasses import replace
-
-    from rcbht_introspection.learn.online import load_teach_config
     from rcbht_introspection.learn.prequential import (
         PERMUTATIONS,
         PrequentialProtocol,
@@ -334,31 +359,14 @@ def run_prequential(args: argparse.Namespace) -> int:
             "as its reference); drop --classifier",
             field="--classifier",
         )
-    refused = {
-        "--augment-prefixes (use the teach config's prefixes)": bool(args.augment_prefixes),
-        "--live-augment": args.live_augment,
-        "--live-score": args.live_score,
-        "--validation-trials (use --held-out)": args.validation_trials is not None,
-        "--plot": args.plot is not None,
-        "--no-variant": args.no_variant,
-    }
-    for option, given in refused.items():
-        if given:
-            raise InputError(f"{option} does not apply to --protocol prequential")
+    _refuse_curve_options(args)
     permutations = PERMUTATIONS if args.permutations is None else args.permutations
     if permutations < 0:
         raise InputError("--permutations must be at least 0", field="--permutations")
-    teach = load_teach_config(args.teach_config)
-    teach = replace(
-        teach,
-        encoding=args.encoding or teach.encoding,
-        n_estimators=teach.n_estimators if args.n_estimators is None else args.n_estimators,
-        warmup_windows=teach.warmup_windows if args.warmup_windows is None else args.warmup_windows,
-        max_nodes=teach.max_nodes if args.max_nodes is None else args.max_nodes,
-        max_points=teach.max_points if args.max_points is None else args.max_points,
-    )
+    teach = _teach_settings(args)
     taxonomy = taxonomy_from_args(args)
     trials = load_checked(args, "evaluate", taxonomy)
+    read = input_record(trials)
     if args.trials is not None:
         trials = trials[: args.trials]
     protocol = PrequentialProtocol(
@@ -372,6 +380,7 @@ def run_prequential(args: argparse.Namespace) -> int:
         lambda progress: prequential(trials, protocol, progress=progress),
     )
     result["datasets"] = [str(p) for p in args.inputs]
+    result["input"] = read
     result["words"] = args.words
     result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"
     result = _clean(result)
@@ -392,6 +401,38 @@ def run_prequential(args: argparse.Namespace) -> int:
     return 0
 
 
+def _teach_settings(args: argparse.Namespace) -> Any:
+    """The teach config (--teach-config, else config/teach.yaml) with the options given."""
+    from dataclasses import replace
+
+    from rcbht_introspection.learn.online import load_teach_config
+
+    teach = load_teach_config(args.teach_config)
+    return replace(
+        teach,
+        encoding=args.encoding or teach.encoding,
+        n_estimators=teach.n_estimators if args.n_estimators is None else args.n_estimators,
+        warmup_windows=teach.warmup_windows if args.warmup_windows is None else args.warmup_windows,
+        max_nodes=teach.max_nodes if args.max_nodes is None else args.max_nodes,
+        max_points=teach.max_points if args.max_points is None else args.max_points,
+    )
+
+
+def _refuse_curve_options(args: argparse.Namespace) -> None:
+    """An error for a learning-curve option given with --protocol prequential."""
+    refused = {
+        "--augment-prefixes (use the teach config's prefixes)": bool(args.augment_prefixes),
+        "--live-augment": args.live_augment,
+        "--live-score": args.live_score,
+        "--validation-trials (use --held-out)": args.validation_trials is not None,
+        "--plot": args.plot is not None,
+        "--no-variant": args.no_variant,
+    }
+    for option, given in refused.items():
+        if given:
+            raise InputError(f"{option} does not apply to --protocol prequential")
+
+
 def _with_progress(
     args: argparse.Namespace,
     total: int,
@@ -399,13 +440,13 @@ def _with_progress(
     unit: str,
     run: Callable[[Callable[[int], None] | None], dict[str, Any]],
 ) -> dict[str, Any]:
-    """`run(progress)` with a tqdm bar on stderr (none with --no-progress), closed however it
-    ends."""
+    """`run(progress)` with its progress on stderr (none with --no-progress): a bar on a
+    terminal, plain periodic lines otherwise (commands/progress.py); closed however it ends."""
     if args.no_progress:
         return run(None)
-    from tqdm import tqdm
+    from rcbht_introspection.commands.progress import progress_bar
 
-    bar = tqdm(total=total, desc=desc, unit=unit, file=sys.stderr)
+    bar = progress_bar(total, desc, unit)
 
     def tick(n: int) -> None:
         bar.update(n)
