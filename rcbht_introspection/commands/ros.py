@@ -166,6 +166,28 @@ def _register_import(sub: argparse._SubParsersAction) -> None:
         help="wrench of an arm (repeat for several arms; no ARM: R); "
         "default: the bag's one WrenchStamped/Wrench topic as arm R",
     )
+    _add_phase_options(p)
+    p.add_argument(
+        "--stamps",
+        choices=("auto", "header", "receive"),  # io.bag_import.STAMP_SOURCES (imported lazily)
+        default="auto",
+        help="sample times: header stamps, receive (log) times, or auto: header when there is one",
+    )
+    p.add_argument(
+        "--rate",
+        type=float,
+        default=None,
+        metavar="HZ",
+        help="resample to HZ (linear; default off)",
+    )
+    p.add_argument(
+        "--task", type=Path, default=None, metavar="TASK_YAML", help="the task of the trials"
+    )
+    p.set_defaults(func=cmd_import)
+
+
+def _add_phase_options(p: argparse.ArgumentParser) -> None:
+    """`bag import`'s phase source and how its values are named."""
     phase = p.add_mutually_exclusive_group(required=True)
     phase.add_argument(
         "--phase", metavar="SPEC", help="string phase names, or integers with --phase-map"
@@ -197,23 +219,6 @@ def _register_import(sub: argparse._SubParsersAction) -> None:
         help="phase that ends the trial (default: the --task end phases, else done); "
         "without one the trial ends at its last sample",
     )
-    p.add_argument(
-        "--stamps",
-        choices=("auto", "header", "receive"),  # io.bag_import.STAMP_SOURCES (imported lazily)
-        default="auto",
-        help="sample times: header stamps, receive (log) times, or auto: header when there is one",
-    )
-    p.add_argument(
-        "--rate",
-        type=float,
-        default=None,
-        metavar="HZ",
-        help="resample to HZ (linear; default off)",
-    )
-    p.add_argument(
-        "--task", type=Path, default=None, metavar="TASK_YAML", help="the task of the trials"
-    )
-    p.set_defaults(func=cmd_import)
 
 
 def _bags(paths: list[Path]) -> list[Path]:
