@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from rcbht_introspection.commands.sensor import add_strict, report_dropped
 from rcbht_introspection.errors import InputError
 
 
@@ -53,16 +54,23 @@ def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("data", nargs="+", help="trial folders, dataset folders or bags")
     p.add_argument("--labels", type=Path, default=None, help="labels CSV (docs/verification.md)")
     p.add_argument("--config", type=Path, default=None, help="verify config (config/verify.yaml)")
+    add_strict(p, ", or a labels row for a trial not given")
 
 
-def _load(paths: list[str]) -> list[Any]:
-    """The trials of `paths`: unique names, one arm set."""
+def _load(paths: list[str], strict: bool = False) -> list[Any]:
+    """The trials of `paths`: unique names (a name twice is an error naming both paths), one arm
+    set; state times after the data or out of order dropped (`strict`: an error)."""
     from rcbht_introspection.learn.data import find_inputs, read_any_trial
 
-    trials = [read_any_trial(p) for p in find_inputs(paths)]
-    names = [t.name for t in trials]
-    if len(set(names)) != len(names):
-        raise InputError("two trials have the same name", ", ".join(paths))
+    found = find_inputs(paths)
+    trials = [read_any_trial(p, strict=strict) for p in found]
+    first: dict[str, Path] = {}
+    for path, trial in zip(found, trials, strict=True):
+        if trial.name in first:
+            raise InputError(
+                f"two trials are named {trial.name!r}: {first[trial.name]} and {path}", path
+            )
+        first[trial.name] = path
     if len({t.arms for t in trials}) != 1:
         raise InputError(
             f"trials mix arm sets {sorted({t.arms for t in trials})}", ", ".join(paths)
@@ -70,15 +78,43 @@ def _load(paths: list[str]) -> list[Any]:
     return trials
 
 
-def _labels(labels_file: Path | None, *sets: list[Any]) -> list[dict[str, Any]]:
-    """Per set of trials, each trial's label: its row of the labels file, else its metadata's.
-    A row naming none of the trials is an error (a typo would make a failure a success)."""
+def _labels(
+    labels_file: Path | None, *sets: list[Any], strict: bool = False, command: str = ""
+) -> tuple[list[dict[str, Any]], int]:
+    """Per set of trials, each trial's label: its row of the labels file, else its metadata's;
+    and how many rows named none of the trials (a warning on stderr; `strict`: an error)."""
     from rcbht_introspection.verify.labels import check_labels_cover, label_of, read_labels
 
     given = read_labels(labels_file) if labels_file is not None else {}
+    not_given: list[str] = []
     if labels_file is not None:
-        check_labels_cover(labels_file, given, [t for trials in sets for t in trials])
-    return [{t.name: given.get(t.name) or label_of(t) for t in trials} for trials in sets]
+        every = [t for trials in sets for t in trials]
+        not_given = check_labels_cover(labels_file, given, every, strict)
+    if not_given:
+        shown = ", ".join(not_given[:3]) + (" ..." if len(not_given) > 3 else "")
+        print(
+            f"rcbht {command}: warning: {labels_file}: {len(not_given)} of {len(given)} rows "
+            f"name trials not given ({shown}); --strict makes this an error",
+            file=sys.stderr,
+        )
+    labels = [{t.name: given.get(t.name) or label_of(t) for t in trials} for trials in sets]
+    return labels, len(not_given)
+
+
+def _input_record(
+    command: str, trials: list[Any], train: list[Any], labels_not_given: int
+) -> dict[str, Any]:
+    """The JSON's `input` record: the state times dropped from the trials (training trials of
+    --train as train:<name>; one summary line on stderr) and the labels rows not used."""
+    from rcbht_introspection.io.hiro import dropped_state_times
+    from rcbht_introspection.verify.evaluate import TRAIN_PREFIX
+
+    counts = {t.name: dropped_state_times(t) for t in trials}
+    counts.update({TRAIN_PREFIX + t.name: dropped_state_times(t) for t in train})
+    return {
+        "dropped_state_times": report_dropped(command, counts),
+        "labels_rows_not_given": labels_not_given,
+    }
 
 
 def cmd_verify_train(args: argparse.Namespace) -> int:
@@ -86,14 +122,16 @@ def cmd_verify_train(args: argparse.Namespace) -> int:
     from rcbht_introspection.verify.model_file import save_verifier
     from rcbht_introspection.verify.train import train_verifier
 
-    trials = _load(args.data)
-    (labels,) = _labels(args.labels, trials)
+    trials = _load(args.data, args.strict)
+    (labels,), not_given = _labels(args.labels, trials, strict=args.strict, command="verify-train")
+    read = _input_record("verify-train", trials, [], not_given)
     if sum(not lb.failed for lb in labels.values()) < 2:
         raise InputError("need at least 2 successful trials to calibrate the detector")
     try:
         model = train_verifier(trials, labels, load_verify_config(args.config))
     except ValueError as exc:
         raise InputError(str(exc)) from None
+    model.trained_on["input"] = read  # stored in the verifier file's header too
     save_verifier(model, args.out)
     print(f"{args.out}: {json.dumps(model.trained_on)}")
     return 0
@@ -104,11 +142,14 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     from rcbht_introspection.verify.evaluate import summarise, verify_runs
 
     config = load_verify_config(args.config)
-    trials = _load(args.data)
-    train = _load(args.train) if args.train else []
-    labels, train_labels = _labels(args.labels, trials, train)
+    trials = _load(args.data, args.strict)
+    train = _load(args.train, args.strict) if args.train else []
+    (labels, train_labels), not_given = _labels(
+        args.labels, trials, train, strict=args.strict, command="verify-eval"
+    )
+    read = _input_record("verify-eval", trials, train, not_given)
     folds = None if args.loo else args.folds
-    if folds is not None and not 2 <= folds <= len(trials):
+    if not train and folds is not None and not 2 <= folds <= len(trials):
         raise InputError(f"--folds must be 2..{len(trials)} (the trials), got {folds}")
     if train and train[0].arms != trials[0].arms:
         raise InputError(f"--train trials have arms {train[0].arms}, the others {trials[0].arms}")
@@ -134,6 +175,7 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
         raise InputError(str(exc)) from None
     protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
     summary, records = summarise(runs, config, protocol, left_out)
+    summary["input"] = read
     _print(summary)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
@@ -145,6 +187,7 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
 
 def _contradictions(model_file: Path, trials: list[Any], config: Any) -> dict[str, Any]:
     """Per trial, the contradicting final verdicts `model_file`'s classifier gives live."""
+    from rcbht_introspection.commands.progress import progress_bar
     from rcbht_introspection.learn.live import load_live_config, stream_factory
     from rcbht_introspection.learn.model_file import load_model, profile_mismatch
     from rcbht_introspection.taxonomy.config import default_config
@@ -157,9 +200,13 @@ def _contradictions(model_file: Path, trials: list[Any], config: Any) -> dict[st
     factory = stream_factory(load_live_config())
     p = config.mismatch_min_probability
     out = {}
-    for i, t in enumerate(trials):
-        print(f"classifier verdicts {i + 1}/{len(trials)}", file=sys.stderr)
-        out[t.name] = trial_contradictions(t, model, factory, p)
+    bar = progress_bar(len(trials), "classifier verdicts", "trial")
+    try:
+        for t in trials:
+            out[t.name] = trial_contradictions(t, model, factory, p)
+            bar.update(1)
+    finally:
+        bar.close()
     return out
 
 

@@ -160,20 +160,26 @@ def _parse(path: Path, table: list[list[str]]) -> dict[str, TrialLabel]:
 
 
 def check_labels_cover(
-    path: Path, labels: Mapping[str, TrialLabel], trials: Sequence[Trial]
-) -> None:
-    """One-line error for a labels row that names no given trial (a typo would otherwise make
-    the failure it labels a success silently) or an onset after its trial's end."""
+    path: Path, labels: Mapping[str, TrialLabel], trials: Sequence[Trial], strict: bool = False
+) -> list[str]:
+    """The labels rows that name no given trial (one labels file may serve a training and a
+    test set), in file order; with `strict` the first is a one-line error (a typo would
+    otherwise make the failure it labels a success silently). An onset after its trial's end is
+    an error either way."""
     by_name = {t.name: t for t in trials}  # (a name in two sets: the bound of either)
+    not_given: list[str] = []
     for name, label in labels.items():
         trial = by_name.get(name)
         if trial is None:
-            raise InputError(
-                f"trial {name!r} is not among the given trials",
-                path,
-                line=label.line,
-                field="trial",
-            )
+            if strict:
+                raise InputError(
+                    f"trial {name!r} is not among the given trials",
+                    path,
+                    line=label.line,
+                    field="trial",
+                )
+            not_given.append(name)
+            continue
         end = float(trial.time[-1] - trial.time[0])
         if label.onset is not None and label.onset > end:
             raise InputError(
@@ -182,3 +188,4 @@ def check_labels_cover(
                 line=label.line,
                 field="onset_s",
             )
+    return not_given
