@@ -226,6 +226,18 @@ def test_bad_input_is_counted_and_nothing_readable_is_one_line(
     assert "field --alpha" in capsys.readouterr().err
 
 
+def test_state_times_after_the_data_are_counted_where_they_are(tmp_path: Path) -> None:
+    data = write_set(tmp_path / "set", trial_set(n=6))
+    state = data / "trial-02" / "R_State.dat"
+    state.write_text(state.read_text() + "99.0\n")  # after the last sample
+    report = audit_paths([data], FAST)
+    found = report.of_kind("dropped_state_times")
+    assert len(found) == 1 and found[0].trials == ("trial-02",)
+    assert found[0].detail["trials"]["trial-02"] == [
+        {"line": 5, "time": 99.0, "reason": "after the data"}
+    ]
+
+
 @pytest.mark.shared_data
 def test_real_hiro_convention_change_and_none_on_sim(hiro_data: Path) -> None:
     """REAL: S-01..21 give rotation 8.3 s and insertion 0.94 s, S-22..46 rotation 5 ms and

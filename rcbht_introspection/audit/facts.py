@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from rcbht_introspection.audit.agreement import window_features
+from rcbht_introspection.io.hiro import DROPPED_STATE_TIMES
 from rcbht_introspection.io.sensor_checks import REPEATED_METADATA, frozen_runs
 from rcbht_introspection.io.trial import AXES, Trial
 from rcbht_introspection.task import Task
@@ -70,6 +71,8 @@ class TrialFacts:
     """Per arm, the mean of each axis over the first FREE_MOTION_S seconds."""
     level_noise: dict[str, tuple[float, ...]] = field(default_factory=dict)
     """Per arm, the standard error of that mean from the sensor's sample-to-sample noise."""
+    dropped_states: tuple[dict[str, object], ...] = ()
+    """State times the reader dropped (after the data or out of order: line, time, reason)."""
     windows: np.ndarray | None = None
     """Features of the trial's wrench windows, tared (audit/agreement.py; None: not kept)."""
     window_labels: tuple[str, ...] = ()
@@ -168,6 +171,7 @@ def trial_facts(
     levels = {arm: level_of(trial.time, trial.wrench[arm]) for arm in trial.arms}
     dropped, messages = dropped_of(trial)
     means = {arm: mean for arm, (mean, _) in levels.items()}
+    states = trial.metadata.get(DROPPED_STATE_TIMES)
     features, labels = window_features(trial, means) if windows else (None, ())
     return TrialFacts(
         name=trial.name,
@@ -181,6 +185,9 @@ def trial_facts(
         messages=messages,
         level=means,
         level_noise={arm: noise for arm, (_, noise) in levels.items()},
+        dropped_states=tuple(d for d in states if isinstance(d, dict))
+        if isinstance(states, list)
+        else (),
         windows=features,
         window_labels=labels,
     )

@@ -22,6 +22,8 @@ ACTIONS: dict[str, str] = {
     "the words jump over a gap, so leave long ones out",
     "sampling_rate": "the taxonomy's windows count samples: resample to one rate (bag import "
     "--rate) or calibrate a profile for each rate (rcbht calibrate)",
+    "dropped_state_times": "the state log has times after the recording or out of order: the "
+    "sub-task each dropped time started is missing from its trial; fix the log or relabel",
     "incomplete_trial": "the trial ends before its task does: its last sub-task is left out of "
     "the durations; check its state events, or leave it out of training",
     "unreadable": "fix the file named (the rest of the set was audited without it)",

@@ -151,6 +151,7 @@ def trial_dict(f: TrialFacts) -> dict[str, Any]:
         },
         "frozen": [dataclasses.asdict(s) for s in f.frozen],
         "dropped": f.dropped,
+        "dropped_state_times": list(f.dropped_states),
         "level": {arm: list(v) for arm, v in f.level.items()},
     }
 

@@ -173,6 +173,26 @@ def incomplete_finding(facts: list[TrialFacts]) -> list[Finding]:
     ]
 
 
+def states_finding(facts: list[TrialFacts]) -> list[Finding]:
+    hit = [f for f in facts if f.dropped_states]
+    if not hit:
+        return []
+    reasons: dict[str, int] = {}
+    for f in hit:
+        for d in f.dropped_states:
+            reasons[str(d.get("reason"))] = reasons.get(str(d.get("reason")), 0) + 1
+    counts = ", ".join(f"{n} {reason}" for reason, n in sorted(reasons.items()))
+    parts = [f"{f.name} ({len(f.dropped_states)})" for f in hit]
+    message = (
+        f"state times dropped when read ({counts}) in {len(hit)} of {len(facts)} trial(s): "
+        f"{_listed(parts)}"
+    )
+    rows = {f.name: list(f.dropped_states) for f in hit}
+    strength = {"state_times": sum(reasons.values()), "reasons": reasons}
+    names = tuple(f.name for f in hit)
+    return [Finding("dropped_state_times", message, names, (), None, strength, {"trials": rows})]
+
+
 def unreadable_finding(unreadable: list[tuple[str, str]]) -> list[Finding]:
     if not unreadable:
         return []
@@ -197,6 +217,7 @@ def sensor_findings(facts: list[TrialFacts], unreadable: list[tuple[str, str]]) 
     """Every sensor and completeness finding of the set."""
     return [
         *unreadable_finding(unreadable),
+        *states_finding(facts),
         *incomplete_finding(facts),
         *frozen_finding(facts),
         *gap_finding(facts),
