@@ -207,6 +207,22 @@ def test_cli_prints_the_change_and_writes_json_and_figure(
     assert fig.stat().st_size > 10_000
 
 
+def test_trial_bags_are_audited_like_trial_folders(tmp_path: Path) -> None:
+    from rcbht_introspection.io.bags import write_trial_bag
+
+    trials = trial_set(n=16, moved_from=8)
+    for trial in trials:
+        write_trial_bag(trial, tmp_path / f"{trial.name}.mcap")
+    bags = audit_paths([tmp_path], FAST)
+    folders = audit_paths([write_set(tmp_path / "set", trials)], FAST)
+    assert [f.name for f in bags.facts] == [t.name for t in trials]
+    assert bags.task.subtasks == TASK.subtasks
+    for report in (bags, folders):
+        (change,) = report.of_kind("convention_change")
+        assert change.between == ("trial-08", "trial-09")
+    assert bags.facts[0].durations == pytest.approx(folders.facts[0].durations, abs=1e-6)
+
+
 def test_bad_input_is_counted_and_nothing_readable_is_one_line(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
