@@ -47,6 +47,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "with the mismatch signal, from this classifier's final verdicts as the node gives them",
     )
     ev.add_argument("--seed", type=int, default=0)
+    ev.add_argument(
+        "--no-peers",
+        action="store_true",
+        help="leave out the anchors' methods (hmm, minirocket: the peers extra)",
+    )
     ev.set_defaults(func=cmd_verify_eval)
 
 
@@ -157,7 +162,6 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     if n_nominal < 3:
         raise InputError("need at least 3 successful trials to train and calibrate on")
     contradictions = _contradictions(args.model, trials, config) if args.model else None
-    left_out: list[tuple[str, str]] = []
     try:
         runs = verify_runs(
             trials,
@@ -169,12 +173,12 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
             progress=lambda s: print(s, file=sys.stderr),
             train_labels=train_labels,
             contradictions=contradictions,
-            left_out=left_out,
+            peers=not args.no_peers,
         )
     except ValueError as exc:  # e.g. successes without sub-task events to calibrate on
         raise InputError(str(exc)) from None
     protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
-    summary, records = summarise(runs, config, protocol, left_out)
+    summary, records = summarise(runs, config, protocol)
     summary["input"] = read
     _print(summary)
     if args.json:
@@ -225,6 +229,7 @@ def _print(summary: dict[str, Any]) -> None:
         "recall",
         "false_alarms_per_nominal_run",
         "class_accuracy",
+        "class_accuracy_given_onset",
     )
     print("method        " + "  ".join(f"{k[:18]:>18}" for k in (*keys, "delay p50 (s)")))
     for name, m in rows:
@@ -232,8 +237,6 @@ def _print(summary: dict[str, Any]) -> None:
         print(f"{name:<13} " + "  ".join(f"{c:>18}" for c in cells))
     src = summary["protocol"]["onset_source"]
     print(f"runs {summary['runs']} ({summary['nominal_runs']} nominal); onsets from: {src}")
-    for method, left in summary["protocol"]["successes_left_out"].items():
-        print(f"{method}: successes left out of the nominal model (folds): {left}")
 
 
 def _plots(out: Path, trials: list[Any], labels: dict[str, Any], runs: list[Any]) -> None:

@@ -10,9 +10,8 @@ wrench features for the whole trial) and `timing` (sub-task durations only).
 from __future__ import annotations
 
 import warnings
-from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -20,29 +19,38 @@ from sklearn.metrics import roc_auc_score
 from sklearn.model_selection import StratifiedKFold
 
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.verify.characterise import Characteriser, EvidenceView, wrench_means
+from rcbht_introspection.verify.characterise import sign_table
 from rcbht_introspection.verify.config import VerifyConfig
-from rcbht_introspection.verify.detector import Detector
+from rcbht_introspection.verify.detector import Detection, Detector
+from rcbht_introspection.verify.evidence import named_at, namings
 from rcbht_introspection.verify.features import TrialFeatures, trial_features
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
 from rcbht_introspection.verify.mismatch import Contradiction, with_mismatch
 from rcbht_introspection.verify.novelty import TimingModel
-from rcbht_introspection.verify.train import onset_for
+from rcbht_introspection.verify.train import Fitted, fit_method, onset_for
 
 GATE_S = 1.0
 TRAIN_PREFIX = "train:"
 """Key prefix of training trials in a transfer evaluation (names may repeat across sets)."""
 METHODS: dict[str, tuple[tuple[str, ...], str]] = {
-    "verifier": (("wrench", "timing"), "envelope"),
-    "raw_wrench": (("wrench_global",), "global_envelope"),
+    "verifier": (("wrench", "timing"), "wrench"),
+    "raw_wrench": (("wrench_global",), "raw"),
     "timing": (("timing",), "timing"),
 }
 """Method -> (detector signals, evidence view of its characteriser)."""
+PEERS = ("hmm", "minirocket")
+"""The anchors' methods (peers/): `hmm` detects with the successor framework's HMM per sub-task
+and names the class by one HMM per class; `minirocket` names the class by MiniRocket features
+and a ridge classifier, on the verifier's alarms (it has no detector of its own)."""
+PEER_LEAD_S = 0.1
+"""The peers' window starts this long before the onset."""
 WITH_MISMATCH = "verifier_mismatch"
 """The verifier with the mismatch signal (verify/mismatch.py): scored when the classifier's
 final verdicts of the test trials are given."""
 CLASS_EVIDENCE_S = (0.0, 0.5, 1.0)
 """Class accuracy is also reported this long after the alarm."""
+Raw = tuple[np.ndarray, np.ndarray]
+"""A trial's stream times and wrench samples (all arms side by side)."""
 
 
 @dataclass(frozen=True)
@@ -67,15 +75,166 @@ class RunResult:
     """Tick times and the combined score (largest signal over its threshold) per tick."""
     score: np.ndarray
     classes_over_time: list[tuple[float, str]]
-    """(tick time, class) after the alarm, as the live verifier would publish them."""
+    """(tick time, class) at each naming after the alarm, as the live verifier publishes them."""
 
 
-def view_of(detector: Detector, view: str) -> EvidenceView:
-    """The model a method's characteriser reads evidence through."""
-    model = getattr(detector.models, view)
+@dataclass(frozen=True)
+class Naming:
+    """What a method's characteriser says of one evidence span: its class over time, its last
+    class and directions."""
+
+    over_time: list[tuple[float, str]]
+    last: str = ""
+    directions: dict[str, str] = field(default_factory=dict)
+
+
+NO_NAMING = Naming([])
+
+
+def _ours(fitted: Fitted, tf: TrialFeatures, onset: float, start: float) -> Naming:
+    """The characteriser's namings from `start` (the alarm) on, evidence from `onset`."""
+    char = fitted.characteriser
+    if char is None:
+        return NO_NAMING
+    ticks = fitted.reader.ticks(tf)
+    named = [(t, char.predict(x)) for t, x in namings(fitted.reader, _spans(fitted), onset, ticks, start)]
+    if not named:
+        return NO_NAMING
+    return Naming([(t, n[0]) for t, n in named], named[-1][1][0], named[-1][1][2])
+
+
+def _spans(fitted: Fitted) -> tuple[float, ...]:
+    return fitted.detector.config.evidence_s
+
+
+@dataclass
+class Fold:
+    """One fold's training data, fitted methods and onsets."""
+
+    successes: list[TrialFeatures]
+    failures: list[tuple[TrialFeatures, TrialLabel, float]]
+    timing: TimingModel
+    config: VerifyConfig
+    seed: int
+    groups: dict[str, str]
+    fitted: dict[str, Fitted] = field(default_factory=dict)
+    peers: dict[str, Any] = field(default_factory=dict)
+    signs: dict[str, dict[str, str]] = field(default_factory=dict)
+    """Failure class -> its deviation signs (the training labels' sign table)."""
+
+
+def _make_fold(
+    train: Sequence[str],
+    feats: Mapping[str, TrialFeatures],
+    labels: Mapping[str, TrialLabel],
+    config: VerifyConfig,
+    seed: int,
+) -> Fold:
+    successes = [feats[n] for n in train if not labels[n].failed]
+    timing = TimingModel.fit(successes, config)
+    failed = [n for n in train if labels[n].failed]
+    failures = [(feats[n], labels[n], onset_for(labels[n], feats[n], timing)[0]) for n in failed]
+    groups = {n: labels[n].session for n in train if labels[n].session}
+    table = sign_table([labels[n] for n in failed])
+    signs = {cls: dict(zip(DIRECTION_AXES, key, strict=True)) for key, cls in table.items()}
+    return Fold(successes, failures, timing, config, seed, groups, signs=signs)
+
+
+def _peer_window(raw: Raw, start: float, until: float) -> np.ndarray:
+    """The wrench samples in [start - PEER_LEAD_S, until] (at least the last one before)."""
+    t, w = raw
+    sel = (t >= start - PEER_LEAD_S - 1e-9) & (t <= until + 1e-9)
+    if not np.any(sel):
+        sel = np.arange(len(t)) == max(int(np.searchsorted(t, until, "right")) - 1, 0)
+    return w[sel]
+
+
+def _fit_peers(fold: Fold, raws: Mapping[str, Raw]) -> None:
+    """The anchors' classifiers on the training failures' windows [onset - lead, end]."""
+    from rcbht_introspection.peers.hmm import HMMClassifier
+    from rcbht_introspection.peers.minirocket import MiniRocketClassifier
+
+    if not fold.failures:
+        return
+    windows = [_peer_window(raws[tf.trial], o, tf.end) for tf, _, o in fold.failures]
+    y = [lb.failure_class for _, lb, _ in fold.failures]
+    fold.peers["hmm"] = HMMClassifier(random_state=fold.seed).fit(windows, y)
+    fold.peers["minirocket"] = MiniRocketClassifier(random_state=fold.seed).fit(windows, y)
+
+
+def _peer_naming(fold: Fold, method: str, raw: Raw, onset: float, start: float, end: float) -> Naming:
+    """The peer's class at the alarm + CLASS_EVIDENCE_S and at the end."""
+    model = fold.peers.get(method)
     if model is None:
-        raise ValueError(f"the detector has no {view}")
-    return model
+        return NO_NAMING
+    times = sorted({min(start + s, end) for s in CLASS_EVIDENCE_S} | {end})
+    named = [str(c) for c in model.predict([_peer_window(raw, onset, t) for t in times])]
+    return Naming(list(zip(times, named, strict=True)), named[-1], fold.signs.get(named[-1], {}))
+
+
+def _detector_of(fold: Fold, method: str, left_out: list[tuple[str, str]] | None) -> Fitted:
+    """The method's fitted parts (peers: the hmm detector; minirocket: the verifier's)."""
+    key = {"verifier_mismatch": "verifier", "minirocket": "verifier"}.get(method, method)
+    if key not in fold.fitted:
+        signals, view = METHODS[key] if key in METHODS else (("hmm",), "wrench")
+        failures = fold.failures if key in METHODS else []
+        fold.fitted[key] = fit_method(
+            fold.successes, failures, fold.config, signals, view, fold.seed, fold.groups
+        )
+    return fold.fitted[key]
+
+
+def _run(
+    fold: Fold,
+    method: str,
+    name: str,
+    feats: Mapping[str, TrialFeatures],
+    labels: Mapping[str, TrialLabel],
+    raws: Mapping[str, Raw],
+    contradictions: Mapping[str, Sequence[Contradiction]] | None,
+) -> RunResult:
+    """One test trial through one method."""
+    tf, label = feats[name], labels[name]
+    fitted = _detector_of(fold, method, None)
+    d: Detection = fitted.detector.run(tf)
+    if method == WITH_MISMATCH and contradictions is not None:
+        d = with_mismatch(d, contradictions.get(name, ()), fold.config)
+    onset, source = onset_for(label, tf, fold.timing) if label.failed else (None, "")
+    after, given = NO_NAMING, NO_NAMING
+    if label.failed:
+        if method in PEERS and method in fold.peers:
+            if d.alarm is not None and d.onset is not None:
+                after = _peer_naming(fold, method, raws[name], d.onset, d.alarm, tf.end)
+            if onset is not None:
+                given = _peer_naming(fold, method, raws[name], onset, tf.end, tf.end)
+        elif method not in PEERS:
+            if d.alarm is not None and d.onset is not None:
+                after = _ours(fitted, tf, d.onset, d.alarm)
+            if onset is not None:
+                given = _ours(fitted, tf, onset, onset)
+    by_evidence = (
+        {str(s): named_at(after.over_time, d.alarm + s) for s in CLASS_EVIDENCE_S}
+        if d.alarm is not None
+        else {}
+    )
+    return RunResult(
+        trial=name,
+        label=label,
+        onset=onset,
+        onset_source=source,
+        run_score=float(np.max(d.score)) if len(d.score) else 0.0,
+        alarm=d.alarm,
+        alarm_signal=d.alarm_signal,
+        onset_estimate=d.onset,
+        predicted_class=after.last,
+        class_by_evidence=by_evidence,
+        class_given_onset=given.last,
+        directions=after.directions,
+        directions_given_onset=given.directions,
+        times=d.times,
+        score=d.score,
+        classes_over_time=after.over_time,
+    )
 
 
 def _fold_results(
@@ -83,88 +242,16 @@ def _fold_results(
     test: Sequence[str],
     feats: Mapping[str, TrialFeatures],
     labels: Mapping[str, TrialLabel],
+    raws: Mapping[str, Raw],
     config: VerifyConfig,
     seed: int,
+    methods: Sequence[str],
     contradictions: Mapping[str, Sequence[Contradiction]] | None = None,
-    left_out: list[tuple[str, str]] | None = None,
 ) -> dict[str, list[RunResult]]:
-    successes = [feats[n] for n in train if not labels[n].failed]
-    timing = TimingModel.fit(successes, config)
-
-    def onset_of(name: str) -> tuple[float | None, str]:
-        if not labels[name].failed:
-            return None, ""
-        return onset_for(labels[name], feats[name], timing)
-
-    out: dict[str, list[RunResult]] = {}
-    methods = dict(METHODS)
-    if contradictions is not None:
-        methods[WITH_MISMATCH] = METHODS["verifier"]
-    failures = [(feats[n], labels[n], onset_of(n)[0]) for n in train if labels[n].failed]
-    onsets_known = [(f, lb, float(o)) for f, lb, o in failures if o is not None]
-    fitted: dict[tuple[str, ...], Detector] = {}
-    characterisers: dict[tuple[tuple[str, ...], str], Characteriser | None] = {}
-    for method, (signals, view) in methods.items():
-        if signals not in fitted:
-            fitted[signals] = Detector.fit(successes, config, signals, seed=seed)
-            if left_out is not None:
-                left_out.extend((method, name) for name in fitted[signals].left_out)
-        detector = fitted[signals]
-        ev = view_of(detector, view)
-        if (signals, view) not in characterisers:  # the mismatch variant shares the verifier's
-            characterisers[signals, view] = (
-                Characteriser.fit(onsets_known, ev, config, seed) if failures else None
-            )
-        char = characterisers[signals, view]
-        results = []
-        for name in test:
-            tf, label = feats[name], labels[name]
-            onset, source = onset_of(name)
-            d = detector.run(tf)
-            if method == WITH_MISMATCH and contradictions is not None:
-                d = with_mismatch(d, contradictions.get(name, ()), config)
-            predicted, given = "", ""
-            dirs: dict[str, str] = {}
-            dirs_given: dict[str, str] = {}
-            by_evidence: dict[str, str] = {}
-            over_time: list[tuple[float, str]] = []
-            if char is not None and label.failed:
-                z, means = ev.z(tf), wrench_means(tf)
-                if d.alarm is not None and d.onset is not None:
-                    predicted, _, dirs = char.predict(tf, z, d.onset, tf.end, means)
-                    for span in CLASS_EVIDENCE_S:
-                        by_evidence[str(span)] = char.predict(
-                            tf, z, d.onset, min(d.alarm + span, tf.end), means
-                        )[0]
-                    ticks = tf.times[tf.times >= d.alarm]
-                    for g in ticks[:: max(1, len(ticks) // 40)]:
-                        over_time.append(
-                            (float(g), char.predict(tf, z, d.onset, float(g), means)[0])
-                        )
-                if onset is not None:
-                    given, _, dirs_given = char.predict(tf, z, onset, tf.end, means)
-            results.append(
-                RunResult(
-                    trial=name,
-                    label=label,
-                    onset=onset,
-                    onset_source=source,
-                    run_score=float(np.max(d.score)) if len(d.score) else 0.0,
-                    alarm=d.alarm,
-                    alarm_signal=d.alarm_signal,
-                    onset_estimate=d.onset,
-                    predicted_class=predicted,
-                    class_by_evidence=by_evidence,
-                    class_given_onset=given,
-                    directions=dirs,
-                    directions_given_onset=dirs_given,
-                    times=d.times,
-                    score=d.score,
-                    classes_over_time=over_time,
-                )
-            )
-        out[method] = results
-    return out
+    fold = _make_fold(train, feats, labels, config, seed)
+    if any(m in PEERS for m in methods):
+        _fit_peers(fold, raws)
+    return {m: [_run(fold, m, n, feats, labels, raws, contradictions) for n in test] for m in methods}
 
 
 def _ratio(a: float, b: float) -> float | None:
@@ -256,6 +343,24 @@ def _auc(nominal: Sequence[RunResult], failed: Sequence[RunResult]) -> float | N
     return float(roc_auc_score(y, s))
 
 
+def _raw(trial: Trial) -> Raw:
+    t = np.asarray(trial.time, dtype=float)
+    return t - t[0], np.hstack([np.asarray(trial.wrench[a], dtype=float) for a in trial.arms])
+
+
+def _splits(
+    names: list[str], labels: Mapping[str, TrialLabel], folds: int | None, seed: int
+) -> list[tuple[list[str], list[str]]]:
+    """Stratified `folds` over the trials (None: leave one trial out)."""
+    if folds is None:
+        return [([m for m in names if m != n], [n]) for n in names]
+    y = [labels[n].failure_class if labels[n].failed else "success" for n in names]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # a class with fewer trials than folds
+        kfold = StratifiedKFold(n_splits=folds, shuffle=True, random_state=seed)
+        return [([names[i] for i in a], [names[i] for i in b]) for a, b in kfold.split(names, y)]
+
+
 def verify_runs(
     trials: Sequence[Trial],
     labels: Mapping[str, TrialLabel],
@@ -266,58 +371,45 @@ def verify_runs(
     progress: Callable[[str], None] | None = None,
     train_labels: Mapping[str, TrialLabel] | None = None,
     contradictions: Mapping[str, Sequence[Contradiction]] | None = None,
-    left_out: list[tuple[str, str]] | None = None,
+    peers: bool = True,
 ) -> dict[str, list[RunResult]]:
     """Every test run of every method: stratified `folds` over `trials` (None: leave one trial
     out), or fitted on `train` and tested on `trials` (transfer; training trials are kept apart
     from the test trials even when their names are the same, as in two simulated sets).
     `contradictions` (test trial -> the classifier's contradicting final verdicts) adds the
-    verifier with the mismatch signal (WITH_MISMATCH). `left_out` collects (method, trial) for the
-    successes each fold's detectors left out of their nominal model (Detector.fit)."""
+    verifier with the mismatch signal (WITH_MISMATCH); `peers` adds the anchors' methods."""
     feats = {t.name: trial_features(t, config) for t in trials}
+    raws = {t.name: _raw(t) for t in trials} if peers else {}
     labels = dict(labels)
     names = [t.name for t in trials]
-    splits: list[tuple[list[str], list[str]]]
     if train:
         keys = [TRAIN_PREFIX + t.name for t in train]
         for key, t in zip(keys, train, strict=True):
             feats[key] = trial_features(t, config)
             labels[key] = (train_labels or labels)[t.name]
+            if peers:
+                raws[key] = _raw(t)
         splits = [(keys, names)]
-    elif folds is None:
-        splits = [([m for m in names if m != n], [n]) for n in names]
     else:
-        y = [labels[n].failure_class if labels[n].failed else "success" for n in names]
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # a class with fewer trials than folds
-            kfold = StratifiedKFold(n_splits=folds, shuffle=True, random_state=seed)
-            splits = [
-                ([names[i] for i in a], [names[i] for i in b]) for a, b in kfold.split(names, y)
-            ]
+        splits = _splits(names, labels, folds, seed)
+    methods = [*METHODS, *(PEERS if peers else ()), *([WITH_MISMATCH] if contradictions else [])]
     runs: dict[str, list[RunResult]] = {}
     for k, (tr, te) in enumerate(splits):
         if progress is not None:
             progress(f"fold {k + 1}/{len(splits)}")
-        fold = _fold_results(tr, te, feats, labels, config, seed, contradictions, left_out)
+        fold = _fold_results(tr, te, feats, labels, raws, config, seed, methods, contradictions)
         for method, res in fold.items():
             runs.setdefault(method, []).extend(res)
     return runs
 
 
 def summarise(
-    runs: Mapping[str, Sequence[RunResult]],
-    config: VerifyConfig,
-    protocol: str,
-    left_out: Sequence[tuple[str, str]] = (),
+    runs: Mapping[str, Sequence[RunResult]], config: VerifyConfig, protocol: str
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """The JSON summary (the verifier's numbers, the baselines beside) and per-run records;
-    `left_out`: (method, trial) of each success a fold's detector left out of its nominal
-    model, counted per method and trial."""
+    """The JSON summary (the verifier's numbers, the baselines and anchors beside) and per-run
+    records."""
     main = metrics(runs["verifier"])
     sources = [r.onset_source for r in runs["verifier"] if r.label.failed]
-    left: dict[str, dict[str, int]] = {}  # method -> trial -> folds that left it out
-    for (method, trial), folds in sorted(Counter(left_out).items()):
-        left.setdefault(method, {})[trial] = folds
     summary: dict[str, Any] = {
         **main,
         "protocol": {
@@ -325,9 +417,11 @@ def summarise(
             "gate_s": GATE_S,
             "false_alarm_rate_target": config.false_alarm_rate,
             "onset_source": {s: sources.count(s) for s in sorted(set(sources))},
-            "successes_left_out": left,
+            "minirocket": "no detector of its own: named on the verifier's alarms and onsets",
         },
-        "baselines": {m: metrics(runs[m]) for m in METHODS if m != "verifier"},
+        "baselines": {
+            m: metrics(runs[m]) for m in (*METHODS, *PEERS) if m != "verifier" and m in runs
+        },
     }
     if WITH_MISMATCH in runs:
         summary[WITH_MISMATCH] = metrics(runs[WITH_MISMATCH])

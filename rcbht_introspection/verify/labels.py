@@ -3,12 +3,14 @@ time and the deviation of the part, from the trial's own metadata or a hand-writ
 
 A labels file is CSV with a header row; one row per trial, empty cells for unknown values:
 
-    trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg
-    run-07,failure,jammed,12.4,,,
-    run-08,success,,,,,
+    trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg,session
+    run-07,failure,jammed,12.4,,,,day2
+    run-08,success,,,,,,day2
 
 `outcome` is success or failure; `onset_s` is the stream time (s from the trial's first sample)
-of the first moment the trial's contacts differ from the nominal task's.
+of the first moment the trial's contacts differ from the nominal task's. `session` (optional
+column) names the recording session: the detector's thresholds are calibrated on folds that
+hold out whole sessions.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import Trial
 
 COLUMNS = ("trial", "outcome", "failure_class", "onset_s", "dev_x_mm", "dev_y_mm", "dev_yaw_deg")
+SESSION = "session"
+"""The optional last column: the recording session."""
 DIRECTION_AXES = ("x", "y", "r")
 """Deviation axes of the characterisation: x and y offsets and yaw (r)."""
 DIRECTIONS = ("-", "0", "+")
@@ -41,6 +45,8 @@ class TrialLabel:
     deviation: tuple[float, float, float] | None = None
     line: int | None = None
     """The row of the labels file it was read from (None: the trial's own metadata)."""
+    session: str = ""
+    """The recording session ('' unknown)."""
 
     @property
     def failed(self) -> bool:
@@ -61,6 +67,7 @@ def label_of(trial: Trial) -> TrialLabel:
     """The label a trial carries: its metadata["failure"] record (simulator, bags), else its
     outcome (a failure type without onset or deviation)."""
     record = trial.metadata.get("failure")
+    session = str(trial.metadata.get("session") or "")
     if isinstance(record, Mapping):
         dev = record.get("deviation")
         deviation = None
@@ -77,10 +84,13 @@ def label_of(trial: Trial) -> TrialLabel:
             failure_class=str(record.get("class") or trial.outcome),
             onset=None if onset is None else float(onset) - float(trial.time[0]),
             deviation=deviation,
+            session=session,
         )
     if trial.outcome == SUCCESS:
-        return TrialLabel(trial=trial.name, outcome=SUCCESS)
-    return TrialLabel(trial=trial.name, outcome=FAILURE, failure_class=trial.outcome)
+        return TrialLabel(trial=trial.name, outcome=SUCCESS, session=session)
+    return TrialLabel(
+        trial=trial.name, outcome=FAILURE, failure_class=trial.outcome, session=session
+    )
 
 
 def _number(text: str, scale: float, path: Path, line: int, field: str) -> float | None:
@@ -114,14 +124,18 @@ def read_labels(path: Path | str) -> dict[str, TrialLabel]:
 def _parse(path: Path, table: list[list[str]]) -> dict[str, TrialLabel]:
     rows = iter(table)
     header = next(rows, None)
-    if header is None or tuple(h.strip() for h in header) != COLUMNS:
-        raise InputError(f"header must be {','.join(COLUMNS)}", path, line=1, field="header")
+    names = tuple(h.strip() for h in header) if header is not None else ()
+    if names not in (COLUMNS, (*COLUMNS, SESSION)):
+        raise InputError(
+            f"header must be {','.join(COLUMNS)}[,{SESSION}]", path, line=1, field="header"
+        )
+    width = len(names)
     labels: dict[str, TrialLabel] = {}
     for line, row in enumerate(rows, start=2):
         if not row or not "".join(row).strip():
             continue
-        if len(row) != len(COLUMNS):
-            raise InputError(f"expected {len(COLUMNS)} cells, got {len(row)}", path, line=line)
+        if len(row) != width:
+            raise InputError(f"expected {width} cells, got {len(row)}", path, line=line)
         trial, outcome, cls = (c.strip() for c in row[:3])
         if not trial:
             raise InputError("empty trial name", path, line=line, field="trial")
@@ -155,6 +169,7 @@ def _parse(path: Path, table: list[list[str]]) -> dict[str, TrialLabel]:
             onset=onset,
             deviation=deviation,
             line=line,
+            session=row[7].strip() if width > len(COLUMNS) else "",
         )
     return labels
 

@@ -3,8 +3,9 @@
 The verifier node's state without ROS. Each tick (every step_s of stream time, once every arm's
 samples have passed it) gets the detector's signals against their thresholds; the first tick
 above threshold raises the alarm, which latches until the stream ends. From then on each verdict
-carries the failure class, its probabilities and the deviation directions, refined as evidence
-grows. The same numbers as the offline `Detector.run` on the whole trial (tested).
+carries the failure class, its probabilities and the deviation directions, named again as each
+evidence span closes. The same numbers as the offline `Detector.run` on the whole trial and the
+offline namings (tested).
 """
 
 from __future__ import annotations
@@ -14,9 +15,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rcbht_introspection.verify.characterise import EvidenceTick, RunningEvidence
+from rcbht_introspection.verify.characterise import RunningEvidence
 from rcbht_introspection.verify.detector import SCORE_CAP
-from rcbht_introspection.verify.features import PER_ARM, ArmFeatures, kind_columns
+from rcbht_introspection.verify.evidence import EvidenceReader, Tick
+from rcbht_introspection.verify.features import PER_ARM, ArmFeatures
 from rcbht_introspection.verify.mismatch import MISMATCH, Contradiction, mismatch_onset
 from rcbht_introspection.verify.model_file import VerifierModel
 
@@ -28,6 +30,7 @@ HISTORY_TICKS = 20_000
 """Ticks kept before the alarm for the evidence from onset on (1000 s at 20 Hz): an onset
 further back than this is read from the ticks kept. After the alarm the evidence is running
 sums (`RunningEvidence`), whatever its length."""
+VERIFIER_VIEW = "wrench"
 
 
 @dataclass(frozen=True)
@@ -71,7 +74,10 @@ class VerifierSession:
         self.arms = {a: ArmFeatures(cfg) for a in self.model.arms}
         self.pending: dict[str, dict[int, tuple[float, np.ndarray]]] = {a: {} for a in self.arms}
         self.last_rows = {a: np.zeros(PER_ARM) for a in self.arms}
-        self._mean_columns = kind_columns(("mean",), len(self.arms))
+        d = self.model.detector
+        self.reader = EvidenceReader(
+            VERIFIER_VIEW, d.phases, len(self.arms), d.models.level, d.models.timing
+        )
         self.held_rows = 0
         """Ticks at which an arm had sent nothing for MAX_ARM_LAG_TICKS while another had:
         its last row stood in (counted, not silent)."""
@@ -82,10 +88,12 @@ class VerifierSession:
         """First tick of the running excursion above onset_fraction (the onset estimate)."""
         self._prev_below = False
         self.tick = 0
-        self.history: list[EvidenceTick] = []
+        self.history: list[Tick] = []
         """The ticks before the alarm: where the characterisation's evidence begins."""
         self.evidence: RunningEvidence | None = None
         """From the alarm on: the evidence [onset, now]."""
+        self.named: tuple[str, dict[str, float], dict[str, str]] | None = None
+        """The characteriser's latest naming (class, probabilities, directions)."""
         self.ended = False
         self.contradictions: list[Contradiction] = []
         """Final verdicts that contradicted their sub-task (the mismatch signal's evidence)."""
@@ -98,8 +106,6 @@ class VerifierSession:
     def phase(self, name: str, t: float) -> None:
         """A sub-task event at stream time t (applies to samples after it)."""
         self.phases.append((name, t))
-        for feats in self.arms.values():
-            feats.phase(t)
 
     def push(self, arm: str, t: float, wrench: Sequence[float] | np.ndarray) -> list[Verdict]:
         """One wrench sample of `arm`; returns the verdicts of the ticks now complete on all arms."""
@@ -151,12 +157,6 @@ class VerifierSession:
         name = self.phases[i][0] if i >= 0 else ""
         elapsed = g - self.phases[i][1] if i >= 0 else 0.0
         scores = []
-        env = d.models.envelope
-        z = (
-            env.z_row(name, elapsed, features)
-            if env is not None
-            else np.full(len(features), np.nan)
-        )
         for s in d.signals:
             if s == "wrench" and d.models.neighbours is not None:
                 v = d.models.neighbours.score_row(name, elapsed, features) if i >= 0 else 0.0
@@ -177,12 +177,14 @@ class VerifierSession:
             default=0.0,
         )
         signals = (*d.signals, MISMATCH)
-        thresholds = np.append(d.threshold_of(name, elapsed), min_p)
+        thresholds = np.append(d.threshold_of(name), min_p)
         normalised = np.append(np.asarray(scores) / thresholds[:-1], mismatch)
         combined = float(np.nan_to_num(normalised.max(), posinf=1e6))
-        tick = EvidenceTick(g, name, elapsed, z, features[self._mean_columns])
+        names = [n for n, _ in self.phases[: i + 1]]
+        tick = Tick(g, name, elapsed, self.reader.vector(features, names, starts[: i + 1], g))
+        rename = last
         if self.evidence is not None:
-            self.evidence.add(tick)
+            rename = self.evidence.add(tick.time, tick.vector) or rename
         elif self.alarm_time is None:
             self.history.append(tick)
             if len(self.history) > HISTORY_TICKS:
@@ -199,6 +201,7 @@ class VerifierSession:
                     if start is not None:  # 0.0 is a start (the first sub-task's)
                         self.onset = start
                 self._start_evidence(self.onset)
+                rename = True
             self._prev_below = combined < d.config.onset_fraction
         verdict = Verdict(
             time=g,
@@ -210,11 +213,12 @@ class VerifierSession:
             alarm_time=self.alarm_time,
             onset=self.onset,
         )
-        if self.evidence is None or not self.evidence.count or self.model.characteriser is None:
+        ch = self.model.characteriser
+        if self.evidence is None or ch is None:
             return verdict
-        cls, probs, dirs = self.model.characteriser.predict_from(
-            self.evidence.features(), self.evidence.geometry(g), g - self.evidence.onset
-        )
+        if rename or self.named is None:
+            self.named = ch.predict(self.evidence.features())
+        cls, probs, dirs = self.named
         return Verdict(
             **{
                 **verdict.__dict__,
@@ -225,8 +229,8 @@ class VerifierSession:
         )
 
     def _start_evidence(self, onset: float) -> None:
-        """At the alarm: the evidence from the kept ticks (later ones are added as they come)."""
-        ch = self.model.characteriser
-        if ch is not None:
-            self.evidence = RunningEvidence.begin(ch.phases, onset, self.model.config, self.history)
+        """At the alarm: the evidence from the kept ticks, the alarm's among them (later ones
+        are added as they come)."""
+        if self.model.characteriser is not None:
+            self.evidence = self.reader.begin(self.model.config.evidence_s, onset, self.history)
         self.history = []

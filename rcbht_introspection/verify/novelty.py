@@ -1,27 +1,35 @@
-"""How far a running sub-task is from the successful trials: a nominal envelope of the features
-per sub-task and elapsed time, and the nominal range of each sub-task's duration.
+"""How far a running sub-task is from the successful trials: the distance of a tick to the
+nearest success at the same time into the same sub-task, the nominal range of each sub-task's
+duration, and the nominal mean wrench along each sub-task (what the characteriser compares the
+wrench before onset with).
 
-Both are fitted on successful trials only. `EnvelopeModel.z` gives each feature's signed distance
-from the nominal median in nominal spreads; the novelty of a tick is the mean of its `top_k`
-largest |z|. `TimingModel` scores a sub-task that has lasted longer than any nominal one, or that
-ended sooner or later than the nominal range.
+All are fitted on successful trials only. `TimingModel` scores a sub-task that has lasted longer
+than any nominal one, or that ended sooner or later than the nominal range.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import ClassVar
-
 import numpy as np
 
 from rcbht_introspection.verify.config import VerifyConfig
-from rcbht_introspection.verify.features import (
-    PER_ARM,
-    TrialFeatures,
-    kind_columns,
-    scale_floors,
-)
+from rcbht_introspection.verify.features import PER_ARM, TrialFeatures, kind_columns
+
+SCALE_FLOOR_FORCE = 0.02
+"""Smallest spread of a force feature (N): sensor noise, never zero."""
+SCALE_FLOOR_TORQUE = 0.001
+"""... of a moment feature (N m)."""
+ELAPSED_RELATIVE = 0.25
+"""Late in a long sub-task the comparison window widens to this share of the elapsed time."""
+BIN_S = 0.1
+"""The spreads and the nominal mean are kept per BIN_S of time into the sub-task."""
+
+
+def scale_floors(n_columns: int) -> np.ndarray:
+    """The smallest spread of each column of a block of wrench axes (forces, then moments)."""
+    axis = np.arange(n_columns) % 6
+    return np.where(axis < 3, SCALE_FLOOR_FORCE, SCALE_FLOOR_TORQUE)
 
 
 def pool_ticks(
@@ -48,84 +56,9 @@ def pool_ticks(
 
 
 @dataclass
-class EnvelopeModel:
-    """Per sub-task: median and spread per bin of time into the sub-task; `phase_free`: one
-    envelope over time into the trial (no state machine: the raw-wrench baseline)."""
-
-    reads_wrench: ClassVar[bool] = True
-    """A characteriser reading evidence through it may read the wrench's contact geometry."""
-    phases: tuple[str, ...]
-    median: list[np.ndarray]
-    """Per phase, (bins, features)."""
-    scale: list[np.ndarray]
-    bin_s: float
-    top_k: int
-    phase_free: bool = False
-
-    @classmethod
-    def fit(
-        cls, trials: Sequence[TrialFeatures], config: VerifyConfig, phase_free: bool = False
-    ) -> EnvelopeModel:
-        pools = pool_ticks(trials, phase_free)
-        names = list(pools)
-        bin_s = config.elapsed_bin_s
-        medians, scales = [], []
-        for name in names:
-            elapsed, feats, _ = pools[name]
-            phase_mad = 1.4826 * np.median(np.abs(feats - np.median(feats, axis=0)), axis=0)
-            floor = np.maximum(scale_floors(config, feats.shape[1]), 0.25 * phase_mad)
-            n_bins = int(np.ceil((elapsed.max() + 1e-9) / bin_s)) + 1
-            med = np.empty((n_bins, feats.shape[1]))
-            scale = np.empty_like(med)
-            half = config.elapsed_tolerance_s + bin_s / 2
-            for b in range(n_bins):
-                centre = (b + 0.5) * bin_s
-                near = np.abs(elapsed - centre) <= half
-                if not np.any(near):
-                    near = np.abs(elapsed - centre) <= np.min(np.abs(elapsed - centre)) + 1e-9
-                part = feats[near]
-                med[b] = np.median(part, axis=0)
-                scale[b] = np.maximum(1.4826 * np.median(np.abs(part - med[b]), axis=0), floor)
-            medians.append(med)
-            scales.append(scale)
-        return cls(tuple(names), medians, scales, bin_s, config.top_k, phase_free)
-
-    def z(self, tf: TrialFeatures) -> np.ndarray:
-        """(ticks, features) signed z of every tick; NaN rows for ticks of unknown sub-tasks."""
-        out = np.full(tf.features.shape, np.nan)
-        for t in range(len(tf.times)):
-            elapsed = tf.times[t] if self.phase_free else tf.elapsed[t]
-            out[t] = self.z_row(self._phase_name(tf, t), float(elapsed), tf.features[t])
-        return out
-
-    def _phase_name(self, tf: TrialFeatures, tick: int) -> str:
-        i = int(tf.phase_index[tick])
-        if i < 0:
-            return ""
-        return "all" if self.phase_free else tf.phases[i]
-
-    def z_row(self, phase: str, elapsed: float, features: np.ndarray) -> np.ndarray:
-        """Signed z of one tick's features; NaN when the sub-task has no envelope."""
-        if phase not in self.phases:
-            return np.full(len(features), np.nan)
-        p = self.phases.index(phase)
-        b = min(int(elapsed / self.bin_s), len(self.median[p]) - 1)
-        return (features - self.median[p][b]) / self.scale[p][b]
-
-    def score_z(self, z: np.ndarray) -> np.ndarray:
-        """Novelty per tick: the mean of the top_k largest |z| (NaN rows: +inf, an unknown sub-task)."""
-        a = np.abs(np.atleast_2d(z))
-        k = min(self.top_k, a.shape[1])
-        top = -np.sort(-np.nan_to_num(a, nan=np.inf), axis=1)[:, :k]
-        return top.mean(axis=1)
-
-
-@dataclass
 class TimingModel:
     """Nominal duration range of each sub-task, with a spread to score excursions in."""
 
-    reads_wrench: ClassVar[bool] = False
-    """The timing baseline's characteriser reads durations only, no contact geometry."""
     phases: tuple[str, ...]
     low: np.ndarray
     high: np.ndarray
@@ -165,19 +98,25 @@ class TimingModel:
             0.0, (self.low[p] - duration) / self.scale[p], (duration - self.high[p]) / self.scale[p]
         )
 
-    def z(self, tf: TrialFeatures) -> np.ndarray:
-        """(ticks, sub-tasks) signed duration so far of each nominal sub-task, from the middle of
-        its nominal range in spreads (0 before it starts): the timing view of a trial."""
-        out = np.zeros((len(tf.times), len(self.phases)))
+    def z_row(self, names: Sequence[str], starts: Sequence[float], t: float) -> np.ndarray:
+        """Signed duration so far of each nominal sub-task at stream time t, from the middle of
+        its nominal range in spreads (0 before it starts), given the sub-tasks started so far
+        (`names` at `starts`): the timing view of a tick."""
+        out = np.zeros(len(self.phases))
         mid = (self.low + self.high) / 2
+        for i, name in enumerate(names):
+            if name in self.phases and starts[i] <= t:
+                p = self.phases.index(name)
+                end = min(starts[i + 1] if i + 1 < len(starts) else t, t)
+                out[p] = (end - starts[i] - mid[p]) / self.scale[p]
+        return out
+
+    def z(self, tf: TrialFeatures) -> np.ndarray:
+        """(ticks, sub-tasks) `z_row` of every tick of a trial."""
+        out = np.zeros((len(tf.times), len(self.phases)))
         for t in range(len(tf.times)):
-            for i in range(int(tf.phase_index[t]) + 1):
-                if tf.phases[i] in self.phases:
-                    p = self.phases.index(tf.phases[i])
-                    end = tf.starts[i + 1] if i + 1 < len(tf.starts) else tf.times[t]
-                    out[t, p] = (
-                        min(float(end), float(tf.times[t])) - tf.starts[i] - mid[p]
-                    ) / self.scale[p]
+            n = int(tf.phase_index[t]) + 1
+            out[t] = self.z_row(tf.phases[:n], list(tf.starts[:n]), float(tf.times[t]))
         return out
 
     def scores(self, tf: TrialFeatures) -> np.ndarray:
@@ -199,7 +138,7 @@ class TimingModel:
 @dataclass
 class NeighbourModel:
     """The successful trials' ticks per sub-task; a tick's novelty is its distance to the
-    `k`-th nearest successful trial among ticks of the same sub-task at a similar elapsed time
+    nearest successful trial among ticks of the same sub-task at a similar elapsed time
     (within max(tolerance, relative * elapsed)): "did any success look like this, about now?".
     Distances are root-mean-square over features in units of each feature's spread among those
     successes' ticks at that elapsed time (one spread per `bin_s`), so the tight first contact
@@ -211,16 +150,14 @@ class NeighbourModel:
     """Per phase, the pooled ticks' elapsed times, sorted."""
     points: list[np.ndarray]
     """Per phase, (ticks, features) in the same order."""
-    trial_ids: list[np.ndarray]
     scale: list[np.ndarray]
     """Per phase, (bins, features): the spread of each feature around each bin's elapsed time."""
     bin_s: float
     n_trials: int
     tolerance_s: float
     relative: float
-    k: int
     columns: np.ndarray
-    """The feature columns compared (config.novelty_features of every arm)."""
+    """The feature columns compared (one kind of every arm)."""
     phase_free: bool = False
 
     def window(self, p: int, elapsed: float) -> tuple[int, int]:
@@ -239,10 +176,13 @@ class NeighbourModel:
         trials: Sequence[TrialFeatures],
         config: VerifyConfig,
         phase_free: bool = False,
+        kind: str = "change",
     ) -> NeighbourModel:
+        """`kind`: the feature block compared (the verifier's change; the raw-wrench baseline's
+        mean)."""
         n_arms = trials[0].features.shape[1] // PER_ARM if trials else 1
-        columns = kind_columns(config.novelty_features, n_arms)
-        floors = scale_floors(config, n_arms * PER_ARM)[columns]
+        columns = kind_columns(kind, n_arms)
+        floors = scale_floors(len(columns))
         pools = pool_ticks(trials, phase_free)
         names = list(pools)
         model = cls(
@@ -250,21 +190,18 @@ class NeighbourModel:
             [],
             [],
             [],
-            [],
-            config.elapsed_bin_s,
+            BIN_S,
             len(trials),
             config.elapsed_tolerance_s,
-            config.elapsed_relative,
-            config.neighbours,
+            ELAPSED_RELATIVE,
             columns,
             phase_free,
         )
         for p, name in enumerate(names):
-            el, feats, ids = pools[name]
+            el, feats, _ = pools[name]
             order = np.argsort(el, kind="stable")
             model.elapsed.append(el[order])
             model.points.append(feats[order][:, columns])
-            model.trial_ids.append(ids[order])
             n_bins = int(np.ceil((el.max() + 1e-9) / model.bin_s)) + 1
             scale = np.empty((n_bins, len(columns)))
             for b in range(n_bins):
@@ -282,12 +219,7 @@ class NeighbourModel:
         scale = self.scale[p][min(int(elapsed / self.bin_s), len(self.scale[p]) - 1)]
         diff = (self.points[p][lo:hi] - features[self.columns]) / scale
         dist = np.sqrt(np.mean(diff * diff, axis=1))
-        best = np.full(self.n_trials, np.inf)
-        np.minimum.at(best, self.trial_ids[p][lo:hi], dist)
-        k = min(self.k, int(np.sum(np.isfinite(best))))
-        if k < 1:
-            return float("inf")
-        return float(np.partition(best, k - 1)[k - 1])
+        return float(dist.min()) if len(dist) else float("inf")
 
     def scores(self, tf: TrialFeatures) -> np.ndarray:
         """Novelty per tick (0 before the first sub-task)."""
@@ -300,3 +232,34 @@ class NeighbourModel:
             elapsed = float(tf.times[t] if self.phase_free else tf.elapsed[t])
             out[t] = self.score_row(name, elapsed, tf.features[t])
         return out
+
+
+@dataclass
+class NominalLevel:
+    """Per sub-task, the successes' median mean wrench per BIN_S of time into it: what the
+    characteriser compares a failure's wrench just before onset with."""
+
+    phases: tuple[str, ...]
+    median: list[np.ndarray]
+    """Per phase, (bins, 6 * arms)."""
+
+    @classmethod
+    def fit(cls, trials: Sequence[TrialFeatures]) -> NominalLevel:
+        n_arms = trials[0].features.shape[1] // PER_ARM if trials else 1
+        columns = kind_columns("mean", n_arms)
+        pools = pool_ticks(trials)
+        medians = []
+        for elapsed, feats, _ in pools.values():
+            bins = np.minimum((elapsed / BIN_S).astype(int), int(elapsed.max() / BIN_S))
+            med = np.zeros((int(bins.max()) + 1, len(columns)))
+            for b in range(len(med)):  # a bin no tick fell in keeps the one before it
+                med[b] = np.median(feats[bins == b][:, columns], axis=0) if np.any(bins == b) else med[b - 1]
+            medians.append(med)
+        return cls(tuple(pools), medians)
+
+    def at(self, phase: str, elapsed: float) -> np.ndarray | None:
+        """The nominal mean wrench at `elapsed` s into `phase` (None: no success had it)."""
+        if phase not in self.phases:
+            return None
+        med = self.median[self.phases.index(phase)]
+        return med[min(max(int(elapsed / BIN_S), 0), len(med) - 1)]

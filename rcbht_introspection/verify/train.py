@@ -4,11 +4,15 @@ the failures (from their labelled onset, else the start of their first failing s
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
 
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.verify.characterise import Characteriser
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detector
+from rcbht_introspection.verify.evidence import EvidenceReader, arms_of, namings
 from rcbht_introspection.verify.features import TrialFeatures, trial_features
 from rcbht_introspection.verify.labels import TrialLabel
 from rcbht_introspection.verify.model_file import VerifierModel
@@ -36,6 +40,47 @@ def onset_for(label: TrialLabel, tf: TrialFeatures, timing: TimingModel) -> tupl
     return fallback_onset(tf, timing), "first failing sub-task"
 
 
+@dataclass(frozen=True)
+class Fitted:
+    """One method's fitted parts: the detector, the evidence view and the characteriser."""
+
+    detector: Detector
+    reader: EvidenceReader
+    characteriser: Characteriser | None
+
+
+def reader_of(detector: Detector, view: str, n_arms: int) -> EvidenceReader:
+    """The evidence view of a method over its detector's models."""
+    m = detector.models
+    return EvidenceReader(view, detector.phases, n_arms, m.level, m.timing)
+
+
+def fit_method(
+    successes: Sequence[TrialFeatures],
+    failures: Sequence[tuple[TrialFeatures, TrialLabel, float]],
+    config: VerifyConfig,
+    signals: Sequence[str],
+    view: str,
+    seed: int = 0,
+    groups: Mapping[str, str] | None = None,
+) -> Fitted:
+    """Detector on the successes; characteriser on the failures' evidence from their onsets,
+    one row at every tick at which the class is named again."""
+    detector = Detector.fit(successes, config, signals, seed=seed, groups=groups)
+    if view == "timing" and detector.models.timing is None:
+        detector.models.timing = TimingModel.fit(successes, config)
+    reader = reader_of(detector, view, arms_of(successes[0]))
+    rows: list[np.ndarray] = []
+    labels: list[TrialLabel] = []
+    for tf, label, onset in failures:
+        ticks = reader.ticks(tf)
+        for _, x in namings(reader, config.evidence_s, onset, ticks, onset):
+            rows.append(x)
+            labels.append(label)
+    char = Characteriser(random_state=seed).fit(np.vstack(rows), labels) if rows else None
+    return Fitted(detector, reader, char)
+
+
 def train_verifier(
     trials: Sequence[Trial],
     labels: Mapping[str, TrialLabel],
@@ -48,24 +93,18 @@ def train_verifier(
         raise ValueError(f"trials mix arm sets {sorted(arms)}")
     feats = {t.name: trial_features(t, config) for t in trials}
     successes = [feats[t.name] for t in trials if not labels[t.name].failed]
-    detector = Detector.fit(successes, config, MAIN_SIGNALS, seed=seed)
     failed = [t.name for t in trials if labels[t.name].failed]
-    characteriser = None
-    if failed and detector.models.envelope is not None:
-        timing = TimingModel.fit(successes, config)  # all successes, as verify-eval's onsets
-        characteriser = Characteriser.fit(
-            [(feats[n], labels[n], onset_for(labels[n], feats[n], timing)[0]) for n in failed],
-            detector.models.envelope,
-            config,
-            seed,
-        )
+    timing = TimingModel.fit(successes, config)  # all successes, as verify-eval's onsets
+    failures = [(feats[n], labels[n], onset_for(labels[n], feats[n], timing)[0]) for n in failed]
+    groups = {n: lb.session for n, lb in labels.items() if lb.session}
+    fitted = fit_method(successes, failures, config, MAIN_SIGNALS, "wrench", seed, groups)
     return VerifierModel(
         arms=arms.pop(),
-        detector=detector,
-        characteriser=characteriser,
+        detector=fitted.detector,
+        characteriser=fitted.characteriser,
         trained_on={
             "successes": len(successes),
-            "successes_left_out": list(detector.left_out),
+            "sessions": len(set(groups.values())),
             "failures": len(failed),
             "classes": sorted({labels[n].failure_class for n in failed}),
         },

@@ -1,0 +1,117 @@
+"""What a characteriser reads of a trial or a stream: one vector per tick in its view, and the
+reference and context the evidence starts from (verify/characterise.py says why)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from rcbht_introspection.verify.characterise import VIEWS, RunningEvidence
+from rcbht_introspection.verify.features import PER_ARM, TrialFeatures, kind_columns
+from rcbht_introspection.verify.novelty import NominalLevel, TimingModel
+
+
+class Tick(NamedTuple):
+    """One tick as a characteriser keeps it."""
+
+    time: float
+    phase: str
+    """The commanded sub-task ('' before the first)."""
+    elapsed: float
+    vector: np.ndarray
+    """The view's vector (`EvidenceReader.vector`)."""
+
+
+@dataclass(frozen=True)
+class EvidenceReader:
+    """A view of the ticks: which vector each gives, and where the evidence starts from."""
+
+    view: str
+    phases: tuple[str, ...]
+    """The sub-tasks of the nominal model (the context's one-hot)."""
+    n_arms: int
+    level: NominalLevel | None = None
+    timing: TimingModel | None = None
+
+    def __post_init__(self) -> None:
+        if self.view not in VIEWS:
+            raise ValueError(f"unknown evidence view {self.view!r}")
+        if self.view == "timing" and self.timing is None:
+            raise ValueError("the timing view needs a timing model")
+
+    def vector(
+        self, features: np.ndarray, names: Sequence[str], starts: Sequence[float], t: float
+    ) -> np.ndarray:
+        """The view's vector of a tick: its features, and the sub-tasks started so far."""
+        if self.view == "timing" and self.timing is not None:
+            return self.timing.z_row(names, starts, t)
+        return np.asarray(features)[kind_columns("mean", self.n_arms)]
+
+    def ticks(self, tf: TrialFeatures) -> list[Tick]:
+        """Every tick of a trial in this view."""
+        out = []
+        for t in range(len(tf.times)):
+            i = int(tf.phase_index[t])
+            g = float(tf.times[t])
+            vec = self.vector(tf.features[t], tf.phases[: i + 1], list(tf.starts[: i + 1]), g)
+            out.append(Tick(g, tf.phases[i] if i >= 0 else "", float(tf.elapsed[t]), vec))
+        return out
+
+    def begin(self, spans: Sequence[float], onset: float, ticks: Sequence[Tick]) -> RunningEvidence:
+        """The evidence from `onset` on, started from the ticks kept so far (those at or after
+        onset are added); the reference is the last tick before onset (the first if none)."""
+        ref = next((k for k in reversed(ticks) if k.time < onset - 1e-9), ticks[0] if ticks else None)
+        first = next((k for k in ticks if k.time >= onset - 1e-9), ref)
+        width = len(ref.vector) if ref is not None else 6 * self.n_arms
+        reference, context = np.zeros(width), np.zeros(0)
+        if self.view == "wrench" and ref is not None and first is not None:
+            reference = ref.vector
+            nominal = self.level.at(ref.phase, ref.elapsed) if self.level is not None else None
+            onehot = np.array([float(first.phase == p) for p in self.phases])
+            offset = ref.vector - nominal if nominal is not None else np.zeros(width)
+            context = np.concatenate([offset, [first.elapsed], onehot])
+        elif self.view == "raw":
+            context = np.array([onset])
+        evidence = RunningEvidence(tuple(spans), onset, reference, context)
+        for k in ticks:
+            if k.time >= onset - 1e-9:
+                evidence.add(k.time, k.vector)
+        return evidence
+
+
+def namings(
+    reader: EvidenceReader, spans: Sequence[float], onset: float, ticks: Sequence[Tick], start: float
+) -> list[tuple[float, np.ndarray]]:
+    """(tick time, evidence features) at every tick a characteriser names the class again: the
+    first at or after `start` (the alarm; the evidence begins at onset), then each tick that
+    opens a span, then the last tick."""
+    before = [k for k in ticks if k.time < start - 1e-9]
+    later = [k for k in ticks if k.time >= start - 1e-9]
+    if not later:
+        return []
+    evidence = reader.begin(spans, onset, [*before, later[0]])
+    out = [(later[0].time, evidence.features())]
+    for k in later[1:]:
+        if evidence.add(k.time, k.vector):
+            out.append((k.time, evidence.features()))
+    if out[-1][0] != later[-1].time:
+        out.append((later[-1].time, evidence.features()))
+    return out
+
+
+def named_at(namings_: Sequence[tuple[float, str]], t: float) -> str:
+    """The class named at time t: the last naming at or before t ('' before the first)."""
+    found = ""
+    for when, cls in namings_:
+        if when > t + 1e-9:
+            break
+        found = cls
+    return found
+
+
+def arms_of(tf: TrialFeatures) -> int:
+    """Number of arms of a trial's features."""
+    return tf.features.shape[1] // PER_ARM
