@@ -1,10 +1,12 @@
-"""Verification core: live session == batch detector, safe verifier file, conformal thresholds,
-the protocol's scoring rules, labels files, and detection of an injected contact anomaly."""
+"""Verification core: live session == batch detector and offline namings, bias-robust features,
+boosted trees == scikit-learn, safe verifier file, conformal thresholds, session-grouped
+calibration, the protocol's scoring rules, labels files, and detection of an injected anomaly."""
 
 from __future__ import annotations
 
 import dataclasses
 import json
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -12,31 +14,34 @@ import pytest
 from conftest import SIM_SUCCESS
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from sklearn.ensemble import HistGradientBoostingClassifier
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import read_safe_npz, write_safe_npz
 from rcbht_introspection.sim import load_sim_config, simulate_trial
+from rcbht_introspection.verify.boosted import BoostedTrees, check_packed
 from rcbht_introspection.verify.characterise import (
     FAILURE,
-    Characteriser,
-    EvidenceTick,
-    ForestHead,
     RunningEvidence,
-    channel_columns,
-    contact_geometry,
-    evidence_features,
+    _shared_by_signs,
     sign_table,
-    wrench_means,
+    span_index,
 )
-from rcbht_introspection.verify.config import CHARACTERISER_HEADS, KINDS, load_verify_config
-from rcbht_introspection.verify.detector import Detector, conformal_threshold
+from rcbht_introspection.verify.config import load_verify_config
+from rcbht_introspection.verify.detector import (
+    Detection,
+    Detector,
+    calibration_folds,
+    conformal_threshold,
+)
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
-from rcbht_introspection.verify.features import TrialFeatures, feature_names, trial_features
+from rcbht_introspection.verify.evidence import EvidenceReader, Tick, named_at, namings, reader_of
+from rcbht_introspection.verify.features import kind_columns, lag_ticks, trial_features
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel, label_of, read_labels
-from rcbht_introspection.verify.model_file import load_verifier, save_verifier
-from rcbht_introspection.verify.monitor import NOMINAL, VerifierSession
+from rcbht_introspection.verify.model_file import VerifierModel, load_verifier, save_verifier
+from rcbht_introspection.verify.monitor import NOMINAL, Verdict, VerifierSession
 from rcbht_introspection.verify.stream import offline_verdicts
 from rcbht_introspection.verify.train import train_verifier
 
@@ -59,6 +64,56 @@ def labels(trials: list[Trial]) -> dict[str, TrialLabel]:
     return {t.name: label_of(t) for t in trials}
 
 
+@pytest.fixture(scope="module")
+def trained(trials: list[Trial], labels: dict[str, TrialLabel]) -> VerifierModel:
+    """A verifier trained on every trial (the tests that need no held-out trial share it)."""
+    return train_verifier(trials, labels, load_verify_config())
+
+
+@pytest.fixture(scope="module")
+def held_out_model(
+    trials: list[Trial], labels: dict[str, TrialLabel], tmp_path_factory: pytest.TempPathFactory
+) -> VerifierModel:
+    """A verifier without the first success and the last failure, saved and loaded."""
+    train = trials[1:-1]
+    path = tmp_path_factory.mktemp("held_out") / "v.npz"
+    return load_verifier(save_verifier(train_verifier(train, labels, load_verify_config()), path))
+
+
+def offline_namings(
+    model: VerifierModel, trial: Trial, detection: Detection
+) -> list[tuple[float, tuple[str, dict[str, float], dict[str, str]]]]:
+    """The batch path's namings of a trial from its alarm on (evidence from its onset)."""
+    assert model.characteriser is not None
+    if detection.alarm is None or detection.onset is None:
+        return []
+    config = model.config
+    tf = trial_features(trial, config)
+    reader = reader_of(model.detector, "wrench", len(model.arms))
+    rows = namings(reader, config.evidence_s, detection.onset, reader.ticks(tf), detection.alarm)
+    return [(t, model.characteriser.predict(x)) for t, x in rows]
+
+
+def assert_live_names_as_offline(
+    model: VerifierModel, trial: Trial, verdicts: Sequence[Verdict], detection: Detection
+) -> int:
+    """Tick for tick, the live verdicts' class, probabilities and directions are the offline
+    naming standing at that tick (named_at); returns how many alarm verdicts were compared."""
+    named = offline_namings(model, trial, detection)
+    classes = [(t, n[0]) for t, n in named]
+    compared = 0
+    for v in verdicts:
+        if not v.alarm:
+            assert v.failure_class == "" and v.health == NOMINAL
+            continue
+        want = named_at(classes, v.time)
+        assert v.failure_class == want, v.time
+        current = [n for t, n in named if t <= v.time + 1e-9][-1]
+        assert v.class_probabilities == current[1] and v.directions == current[2]
+        compared += 1
+    return compared
+
+
 def test_failure_labels_come_from_the_simulator(labels: dict[str, TrialLabel]) -> None:
     failed = [lb for lb in labels.values() if lb.failed]
     assert [lb.failure_class for lb in failed] == list(FAILURES)
@@ -69,12 +124,14 @@ def test_failure_labels_come_from_the_simulator(labels: dict[str, TrialLabel]) -
 
 
 def test_live_session_equals_the_batch_detector(
-    trials: list[Trial], labels: dict[str, TrialLabel], tmp_path: Path
+    trials: list[Trial], held_out_model: VerifierModel
 ) -> None:
-    config = load_verify_config()
-    train = [t for t in trials if t.name not in (trials[0].name, trials[-1].name)]
-    model = load_verifier(save_verifier(train_verifier(train, labels, config), tmp_path / "v.npz"))
+    """Scores, alarm and onset as the batch detector gives them; from the alarm on, the class,
+    its probabilities and the directions the offline namings give at that tick."""
+    model = held_out_model
+    config = model.config
     assert model.characteriser is not None
+    alarmed = 0
     for trial in (trials[0], trials[-1]):
         tf = trial_features(trial, config)
         batch = model.detector.run(tf)
@@ -83,69 +140,214 @@ def test_live_session_equals_the_batch_detector(
         np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
         assert verdicts[-1].alarm_time == batch.alarm
         assert verdicts[-1].onset == batch.onset
-        if batch.alarm is not None and batch.onset is not None:
-            z = model.detector.models.envelope.z(tf)  # type: ignore[union-attr]
-            means = wrench_means(tf)
-            for v in verdicts[:: max(1, len(verdicts) // 25)] + verdicts[-1:]:
-                if v.alarm:  # every head, contact forests included, as the batch path names it
-                    cls, probs, dirs = model.characteriser.predict(
-                        tf, z, batch.onset, v.time, means
-                    )
-                    assert (v.failure_class, v.directions) == (cls, dirs)
-                    assert v.class_probabilities == pytest.approx(probs)
-            assert verdicts[-1].health == verdicts[-1].failure_class
+        if batch.alarm is not None:
+            alarmed += 1
+            assert assert_live_names_as_offline(model, trial, verdicts, batch) > 0
+            assert verdicts[-1].health == verdicts[-1].failure_class != ""
         else:
             assert {v.health for v in verdicts} == {NOMINAL}
+    assert alarmed, "the held-out failure must raise the alarm for this test"
 
 
-def test_a_saved_characteriser_names_what_the_trained_one_names(
-    trials: list[Trial], labels: dict[str, TrialLabel], tmp_path: Path
+def test_live_session_with_a_late_first_event_equals_the_batch_detector(
+    trials: list[Trial], held_out_model: VerifierModel
+) -> None:
+    """A robot streams wrench before its state machine's first event: the ticks before it are
+    judged 'no sub-task yet', and an alarm's evidence is named as offline."""
+    config = held_out_model.config
+    failing = trials[-1]
+    late = dataclasses.replace(failing, state_times=(0.5, *failing.state_times[1:]))
+    tf = trial_features(late, config)
+    batch = held_out_model.detector.run(tf)
+    verdicts = offline_verdicts(late, held_out_model)
+    np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
+    assert verdicts[-1].alarm_time == batch.alarm and verdicts[-1].onset == batch.onset
+    assert verdicts[0].phase == "" and verdicts[-1].phase != ""
+    assert batch.alarm is not None
+    assert assert_live_names_as_offline(held_out_model, late, verdicts, batch) > 0
+
+
+def test_two_arms_with_offset_stamps_and_a_silent_arm_still_give_verdicts(
+    trials: list[Trial], labels: dict[str, TrialLabel]
+) -> None:
+    some = [*trials[:4], *trials[-3:]]  # four successes, the three failures
+    both = [dataclasses.replace(t, wrench={"L": t.wrench["R"], "R": t.wrench["R"]}) for t in some]
+    model = train_verifier(both, labels, load_verify_config())
+    trial = both[0]
+    session = VerifierSession(model)
+    session.phase(trial.phase_names[0], 0.0)
+    time = np.asarray(trial.time) - float(trial.time[0])
+    verdicts = []
+    for i, t in enumerate(time[: len(time) // 2]):
+        verdicts += session.push("R", float(t), trial.wrench["R"][i])
+        if t < 2.0:  # the left arm's stamps run 5 ms late, then it falls silent
+            verdicts += session.push("L", float(t) + 0.005, trial.wrench["L"][i])
+    ticks = int(time[len(time) // 2 - 1] / model.config.step_s)
+    assert len(verdicts) >= ticks - 25  # at most the 1 s of waiting for the silent arm behind
+    assert session.held_rows > 0
+    assert [v.time for v in verdicts] == sorted(v.time for v in verdicts)
+    # both arms in full: the live session is the batch detector on two arms
+    failing = both[-1]
+    batch = model.detector.run(trial_features(failing, model.config))
+    live = offline_verdicts(failing, model)
+    np.testing.assert_allclose([v.score for v in live], batch.score, rtol=1e-12)
+    assert live[-1].alarm_time == batch.alarm
+    assert_live_names_as_offline(model, failing, live, batch)
+
+
+def test_live_session_with_a_contradiction_equals_the_batch_mismatch_rule(
+    trials: list[Trial], held_out_model: VerifierModel
+) -> None:
+    """A contradicting final verdict raises the alarm at the first tick it is known, with the
+    contradicted sub-task's start as onset; the live session and the batch rule agree, and the
+    class named from then on is the offline naming of that evidence."""
+    from rcbht_introspection.verify.mismatch import MISMATCH, Contradiction, with_mismatch
+
+    model = held_out_model
+    config = model.config
+    nominal = trials[0]
+    tf = trial_features(nominal, config)
+    batch_plain = model.detector.run(tf)
+    assert batch_plain.alarm is None, "the held-out success must be quiet for this test"
+    start = float(tf.starts[0])  # the first sub-task: its start, 0.0, is the onset
+    assert start == 0.0
+    known = float(tf.starts[2]) + 0.3
+    c = Contradiction(known, start, tf.phases[0], tf.phases[1], 0.95)
+    batch = with_mismatch(batch_plain, [c], config)
+    verdicts = offline_verdicts(nominal, model, [c])
+    np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
+    assert batch.alarm_signal == MISMATCH and batch.onset == start
+    assert verdicts[-1].alarm_time == batch.alarm == min(t for t in tf.times if t >= known - 1e-9)
+    assert verdicts[-1].onset == start
+    assert all(not v.alarm for v in verdicts if v.time < known - 1e-9)
+    assert verdicts[-1].signals[MISMATCH] == pytest.approx(0.95 / config.mismatch_min_probability)
+    assert assert_live_names_as_offline(model, nominal, verdicts, batch) > 0
+
+
+def test_contradictions_need_a_confident_final_verdict_on_a_commanded_subtask() -> None:
+    from rcbht_introspection.live.belief import UNKNOWN, Belief
+    from rcbht_introspection.verify.mismatch import contradiction_of
+
+    def belief(subtask: str, p: float, final: bool = True, phase: str = "insertion") -> Belief:
+        classes = (subtask, "insertion") if subtask != "insertion" else (subtask, "x")
+        return Belief(subtask, classes, (p, 1.0 - p), 2.0, 5.0, "boundary", phase, final)
+
+    c = contradiction_of(belief("rotation", 0.9), 6.5, 0.8)
+    assert c is not None and (c.time, c.start, c.phase, c.subtask) == (
+        6.5,
+        2.0,
+        "insertion",
+        "rotation",
+    )
+    assert c.probability == pytest.approx(0.9)
+    assert contradiction_of(belief("rotation", 0.8), 6.5, 0.8) is None  # not above
+    assert contradiction_of(belief("rotation", 0.9, final=False), 6.5, 0.8) is None  # running
+    assert contradiction_of(belief("insertion", 0.99), 6.5, 0.8) is None  # agrees
+    assert contradiction_of(belief(UNKNOWN, 0.99), 6.5, 0.8) is None
+    assert contradiction_of(belief("rotation", 0.9, phase=""), 6.5, 0.8) is None  # window mode
+    # a model that does not know the commanded sub-task cannot contradict it
+    unknown_phase = Belief("rotation", ("rotation", "x"), (0.9, 0.1), 2, 5, "boundary", "new", True)
+    assert contradiction_of(unknown_phase, 6.5, 0.8) is None
+
+
+def test_the_change_block_is_the_mean_minus_the_mean_lag_s_before(trials: list[Trial]) -> None:
+    """change(t) = mean(t) - mean(t - lag_s), from the first tick while the stream is younger;
+    a constant offset on every sample leaves the change as it was and shifts the mean by it."""
+    config = load_verify_config()
+    lag = lag_ticks(config)
+    assert lag == round(config.lag_s / config.step_s) > 1
+    trial = trials[-1]
+    tf = trial_features(trial, config)
+    mean, change = (
+        tf.features[:, kind_columns("mean", 1)],
+        tf.features[:, kind_columns("change", 1)],
+    )
+    assert np.all(np.diff(tf.times) > 0) and len(tf.times) > 3 * lag
+    earlier = mean[np.maximum(np.arange(len(mean)) - lag, 0)]
+    np.testing.assert_allclose(change, mean - earlier, rtol=0, atol=1e-9)
+    assert np.all(change[0] == 0)
+    assert np.abs(change).max() > 1.0  # the contacts do change the wrench
+    offset = np.array([15.0, -4.0, 40.0, 0.5, -0.3, 0.2])
+    shifted = dataclasses.replace(trial, wrench={"R": trial.wrench["R"] + offset})
+    sf = trial_features(shifted, config)
+    np.testing.assert_array_equal(sf.times, tf.times)
+    np.testing.assert_allclose(sf.features[:, kind_columns("change", 1)], change, atol=1e-9)
+    np.testing.assert_allclose(sf.features[:, kind_columns("mean", 1)], mean + offset, atol=1e-9)
+
+
+def test_calibration_folds_hold_out_whole_sessions() -> None:
+    names = [f"t{i}" for i in range(11)]
+    groups = {n: f"s{i % 4}" for i, n in enumerate(names[:10])}  # t10: no session named
+    folds = calibration_folds(names, groups, 3, seed=2)
+    assert len(folds) == 3 and sorted(i for f in folds for i in f) == list(range(11))
+    for session in {*groups.values(), "t10"}:
+        holding = [k for k, f in enumerate(folds) if any(groups.get(names[i], names[i]) == session for i in f)]  # fmt: skip
+        assert len(holding) == 1, session  # a session is never split across folds
+    assert calibration_folds(names, groups, 3, seed=2) == folds  # seeded
+    assert len(calibration_folds(names, groups, 9, seed=0)) == 5  # no more folds than sessions
+    single = calibration_folds(names, None, 20, seed=0)  # no sessions: one trial per fold
+    assert sorted(i for f in single for i in f) == list(range(11)) and {len(f) for f in single} == {
+        1
+    }
+
+
+def test_a_constant_bias_raises_no_alarm_the_raw_wrench_does(trials: list[Trial]) -> None:
+    """Fitted on the successes of one session, tested on successes of another whose sensor
+    reads 15 N more Fz and 0.5 N m more Mx: the verifier's signals are the unbiased runs' (it
+    reads the change), the raw-wrench baseline alarms on every biased run."""
+    config = load_verify_config()
+    successes = [t for t in trials if "failure" not in t.metadata]
+    train, test = successes[:5], successes[5:]
+    feats = [trial_features(t, config) for t in train]
+    detector = Detector.fit(feats, config)  # one session: the folds hold out single trials
+    assert detector.calibration["folds"] == len(train)
+    raw = Detector.fit(feats, config, signals=("wrench_global",))
+    bias = np.array([0.0, 0.0, 15.0, 0.5, 0.0, 0.0])
+    plain_alarms = biased_alarms = raw_alarms = 0
+    for t in test:
+        biased = dataclasses.replace(t, wrench={"R": t.wrench["R"] + bias})
+        plain, shifted = (
+            detector.run(trial_features(t, config)),
+            detector.run(trial_features(biased, config)),
+        )
+        np.testing.assert_allclose(shifted.normalised, plain.normalised, atol=1e-6)
+        plain_alarms += plain.alarm is not None
+        biased_alarms += shifted.alarm is not None
+        raw_alarms += raw.run(trial_features(biased, config)).alarm is not None
+    assert biased_alarms <= plain_alarms
+    assert raw_alarms == len(test)  # the test can fail: a bias the raw wrench cannot ignore
+
+
+@pytest.fixture(scope="module")
+def cell_successes() -> list[Trial]:
+    """Ten successes of the repeated-program cell (config/sim_cell.yaml), whose nominal runs
+    are alike, as a fixed robot program's are."""
+    cell = load_sim_config(Path(__file__).resolve().parents[1] / "config" / "sim_cell.yaml")
+    return [simulate_trial(cell, 500 + i, name=f"S-{i:02d}") for i in range(10)]
+
+
+@pytest.mark.parametrize("after_s", [0.5, 1.0, 2.0])
+def test_an_injected_contact_anomaly_raises_the_alarm_after_it(
+    cell_successes: list[Trial], after_s: float
 ) -> None:
     config = load_verify_config()
-    trained = train_verifier(trials, labels, config)
-    loaded = load_verifier(save_verifier(trained, tmp_path / "v.npz"))
-    assert trained.characteriser is not None and loaded.characteriser is not None
-    assert set(loaded.characteriser.directions) == {"x", "y", "r"}
-    # x is '0' for both deviations here: one class, so no contact forest for it
-    assert set(loaded.characteriser.contact) == {"class", "y"}
-    assert set(loaded.characteriser.narrow) == set(config.direction_channels) == {"x", "r"}
-    assert loaded.characteriser.signs == trained.characteriser.signs
-    envelope = trained.detector.models.envelope
-    assert envelope is not None
-    for trial in trials:
-        tf = trial_features(trial, config)
-        z = envelope.z(tf)
-        onset = float(tf.times[len(tf.times) // 2])
-        want = trained.characteriser.predict(tf, z, onset, tf.end, wrench_means(tf))
-        got = loaded.characteriser.predict(tf, z, onset, tf.end, wrench_means(tf))
-        assert got[0] == want[0] and got[2] == want[2]
-        assert got[1] == pytest.approx(want[1], abs=1e-12)
+    held = cell_successes[-1]
+    detector = Detector.fit([trial_features(t, config) for t in cell_successes[:-1]], config)
+    onset = float(held.state_times[1]) + after_s  # in rotation: the part presses on the housing
+    plain = detector.run(trial_features(held, config))
+    hit = detector.run(trial_features(_jammed(held, onset), config))
+    assert hit.alarm is not None and onset <= hit.alarm <= onset + GATE_S
+    assert hit.onset is not None and onset - config.step_s <= hit.onset <= hit.alarm
+    assert plain.alarm is None
 
 
-def test_contact_geometry_reads_where_the_part_touched() -> None:
-    """A 5 N push with 0.5 N along x at (3, -2) mm, from onset, over a constant sensor bias:
-    the contact point, the yaw moment per pressing force and the force shares come back; before onset, nothing."""
-    config = load_verify_config()
-    times = np.arange(0.0, 2.0, config.step_s)
-    bias = np.array([0.3, -0.2, 1.0, 0.01, -0.02, 0.005])
-    force, point = np.array([0.5, 0.0, 5.0]), np.array([0.003, -0.002, 0.0])
-    arm = np.tile(bias, (len(times), 1))
-    arm[times >= 1.0] += np.concatenate([force, np.cross(point, force)])
-    still = np.tile(bias, (len(times), 1))
-    means = np.hstack([arm, still])  # two arms: the second never touches
-    got = contact_geometry(times, means, 1.0, 2.0, config)
-    assert got == pytest.approx([-2.0, 3.0, 0.2, 10.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], abs=1e-9)
-    assert contact_geometry(times, means, 0.3, 0.9, config) is None
-    # what comes after contact_s, and a tick pressing no more than RATIO_MIN_FORCE, do not count
-    later = means.copy()
-    later[times > 1.0 + config.contact_s + 1e-9, 0] += 3.0
-    later[np.isclose(times, 1.0), :6] = bias + np.array([5.0, 0.0, 0.5, 0.0, 0.0, 0.0])
-    assert contact_geometry(times, later, 1.0, 2.0, config) == pytest.approx(got, abs=1e-9)
-    # a lever over a weak push is clipped
-    weak = np.tile(bias, (len(times), 1))
-    weak[times >= 1.0] += [0.0, 0.0, 1.5, -1.0, 0.0, 0.0]
-    clipped = contact_geometry(times, weak, 1.0, 2.0, config)
-    assert clipped is not None and clipped[0] == pytest.approx(-30.0)
+def _jammed(trial: Trial, onset: float) -> Trial:
+    """The trial with a jam from `onset`: 30 N more push, wedged about 17 mm off-centre."""
+    wrench = trial.wrench["R"].copy()
+    after = np.asarray(trial.time) >= onset
+    wrench[after, 2] += 30.0
+    wrench[after, 4] += 0.5
+    return dataclasses.replace(trial, wrench={"R": wrench})
 
 
 @settings(max_examples=60, deadline=None)
@@ -153,120 +355,116 @@ def test_contact_geometry_reads_where_the_part_touched() -> None:
     seed=st.integers(0, 2**32 - 1),
     onset_tick=st.integers(0, 59),
     offset=st.sampled_from([0.0, 0.013, -0.02]),
-    alarm_tick=st.integers(0, 59),
-    first_kept=st.integers(0, 59),
+    alarm_after=st.integers(0, 30),
 )
-def test_running_evidence_is_the_evidence_of_the_whole_span(
-    seed: int, onset_tick: int, offset: float, alarm_tick: int, first_kept: int
+def test_running_evidence_and_namings_are_the_span_summaries(
+    seed: int, onset_tick: int, offset: float, alarm_after: int
 ) -> None:
-    """The live verifier's running evidence, begun at the alarm from the ticks kept and fed one
-    tick at a time, gives the batch `evidence_features` and `contact_geometry` bit for bit, as
-    long as the kept ticks reach back to the reference tick (onsets between ticks too)."""
+    """The evidence begun at the alarm and fed tick by tick is, at every tick, each span's mean
+    of the vectors since onset minus the reference tick's (a span not reached repeats the last
+    reached one), then the context; the class is named at the alarm, at each tick opening a
+    span and at the last tick."""
     config = load_verify_config()
+    spans = config.evidence_s
     rng = np.random.default_rng(seed)
-    n = 60
-    times = np.arange(n) * config.step_s
-    z = rng.normal(0.0, 40.0, (n, 9))
-    z[rng.random(z.shape) < 0.1] = np.nan
-    means = rng.normal(0.0, 2.0, (n, 12))  # two arms
-    means[:, 2] += np.where(times > 1.5, 5.0, 0.0)  # the first arm presses from 1.5 s
-    index = np.where(times < 1.0, 0, 1)
-    starts = np.array([0.0, 1.0])
-    tf = TrialFeatures(
-        trial="t",
-        phases=("approach", "insertion"),
-        starts=starts,
-        times=times,
-        phase_index=index,
-        elapsed=times - starts[index],
-        features=np.zeros((n, 0)),
-        end=float(times[-1]),
-    )
-    phases = ("insertion", "approach", "mating")  # the characteriser's order, not the trial's
-    onset = max(float(times[onset_tick]) + offset, 0.0)
+    n, step = 60, config.step_s
+    times = np.arange(n) * step
+    vectors = rng.normal(0.0, 2.0, (n, 6))
+    phases = ("insertion", "approach")  # the reader's order, not the trial's
     ticks = [
-        EvidenceTick(times[i], tf.phases[index[i]], tf.elapsed[i], z[i], means[i]) for i in range(n)
+        Tick(float(g), "approach" if g < 1.0 else "insertion", float(g if g < 1.0 else g - 1.0), v)
+        for g, v in zip(times, vectors, strict=True)
     ]
-    alarm = max(onset_tick, alarm_tick)
-    reference = np.searchsorted(times, onset - config.contact_reference_s + 1e-9, "right") - 1
-    first = min(first_kept, max(int(reference), 0), alarm)  # kept from the reference on
-    ev = RunningEvidence.begin(phases, onset, config, ticks[first : alarm + 1])
-    if times[alarm] < onset - 1e-9:
-        return  # no tick of the evidence yet: the live session names no class
-    for i in range(alarm, n):
-        if i > alarm:
-            ev.add(ticks[i])
-        until = float(times[i])
-        assert np.array_equal(ev.features(), evidence_features(tf, z, phases, onset, until))
-        want = contact_geometry(times, means, onset, until, config)
-        got = ev.geometry(until)
-        assert (got is None and want is None) or np.array_equal(got, want)
+    reader = EvidenceReader("wrench", phases, 1, lead_s=config.lag_s)
+    onset = max(float(times[onset_tick]) + offset, 0.0)
+    first = int(np.searchsorted(times, onset - 1e-9, "left"))  # first tick at or after onset
+    alarm = min(first + alarm_after, n - 1)
+    if first >= n:
+        return
+    ref = [k for k in ticks if k.time < onset - config.lag_s - 1e-9] or ticks[:1]
+    reference = ref[-1].vector
+    context = np.concatenate([np.zeros(6), [ticks[first].elapsed], [float(ticks[first].phase == p) for p in phases]])  # fmt: skip
+
+    def direct(i: int) -> np.ndarray:
+        k = np.array([span_index(spans, times[j] - onset) for j in range(first, i + 1)])
+        assert np.all(k == np.array([sum(s < times[j] - onset - 1e-9 for s in spans) for j in range(first, i + 1)]))  # fmt: skip
+        out, last = [], np.zeros(6)
+        for s in range(len(spans) + 1):
+            if np.any(k == s):
+                last = vectors[first : i + 1][k == s].mean(axis=0) - reference
+            out.append(last)
+        return np.concatenate([*out, context])
+
+    evidence = reader.begin(spans, onset, ticks[: alarm + 1])
+    np.testing.assert_allclose(evidence.features(), direct(alarm), rtol=1e-12, atol=1e-12)
+    opened = []
+    for i in range(alarm + 1, n):
+        if evidence.add(float(times[i]), vectors[i]):
+            opened.append(float(times[i]))
+        np.testing.assert_allclose(evidence.features(), direct(i), rtol=1e-12, atol=1e-12)
+    named = namings(reader, spans, onset, ticks, float(times[alarm]))
+    want = [float(times[alarm]), *opened]
+    if want[-1] != times[-1]:
+        want.append(float(times[-1]))
+    assert [t for t, _ in named] == want
+    for t, x in named:
+        np.testing.assert_allclose(x, direct(round(t / step)), rtol=1e-12, atol=1e-12)
+    spans_hit = {span_index(spans, t - onset) for t in opened}
+    assert len(spans_hit) == len(opened)  # each naming after the alarm opens a new span
 
 
-def test_a_contact_forest_of_fewer_classes_gives_the_others_nothing() -> None:
-    rng = np.random.default_rng(3)
-    X = rng.normal(size=(40, 2))
-    head = ForestHead.fit(X, ["a" if x[0] > 0 else "c" for x in X], trees=5)
-    p = head.predict_proba(X[:1])[0]
-    assert head.proba_over(("a", "b", "c"), X[:1]) == pytest.approx([p[0], 0.0, p[1]])
-    assert head.proba_over(("c", "a"), X[:1]) == pytest.approx([p[1], p[0]])
+def test_running_evidence_counts_a_tick_in_the_span_it_closes() -> None:
+    ev = RunningEvidence((0.1, 0.25), 1.0, np.zeros(1), np.array([7.0]))
+    assert ev.add(1.0, np.array([1.0])) and not ev.add(1.1, np.array([3.0]))  # 0.1 closes span 0
+    assert ev.add(1.15, np.array([5.0])) and ev.add(1.3, np.array([np.nan]))
+    assert ev.features() == pytest.approx([2.0, 5.0, 0.0, 7.0])
 
 
-@pytest.mark.parametrize(
-    "weights, field",
-    [
-        ("{z: 0.2}", "contact_weights.z"),
-        ("{y: 1.5}", "contact_weights.y"),
-        ("{y: .nan}", "contact_weights.y"),
-    ],
-)
-def test_contact_weights_are_checked(tmp_path: Path, weights: str, field: str) -> None:
-    path = tmp_path / "verify.yaml"
-    path.write_text(f"verify:\n  contact_weights: {weights}\n")
-    with pytest.raises(InputError, match=f"line 2, field verify.{field}: "):
-        load_verify_config(path)
+@pytest.mark.parametrize("n_classes", [2, 3])
+def test_boosted_trees_predict_as_scikit_learn(n_classes: int) -> None:
+    rng = np.random.default_rng(n_classes)
+    X = rng.normal(size=(240, 5))
+    score = X[:, 0] + 0.5 * X[:, 1] * X[:, 2] + rng.normal(0.0, 0.3, len(X))
+    y = np.array(["a", "b", "c"])[
+        np.digitize(score, np.quantile(score, [0.4, 0.7])[: n_classes - 1])
+    ]
+    params = {"max_iter": 25, "learning_rate": 0.2, "max_leaf_nodes": 7, "random_state": 4}
+    ours = BoostedTrees(**params).fit(X, y)
+    theirs = HistGradientBoostingClassifier(**params, early_stopping=False).fit(X, y)
+    test = rng.normal(size=(100, 5)) * 1.5
+    assert list(ours.classes_) == list(theirs.classes_) == ["a", "b", "c"][:n_classes]
+    np.testing.assert_allclose(
+        ours.predict_proba(test), theirs.predict_proba(test), rtol=0, atol=1e-12
+    )
+    assert list(ours.predict(test)) == list(theirs.predict(test))
+    arrays = {**ours.arrays_, "n_features": np.array(ours.n_features_in_)}
+    again = BoostedTrees.from_arrays(ours.get_params(), list(ours.classes_), arrays)
+    np.testing.assert_array_equal(again.predict_proba(test), ours.predict_proba(test))
 
 
-def test_channel_columns_read_only_the_named_wrench_axes() -> None:
-    phases = ("approach", "insertion")
-    names = feature_names(["right", "left"])
-    evidence = [f"{b}:{n}" for b in ("mean", "max", "min") for n in names]
-    evidence += [*(f"start:{p}" for p in phases), "start:elapsed"]
-    cols = channel_columns(len(evidence), len(phases), ("Fx", "My"))
-    picked = [evidence[c] for c in cols]
-    assert picked[-3:] == ["start:approach", "start:insertion", "start:elapsed"]
-    assert all(n.endswith((".Fx", ".My")) for n in picked[:-3])
-    assert len(picked) - 3 == 3 * 2 * len(KINDS) * 2  # blocks x arms x kinds x axes
+def test_packed_trees_refuse_tampered_arrays() -> None:
+    rng = np.random.default_rng(1)
+    X = rng.normal(size=(120, 3))
+    model = BoostedTrees(max_iter=5, max_leaf_nodes=5).fit(X, np.where(X[:, 0] > 0, "p", "n"))
+    a = model.arrays_
+    check_packed(a, 2, 3)
+    inner = int(np.flatnonzero(~a["leaf"])[1])  # an inner node of the first tree, not its root
 
+    def tampered(key: str, value: int) -> dict[str, np.ndarray]:
+        out = {k: v.copy() for k, v in a.items()}
+        out[key][inner] = value
+        return out
 
-def test_narrow_direction_heads_ignore_the_other_axes_and_phase_in(
-    trials: list[Trial], labels: dict[str, TrialLabel]
-) -> None:
-    """A narrow head reads only its wrench axes; at onset it has no say, from
-    direction_ramp_s on it names the direction alone (no contact geometry here)."""
-    config = load_verify_config()
-    model = train_verifier(trials, labels, config)
-    ch, envelope = model.characteriser, model.detector.models.envelope
-    assert ch is not None and envelope is not None
-    full = dataclasses.replace(ch, narrow={})
-    ramp = config.direction_ramp_s
-    tf = trial_features(trials[-1], config)
-    x = evidence_features(tf, envelope.z(tf), ch.phases, float(tf.times[5]), tf.end)
-    assert ch.predict_from(x, None, 0.0) == full.predict_from(x, None, 0.0)
-    for axis in ("x", "r"):
-        narrow, cols = ch.narrow[axis], ch.columns[axis]
-        assert narrow.forest.n_features_in_ == len(cols) < len(x)
-        moved = x.copy()
-        moved[np.setdiff1d(np.arange(len(x)), cols)] += 7.0
-        assert np.array_equal(
-            narrow.predict_proba(moved[None, cols]), narrow.predict_proba(x[None, cols])
-        )
-        alone = narrow.classes[int(np.argmax(narrow.predict_proba(x[None, cols])[0]))]
-        assert ch.predict_from(moved, None, ramp)[2][axis] == alone
-        assert ch.predict_from(x, None, 2 * ramp)[2][axis] == alone
-    plain = dataclasses.replace(config, direction_channels={})
-    every = train_verifier(trials, labels, plain).characteriser
-    assert every is not None and not every.narrow and not every.columns
+    with pytest.raises(ValueError, match="left children do not point forward"):
+        check_packed(tampered("left", inner - 1), 2, 3)  # a loop back up the tree
+    with pytest.raises(ValueError, match="right children do not point forward"):
+        check_packed(tampered("right", len(a["leaf"])), 2, 3)  # beyond the nodes
+    with pytest.raises(ValueError, match="split on features the model does not read"):
+        check_packed(tampered("feature", 3), 2, 3)
+    with pytest.raises(ValueError, match="do not match the classes"):
+        check_packed(a, 3, 3)
+    with pytest.raises(ValueError, match="differ in length"):
+        check_packed({**a, "threshold": a["threshold"][:-1]}, 2, 3)
 
 
 def test_the_sign_table_ties_signs_to_a_class_only_when_unambiguous() -> None:
@@ -289,148 +487,57 @@ def test_the_sign_table_ties_signs_to_a_class_only_when_unambiguous() -> None:
     assert table == {("+", "0", "0"): "slip_x"}
 
 
-def test_direction_signs_weigh_in_on_which_deviation_is_named() -> None:
-    """Real forests on two features: the class by the first, the signs by the second. Where
-    the class head names one deviation and the direction heads are sure of another's signs,
-    that one is named and takes the class head's probability for its pick; where they cannot
-    tell, or the class head names no deviation, the class head's pick stands."""
-    rng = np.random.default_rng(5)
-    X = rng.uniform(-3, 3, size=(400, 2))
-    klass = ["dev_a" if a > 1 else "dev_b" if a > 0 else "jam" for a in X[:, 0]]
-    pos = X[:, 1] > 0
-    noisy = pos ^ (np.abs(X[:, 1]) < 0.5) & (rng.random(len(X)) < 0.5)  # no sign near 0
-    config = dataclasses.replace(load_verify_config(), contact_weights={}, direction_channels={})
-    directions = {
-        "x": ForestHead.fit(X, ["+" if p else "0" for p in noisy], 20),
-        "y": ForestHead.fit(X, ["0" if p else "-" for p in noisy], 20),
-        "r": ForestHead.fit(X, ["0" if p else "+" for p in noisy], 20),
-    }
+def test_direction_signs_share_the_deviation_classes_mass() -> None:
+    """The class head's probability of "one of the sign table's classes" is shared among them
+    by the direction heads' belief in each one's signs; other classes keep theirs."""
     signs = {("0", "-", "+"): "dev_a", ("+", "0", "0"): "dev_b"}
-    ch = Characteriser((), ForestHead.fit(X, klass, 20), directions, config, signs=signs)
-    alone = dataclasses.replace(ch, config=dataclasses.replace(config, direction_weight=0.0))
-    late = config.direction_ramp_s
-    for row, head_says, named in (
-        ([2.5, 2.5], "dev_a", "dev_b"),  # sure of + 0 0: dev_b
-        ([2.5, -2.5], "dev_a", "dev_a"),  # sure of 0 - +: dev_a, as the class head says
-        ([2.5, 0.0], "dev_a", "dev_a"),  # unsure: the class head's pick
-        ([-2.5, 2.5], "jam", "jam"),  # not a deviation: the signs do not rename it
-    ):
-        x = np.array(row)
-        first, p_head, _ = alone.predict_from(x, None, late)
-        assert ch.predict_from(x, None, 0.0)[0] == first  # at onset the signs have no say
-        cls, probs, _ = ch.predict_from(x, None, late)
-        assert first == head_says and cls == named, row
-        assert probs[cls] == max(probs.values()) == p_head[head_says]
-        assert probs[head_says] == p_head[cls]
-        assert sum(probs.values()) == pytest.approx(1.0)
+    probs = {"dev_a": 0.5, "dev_b": 0.2, "jam": 0.3}
+    sure_b = {"x": {"+": 0.9, "0": 0.1}, "y": {"0": 1.0}, "r": {"0": 1.0}}
+    got = _shared_by_signs(probs, sure_b, signs)
+    assert got["jam"] == 0.3 and sum(got.values()) == pytest.approx(1.0)
+    assert got["dev_b"] == pytest.approx(0.7) and got["dev_a"] == pytest.approx(0.0)
+    undecided = {"x": {"+": 0.5, "0": 0.5}, "y": {"-": 0.5, "0": 0.5}, "r": {"+": 0.5, "0": 0.5}}
+    even = _shared_by_signs(probs, undecided, signs)
+    assert even["dev_a"] == pytest.approx(0.7 * 0.125 / 0.25) == even["dev_b"]
+    assert _shared_by_signs(probs, {a: {"-": 1.0} for a in "xyr"}, signs) == probs  # no belief
 
 
-def test_the_config_names_the_characteriser_heads() -> None:
-    assert (FAILURE, *DIRECTION_AXES) == CHARACTERISER_HEADS
+def test_the_characteriser_heads_and_composed_signs(trained: VerifierModel) -> None:
+    ch = trained.characteriser
+    assert ch is not None
+    assert set(ch.heads_) == {FAILURE, *DIRECTION_AXES}
+    assert list(ch.heads_[FAILURE].classes_) == sorted(FAILURES)
+    assert ch.signs_ == {("0", "0", "+"): "deviation_r+", ("0", "-", "0"): "deviation_y-"}
+    assert list(ch.heads_["x"].classes_) == ["0"]  # every deviation here is 0 along x
 
 
-def test_contact_forests_vote_only_where_the_part_touched(
-    trials: list[Trial], labels: dict[str, TrialLabel]
+def test_a_saved_verifier_names_what_the_trained_one_names(
+    trials: list[Trial], trained: VerifierModel, tmp_path: Path
 ) -> None:
-    """Without contact weights there are no contact forests, and the envelope forests are the
-    same; with them, evidence where nothing touched is named by the envelope forests alone;
-    the timing view, which reads no wrench, gets none."""
-    config = load_verify_config()
-    trained = train_verifier(trials, labels, config)
-    with_contact = trained.characteriser
-    plain = dataclasses.replace(config, contact_weights={})
-    without = train_verifier(trials, labels, plain).characteriser
-    assert with_contact is not None and without is not None
-    assert with_contact.contact and not without.contact
-    envelope_only = dataclasses.replace(with_contact, contact={})
-    model = trained.detector.models.envelope
-    assert model is not None
-    touched = 0
+    loaded = load_verifier(save_verifier(trained, tmp_path / "v.npz"))
+    assert loaded.characteriser is not None and trained.characteriser is not None
+    assert loaded.arms == trained.arms and loaded.trained_on == trained.trained_on
+    assert loaded.characteriser.signs_ == trained.characteriser.signs_
+    np.testing.assert_array_equal(loaded.detector.thresholds, trained.detector.thresholds)
+    config = trained.config
+    reader = reader_of(trained.detector, "wrench", 1)
+    assert reader_of(loaded.detector, "wrench", 1) == reader
+    rows = 0
     for trial in trials:
         tf = trial_features(trial, config)
-        z, means = model.z(tf), wrench_means(tf)
-        onset = float(tf.times[len(tf.times) // 2])
-        want = envelope_only.predict(tf, z, onset, tf.end, means)
-        assert without.predict(tf, z, onset, tf.end, means) == want
-        still = np.repeat(means[:1], len(means), axis=0)  # nothing touched
-        assert with_contact.predict(tf, z, onset, tf.end, still) == envelope_only.predict(
-            tf, z, onset, tf.end, still
+        np.testing.assert_array_equal(
+            loaded.detector.run(tf).normalised, trained.detector.run(tf).normalised
         )
-        touched += with_contact.predict(tf, z, onset, tf.end, means)[1] != want[1]
-    assert touched  # and where the part touched, the contact forests do weigh in
-    timing = trained.detector.models.timing
-    assert timing is not None
-    failed = [
-        (trial_features(t, config), labels[t.name], labels[t.name].onset)
-        for t in trials
-        if labels[t.name].failed
-    ]
-    assert not Characteriser.fit(failed, timing, config).contact  # a view of no wrench
+        onset = float(tf.times[len(tf.times) // 2])
+        for _, x in namings(reader, config.evidence_s, onset, reader.ticks(tf), onset):
+            assert loaded.characteriser.predict(x) == trained.characteriser.predict(x)
+            rows += 1
+    assert rows > len(trials)
+    assert offline_verdicts(trials[-1], loaded) == offline_verdicts(trials[-1], trained)
 
 
-def test_an_injected_contact_anomaly_raises_the_alarm_after_it(
-    trials: list[Trial], labels: dict[str, TrialLabel]
-) -> None:
-    config = load_verify_config()
-    successes = [t for t in trials if not labels[t.name].failed]
-    held = successes[-1]
-    detector = Detector.fit([trial_features(t, config) for t in successes[:-1]], config)
-    onset = float(held.state_times[1]) + 1.0  # in rotation: the part presses on the housing
-    bumped = _jammed(held, onset)
-    plain = detector.run(trial_features(held, config))
-    hit = detector.run(trial_features(bumped, config))
-    assert hit.alarm is not None and onset <= hit.alarm <= onset + GATE_S
-    assert hit.onset is not None and hit.onset <= hit.alarm
-    assert plain.alarm is None or plain.alarm > hit.alarm
-
-
-def _jammed(trial: Trial, onset: float) -> Trial:
-    """The trial with a jam from `onset`: 30 N more push, wedged about 17 mm off-centre."""
-    wrench = trial.wrench["R"].copy()
-    after = np.asarray(trial.time) >= onset
-    wrench[after, 2] += 30.0
-    wrench[after, 4] += 0.5
-    return dataclasses.replace(trial, wrench={"R": wrench})
-
-
-@pytest.fixture(scope="module")
-def cell_successes() -> list[Trial]:
-    """Ten successes of the repeated-program cell (config/sim_cell.yaml), whose nominal runs
-    are alike, as a fixed robot program's are."""
-    cell = load_sim_config(Path(__file__).resolve().parents[1] / "config" / "sim_cell.yaml")
-    return [simulate_trial(cell, 500 + i, name=f"S-{i:02d}") for i in range(10)]
-
-
-@pytest.mark.parametrize("fence", [3.0, 0.0])
-def test_a_success_unlike_the_others_is_left_out_of_the_nominal_model(
-    cell_successes: list[Trial], fence: float
-) -> None:
-    """A 'success' that jammed and still ended well (as a slip that snapped in) among the
-    training successes: left out and named, the same jam on a held-out trial raises the alarm
-    within the gate; kept (fence 0), it hides that jam."""
-    config = dataclasses.replace(load_verify_config(), nominal_fence_iqr=fence)
-    first, held = cell_successes[0], cell_successes[-1]
-    odd = _jammed(first, float(first.state_times[1]) + 1.0)
-    train = [odd, *cell_successes[1:-1]]
-    model = train_verifier(train, {t.name: label_of(t) for t in train}, config)
-    detector = model.detector
-    assert model.trained_on["successes_left_out"] == list(detector.left_out)
-    onset = float(held.state_times[1]) + 1.0
-    hit = detector.run(trial_features(_jammed(held, onset), config))
-    assert detector.run(trial_features(held, config)).alarm is None
-    if fence:
-        assert detector.left_out == (odd.name,)
-        assert detector.calibration["successes"] == len(train) - 1
-        assert hit.alarm is not None and onset <= hit.alarm <= onset + GATE_S
-    else:
-        assert detector.left_out == ()
-        assert hit.alarm is None or hit.alarm > onset + GATE_S
-
-
-def test_verifier_file_refuses_tampering(
-    trials: list[Trial], labels: dict[str, TrialLabel], tmp_path: Path
-) -> None:
-    path = save_verifier(train_verifier(trials, labels, load_verify_config()), tmp_path / "v.npz")
+def test_verifier_file_refuses_tampering(trained: VerifierModel, tmp_path: Path) -> None:
+    path = save_verifier(trained, tmp_path / "v.npz")
     original = path.read_bytes()
     bad = tmp_path / "bad.npz"
     header, arrays = read_safe_npz(path, "verifier")
@@ -454,28 +561,37 @@ def test_verifier_file_refuses_tampering(
     assert loaded <= 2, f"{loaded} of 23 flipped bytes went unnoticed"
     with pytest.raises(InputError, match="not found"):
         load_verifier(tmp_path / "missing.npz")
-    # a consistent file (checksum rewritten) whose contact weights do not fit its forests
-    for weights, match in (
-        ({"class": 0.2, "x": 0.2, "y": 2.0}, "field config.contact_weights.y"),
-        ({"class": 0.2}, "'y', which has no contact weight"),
-    ):
-        edited = json.loads(json.dumps(header))
-        edited["config"]["contact_weights"] = weights
-        write_safe_npz(bad, edited, arrays)
-        with pytest.raises(InputError, match=match):
+
+    def refused(edited: dict[str, object], changed: dict[str, np.ndarray], match: str) -> None:
+        write_safe_npz(bad, edited, changed)  # a consistent file: its checksum rewritten
+        with pytest.raises(InputError, match=match) as err:
             load_verifier(bad)
-    # ... whose narrow direction head reads other columns than its config names, or whose sign
-    # table names no class
-    edited = json.loads(json.dumps(header))
-    edited["config"]["direction_channels"]["x"] = ["Fx"]
-    write_safe_npz(bad, edited, arrays)
-    with pytest.raises(InputError, match="the narrow x head reads other columns"):
+        assert "\n" not in str(err.value)
+
+    # an array changed under the old checksum
+    thresholds = arrays["thresholds"] * 0.5
+    np.savez(bad, header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **{**arrays, "thresholds": thresholds})  # fmt: skip
+    with pytest.raises(InputError, match="checksum mismatch"):
         load_verifier(bad)
+    left = arrays["head.class.left"].copy()
+    left[np.flatnonzero(~arrays["head.class.leaf"])[0]] = 0  # a root pointing at itself
+    refused(dict(header), {**arrays, "head.class.left": left}, "children do not point forward")
+    feature = arrays["head.class.feature"].copy()
+    feature[np.flatnonzero(~arrays["head.class.leaf"])[0]] = 10**6
+    refused(dict(header), {**arrays, "head.class.feature": feature}, "split on features")
+    short = {k: v for k, v in arrays.items() if k != "head.y.value"}
+    refused(dict(header), short, "head 'y' lacks value")
     edited = json.loads(json.dumps(header))
     edited["characteriser"]["signs"] = [["0", "-", "+", "no_such_class"]]
-    write_safe_npz(bad, edited, arrays)
-    with pytest.raises(InputError, match="unknown class 'no_such_class'"):
-        load_verifier(bad)
+    refused(edited, arrays, "unknown class 'no_such_class'")
+    edited = json.loads(json.dumps(header))
+    edited["characteriser"]["signs"] = [["0", "?", "+", FAILURES[0]]]
+    refused(edited, arrays, r"are not one of -, 0, \+ per axis")
+    wrong = {**arrays, "thresholds": arrays["thresholds"][:, :-1]}
+    refused(dict(header), wrong, "thresholds do not match the signals and sub-tasks")
+    edited = json.loads(json.dumps(header))
+    edited["config"]["lag_s"] = -1
+    refused(edited, arrays, "field config.lag_s")
 
 
 @settings(max_examples=60, deadline=None)
@@ -530,105 +646,51 @@ def test_the_protocol_counts_alarms_by_the_one_second_gate() -> None:
     assert m["detection_delay_s"]["p50"] == pytest.approx(0.4)
 
 
+HEADER = "trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg"
+
+
 def test_labels_file(tmp_path: Path) -> None:
     path = tmp_path / "labels.csv"
-    path.write_text(
-        "trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg\n"
-        "a,failure,slip,12.5,2,,-3\n"
-        "b,success,,,,,\n"
-    )
+    path.write_text(f"{HEADER}\na,failure,slip,12.5,2,,-3\nb,success,,,,,\n")
     got = read_labels(path)
     assert got["a"].onset == 12.5 and got["a"].directions() == {"x": "+", "y": "0", "r": "-"}
-    assert not got["b"].failed
-    path.write_text(
-        "trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg\nc,failure,slip,soon,,,\n"
-    )
+    assert not got["b"].failed and got["a"].session == got["b"].session == ""
+    path.write_text(f"{HEADER}\nc,failure,slip,soon,,,\n")
     with pytest.raises(InputError) as err:
         read_labels(path)
     assert "line 2" in str(err.value) and "onset_s" in str(err.value)
 
 
-def test_verify_eval_cli_reports_the_verifier_beside_both_baselines(
-    trials: list[Trial], tmp_path: Path
+def test_labels_file_reads_the_session_column_and_names_the_accepted_headers(
+    tmp_path: Path,
 ) -> None:
-    from rcbht_introspection.cli import main
-    from rcbht_introspection.io.hiro import write_trial
-
-    for t in trials:
-        folder = write_trial(t, tmp_path / "set" / t.name)
-        if "failure" in t.metadata:
-            (folder / "meta.json").write_text(json.dumps(t.metadata))
-    out = tmp_path / "v.json"
-    assert main(["verify-eval", str(tmp_path / "set"), "--folds", "2", "--json", str(out)]) == 0
-    result = json.loads(out.read_text())
-    for m in (result, *result["baselines"].values()):
-        assert 0 <= m["roc_auc"] <= 1 and 0 <= m["false_alarms_per_nominal_run"] <= 1
-        assert m["failure_runs"] == len(FAILURES)
-    assert set(result["baselines"]) == {"raw_wrench", "timing"}
-    assert result["protocol"]["onset_source"] == {"label": len(FAILURES)}
-    left = result["protocol"]["successes_left_out"]  # per method: trial -> folds (of 2)
-    assert set(left) <= {"verifier", "raw_wrench", "timing"}
-    assert all(1 <= folds <= 2 for trials in left.values() for folds in trials.values())
-    assert "verifier_mismatch" not in result  # no classifier given
-    # with a sub-task classifier (trained on other trials): the verifier with the mismatch
-    # signal too, on the same runs; it can only add alarms to the verifier's
-    model = tmp_path / "cls.rcbht"
-    successes = tmp_path / "successes"
-    for t in trials[:4]:
-        write_trial(t, successes / t.name)
-    assert main(["train", str(successes), "--out", str(model)]) == 0
-    args = ["verify-eval", str(tmp_path / "set"), "--folds", "2", "--model", str(model)]
-    assert main([*args, "--json", str(out)]) == 0
-    with_model = json.loads(out.read_text())
-    both = with_model["verifier_mismatch"]
-    verifier_runs = [r for r in with_model["runs"] if r["method"] == "verifier"]
-    assert both["runs"] == len(verifier_runs) == len(trials) and 0 <= both["roc_auc"] <= 1
-    alarms = {m: {r["trial"]: r["alarm"] for r in with_model["runs"] if r["method"] == m} for m in ("verifier", "verifier_mismatch")}  # fmt: skip
-    for name, alarm in alarms["verifier"].items():
-        if alarm is not None:
-            assert alarms["verifier_mismatch"][name] is not None
-            assert alarms["verifier_mismatch"][name] <= alarm
+    path = tmp_path / "labels.csv"
+    path.write_text(f"{HEADER},session\na,failure,slip,1.5,,,,day2\nb,success,,,,,, day1 \nc,success,,,,,,\n")  # fmt: skip
+    got = read_labels(path)
+    assert {n: lb.session for n, lb in got.items()} == {"a": "day2", "b": "day1", "c": ""}
+    path.write_text(f"{HEADER},session\na,failure,slip,1.5,,,\n")
+    with pytest.raises(InputError, match=r"line 2.*expected 8 cells, got 7"):
+        read_labels(path)
+    for wrong in (HEADER.replace("onset_s", "onset"), f"{HEADER},day", "trial,outcome"):
+        path.write_text(f"{wrong}\n")
+        with pytest.raises(InputError) as err:
+            read_labels(path)
+        assert f"header must be {HEADER}[,session]" in str(err.value) and "line 1" in str(err.value)
 
 
-def test_live_session_with_a_late_first_event_equals_the_batch_detector(
+def test_sessions_of_the_labels_group_the_calibration(
     trials: list[Trial], labels: dict[str, TrialLabel]
 ) -> None:
-    """A robot streams wrench before its state machine's first event: the ticks before it are
-    judged 'no sub-task yet', and an alarm's evidence still stacks."""
-    config = load_verify_config()
-    model = train_verifier(trials, labels, config)
-    failing = trials[-1]
-    late = dataclasses.replace(failing, state_times=(0.5, *failing.state_times[1:]))
-    tf = trial_features(late, config)
-    batch = model.detector.run(tf)
-    verdicts = offline_verdicts(late, model)
-    np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
-    assert verdicts[-1].alarm_time == batch.alarm
-    assert verdicts[0].phase == "" and verdicts[-1].phase != ""
-
-
-def test_two_arms_with_offset_stamps_and_a_silent_arm_still_give_verdicts(
-    trials: list[Trial], labels: dict[str, TrialLabel]
-) -> None:
-    both = [dataclasses.replace(t, wrench={"L": t.wrench["R"], "R": t.wrench["R"]}) for t in trials]
-    model = train_verifier(both, labels, load_verify_config())
-    trial = both[0]
-    session = VerifierSession(model)
-    session.phase(trial.phase_names[0], 0.0)
-    time = np.asarray(trial.time) - float(trial.time[0])
-    verdicts = []
-    for i, t in enumerate(time[: len(time) // 2]):
-        verdicts += session.push("R", float(t), trial.wrench["R"][i])
-        if t < 2.0:  # the left arm's stamps run 5 ms late, then it falls silent
-            verdicts += session.push("L", float(t) + 0.005, trial.wrench["L"][i])
-    ticks = int(time[len(time) // 2 - 1] / model.config.step_s)
-    assert len(verdicts) >= ticks - 25  # at most the 1 s of waiting for the silent arm behind
-    assert session.held_rows > 0
-    assert [v.time for v in verdicts] == sorted(v.time for v in verdicts)
+    """Two sessions named: two calibration folds, each holding out one session."""
+    sessions = {n: dataclasses.replace(lb, session=f"s{i % 2}") for i, (n, lb) in enumerate(labels.items())}  # fmt: skip
+    model = train_verifier(trials, sessions, load_verify_config())
+    assert model.trained_on["sessions"] == 2
+    assert model.detector.calibration["folds"] == 2
+    assert model.detector.calibration["grouped_by_session"] is True
 
 
 def test_labels_file_refuses_bad_text_and_accepts_a_byte_order_mark(tmp_path: Path) -> None:
-    header = "trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg\n"
+    header = HEADER + "\n"
     path = tmp_path / "labels.csv"
     path.write_text("\ufeff" + header + "a,failure,slip,1.5,,,\n", encoding="utf-8")
     assert read_labels(path)["a"].onset == 1.5
@@ -650,62 +712,63 @@ def test_a_labels_row_naming_no_trial_is_an_error_when_strict(
     for t in trials[:4]:
         write_trial(t, tmp_path / "set" / t.name)
     labels = tmp_path / "labels.csv"
-    labels.write_text(
-        "trial,outcome,failure_class,onset_s,dev_x_mm,dev_y_mm,dev_yaw_deg\n"
-        f"{trials[0].name}x,failure,slip,,,,\n"
-    )
+    labels.write_text(f"{HEADER}\n{trials[0].name}x,failure,slip,,,,\n")
     args = ["verify-train", str(tmp_path / "set"), "--labels", str(labels), "--out", "v.npz"]
     assert main([*args, "--strict"]) == 2
 
 
-def test_contradictions_need_a_confident_final_verdict_on_a_commanded_subtask() -> None:
-    from rcbht_introspection.live.belief import UNKNOWN, Belief
-    from rcbht_introspection.verify.mismatch import contradiction_of
+def _write_set(trials: list[Trial], folder: Path) -> Path:
+    from rcbht_introspection.io.hiro import write_trial
 
-    def belief(subtask: str, p: float, final: bool = True, phase: str = "insertion") -> Belief:
-        classes = (subtask, "insertion") if subtask != "insertion" else (subtask, "x")
-        return Belief(subtask, classes, (p, 1.0 - p), 2.0, 5.0, "boundary", phase, final)
-
-    c = contradiction_of(belief("rotation", 0.9), 6.5, 0.8)
-    assert c is not None and (c.time, c.start, c.phase, c.subtask) == (
-        6.5,
-        2.0,
-        "insertion",
-        "rotation",
-    )
-    assert c.probability == pytest.approx(0.9)
-    assert contradiction_of(belief("rotation", 0.8), 6.5, 0.8) is None  # not above
-    assert contradiction_of(belief("rotation", 0.9, final=False), 6.5, 0.8) is None  # running
-    assert contradiction_of(belief("insertion", 0.99), 6.5, 0.8) is None  # agrees
-    assert contradiction_of(belief(UNKNOWN, 0.99), 6.5, 0.8) is None
-    assert contradiction_of(belief("rotation", 0.9, phase=""), 6.5, 0.8) is None  # window mode
-    # a model that does not know the commanded sub-task cannot contradict it
-    unknown_phase = Belief("rotation", ("rotation", "x"), (0.9, 0.1), 2, 5, "boundary", "new", True)
-    assert contradiction_of(unknown_phase, 6.5, 0.8) is None
+    for t in trials:
+        written = write_trial(t, folder / t.name)
+        if "failure" in t.metadata:
+            (written / "meta.json").write_text(json.dumps(t.metadata))
+    return folder
 
 
-def test_live_session_with_a_contradiction_equals_the_batch_mismatch_rule(
-    trials: list[Trial], labels: dict[str, TrialLabel]
+def test_verify_eval_cli_reports_the_verifier_beside_the_baselines_and_anchors(
+    trials: list[Trial], tmp_path: Path
 ) -> None:
-    """A contradicting final verdict raises the alarm at the first tick it is known, with the
-    contradicted sub-task's start as onset; the live session and the batch rule agree."""
-    from rcbht_introspection.verify.mismatch import MISMATCH, Contradiction, with_mismatch
+    from rcbht_introspection.cli import main
 
-    config = load_verify_config()
-    model = train_verifier(trials[1:], labels, config)
-    nominal = trials[0]
-    tf = trial_features(nominal, config)
-    batch_plain = model.detector.run(tf)
-    assert batch_plain.alarm is None, "the held-out success must be quiet for this test"
-    start = float(tf.starts[0])  # the first sub-task: its start, 0.0, is the onset
-    assert start == 0.0
-    known = float(tf.starts[2]) + 0.3
-    c = Contradiction(known, start, tf.phases[0], tf.phases[1], 0.95)
-    batch = with_mismatch(batch_plain, [c], config)
-    verdicts = offline_verdicts(nominal, model, [c])
-    np.testing.assert_allclose([v.score for v in verdicts], batch.score, rtol=1e-12)
-    assert batch.alarm_signal == MISMATCH and batch.onset == start
-    assert verdicts[-1].alarm_time == batch.alarm == min(t for t in tf.times if t >= known - 1e-9)
-    assert verdicts[-1].onset == start
-    assert all(not v.alarm for v in verdicts if v.time < known - 1e-9)
-    assert verdicts[-1].signals[MISMATCH] == pytest.approx(0.95 / config.mismatch_min_probability)
+    data = _write_set(trials, tmp_path / "set")
+    out = tmp_path / "v.json"
+    assert main(["verify-eval", str(data), "--folds", "2", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert set(result["baselines"]) == {"raw_wrench", "timing", "hmm", "minirocket"}
+    for m in (result, *result["baselines"].values()):
+        assert 0 <= m["roc_auc"] <= 1 and 0 <= m["false_alarms_per_nominal_run"] <= 1
+        assert m["failure_runs"] == len(FAILURES) and m["runs"] == len(trials)
+        assert m["class_accuracy"] is not None
+    assert result["protocol"]["onset_source"] == {"label": len(FAILURES)}
+    assert "verifier_mismatch" not in result  # no classifier given
+    runs = {m: {r["trial"]: r for r in result["runs"] if r["method"] == m} for m in ("verifier", "minirocket")}  # fmt: skip
+    for name, run in runs["verifier"].items():  # minirocket names on the verifier's alarms
+        assert runs["minirocket"][name]["alarm"] == run["alarm"]
+
+
+def test_verify_eval_cli_adds_the_mismatch_signal_with_a_classifier(
+    trials: list[Trial], tmp_path: Path
+) -> None:
+    """With a sub-task classifier (trained on other trials): the verifier with the mismatch
+    signal too, on the same runs; it can only add alarms to the verifier's."""
+    from rcbht_introspection.cli import main
+
+    data = _write_set(trials, tmp_path / "set")
+    model = tmp_path / "cls.rcbht"
+    successes = _write_set(trials[:4], tmp_path / "successes")
+    assert main(["train", str(successes), "--out", str(model)]) == 0
+    out = tmp_path / "v.json"
+    args = ["verify-eval", str(data), "--folds", "2", "--model", str(model), "--no-peers"]
+    assert main([*args, "--json", str(out)]) == 0
+    with_model = json.loads(out.read_text())
+    assert set(with_model["baselines"]) == {"raw_wrench", "timing"}
+    both = with_model["verifier_mismatch"]
+    verifier_runs = [r for r in with_model["runs"] if r["method"] == "verifier"]
+    assert both["runs"] == len(verifier_runs) == len(trials) and 0 <= both["roc_auc"] <= 1
+    alarms = {m: {r["trial"]: r["alarm"] for r in with_model["runs"] if r["method"] == m} for m in ("verifier", "verifier_mismatch")}  # fmt: skip
+    for name, alarm in alarms["verifier"].items():
+        if alarm is not None:
+            assert alarms["verifier_mismatch"][name] is not None
+            assert alarms["verifier_mismatch"][name] <= alarm
