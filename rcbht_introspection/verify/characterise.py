@@ -150,7 +150,9 @@ class Characteriser(BaseEstimator):
 
 
 def _named(head: BoostedTrees, row: np.ndarray) -> dict[str, float]:
-    return {str(c): float(p) for c, p in zip(head.classes_, head.predict_proba(row)[0], strict=True)}
+    return {
+        str(c): float(p) for c, p in zip(head.classes_, head.predict_proba(row)[0], strict=True)
+    }
 
 
 def _shared_by_signs(
@@ -163,7 +165,9 @@ def _shared_by_signs(
     owned = {cls: key for key, cls in signs.items() if cls in probs}
     mass = sum(probs[c] for c in owned)
     belief = {
-        c: float(np.prod([directions[a].get(s, 0.0) for a, s in zip(DIRECTION_AXES, key, strict=True)]))
+        c: float(
+            np.prod([directions[a].get(s, 0.0) for a, s in zip(DIRECTION_AXES, key, strict=True)])
+        )
         for c, key in owned.items()
     }
     total = sum(belief.values())

@@ -95,8 +95,9 @@ class HMMSignal:
         from rcbht_introspection.peers.hmm import HMMDetector
 
         sequences: dict[str, list[np.ndarray]] = {}
-        for tf, (name, sel) in ((tf, part) for tf in trials for part in _parts(tf)):
-            sequences.setdefault(name, []).append(tf.features[sel][:, _means(tf)])
+        for trial in trials:
+            for name, sel in _parts(trial):
+                sequences.setdefault(name, []).append(trial.features[sel][:, _means(trial)])
         return cls(HMMDetector().fit(sequences))
 
     def scores(self, tf: TrialFeatures) -> np.ndarray:
@@ -218,7 +219,9 @@ class Detector:
         """`groups`: trial -> session, for folds that hold out whole sessions."""
         signals = tuple(signals)
         successes = list(successes)
-        held = calibration_folds([tf.trial for tf in successes], groups, config.calibration_folds, seed)
+        held = calibration_folds(
+            [tf.trial for tf in successes], groups, config.calibration_folds, seed
+        )
         if len(held) < 2:
             raise ValueError(
                 f"need at least 2 successful trials (or sessions) to calibrate, got {len(held)}"

@@ -3,8 +3,9 @@
 The anchors' rules: a failure run's alarm is a true positive only within `gate_s` after the
 labelled onset (an alarm before onset is a false alarm), any alarm on a nominal run is a false
 positive, a run raises at most one alarm (it latches). The verifier is scored beside two
-baselines that need no grammar and no sub-task envelope: `raw_wrench` (one envelope of the raw
-wrench features for the whole trial) and `timing` (sub-task durations only).
+trivial baselines, `raw_wrench` (the raw mean wrench by time into the trial, no state machine,
+no bias cancelling) and `timing` (sub-task durations only), and beside the anchors' methods
+(PEERS: the successor framework's HMMs and MiniRocket).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from sklearn.model_selection import StratifiedKFold
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.verify.characterise import sign_table
 from rcbht_introspection.verify.config import VerifyConfig
-from rcbht_introspection.verify.detector import Detection, Detector
+from rcbht_introspection.verify.detector import Detection
 from rcbht_introspection.verify.evidence import named_at, namings
 from rcbht_introspection.verify.features import TrialFeatures, trial_features
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
@@ -97,7 +98,9 @@ def _ours(fitted: Fitted, tf: TrialFeatures, onset: float, start: float) -> Nami
     if char is None:
         return NO_NAMING
     ticks = fitted.reader.ticks(tf)
-    named = [(t, char.predict(x)) for t, x in namings(fitted.reader, _spans(fitted), onset, ticks, start)]
+    named = [
+        (t, char.predict(x)) for t, x in namings(fitted.reader, _spans(fitted), onset, ticks, start)
+    ]
     if not named:
         return NO_NAMING
     return Naming([(t, n[0]) for t, n in named], named[-1][1][0], named[-1][1][2])
@@ -162,7 +165,9 @@ def _fit_peers(fold: Fold, raws: Mapping[str, Raw]) -> None:
     fold.peers["minirocket"] = MiniRocketClassifier(random_state=fold.seed).fit(windows, y)
 
 
-def _peer_naming(fold: Fold, method: str, raw: Raw, onset: float, start: float, end: float) -> Naming:
+def _peer_naming(
+    fold: Fold, method: str, raw: Raw, onset: float, start: float, end: float
+) -> Naming:
     """The peer's class at the alarm + CLASS_EVIDENCE_S and at the end."""
     model = fold.peers.get(method)
     if model is None:
@@ -176,7 +181,7 @@ def _detector_of(fold: Fold, method: str, left_out: list[tuple[str, str]] | None
     """The method's fitted parts (peers: the hmm detector; minirocket: the verifier's)."""
     key = {"verifier_mismatch": "verifier", "minirocket": "verifier"}.get(method, method)
     if key not in fold.fitted:
-        signals, view = METHODS[key] if key in METHODS else (("hmm",), "wrench")
+        signals, view = METHODS.get(key, (("hmm",), "wrench"))
         failures = fold.failures if key in METHODS else []
         fold.fitted[key] = fit_method(
             fold.successes, failures, fold.config, signals, view, fold.seed, fold.groups
@@ -251,7 +256,9 @@ def _fold_results(
     fold = _make_fold(train, feats, labels, config, seed)
     if any(m in PEERS for m in methods):
         _fit_peers(fold, raws)
-    return {m: [_run(fold, m, n, feats, labels, raws, contradictions) for n in test] for m in methods}
+    return {
+        m: [_run(fold, m, n, feats, labels, raws, contradictions) for n in test] for m in methods
+    }
 
 
 def _ratio(a: float, b: float) -> float | None:

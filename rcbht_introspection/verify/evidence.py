@@ -10,6 +10,7 @@ from typing import NamedTuple
 import numpy as np
 
 from rcbht_introspection.verify.characterise import VIEWS, RunningEvidence
+from rcbht_introspection.verify.detector import Detector
 from rcbht_introspection.verify.features import PER_ARM, TrialFeatures, kind_columns
 from rcbht_introspection.verify.novelty import NominalLevel, TimingModel
 
@@ -35,6 +36,9 @@ class EvidenceReader:
     n_arms: int
     level: NominalLevel | None = None
     timing: TimingModel | None = None
+    lead_s: float = 0.0
+    """The reference is the last tick at least this long before onset: the detector's lag,
+    so a late onset estimate still measures the whole change it reacted to."""
 
     def __post_init__(self) -> None:
         if self.view not in VIEWS:
@@ -62,8 +66,10 @@ class EvidenceReader:
 
     def begin(self, spans: Sequence[float], onset: float, ticks: Sequence[Tick]) -> RunningEvidence:
         """The evidence from `onset` on, started from the ticks kept so far (those at or after
-        onset are added); the reference is the last tick before onset (the first if none)."""
-        ref = next((k for k in reversed(ticks) if k.time < onset - 1e-9), ticks[0] if ticks else None)
+        onset are added); the reference is the last tick lead_s before onset (the first if
+        none)."""
+        at = onset - self.lead_s - 1e-9
+        ref = next((k for k in reversed(ticks) if k.time < at), ticks[0] if ticks else None)
         first = next((k for k in ticks if k.time >= onset - 1e-9), ref)
         width = len(ref.vector) if ref is not None else 6 * self.n_arms
         reference, context = np.zeros(width), np.zeros(0)
@@ -83,7 +89,11 @@ class EvidenceReader:
 
 
 def namings(
-    reader: EvidenceReader, spans: Sequence[float], onset: float, ticks: Sequence[Tick], start: float
+    reader: EvidenceReader,
+    spans: Sequence[float],
+    onset: float,
+    ticks: Sequence[Tick],
+    start: float,
 ) -> list[tuple[float, np.ndarray]]:
     """(tick time, evidence features) at every tick a characteriser names the class again: the
     first at or after `start` (the alarm; the evidence begins at onset), then each tick that
@@ -115,3 +125,9 @@ def named_at(namings_: Sequence[tuple[float, str]], t: float) -> str:
 def arms_of(tf: TrialFeatures) -> int:
     """Number of arms of a trial's features."""
     return tf.features.shape[1] // PER_ARM
+
+
+def reader_of(detector: Detector, view: str, n_arms: int) -> EvidenceReader:
+    """The evidence view of a method over its detector's models."""
+    m = detector.models
+    return EvidenceReader(view, detector.phases, n_arms, m.level, m.timing, detector.config.lag_s)

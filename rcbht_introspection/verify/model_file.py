@@ -103,7 +103,9 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
     return path
 
 
-def _detector(header: dict[str, Any], arrays: dict[str, np.ndarray], config: VerifyConfig) -> Detector:
+def _detector(
+    header: dict[str, Any], arrays: dict[str, np.ndarray], config: VerifyConfig
+) -> Detector:
     neighbours = level = timing = None
     if "neighbours" in header:
         nh = header["neighbours"]

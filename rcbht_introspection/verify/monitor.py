@@ -17,7 +17,7 @@ import numpy as np
 
 from rcbht_introspection.verify.characterise import RunningEvidence
 from rcbht_introspection.verify.detector import SCORE_CAP
-from rcbht_introspection.verify.evidence import EvidenceReader, Tick
+from rcbht_introspection.verify.evidence import Tick, reader_of
 from rcbht_introspection.verify.features import PER_ARM, ArmFeatures
 from rcbht_introspection.verify.mismatch import MISMATCH, Contradiction, mismatch_onset
 from rcbht_introspection.verify.model_file import VerifierModel
@@ -75,9 +75,7 @@ class VerifierSession:
         self.pending: dict[str, dict[int, tuple[float, np.ndarray]]] = {a: {} for a in self.arms}
         self.last_rows = {a: np.zeros(PER_ARM) for a in self.arms}
         d = self.model.detector
-        self.reader = EvidenceReader(
-            VERIFIER_VIEW, d.phases, len(self.arms), d.models.level, d.models.timing
-        )
+        self.reader = reader_of(d, VERIFIER_VIEW, len(self.arms))
         self.held_rows = 0
         """Ticks at which an arm had sent nothing for MAX_ARM_LAG_TICKS while another had:
         its last row stood in (counted, not silent)."""

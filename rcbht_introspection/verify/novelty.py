@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+
 import numpy as np
 
 from rcbht_introspection.verify.config import VerifyConfig
@@ -253,7 +254,11 @@ class NominalLevel:
             bins = np.minimum((elapsed / BIN_S).astype(int), int(elapsed.max() / BIN_S))
             med = np.zeros((int(bins.max()) + 1, len(columns)))
             for b in range(len(med)):  # a bin no tick fell in keeps the one before it
-                med[b] = np.median(feats[bins == b][:, columns], axis=0) if np.any(bins == b) else med[b - 1]
+                med[b] = (
+                    np.median(feats[bins == b][:, columns], axis=0)
+                    if np.any(bins == b)
+                    else med[b - 1]
+                )
             medians.append(med)
         return cls(tuple(pools), medians)
 

@@ -12,7 +12,7 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.verify.characterise import Characteriser
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detector
-from rcbht_introspection.verify.evidence import EvidenceReader, arms_of, namings
+from rcbht_introspection.verify.evidence import EvidenceReader, arms_of, namings, reader_of
 from rcbht_introspection.verify.features import TrialFeatures, trial_features
 from rcbht_introspection.verify.labels import TrialLabel
 from rcbht_introspection.verify.model_file import VerifierModel
@@ -47,12 +47,6 @@ class Fitted:
     detector: Detector
     reader: EvidenceReader
     characteriser: Characteriser | None
-
-
-def reader_of(detector: Detector, view: str, n_arms: int) -> EvidenceReader:
-    """The evidence view of a method over its detector's models."""
-    m = detector.models
-    return EvidenceReader(view, detector.phases, n_arms, m.level, m.timing)
 
 
 def fit_method(
