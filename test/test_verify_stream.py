@@ -99,8 +99,13 @@ def test_a_contradicting_final_belief_raises_the_alarm_from_the_latest_sample(
     from rcbht_introspection.verify.mismatch import MISMATCH
 
     model, held_out = verifier
-    quiet = [t for t in held_out if offline_verdicts(t, model)[-1].alarm_time is None]
-    assert quiet, "no held-out trial without an alarm to test on"
+
+    def quiet_until_the_middle(t: Trial) -> bool:
+        alarm = offline_verdicts(t, model)[-1].alarm_time
+        return alarm is None or alarm > float(t.time[-1] - t.time[0]) / 2 + 1.0
+
+    quiet = [t for t in held_out if quiet_until_the_middle(t)]
+    assert quiet, "no held-out trial without an alarm in its first half to test on"
     trial = quiet[0]
     bag = tmp_path / f"{trial.name}.mcap"
     write_trial_bag(trial, bag)
