@@ -37,6 +37,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
+        "--sessions",
+        type=int,
+        default=1,
+        help="split the trials into this many recording sessions, each with its own sensor bias "
+        "and drift (ranges: the config's sensor.session_*; default 1: none)",
+    )
+    p.add_argument(
         "--failures",
         action="store_true",
         help="make every second trial a failure, cycling through the failure classes "
@@ -108,6 +115,7 @@ def run_sim(args: argparse.Namespace) -> int:
         progress=progress,
         config=config,
         task=args.task,
+        sessions=args.sessions,
     )
     elapsed = time.perf_counter() - start
     kind = args.scenario if args.task == "snap-assembly" else f"{args.task} {args.scenario}"

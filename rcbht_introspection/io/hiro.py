@@ -34,6 +34,8 @@ META_FILE = "meta.json"
 """A trial folder's metadata (the simulator's draw); read_trial takes its failure record."""
 FAILURE_RECORD = "failure"
 """Metadata key of a failed trial's class, onset and deviation (verify/labels.py)."""
+SESSION_RECORD = "session"
+"""Metadata key of the recording session a trial belongs to (verify/labels.py)."""
 DROPPED_STATE_TIMES = "dropped_state_times"
 """Metadata key of the state times read_trial dropped: a list of {line, time, reason}."""
 DropReason = Literal["after the data", "out of order"]
@@ -256,26 +258,34 @@ def read_trial(
         metadata[DROPPED_STATE_TIMES] = [d.to_dict() for d in states.dropped]
     if task != HIRO_TASK:
         metadata["task"] = task.to_dict()  # a bag written from the trial keeps its task
-    failure = _failure_record(folder / META_FILE)
-    if failure is not None:
-        metadata[FAILURE_RECORD] = failure
+    metadata.update(_meta_records(folder / META_FILE))
     trial = Trial(folder.name, time, wrench, state, outcome, metadata, phases)
     check_phases(trial, folder / ("R_State.dat" if "R" in wrench else "L_State.dat"))
     return trial
 
 
-def _failure_record(path: Path) -> dict[str, object] | None:
-    """The failure record (class, onset, deviation: verify/labels.py) of a trial's meta.json."""
+def _meta_records(path: Path) -> dict[str, object]:
+    """What the verifier reads of a trial's meta.json: the failure record (class, onset,
+    deviation: verify/labels.py) and the recording session's name."""
     if not path.is_file():
-        return None
+        return {}
     try:
         meta = json.loads(path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise InputError(f"not readable JSON ({type(exc).__name__})", path) from None
-    record = meta.get(FAILURE_RECORD) if isinstance(meta, dict) else None
+    meta = meta if isinstance(meta, dict) else {}
+    out: dict[str, object] = {}
+    record = meta.get(FAILURE_RECORD)
     if record is not None and not isinstance(record, dict):
         raise InputError("must be a mapping", path, field=FAILURE_RECORD)
-    return record
+    if record is not None:
+        out[FAILURE_RECORD] = record
+    session = meta.get(SESSION_RECORD)
+    if session is not None and not isinstance(session, str):
+        raise InputError("must be a string", path, field=SESSION_RECORD)
+    if session:
+        out[SESSION_RECORD] = session
+    return out
 
 
 def write_trial(trial: Trial, folder: Path | str, task: Task | None = None) -> Path:

@@ -209,6 +209,15 @@ class SensorConfig:
     wander_time: float = 0.8
     quantization_force: float = 0.001
     quantization_torque: float = 0.0001
+    session_bias_force: float = 20.0
+    """A set simulated in sessions (`rcbht sim --sessions N`) draws per session a constant bias
+    uniform in +-this (N) on each force axis: the sensor re-biased between recording days."""
+    session_bias_torque: float = 1.0
+    """... and on each moment axis (N m)."""
+    session_drift_force: float = 0.02
+    """... and a drift uniform in +-this (N/s) on each force axis, from each trial's start."""
+    session_drift_torque: float = 0.001
+    """... and on each moment axis (N m/s)."""
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from rcbht_introspection.io.hiro import write_trial
 from rcbht_introspection.sim.config import FailureType, SimConfig
 from rcbht_introspection.sim.failures import failure_classes
 from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
+from rcbht_introspection.sim.sessions import draw_sessions, in_session, session_of
 from rcbht_introspection.sim.tasks import (
     SimTaskName,
     TaskConfig,
@@ -106,9 +107,11 @@ def write_dataset(
     progress: bool = False,
     config: TaskConfig | None = None,
     task: SimTaskName = "snap-assembly",
+    sessions: int = 1,
 ) -> list[Path]:
     """Simulate `n_trials` trials of `task` into `out_dir`; returns the written trial folders (or
-    bag files). `rate_hz` None is the task's sensor rate (config sensor.rate_hz)."""
+    bag files). `rate_hz` None is the task's sensor rate (config sensor.rate_hz); `sessions` > 1
+    splits the trials into recording sessions with a sensor bias and drift each (sim/sessions.py)."""
     if fmt not in FORMATS:
         raise InputError(f"unknown format {fmt!r} (known: {', '.join(FORMATS)})", field="format")
     if n_trials < 1:
@@ -119,6 +122,7 @@ def write_dataset(
     config = config or sim_task.load_config(None)
     rate = config.sensor.rate_hz if rate_hz is None else rate_hz
     simulate = trial_simulator(sim_task, config, scenario, rate)
+    days = draw_sessions(sessions, seed, config.sensor) if sessions > 1 else []
     write_bag = write_trial_bag if fmt == "bag" else None
     out = Path(out_dir)
     _clear_previous_set(out)
@@ -133,6 +137,8 @@ def write_dataset(
     for i, (trial_seed, failure) in items:
         name = trial_name(scenario, i, failure, sim_task.label)
         trial = simulate(trial_seed, failure, name)
+        if days:
+            trial = in_session(trial, days[session_of(i, n_trials, sessions)])
         if write_bag is not None:
             path = out / f"{name}.mcap"
             write_bag(trial, path)
