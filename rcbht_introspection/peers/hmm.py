@@ -22,9 +22,10 @@ caller here feeds window means on its own tick grid.
 
 from __future__ import annotations
 
+import logging
 import numbers
-from collections.abc import Mapping, Sequence
-from contextlib import AbstractContextManager
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import AbstractContextManager, contextmanager
 from functools import cache
 from typing import Any
 
@@ -69,6 +70,19 @@ def _check_params(n_components: int, n_iter: int) -> None:
             raise ValueError(f"{name} must be a positive integer, got {value!r}")
 
 
+@contextmanager
+def _quiet_hmmlearn() -> Iterator[None]:
+    """hmmlearn logs a line per EM step that does not improve and per state never left (both
+    handled here): hundreds of lines in an evaluation's output. Only its errors pass."""
+    log = logging.getLogger("hmmlearn")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
+
+
 def fit_hmm(
     frames: Sequence[np.ndarray],
     n_components: int,
@@ -94,7 +108,7 @@ def fit_hmm(
     start = np.zeros(states)
     start[0] = 1.0
     model.startprob_ = start
-    with one_thread():
+    with one_thread(), _quiet_hmmlearn():
         model.fit(data, lengths=[len(f) for f in frames])
     # a state seen only at the end of sequences has no observed way out (a zero row, which
     # hmmlearn then refuses to score with): it stays in itself
