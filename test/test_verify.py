@@ -1,5 +1,5 @@
 """Verification core: live session == batch detector and offline namings, bias-robust features,
-boosted trees == scikit-learn, safe verifier file, conformal thresholds, session-grouped
+forest heads == scikit-learn, safe verifier file, conformal thresholds, session-grouped
 calibration, the protocol's scoring rules, labels files, and detection of an injected anomaly."""
 
 from __future__ import annotations
@@ -14,14 +14,13 @@ import pytest
 from conftest import SIM_SUCCESS
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from sklearn.ensemble import HistGradientBoostingClassifier
+from sklearn.ensemble import RandomForestClassifier
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.model_file import read_safe_npz, write_safe_npz
 from rcbht_introspection.sim import load_sim_config, simulate_trial
-from rcbht_introspection.verify.boosted import BoostedTrees, check_packed
 from rcbht_introspection.verify.characterise import (
     FAILURE,
     Characteriser,
@@ -40,6 +39,7 @@ from rcbht_introspection.verify.detector import (
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
 from rcbht_introspection.verify.evidence import EvidenceReader, Tick, named_at, namings, reader_of
 from rcbht_introspection.verify.features import kind_columns, lag_ticks, trial_features
+from rcbht_introspection.verify.forest import ForestHead, check_packed
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel, label_of, read_labels
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier, save_verifier
 from rcbht_introspection.verify.monitor import NOMINAL, Verdict, VerifierSession
@@ -89,12 +89,12 @@ def held_out_model(
         ticks = reader.ticks(tf)
         for onset in tf.times[5::50]:
             for _, x in namings(reader, config.evidence_s, float(onset), ticks, float(onset)):
-                latest = 6 * len(config.evidence_s)  # the last span's block: the newest
+                latest = 12 * len(config.evidence_s)  # the last span's block: the newest
                 fz, fy = x[latest + 2], x[latest + 1]
                 cls = "push" if fz > 0 else "pull"
                 rows.append(x)
                 names.append(TrialLabel(trial.name, "failure", cls, None, (0.0, float(np.sign(fy)) * 1e-3, 0.0)))  # fmt: skip
-    model.characteriser = Characteriser(max_iter=20).fit(np.vstack(rows), names)
+    model.characteriser = Characteriser(n_estimators=20).fit(np.vstack(rows), names)
     path = tmp_path_factory.mktemp("held_out") / "v.npz"
     return load_verifier(save_verifier(model, path))
 
@@ -387,7 +387,7 @@ def test_running_evidence_and_namings_are_the_span_summaries(
 ) -> None:
     """The evidence begun at the alarm and fed tick by tick is, at every tick, each span's mean
     of the vectors since onset minus the reference tick's (a span not reached repeats the last
-    reached one), then the context; the class is named at the alarm, at each tick opening a
+    reached one), their largest and smallest minus the reference, then the context; the class is named at the alarm, at each tick opening a
     span and at the last tick."""
     config = load_verify_config()
     spans = config.evidence_s
@@ -400,15 +400,15 @@ def test_running_evidence_and_namings_are_the_span_summaries(
         Tick(float(g), "approach" if g < 1.0 else "insertion", float(g if g < 1.0 else g - 1.0), v)
         for g, v in zip(times, vectors, strict=True)
     ]
-    reader = EvidenceReader("wrench", phases, 1, lead_s=config.lag_s)
+    reader = EvidenceReader("wrench", phases, 1)
     onset = max(float(times[onset_tick]) + offset, 0.0)
     first = int(np.searchsorted(times, onset - 1e-9, "left"))  # first tick at or after onset
     alarm = min(first + alarm_after, n - 1)
     if first >= n:
         return
-    ref = [k for k in ticks if k.time < onset - config.lag_s - 1e-9] or ticks[:1]
+    ref = [k for k in ticks if k.time < onset - 1e-9] or ticks[:1]
     reference = ref[-1].vector
-    context = np.concatenate([np.zeros(6), [ticks[first].elapsed], [float(ticks[first].phase == p) for p in phases]])  # fmt: skip
+    context = np.concatenate([reference, [ticks[first].elapsed], [float(ticks[first].phase == p) for p in phases]])  # fmt: skip
 
     def direct(i: int) -> np.ndarray:
         k = np.array([span_index(spans, times[j] - onset) for j in range(first, i + 1)])
@@ -418,7 +418,8 @@ def test_running_evidence_and_namings_are_the_span_summaries(
             if np.any(k == s):
                 last = vectors[first : i + 1][k == s].mean(axis=0) - reference
             out.append(last)
-        return np.concatenate([*out, context])
+        seen = vectors[first : i + 1]
+        return np.concatenate([*out, seen.max(axis=0) - reference, seen.min(axis=0) - reference, context])  # fmt: skip
 
     evidence = reader.begin(spans, onset, ticks[: alarm + 1])
     np.testing.assert_allclose(evidence.features(), direct(alarm), rtol=1e-12, atol=1e-12)
@@ -442,35 +443,35 @@ def test_running_evidence_counts_a_tick_in_the_span_it_closes() -> None:
     ev = RunningEvidence((0.1, 0.25), 1.0, np.zeros(1), np.array([7.0]))
     assert ev.add(1.0, np.array([1.0])) and not ev.add(1.1, np.array([3.0]))  # 0.1 closes span 0
     assert ev.add(1.15, np.array([5.0])) and ev.add(1.3, np.array([np.nan]))
-    assert ev.features() == pytest.approx([2.0, 5.0, 0.0, 7.0])
+    assert ev.features() == pytest.approx([2.0, 5.0, 0.0, 5.0, 0.0, 7.0])  # spans, high, low
 
 
 @pytest.mark.parametrize("n_classes", [2, 3])
-def test_boosted_trees_predict_as_scikit_learn(n_classes: int) -> None:
+def test_forest_heads_predict_as_scikit_learn(n_classes: int) -> None:
     rng = np.random.default_rng(n_classes)
     X = rng.normal(size=(240, 5))
     score = X[:, 0] + 0.5 * X[:, 1] * X[:, 2] + rng.normal(0.0, 0.3, len(X))
     y = np.array(["a", "b", "c"])[
         np.digitize(score, np.quantile(score, [0.4, 0.7])[: n_classes - 1])
     ]
-    params = {"max_iter": 25, "learning_rate": 0.2, "max_leaf_nodes": 7, "random_state": 4}
-    ours = BoostedTrees(**params).fit(X, y)
-    theirs = HistGradientBoostingClassifier(**params, early_stopping=False).fit(X, y)
+    params = {"n_estimators": 15, "min_samples_leaf": 2, "random_state": 4}
+    ours = ForestHead(**params).fit(X, y)
+    theirs = RandomForestClassifier(**params).fit(X, y)
     test = rng.normal(size=(100, 5)) * 1.5
     assert list(ours.classes_) == list(theirs.classes_) == ["a", "b", "c"][:n_classes]
-    np.testing.assert_allclose(
-        ours.predict_proba(test), theirs.predict_proba(test), rtol=0, atol=1e-12
+    np.testing.assert_allclose(  # the leaves' class shares are stored as float32
+        ours.predict_proba(test), theirs.predict_proba(test), rtol=0, atol=1e-6
     )
     assert list(ours.predict(test)) == list(theirs.predict(test))
     arrays = {**ours.arrays_, "n_features": np.array(ours.n_features_in_)}
-    again = BoostedTrees.from_arrays(ours.get_params(), list(ours.classes_), arrays)
+    again = ForestHead.from_arrays(ours.get_params(), list(ours.classes_), arrays)
     np.testing.assert_array_equal(again.predict_proba(test), ours.predict_proba(test))
 
 
 def test_packed_trees_refuse_tampered_arrays() -> None:
     rng = np.random.default_rng(1)
     X = rng.normal(size=(120, 3))
-    model = BoostedTrees(max_iter=5, max_leaf_nodes=5).fit(X, np.where(X[:, 0] > 0, "p", "n"))
+    model = ForestHead(n_estimators=3).fit(X, np.where(X[:, 0] > 0, "p", "n"))
     a = model.arrays_
     check_packed(a, 2, 3)
     inner = int(np.flatnonzero(~a["leaf"])[1])  # an inner node of the first tree, not its root
@@ -598,7 +599,7 @@ def test_verifier_file_refuses_tampering(trained: VerifierModel, tmp_path: Path)
     with pytest.raises(InputError, match="checksum mismatch"):
         load_verifier(bad)
     leaf = arrays["head.class.leaf"].copy()
-    leaf[1] = False  # a leaf made an inner node: its children are its tree's root
+    leaf[int(np.flatnonzero(leaf)[0])] = False  # a leaf made an inner node: children of 0
     refused(dict(header), {**arrays, "head.class.leaf": leaf}, "children do not point forward")
     roots = arrays["head.class.roots"].copy()
     roots[-1] = len(leaf)

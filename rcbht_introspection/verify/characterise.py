@@ -10,7 +10,7 @@ centre loads the wrist differently), the time into the sub-task and which sub-ta
 The class is named again each time a span closes and when the stream ends; between those
 ticks the last naming stands, so a tick after the alarm costs only a few additions.
 
-Heads (`Characteriser`): boosted trees for the class and, when the labels carry deviations, one
+Heads (`Characteriser`): random forests for the class and, when the labels carry deviations, one
 per axis with '-', '0', '+'. Where every trial of a class deviated with the same signs and no
 other class shares them, the class head's probability of "one of those deviation classes" is
 shared among them by the direction heads' probabilities of their signs.
@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from rcbht_introspection.verify.boosted import BoostedTrees
+from rcbht_introspection.verify.forest import ForestHead
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
 
 FAILURE = "class"
@@ -54,30 +54,41 @@ class RunningEvidence:
     context: np.ndarray
     sums: np.ndarray = field(init=False)
     counts: np.ndarray = field(init=False)
+    high: np.ndarray = field(init=False)
+    low: np.ndarray = field(init=False)
     current: int = -1
     """The span of the latest tick (-1 before the first)."""
 
     def __post_init__(self) -> None:
         self.sums = np.zeros((len(self.spans) + 1, len(self.reference)))
         self.counts = np.zeros(len(self.spans) + 1, dtype=int)
+        self.high = np.full(len(self.reference), -np.inf)
+        self.low = np.full(len(self.reference), np.inf)
 
     def add(self, time: float, vector: np.ndarray) -> bool:
         """The next tick at or after onset; True when it opens a new span (name again)."""
         k = span_index(self.spans, time - self.onset)
-        self.sums[k] += np.clip(np.nan_to_num(vector, nan=0.0), -CLIP, CLIP)
+        v = np.clip(np.nan_to_num(vector, nan=0.0), -CLIP, CLIP)
+        self.sums[k] += v
         self.counts[k] += 1
+        np.maximum(self.high, v, out=self.high)
+        np.minimum(self.low, v, out=self.low)
         opened = k != self.current
         self.current = k
         return opened
 
     def features(self) -> np.ndarray:
-        """Each span's mean minus the reference (a span not reached: the last reached), then
-        the context."""
+        """Each span's mean minus the reference (a span not reached: the last reached), the
+        largest and smallest since onset minus the reference, then the context."""
         out, last = [], np.zeros(len(self.reference))
         for s, n in zip(self.sums, self.counts, strict=True):
             if n:
                 last = s / n - self.reference
             out.append(last)
+        if self.counts.any():
+            out += [self.high - self.reference, self.low - self.reference]
+        else:
+            out += [last, last]
         return np.concatenate([*out, self.context])
 
 
@@ -102,21 +113,21 @@ class Characteriser(BaseEstimator):
 
     def __init__(
         self,
-        max_iter: int = 100,
-        learning_rate: float = 0.1,
-        max_leaf_nodes: int = 15,
+        n_estimators: int = 100,
+        min_samples_leaf: int = 2,
         compose: bool = True,
         random_state: int = 0,
     ) -> None:
-        self.max_iter = max_iter
-        self.learning_rate = learning_rate
-        self.max_leaf_nodes = max_leaf_nodes
+        self.n_estimators = n_estimators
+        self.min_samples_leaf = min_samples_leaf
         self.compose = compose
         self.random_state = random_state
 
-    def _head(self) -> BoostedTrees:
-        return BoostedTrees(
-            self.max_iter, self.learning_rate, self.max_leaf_nodes, self.random_state
+    def _head(self) -> ForestHead:
+        return ForestHead(
+            n_estimators=self.n_estimators,
+            min_samples_leaf=self.min_samples_leaf,
+            random_state=self.random_state,
         )
 
     def fit(self, X: np.ndarray, labels: Sequence[TrialLabel]) -> Characteriser:
@@ -124,7 +135,7 @@ class Characteriser(BaseEstimator):
         if len(X) == 0:
             raise ValueError("no failure trials to learn failure classes from")
         classes = [lb.failure_class for lb in labels]
-        self.heads_: dict[str, BoostedTrees] = {FAILURE: self._fit_head(X, classes)}
+        self.heads_: dict[str, ForestHead] = {FAILURE: self._fit_head(X, classes)}
         labelled = [i for i, lb in enumerate(labels) if lb.directions() is not None]
         for axis in DIRECTION_AXES if labelled else ():
             y = [labels[i].directions()[axis] for i in labelled]  # type: ignore[index]
@@ -132,7 +143,7 @@ class Characteriser(BaseEstimator):
         self.signs_ = sign_table(labels) if self.compose and labelled else {}
         return self
 
-    def _fit_head(self, X: np.ndarray, y: Sequence[str]) -> BoostedTrees:
+    def _fit_head(self, X: np.ndarray, y: Sequence[str]) -> ForestHead:
         """A head; one class alone is named with certainty (no trees)."""
         if len(set(y)) < 2:
             return Constant(str(y[0]), X.shape[1])
@@ -149,7 +160,7 @@ class Characteriser(BaseEstimator):
         return max(probs, key=probs.__getitem__), probs, dirs
 
 
-def _named(head: BoostedTrees, row: np.ndarray) -> dict[str, float]:
+def _named(head: ForestHead, row: np.ndarray) -> dict[str, float]:
     return {
         str(c): float(p) for c, p in zip(head.classes_, head.predict_proba(row)[0], strict=True)
     }
@@ -176,7 +187,7 @@ def _shared_by_signs(
     return {c: (mass * belief[c] / total if c in owned else p) for c, p in probs.items()}
 
 
-class Constant(BoostedTrees):
+class Constant(ForestHead):
     """A head that saw one class only: it names that class with certainty."""
 
     def __init__(self, only: str = "", n_features: int = 0) -> None:

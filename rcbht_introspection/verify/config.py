@@ -33,7 +33,7 @@ class VerifyConfig:
     """Cross-fitting folds over the successes (grouped by session where labels name one)."""
     onset_fraction: float = 0.5
     """Onset estimate: the first tick of the excursion above this share of the threshold."""
-    evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0)
+    evidence_s: tuple[float, ...] = (0.1, 0.25, 0.5, 1.0, 2.0, 4.0, 8.0)
     """The characteriser summarises the evidence over these spans after onset and names the
     class again as each span closes."""
     mismatch_min_probability: float = 0.45

@@ -36,9 +36,6 @@ class EvidenceReader:
     n_arms: int
     level: NominalLevel | None = None
     timing: TimingModel | None = None
-    lead_s: float = 0.0
-    """The reference is the last tick at least this long before onset: the detector's lag,
-    so a late onset estimate still measures the whole change it reacted to."""
 
     def __post_init__(self) -> None:
         if self.view not in VIEWS:
@@ -49,10 +46,17 @@ class EvidenceReader:
     def vector(
         self, features: np.ndarray, names: Sequence[str], starts: Sequence[float], t: float
     ) -> np.ndarray:
-        """The view's vector of a tick: its features, and the sub-tasks started so far."""
+        """The view's vector of a tick, from its features and the sub-tasks started so far: the
+        verifier's is the mean wrench minus the successes' at that time into the sub-task, and
+        the wrench's spread over the window (stick-slip, vibration)."""
         if self.view == "timing" and self.timing is not None:
             return self.timing.z_row(names, starts, t)
-        return np.asarray(features)[kind_columns("mean", self.n_arms)]
+        mean = np.asarray(features)[kind_columns("mean", self.n_arms)]
+        if self.view != "wrench":
+            return mean
+        nominal = self.level.at(names[-1], t - starts[-1]) if self.level and names else None
+        spread = np.asarray(features)[kind_columns("std", self.n_arms)]
+        return np.concatenate([mean - nominal if nominal is not None else mean, spread])
 
     def ticks(self, tf: TrialFeatures) -> list[Tick]:
         """Every tick of a trial in this view."""
@@ -66,19 +70,16 @@ class EvidenceReader:
 
     def begin(self, spans: Sequence[float], onset: float, ticks: Sequence[Tick]) -> RunningEvidence:
         """The evidence from `onset` on, started from the ticks kept so far (those at or after
-        onset are added); the reference is the last tick lead_s before onset (the first if
-        none)."""
-        at = onset - self.lead_s - 1e-9
+        onset are added); the reference is the last tick before onset (the first if none)."""
+        at = onset - 1e-9
         ref = next((k for k in reversed(ticks) if k.time < at), ticks[0] if ticks else None)
         first = next((k for k in ticks if k.time >= onset - 1e-9), ref)
-        width = len(ref.vector) if ref is not None else 6 * self.n_arms
+        width = len(ref.vector) if ref is not None else 0
         reference, context = np.zeros(width), np.zeros(0)
         if self.view == "wrench" and ref is not None and first is not None:
             reference = ref.vector
-            nominal = self.level.at(ref.phase, ref.elapsed) if self.level is not None else None
             onehot = np.array([float(first.phase == p) for p in self.phases])
-            offset = ref.vector - nominal if nominal is not None else np.zeros(width)
-            context = np.concatenate([offset, [first.elapsed], onehot])
+            context = np.concatenate([ref.vector, [first.elapsed], onehot])
         elif self.view == "raw":
             context = np.array([onset])
         evidence = RunningEvidence(tuple(spans), onset, reference, context)
@@ -130,4 +131,4 @@ def arms_of(tf: TrialFeatures) -> int:
 def reader_of(detector: Detector, view: str, n_arms: int) -> EvidenceReader:
     """The evidence view of a method over its detector's models."""
     m = detector.models
-    return EvidenceReader(view, detector.phases, n_arms, m.level, m.timing, detector.config.lag_s)
+    return EvidenceReader(view, detector.phases, n_arms, m.level, m.timing)

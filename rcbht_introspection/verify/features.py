@@ -1,7 +1,7 @@
 """Causal raw-wrench features of a stream, on a tick grid (every `step_s`).
 
 At tick g an arm's features use only samples stamped <= g: the mean of each axis over the last
-`window_s` and that mean's change over the last `lag_s` (from the stream's first tick while the
+`window_s`, that mean's change over the last `lag_s` and each axis's spread over the window (from the stream's first tick while the
 stream is younger). The change is what the detector reads: a constant sensor bias, drift slower
 than `lag_s` and the load of the gripper cancel in it. The same `ArmFeatures` object serves the
 live verifier (sample by sample) and the offline evaluation (a whole trial fed through it), so
@@ -20,7 +20,7 @@ from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.verify.config import WRENCH_AXES, VerifyConfig
 
-KINDS = ("mean", "change")
+KINDS = ("mean", "change", "std")
 """Feature blocks of an arm, six axes each."""
 PER_ARM = 6 * len(KINDS)
 
@@ -48,6 +48,7 @@ class ArmFeatures:
         self.config = config
         self.window: deque[tuple[float, np.ndarray]] = deque()
         self.sum = np.zeros(6)
+        self.sumsq = np.zeros(6)
         self.next_tick = 0
         """Index of the next tick to emit (tick k is at k * step_s)."""
         self._means: deque[np.ndarray] = deque(maxlen=lag_ticks(config) + 1)
@@ -64,9 +65,11 @@ class ArmFeatures:
         w = np.asarray(wrench, dtype=float)
         self.window.append((t, w))
         self.sum += w
+        self.sumsq += w * w
         while self.window and self.window[0][0] <= t - self.config.window_s:
             _, old = self.window.popleft()
             self.sum -= old
+            self.sumsq -= old * old
         return out
 
     def flush(self) -> list[tuple[float, np.ndarray]]:
@@ -85,8 +88,9 @@ class ArmFeatures:
         if not self.window:
             return self._last.copy()
         mean = self.sum / len(self.window)
+        std = np.sqrt(np.maximum(self.sumsq / len(self.window) - mean * mean, 0.0))
         self._means.append(mean)
-        self._last = np.concatenate([mean, mean - self._means[0]])
+        self._last = np.concatenate([mean, mean - self._means[0], std])
         return self._last.copy()
 
 

@@ -14,16 +14,17 @@ import numpy as np
 from rcbht_introspection.config_files import from_mapping
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.learn.model_file import check_checksum, read_safe_npz, write_safe_npz
-from rcbht_introspection.verify.boosted import ARRAYS, BoostedTrees
 from rcbht_introspection.verify.characterise import FAILURE, Characteriser, Constant
 from rcbht_introspection.verify.config import VerifyConfig, check_verify_config
 from rcbht_introspection.verify.detector import Detector, SignalModels
+from rcbht_introspection.verify.forest import ARRAYS, ForestHead
 from rcbht_introspection.verify.labels import DIRECTION_AXES, DIRECTIONS
 from rcbht_introspection.verify.novelty import NeighbourModel, NominalLevel, TimingModel
 
 FORMAT = "rcbht-verifier"
 FORMAT_VERSION = 6
-"""6: change over lag_s, boosted-tree heads (5 and older: Mondrian heads; retrain)."""
+"""6: change over lag_s, random-forest heads as packed arrays (5 and older: Mondrian heads;
+retrain)."""
 KIND = "verifier"
 
 
@@ -67,7 +68,7 @@ def _detector_parts(d: Detector) -> tuple[dict[str, Any], dict[str, np.ndarray]]
     return header, arrays
 
 
-def _head_parts(name: str, head: BoostedTrees) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+def _head_parts(name: str, head: ForestHead) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     header = {"classes": [str(c) for c in head.classes_], "params": head.get_params()}
     if isinstance(head, Constant):
         return {**header, "constant": True}, {}
@@ -149,7 +150,7 @@ def _characteriser(c: dict[str, Any], arrays: dict[str, np.ndarray]) -> Characte
         missing = [k for k in (*ARRAYS, "n_features") if k not in own]
         if missing:
             raise ValueError(f"head {name!r} lacks {', '.join(missing)}")
-        ch.heads_[name] = BoostedTrees.from_arrays(h["params"], h["classes"], own)
+        ch.heads_[name] = ForestHead.from_arrays(h["params"], h["classes"], own)
     if FAILURE not in ch.heads_:
         raise ValueError("no failure-class head")
     ch.signs_ = {tuple(str(v) for v in row[:-1]): str(row[-1]) for row in c["signs"]}

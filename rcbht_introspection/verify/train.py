@@ -58,8 +58,10 @@ def fit_method(
     seed: int = 0,
     groups: Mapping[str, str] | None = None,
 ) -> Fitted:
-    """Detector on the successes; characteriser on the failures' evidence from their onsets,
-    one row at every tick at which the class is named again."""
+    """Detector on the successes; characteriser on the failures' evidence, one row at every
+    tick at which the class is named again: from the labelled onset, and from the detector's
+    own alarm and onset estimate where it raises one (the evidence as the live verifier will
+    read it, which starts later or sooner than the label)."""
     detector = Detector.fit(successes, config, signals, seed=seed, groups=groups)
     if view == "timing" and detector.models.timing is None:
         detector.models.timing = TimingModel.fit(successes, config)
@@ -68,9 +70,14 @@ def fit_method(
     labels: list[TrialLabel] = []
     for tf, label, onset in failures:
         ticks = reader.ticks(tf)
-        for _, x in namings(reader, config.evidence_s, onset, ticks, onset):
-            rows.append(x)
-            labels.append(label)
+        starts = [(onset, onset)]
+        d = detector.run(tf)
+        if d.alarm is not None and d.onset is not None:
+            starts.append((d.onset, d.alarm))
+        for begin, start in starts:
+            for _, x in namings(reader, config.evidence_s, begin, ticks, start):
+                rows.append(x)
+                labels.append(label)
     char = Characteriser(random_state=seed).fit(np.vstack(rows), labels) if rows else None
     return Fitted(detector, reader, char)
 
