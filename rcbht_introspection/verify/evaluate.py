@@ -177,7 +177,7 @@ def _peer_naming(
     return Naming(list(zip(times, named, strict=True)), named[-1], fold.signs.get(named[-1], {}))
 
 
-def _detector_of(fold: Fold, method: str, left_out: list[tuple[str, str]] | None) -> Fitted:
+def _detector_of(fold: Fold, method: str) -> Fitted:
     """The method's fitted parts (peers: the hmm detector; minirocket: the verifier's)."""
     key = {"verifier_mismatch": "verifier", "minirocket": "verifier"}.get(method, method)
     if key not in fold.fitted:
@@ -200,7 +200,7 @@ def _run(
 ) -> RunResult:
     """One test trial through one method."""
     tf, label = feats[name], labels[name]
-    fitted = _detector_of(fold, method, None)
+    fitted = _detector_of(fold, method)
     d: Detection = fitted.detector.run(tf)
     if method == WITH_MISMATCH and contradictions is not None:
         d = with_mismatch(d, contradictions.get(name, ()), fold.config)
