@@ -109,7 +109,8 @@ def offline_namings(
     config = model.config
     tf = trial_features(trial, config)
     reader = reader_of(model.detector, "wrench", len(model.arms))
-    rows = namings(reader, config.evidence_s, detection.onset, reader.ticks(tf), detection.alarm)
+    ticks = reader.ticks(tf)
+    rows = namings(reader, config.evidence_s, detection.onset, ticks, detection.alarm, config.lag_s)
     return [(t, model.characteriser.predict(x)) for t, x in rows]
 
 
@@ -381,14 +382,16 @@ def _jammed(trial: Trial, onset: float) -> Trial:
     onset_tick=st.integers(0, 59),
     offset=st.sampled_from([0.0, 0.013, -0.02]),
     alarm_after=st.integers(0, 30),
+    lead=st.sampled_from([0.0, 0.75]),
 )
 def test_running_evidence_and_namings_are_the_span_summaries(
-    seed: int, onset_tick: int, offset: float, alarm_after: int
+    seed: int, onset_tick: int, offset: float, alarm_after: int, lead: float
 ) -> None:
     """The evidence begun at the alarm and fed tick by tick is, at every tick, each span's mean
-    of the vectors since onset minus the reference tick's (a span not reached repeats the last
-    reached one), their largest and smallest minus the reference, then the context; the class is named at the alarm, at each tick opening a
-    span and at the last tick."""
+    of the vectors since onset minus the reference tick's (the last before onset - lead; a span
+    not reached repeats the last reached one), their largest and smallest minus the reference,
+    the context, then where the task stands at that tick; the class is named at the alarm, at
+    each tick opening a span and at the last tick."""
     config = load_verify_config()
     spans = config.evidence_s
     rng = np.random.default_rng(seed)
@@ -406,7 +409,7 @@ def test_running_evidence_and_namings_are_the_span_summaries(
     alarm = min(first + alarm_after, n - 1)
     if first >= n:
         return
-    ref = [k for k in ticks if k.time < onset - 1e-9] or ticks[:1]
+    ref = [k for k in ticks if k.time < onset - lead - 1e-9] or ticks[:1]
     reference = ref[-1].vector
     context = np.concatenate([reference, [ticks[first].elapsed], [float(ticks[first].phase == p) for p in phases]])  # fmt: skip
 
@@ -419,16 +422,17 @@ def test_running_evidence_and_namings_are_the_span_summaries(
                 last = vectors[first : i + 1][k == s].mean(axis=0) - reference
             out.append(last)
         seen = vectors[first : i + 1]
-        return np.concatenate([*out, seen.max(axis=0) - reference, seen.min(axis=0) - reference, context])  # fmt: skip
+        now = [*(float(ticks[i].phase == p) for p in phases), ticks[i].elapsed, times[i] - onset]
+        return np.concatenate([*out, seen.max(axis=0) - reference, seen.min(axis=0) - reference, context, now])  # fmt: skip
 
-    evidence = reader.begin(spans, onset, ticks[: alarm + 1])
+    evidence = reader.begin(spans, onset, ticks[: alarm + 1], lead)
     np.testing.assert_allclose(evidence.features(), direct(alarm), rtol=1e-12, atol=1e-12)
     opened = []
     for i in range(alarm + 1, n):
-        if evidence.add(float(times[i]), vectors[i]):
+        if evidence.add(float(times[i]), vectors[i], reader.now(ticks[i], onset)):
             opened.append(float(times[i]))
         np.testing.assert_allclose(evidence.features(), direct(i), rtol=1e-12, atol=1e-12)
-    named = namings(reader, spans, onset, ticks, float(times[alarm]))
+    named = namings(reader, spans, onset, ticks, float(times[alarm]), lead)
     want = [float(times[alarm]), *opened]
     if want[-1] != times[-1]:
         want.append(float(times[-1]))

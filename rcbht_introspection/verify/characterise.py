@@ -4,9 +4,13 @@ The evidence runs from the onset on, tick by tick. Each tick gives a vector of i
 verifier: the mean wrench of every arm; the timing baseline: how long each sub-task has run),
 summarised as its mean over each span of `evidence_s` after onset, minus a reference: for the
 verifier the tick before onset, so the summary is how the contact changed the wrench (sensor
-bias and gripper load cancel). Beside it the verifier reads the context at onset: the wrench
-just before onset against the successes' at that time into the sub-task (a part held off
-centre loads the wrist differently), the time into the sub-task and which sub-task ran.
+bias and gripper load cancel). An onset the detector estimated is where the change score
+left the noise, and that score compares each window with the one `lag_s` before it, so the
+reference is taken `lag_s` before such an onset. Beside it the verifier reads the context at
+onset: the wrench at the reference against the successes' at that time into the sub-task (a
+part held off centre loads the wrist differently), the time into the sub-task and which
+sub-task ran; and where the task stands when the class is named: the sub-task running, the
+time into it and since onset (a jam stalls a sub-task, a missed snap ends it early).
 The class is named again each time a span closes and when the stream ends; between those
 ticks the last naming stands, so a tick after the alarm costs only a few additions.
 
@@ -58,6 +62,8 @@ class RunningEvidence:
     low: np.ndarray = field(init=False)
     current: int = -1
     """The span of the latest tick (-1 before the first)."""
+    now: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Where the task stands at the latest tick (`EvidenceReader.now`)."""
 
     def __post_init__(self) -> None:
         self.sums = np.zeros((len(self.spans) + 1, len(self.reference)))
@@ -65,9 +71,12 @@ class RunningEvidence:
         self.high = np.full(len(self.reference), -np.inf)
         self.low = np.full(len(self.reference), np.inf)
 
-    def add(self, time: float, vector: np.ndarray) -> bool:
-        """The next tick at or after onset; True when it opens a new span (name again)."""
+    def add(self, time: float, vector: np.ndarray, now: np.ndarray | None = None) -> bool:
+        """The next tick at or after onset (`now`: where the task stands at it); True when it
+        opens a new span (name again)."""
         k = span_index(self.spans, time - self.onset)
+        if now is not None:
+            self.now = now
         v = np.clip(np.nan_to_num(vector, nan=0.0), -CLIP, CLIP)
         self.sums[k] += v
         self.counts[k] += 1
@@ -79,7 +88,8 @@ class RunningEvidence:
 
     def features(self) -> np.ndarray:
         """Each span's mean minus the reference (a span not reached: the last reached), the
-        largest and smallest since onset minus the reference, then the context."""
+        largest and smallest since onset minus the reference, the context, where the task
+        stands now."""
         out, last = [], np.zeros(len(self.reference))
         for s, n in zip(self.sums, self.counts, strict=True):
             if n:
@@ -89,7 +99,7 @@ class RunningEvidence:
             out += [self.high - self.reference, self.low - self.reference]
         else:
             out += [last, last]
-        return np.concatenate([*out, self.context])
+        return np.concatenate([*out, self.context, self.now])
 
 
 def sign_table(labels: Sequence[TrialLabel]) -> dict[tuple[str, ...], str]:

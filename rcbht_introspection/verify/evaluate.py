@@ -92,15 +92,15 @@ class Naming:
 NO_NAMING = Naming([])
 
 
-def _ours(fitted: Fitted, tf: TrialFeatures, onset: float, start: float) -> Naming:
-    """The characteriser's namings from `start` (the alarm) on, evidence from `onset`."""
+def _ours(fitted: Fitted, tf: TrialFeatures, onset: float, start: float, lead: float) -> Naming:
+    """The characteriser's namings from `start` (the alarm) on, evidence from `onset` (its
+    reference `lead` before: `lag_s` for an onset the detector estimated, as live)."""
     char = fitted.characteriser
     if char is None:
         return NO_NAMING
     ticks = fitted.reader.ticks(tf)
-    named = [
-        (t, char.predict(x)) for t, x in namings(fitted.reader, _spans(fitted), onset, ticks, start)
-    ]
+    evidence = namings(fitted.reader, _spans(fitted), onset, ticks, start, lead)
+    named = [(t, char.predict(x)) for t, x in evidence]
     if not named:
         return NO_NAMING
     return Naming([(t, n[0]) for t, n in named], named[-1][1][0], named[-1][1][2])
@@ -214,9 +214,9 @@ def _run(
                 given = _peer_naming(fold, method, raws[name], onset, tf.end, tf.end)
         elif method not in PEERS:
             if d.alarm is not None and d.onset is not None:
-                after = _ours(fitted, tf, d.onset, d.alarm)
+                after = _ours(fitted, tf, d.onset, d.alarm, fold.config.lag_s)
             if onset is not None:
-                given = _ours(fitted, tf, onset, onset)
+                given = _ours(fitted, tf, onset, onset, 0.0)
     by_evidence = (
         {str(s): named_at(after.over_time, d.alarm + s) for s in CLASS_EVIDENCE_S}
         if d.alarm is not None

@@ -68,10 +68,21 @@ class EvidenceReader:
             out.append(Tick(g, tf.phases[i] if i >= 0 else "", float(tf.elapsed[t]), vec))
         return out
 
-    def begin(self, spans: Sequence[float], onset: float, ticks: Sequence[Tick]) -> RunningEvidence:
+    def now(self, tick: Tick, onset: float) -> np.ndarray:
+        """Where the task stands at a tick (the verifier's view): the sub-task running (one-hot
+        over the nominal ones), the time into it and the time since onset."""
+        if self.view != "wrench":
+            return np.zeros(0)
+        onehot = [float(tick.phase == p) for p in self.phases]
+        return np.array([*onehot, tick.elapsed, tick.time - onset])
+
+    def begin(
+        self, spans: Sequence[float], onset: float, ticks: Sequence[Tick], lead: float = 0.0
+    ) -> RunningEvidence:
         """The evidence from `onset` on, started from the ticks kept so far (those at or after
-        onset are added); the reference is the last tick before onset (the first if none)."""
-        at = onset - 1e-9
+        onset are added); the reference is the last tick before `onset - lead` (the first if
+        none)."""
+        at = onset - lead - 1e-9
         ref = next((k for k in reversed(ticks) if k.time < at), ticks[0] if ticks else None)
         first = next((k for k in ticks if k.time >= onset - 1e-9), ref)
         width = len(ref.vector) if ref is not None else 0
@@ -83,9 +94,11 @@ class EvidenceReader:
         elif self.view == "raw":
             context = np.array([onset])
         evidence = RunningEvidence(tuple(spans), onset, reference, context)
+        if first is not None:
+            evidence.now = self.now(first, onset)
         for k in ticks:
             if k.time >= onset - 1e-9:
-                evidence.add(k.time, k.vector)
+                evidence.add(k.time, k.vector, self.now(k, onset))
         return evidence
 
 
@@ -95,18 +108,19 @@ def namings(
     onset: float,
     ticks: Sequence[Tick],
     start: float,
+    lead: float = 0.0,
 ) -> list[tuple[float, np.ndarray]]:
     """(tick time, evidence features) at every tick a characteriser names the class again: the
-    first at or after `start` (the alarm; the evidence begins at onset), then each tick that
-    opens a span, then the last tick."""
+    first at or after `start` (the alarm; the evidence begins at onset, its reference `lead`
+    before), then each tick that opens a span, then the last tick."""
     before = [k for k in ticks if k.time < start - 1e-9]
     later = [k for k in ticks if k.time >= start - 1e-9]
     if not later:
         return []
-    evidence = reader.begin(spans, onset, [*before, later[0]])
+    evidence = reader.begin(spans, onset, [*before, later[0]], lead)
     out = [(later[0].time, evidence.features())]
     for k in later[1:]:
-        if evidence.add(k.time, k.vector):
+        if evidence.add(k.time, k.vector, reader.now(k, onset)):
             out.append((k.time, evidence.features()))
     if out[-1][0] != later[-1].time:
         out.append((later[-1].time, evidence.features()))

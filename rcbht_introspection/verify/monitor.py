@@ -182,7 +182,8 @@ class VerifierSession:
         tick = Tick(g, name, elapsed, self.reader.vector(features, names, starts[: i + 1], g))
         rename = last
         if self.evidence is not None:
-            rename = self.evidence.add(tick.time, tick.vector) or rename
+            now = self.reader.now(tick, self.evidence.onset)
+            rename = self.evidence.add(tick.time, tick.vector, now) or rename
         elif self.alarm_time is None:
             self.history.append(tick)
             if len(self.history) > HISTORY_TICKS:
@@ -230,5 +231,6 @@ class VerifierSession:
         """At the alarm: the evidence from the kept ticks, the alarm's among them (later ones
         are added as they come)."""
         if self.model.characteriser is not None:
-            self.evidence = self.reader.begin(self.model.config.evidence_s, onset, self.history)
+            config = self.model.config
+            self.evidence = self.reader.begin(config.evidence_s, onset, self.history, config.lag_s)
         self.history = []

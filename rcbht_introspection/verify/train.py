@@ -61,7 +61,7 @@ def fit_method(
     """Detector on the successes; characteriser on the failures' evidence, one row at every
     tick at which the class is named again: from the labelled onset, and from the detector's
     own alarm and onset estimate where it raises one (the evidence as the live verifier will
-    read it, which starts later or sooner than the label)."""
+    read it, which starts later or sooner than the label; its reference `lag_s` before)."""
     detector = Detector.fit(successes, config, signals, seed=seed, groups=groups)
     if view == "timing" and detector.models.timing is None:
         detector.models.timing = TimingModel.fit(successes, config)
@@ -70,12 +70,12 @@ def fit_method(
     labels: list[TrialLabel] = []
     for tf, label, onset in failures:
         ticks = reader.ticks(tf)
-        starts = [(onset, onset)]
+        starts = [(onset, onset, 0.0)]
         d = detector.run(tf)
         if d.alarm is not None and d.onset is not None:
-            starts.append((d.onset, d.alarm))
-        for begin, start in starts:
-            for _, x in namings(reader, config.evidence_s, begin, ticks, start):
+            starts.append((d.onset, d.alarm, config.lag_s))
+        for begin, start, lead in starts:
+            for _, x in namings(reader, config.evidence_s, begin, ticks, start, lead):
                 rows.append(x)
                 labels.append(label)
     char = Characteriser(random_state=seed).fit(np.vstack(rows), labels) if rows else None
