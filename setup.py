@@ -23,7 +23,7 @@ setup(
     # peer baselines (rcbht_introspection/peers/): the pins of requirements-peers.txt, which
     # `make setup` installs; the core and the nodes never import them
     extras_require={"peers": ["hmmlearn==0.3.3", "aeon==1.6.0"]},
-    python_requires=">=3.10",
+    python_requires=">=3.11",
     zip_safe=True,
     maintainer="rcbht_introspection maintainers",
     maintainer_email="rcbht@example.org",

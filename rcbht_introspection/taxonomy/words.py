@@ -17,7 +17,7 @@ BEHAVIOR_LABELS: tuple[str, ...] = ("FX", "CT", "PS", "PL", "AL", "SH", "U", "N"
 """LLB labels: fixed, contact, push, pull, align, shift, unstable, noise."""
 
 
-class Level(str, Enum):
+class Level(str, Enum):  # noqa: UP042 - StrEnum changes str() of members, which outputs print
     """The three levels of the taxonomy, lowest first."""
 
     PRIMITIVE = "primitive"
