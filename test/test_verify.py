@@ -773,7 +773,7 @@ def test_verify_eval_cli_reports_the_verifier_beside_the_baselines_and_anchors(
         assert m["class_accuracy"] is not None
     assert result["protocol"]["onset_source"] == {"label": len(FAILURES)}
     assert "verifier_mismatch" not in result  # no classifier given
-    runs = {m: {r["trial"]: r for r in result["runs"] if r["method"] == m} for m in ("verifier", "minirocket")}  # fmt: skip
+    runs = {m: {r["trial"]: r for r in result["records"] if r["method"] == m} for m in ("verifier", "minirocket")}  # fmt: skip
     for name, run in runs["verifier"].items():  # minirocket names on the verifier's alarms
         assert runs["minirocket"][name]["alarm"] == run["alarm"]
 
@@ -795,9 +795,9 @@ def test_verify_eval_cli_adds_the_mismatch_signal_with_a_classifier(
     with_model = json.loads(out.read_text())
     assert set(with_model["baselines"]) == {"raw_wrench", "timing"}
     both = with_model["verifier_mismatch"]
-    verifier_runs = [r for r in with_model["runs"] if r["method"] == "verifier"]
+    verifier_runs = [r for r in with_model["records"] if r["method"] == "verifier"]
     assert both["runs"] == len(verifier_runs) == len(trials) and 0 <= both["roc_auc"] <= 1
-    alarms = {m: {r["trial"]: r["alarm"] for r in with_model["runs"] if r["method"] == m} for m in ("verifier", "verifier_mismatch")}  # fmt: skip
+    alarms = {m: {r["trial"]: r["alarm"] for r in with_model["records"] if r["method"] == m} for m in ("verifier", "verifier_mismatch")}  # fmt: skip
     for name, alarm in alarms["verifier"].items():
         if alarm is not None:
             assert alarms["verifier_mismatch"][name] is not None

@@ -183,7 +183,7 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     _print(summary)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps({**summary, "runs": records}, indent=2))
+        args.json.write_text(json.dumps({**summary, "records": records}, indent=2))
     if args.plots:
         _plots(args.plots, trials, labels, runs["verifier"])
     return 0
