@@ -22,7 +22,11 @@ setup(
     install_requires=["setuptools"],
     # peer baselines (rcbht_introspection/peers/): the pins of requirements-peers.txt, which
     # `make setup` installs; the core and the nodes never import them
-    extras_require={"peers": ["hmmlearn==0.3.3", "aeon==1.6.0"]},
+    # fleet: verify-eval --scheduler on a dask.distributed cluster (pinned in requirements.txt)
+    extras_require={
+        "peers": ["hmmlearn==0.3.3", "aeon==1.6.0"],
+        "fleet": ["dask==2026.8.0", "distributed==2026.8.0"],
+    },
     python_requires=">=3.11",
     zip_safe=True,
     maintainer="rcbht_introspection maintainers",

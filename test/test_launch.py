@@ -377,6 +377,7 @@ ROSDEP_KEYS = {
     "numpy": "python3-numpy",
     "scipy": "python3-scipy",
     "sklearn": "python3-sklearn",
+    "joblib": "python3-joblib",
     "yaml": "python3-yaml",
     "matplotlib": "python3-matplotlib",
     "tqdm": "python3-tqdm",
@@ -387,6 +388,9 @@ ROSDEP_KEYS = {
 ROSDISTRO_PIP_KEYS = {"python3-rosbags-pip", "python3-mujoco-pip"}  # defined by rosdistro
 OPTIONAL_EXTRAS = {"peers"}
 """Packages of an optional pip extra (setup.py extras_require): verify-eval's anchor methods."""
+OPTIONAL_IMPORTS = {"dask"}
+"""Modules of an optional pip extra imported where a command option asks for them (fleet:
+verify-eval --scheduler)."""
 
 
 def test_package_xml_lists_every_run_dependency() -> None:
@@ -413,7 +417,7 @@ def test_package_xml_lists_every_run_dependency() -> None:
                 imported |= {a.name.split(".")[0] for a in node.names}
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
                 imported.add(node.module.split(".")[0])
-    third_party = imported - set(sys.stdlib_module_names) - {PACKAGE}
+    third_party = imported - set(sys.stdlib_module_names) - {PACKAGE} - OPTIONAL_IMPORTS
     needed = {ROSDEP_KEYS.get(name, name) for name in third_party}
     needed |= {"launch", "launch_ros", "lifecycle_msgs", "diagnostic_msgs"}
     assert not needed - exec_depends, (

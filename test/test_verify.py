@@ -802,3 +802,37 @@ def test_verify_eval_cli_adds_the_mismatch_signal_with_a_classifier(
         if alarm is not None:
             assert alarms["verifier_mismatch"][name] is not None
             assert alarms["verifier_mismatch"][name] <= alarm
+
+
+def test_verify_eval_gives_the_same_json_on_joblib_workers_and_a_dask_cluster(
+    trials: list[Trial], tmp_path: Path
+) -> None:
+    """--jobs 2 (loky processes) and --scheduler (a loopback dask.distributed LocalCluster)
+    write the sequential run's JSON byte for byte."""
+    from dask.distributed import LocalCluster
+
+    from rcbht_introspection.cli import main
+
+    data = _write_set(trials, tmp_path / "set")
+    args = ["verify-eval", str(data), "--folds", "2", "--no-peers", "--json"]
+    assert main([*args, str(tmp_path / "seq.json")]) == 0
+    assert main([*args, str(tmp_path / "jobs.json"), "--jobs", "2"]) == 0
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, host="127.0.0.1", dashboard_address=None
+    ) as cluster:
+        assert main([*args, str(tmp_path / "dask.json"), "--scheduler", cluster.scheduler_address]) == 0  # fmt: skip
+    sequential = (tmp_path / "seq.json").read_text()
+    assert json.loads(sequential)["records"]  # the per-run records are compared too
+    assert (tmp_path / "jobs.json").read_text() == sequential
+    assert (tmp_path / "dask.json").read_text() == sequential
+
+
+def test_verify_eval_names_an_unreachable_scheduler(
+    trials: list[Trial], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from rcbht_introspection.cli import main
+
+    data = _write_set(trials, tmp_path / "set")
+    args = ["verify-eval", str(data), "--no-peers", "--scheduler", "tcp://127.0.0.1:9"]
+    assert main(args) != 0
+    assert "error: --scheduler tcp://127.0.0.1:9: " in capsys.readouterr().err

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +53,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--no-peers",
         action="store_true",
         help="leave out the anchors' methods (hmm, minirocket: the peers extra)",
+    )
+    ev.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="joblib workers (loky processes) for the trials' features and the folds; -1: one "
+        "per core (the results are the same whatever N)",
+    )
+    ev.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="run the folds on a dask.distributed scheduler (e.g. tcp://10.0.0.5:8786) through "
+        "joblib's Dask backend (the fleet extra); --jobs is then the cluster's",
     )
     ev.set_defaults(func=cmd_verify_eval)
 
@@ -163,18 +180,20 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
         raise InputError("need at least 3 successful trials to train and calibrate on")
     contradictions = _contradictions(args.model, trials, config) if args.model else None
     try:
-        runs = verify_runs(
-            trials,
-            labels,
-            config,
-            folds,
-            args.seed,
-            train,
-            progress=lambda s: print(s, file=sys.stderr),
-            train_labels=train_labels,
-            contradictions=contradictions,
-            peers=not args.no_peers,
-        )
+        with _backend(args.scheduler):
+            runs = verify_runs(
+                trials,
+                labels,
+                config,
+                folds,
+                args.seed,
+                train,
+                progress=lambda s: print(s, file=sys.stderr),
+                train_labels=train_labels,
+                contradictions=contradictions,
+                peers=not args.no_peers,
+                jobs=-1 if args.scheduler else args.jobs,
+            )
     except ValueError as exc:  # e.g. successes without sub-task events to calibrate on
         raise InputError(str(exc)) from None
     protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
@@ -187,6 +206,28 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     if args.plots:
         _plots(args.plots, trials, labels, runs["verifier"])
     return 0
+
+
+@contextlib.contextmanager
+def _backend(scheduler: str | None) -> Iterator[None]:
+    """joblib's Dask backend on the scheduler at `scheduler` (None: joblib's default, loky)."""
+    if scheduler is None:
+        yield
+        return
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise InputError(
+            "--scheduler needs Dask: pip install 'rcbht_introspection[fleet]'"
+        ) from None
+    from joblib import parallel_config
+
+    try:
+        client = Client(scheduler, timeout=30)
+    except OSError as exc:
+        raise InputError(f"--scheduler {scheduler}: {exc}") from None
+    with client, parallel_config(backend="dask"):
+        yield
 
 
 def _contradictions(model_file: Path, trials: list[Any], config: Any) -> dict[str, Any]:

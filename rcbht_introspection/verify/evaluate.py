@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from joblib import Parallel, delayed
 from sklearn.metrics import roc_auc_score
 from sklearn.model_selection import StratifiedKFold
 
@@ -379,20 +380,31 @@ def verify_runs(
     train_labels: Mapping[str, TrialLabel] | None = None,
     contradictions: Mapping[str, Sequence[Contradiction]] | None = None,
     peers: bool = True,
+    jobs: int = 1,
 ) -> dict[str, list[RunResult]]:
     """Every test run of every method: stratified `folds` over `trials` (None: leave one trial
     out), or fitted on `train` and tested on `trials` (transfer; training trials are kept apart
     from the test trials even when their names are the same, as in two simulated sets).
     `contradictions` (test trial -> the classifier's contradicting final verdicts) adds the
-    verifier with the mismatch signal (WITH_MISMATCH); `peers` adds the anchors' methods."""
-    feats = {t.name: trial_features(t, config) for t in trials}
+    verifier with the mismatch signal (WITH_MISMATCH); `peers` adds the anchors' methods.
+    `jobs`: joblib workers for the trials' features and the folds (the results do not depend
+    on it; a joblib backend set by the caller, such as Dask's, is used)."""
+    parallel = Parallel(n_jobs=jobs)
+    feats = dict(
+        zip(
+            (t.name for t in trials),
+            parallel(delayed(trial_features)(t, config) for t in trials),
+            strict=True,
+        )
+    )
     raws = {t.name: _raw(t) for t in trials} if peers else {}
     labels = dict(labels)
     names = [t.name for t in trials]
     if train:
         keys = [TRAIN_PREFIX + t.name for t in train]
-        for key, t in zip(keys, train, strict=True):
-            feats[key] = trial_features(t, config)
+        train_feats = parallel(delayed(trial_features)(t, config) for t in train)
+        for key, t, tf in zip(keys, train, train_feats, strict=True):
+            feats[key] = tf
             labels[key] = (train_labels or labels)[t.name]
             if peers:
                 raws[key] = _raw(t)
@@ -401,10 +413,13 @@ def verify_runs(
         splits = _splits(names, labels, folds, seed)
     methods = [*METHODS, *(PEERS if peers else ()), *([WITH_MISMATCH] if contradictions else [])]
     runs: dict[str, list[RunResult]] = {}
-    for k, (tr, te) in enumerate(splits):
+    folds_out = Parallel(n_jobs=jobs, return_as="generator")(
+        delayed(_fold_results)(tr, te, feats, labels, raws, config, seed, methods, contradictions)
+        for tr, te in splits
+    )
+    for k, fold in enumerate(folds_out):  # in fold order, whichever worker ends first
         if progress is not None:
             progress(f"fold {k + 1}/{len(splits)}")
-        fold = _fold_results(tr, te, feats, labels, raws, config, seed, methods, contradictions)
         for method, res in fold.items():
             runs.setdefault(method, []).extend(res)
     return runs
