@@ -24,6 +24,7 @@ BENCHMARKS: tuple[str, ...] = (
     "rcbht_introspection.bench.mondrian",
     "rcbht_introspection.bench.belief",
     "rcbht_introspection.bench.verifier",
+    "rcbht_introspection.bench.fleet",
     "rcbht_introspection.bench.sim",
     "rcbht_introspection.bench.ros",
 )
