@@ -170,7 +170,10 @@ def test_verify_commands_put_the_counts_into_their_json(
     assert main([*evaluate, "--labels", str(labels)]) == 0
     result = json.loads(out.read_text())
     assert result["protocol"]["folds"] == "transfer"
-    assert [r["trial"] for r in result["records"] if r["method"] == "verifier"] == [names[0], names[7]]
+    assert [r["trial"] for r in result["records"] if r["method"] == "verifier"] == [
+        names[0],
+        names[7],
+    ]
     assert result["input"] == {
         "dropped_state_times": {
             "total": 3,
