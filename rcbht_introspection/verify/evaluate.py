@@ -153,17 +153,19 @@ def _peer_window(raw: Raw, start: float, until: float) -> np.ndarray:
     return w[sel]
 
 
-def _fit_peers(fold: Fold, raws: Mapping[str, Raw]) -> None:
-    """The anchors' classifiers on the training failures' windows [onset - lead, end]."""
+def _fit_peers(fold: Fold, raws: Mapping[str, Raw], peers: Sequence[str]) -> None:
+    """The anchors' classifiers `peers` on the training failures' windows [onset - lead, end]."""
     from rcbht_introspection.peers.hmm import HMMClassifier
     from rcbht_introspection.peers.minirocket import MiniRocketClassifier
 
-    if not fold.failures:
+    if not fold.failures or not peers:
         return
     windows = [_peer_window(raws[tf.trial], o, tf.end) for tf, _, o in fold.failures]
     y = [lb.failure_class for _, lb, _ in fold.failures]
-    fold.peers["hmm"] = HMMClassifier(random_state=fold.seed).fit(windows, y)
-    fold.peers["minirocket"] = MiniRocketClassifier(random_state=fold.seed).fit(windows, y)
+    if "hmm" in peers:
+        fold.peers["hmm"] = HMMClassifier(random_state=fold.seed).fit(windows, y)
+    if "minirocket" in peers:
+        fold.peers["minirocket"] = MiniRocketClassifier(random_state=fold.seed).fit(windows, y)
 
 
 def _peer_naming(
@@ -243,22 +245,39 @@ def _run(
     )
 
 
+def _method_groups(methods: Sequence[str]) -> list[tuple[str, ...]]:
+    """The methods in groups that share fitted parts, the costliest group first: the verifier
+    with its mismatch variant and MiniRocket (which names on the verifier's alarms), the HMMs,
+    then each baseline alone."""
+    shared = tuple(m for m in ("verifier", WITH_MISMATCH, "minirocket") if m in methods)
+    rest = [(m,) for m in ("hmm", *METHODS) if m in methods and m not in shared]
+    return [g for g in (shared, *rest) if g]
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    """What every fold task reads: the trials' features, labels and raw wrench, the settings."""
+
+    feats: Mapping[str, TrialFeatures]
+    labels: Mapping[str, TrialLabel]
+    raws: Mapping[str, Raw]
+    config: VerifyConfig
+    seed: int
+    contradictions: Mapping[str, Sequence[Contradiction]] | None
+
+
 def _fold_results(
-    train: Sequence[str],
-    test: Sequence[str],
-    feats: Mapping[str, TrialFeatures],
-    labels: Mapping[str, TrialLabel],
-    raws: Mapping[str, Raw],
-    config: VerifyConfig,
-    seed: int,
-    methods: Sequence[str],
-    contradictions: Mapping[str, Sequence[Contradiction]] | None = None,
-) -> dict[str, list[RunResult]]:
-    fold = _make_fold(train, feats, labels, config, seed)
-    if any(m in PEERS for m in methods):
-        _fit_peers(fold, raws)
-    return {
-        m: [_run(fold, m, n, feats, labels, raws, contradictions) for n in test] for m in methods
+    k: int, methods: Sequence[str], split: tuple[list[str], list[str]], inputs: _Inputs
+) -> tuple[int, dict[str, list[RunResult]]]:
+    """Fold `k`'s test runs through `methods` fitted on its training trials, tagged with `k`
+    (tasks end in any order; the caller puts the runs back in fold order)."""
+    train, test = split
+    i = inputs
+    fold = _make_fold(train, i.feats, i.labels, i.config, i.seed)
+    _fit_peers(fold, i.raws, [m for m in methods if m in PEERS])
+    return k, {
+        m: [_run(fold, m, n, i.feats, i.labels, i.raws, i.contradictions) for n in test]
+        for m in methods
     }
 
 
@@ -412,17 +431,17 @@ def verify_runs(
     else:
         splits = _splits(names, labels, folds, seed)
     methods = [*METHODS, *(PEERS if peers else ()), *([WITH_MISMATCH] if contradictions else [])]
-    runs: dict[str, list[RunResult]] = {}
-    folds_out = Parallel(n_jobs=jobs, return_as="generator")(
-        delayed(_fold_results)(tr, te, feats, labels, raws, config, seed, methods, contradictions)
-        for tr, te in splits
+    inputs = _Inputs(feats, labels, raws, config, seed, contradictions)
+    tasks = [(k, g) for g in _method_groups(methods) for k in range(len(splits))]
+    out = Parallel(n_jobs=jobs, return_as="generator_unordered")(
+        delayed(_fold_results)(k, g, splits[k], inputs) for k, g in tasks
     )
-    for k, fold in enumerate(folds_out):  # in fold order, whichever worker ends first
+    by_task: dict[tuple[int, str], list[RunResult]] = {}
+    for done, (k, results) in enumerate(out, 1):
+        by_task.update({(k, m): res for m, res in results.items()})
         if progress is not None:
-            progress(f"fold {k + 1}/{len(splits)}")
-        for method, res in fold.items():
-            runs.setdefault(method, []).extend(res)
-    return runs
+            progress(f"fold {k + 1}/{len(splits)}: {', '.join(results)} ({done}/{len(tasks)})")
+    return {m: [r for k in range(len(splits)) for r in by_task[k, m]] for m in methods}
 
 
 def summarise(
