@@ -261,11 +261,11 @@ class ClassifierNode(ManagedNode):
         for level, line in self.teaching.notes():
             {"info": log.info, "warning": log.warning}.get(level, log.error)(line)
 
-    def on_words(self, arm: str, msg: WordsMsg, info: dict | None = None) -> None:
+    def on_words(self, arm: str, msg: WordsMsg, info: dict[str, int] | None = None) -> None:
         """One Words message (the executor path; drain() takes bursts)."""
         self.publish_step(self.session.receive([words_input(arm, msg)]))
 
-    def on_phase(self, msg: PhaseMsg, info: dict) -> None:
+    def on_phase(self, msg: PhaseMsg, info: dict[str, int]) -> None:
         """One Phase message (the executor path; drain() takes bursts)."""
         self.publish_step(self.session.receive([phase_input(msg, info.get("source_timestamp"))]))
 

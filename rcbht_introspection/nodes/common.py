@@ -9,7 +9,7 @@ import time
 import traceback
 from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Any
+from typing import Any, Protocol
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
@@ -23,6 +23,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
+from rclpy.utilities import try_shutdown
 from std_msgs.msg import String
 
 from rcbht_introspection.errors import InputError
@@ -44,7 +45,7 @@ from rcbht_introspection.nodes.params import (
 
 def qos_profile(depth: int, reliability: Reliability) -> QoSProfile:
     """Keep-last QoS of `depth`, reliable or best effort."""
-    return QoSProfile(
+    return QoSProfile(  # type: ignore[no-untyped-call, unused-ignore]  # rclpy's QoSProfile takes **kwargs
         history=HistoryPolicy.KEEP_LAST,
         depth=depth,
         reliability=ReliabilityPolicy.RELIABLE
@@ -84,6 +85,19 @@ def read_config(node: Node, cls: type[NodeConfig]) -> NodeConfig:
     """The validated config from the node's current parameter values (InputError names one)."""
     values = {name: node.get_parameter(name).value for name in defaults(cls)}
     return config_from_parameters(cls, values)
+
+
+class NodeLogger(Protocol):
+    """What the nodes call on their logger (rclpy's RcutilsLogger, which has no annotations)."""
+
+    def info(self, message: str) -> bool:
+        """Log `message` at INFO; whether it was logged."""
+
+    def warning(self, message: str, *, throttle_duration_sec: float = ...) -> bool:
+        """Log `message` at WARN (at most once per `throttle_duration_sec`); whether it was."""
+
+    def error(self, message: str) -> bool:
+        """Log `message` at ERROR; whether it was logged."""
 
 
 DIAGNOSTICS_PERIOD_S = 1.0
@@ -139,6 +153,11 @@ class ManagedNode(LifecycleNode):
     def health(self, period_s: float) -> list[Health]:
         """Statuses for /diagnostics covering the last `period_s` seconds."""
         return []
+
+    def get_logger(self) -> NodeLogger:
+        """The node's logger: rclpy's Node.get_logger, seen through the typed NodeLogger."""
+        logger: NodeLogger = super().get_logger()  # type: ignore[no-untyped-call, unused-ignore]
+        return logger
 
     # --- lifecycle ----------------------------------------------------------------------------
     # rclpy turns an exception in a transition callback into a silent ERROR transition; each
@@ -220,7 +239,7 @@ class ManagedNode(LifecycleNode):
         """The process ends: shut down from whatever state the node is in (logs its statistics)."""
         if self.state_label != "finalized":
             try:
-                self.trigger_shutdown()
+                self.trigger_shutdown()  # type: ignore[no-untyped-call, unused-ignore]
             except RuntimeError as exc:  # rclpy's state machine refused (RCLError)
                 self.get_logger().error(f"shutdown transition refused: {exc}")
 
@@ -263,10 +282,10 @@ def run(
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         if node.autostart and not stop.requested:
-            configured = node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+            configured = node.trigger_configure() == TransitionCallbackReturn.SUCCESS  # type: ignore[no-untyped-call, unused-ignore]
             if configured:
                 stop.up()  # a stop from here shuts the node down in order (statistics line)
-            if not configured or node.trigger_activate() != TransitionCallbackReturn.SUCCESS:
+            if not configured or node.trigger_activate() != TransitionCallbackReturn.SUCCESS:  # type: ignore[no-untyped-call, unused-ignore]
                 # one line naming the parameter; the node never started
                 print(f"[{name}] error: {node.config_error}", file=sys.stderr, flush=True)
                 return 2
@@ -282,8 +301,8 @@ def run(
         if executor is not None:
             executor.shutdown(timeout_sec=0)  # releases what its last wait still holds
         if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+            node.destroy_node()  # type: ignore[no-untyped-call, unused-ignore]
+        try_shutdown()
         stop.exiting()
     return 0
 
@@ -340,8 +359,8 @@ class RosSession:
         self._stop.set()
         self._thread.join()
         self.executor.shutdown(timeout_sec=0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
+        self.node.destroy_node()  # type: ignore[no-untyped-call, unused-ignore]
+        try_shutdown(context=self.context)
 
     def __enter__(self) -> RosSession:
         return self
@@ -355,7 +374,7 @@ def subscribe_intake(
     arms: Sequence[str],
     wrench_topics: Sequence[str],
     phase_topic: str,
-    on_sample: Callable[[str, bytes, dict], None],
+    on_sample: Callable[[str, bytes, dict[str, int]], None],
     on_phase: Callable[..., None],
     qos: QoSProfile,
     group: Any,

@@ -60,7 +60,8 @@ class Draining(Protocol):
 def take(sub: Subscription) -> tuple[Any, Any] | None:
     """The next delivered message of `sub` as (message, info), or None: what drain() loops on."""
     with sub.handle:
-        return sub.handle.take_message(sub.msg_type, sub.raw)
+        taken: tuple[Any, Any] | None = sub.handle.take_message(sub.msg_type, sub.raw)
+    return taken
 
 
 MAX_BURST = 1000
@@ -98,8 +99,9 @@ def serve_ready(executor: Executor, limit: int) -> int:
         except TimeoutException:
             return done
         handler()
-        if handler.exception() is not None:
-            raise handler.exception()
+        error = handler.exception()  # type: ignore[no-untyped-call, unused-ignore]  # rclpy's Task is untyped
+        if error is not None:
+            raise error
     return limit
 
 

@@ -23,9 +23,10 @@ def message_class(msgtype: str) -> type:
     """Python class of 'pkg/msg/Type' (the package must be installed)."""
     pkg, kind, name = msgtype.split("/")
     try:
-        return getattr(importlib.import_module(f"{pkg}.{kind}"), name)
+        cls: type = getattr(importlib.import_module(f"{pkg}.{kind}"), name)
     except (ImportError, AttributeError):
         raise InputError(f"message type {msgtype} is not installed") from None
+    return cls
 
 
 class BagPlayer:
@@ -120,7 +121,7 @@ class RawRecorder:
         cls = message_class(msgtype)
         self.counts[topic] = 0
 
-        def on_message(raw: bytes, info: dict) -> None:
+        def on_message(raw: bytes, info: dict[str, int]) -> None:
             # log time = the publisher's send time: keeps the publication order across topics
             # (receive order across subscriptions depends on the executor)
             t_ns = info.get("source_timestamp") or time.time_ns()

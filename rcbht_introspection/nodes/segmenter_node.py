@@ -71,7 +71,7 @@ class SegmenterNode(ManagedNode):
 
     def __init__(self) -> None:
         super().__init__("segmenter_node", SegmenterConfig)
-        self.pose_subs: list = []
+        self.pose_subs: list[Subscription] = []
         self.bad_poses = 0
         self.create_service(SelfTest, TARE_SERVICE, self.on_tare)
 
@@ -181,7 +181,7 @@ class SegmenterNode(ManagedNode):
         self.take_phases()
         take_bursts(self.wrench_subs, self.sample)
 
-    def sample(self, arm: str, raw: bytes, info: dict) -> None:
+    def sample(self, arm: str, raw: bytes, info: dict[str, int]) -> None:
         self.last_sample = time.monotonic()
         self.take_phases()
         try:
@@ -240,7 +240,7 @@ class SegmenterNode(ManagedNode):
         ]
         return response
 
-    def on_phase(self, msg: String, info: dict) -> None:
+    def on_phase(self, msg: String, info: dict[str, int]) -> None:
         out = self.session.phase(msg.data, info.get("source_timestamp") or None)
         if out.unknown_phase is not None:
             self.get_logger().warning(

@@ -45,8 +45,9 @@ def call_teach(client: Client, request: Any, timeout: float = 20.0) -> Any:
     while time.monotonic() < deadline:
         futures.append(client.call_async(request))
         left = deadline - time.monotonic()
-        if wait_until(lambda: any(f.done() for f in futures), max(0.0, min(RESEND_S, left))):
-            return next(f for f in futures if f.done()).result()
+        # rclpy's Future is untyped
+        if wait_until(lambda: any(f.done() for f in futures), max(0.0, min(RESEND_S, left))):  # type: ignore[no-untyped-call, unused-ignore]
+            return next(f for f in futures if f.done()).result()  # type: ignore[no-untyped-call, unused-ignore]
     raise InputError(f"no response from {client.srv_name} within {timeout:g} s")
 
 

@@ -198,7 +198,7 @@ class VerifierNode(ManagedNode):
         self.take_phases()
         take_bursts(self.wrench_subs, self.sample)
 
-    def sample(self, arm: str, raw: bytes, info: dict) -> None:
+    def sample(self, arm: str, raw: bytes, info: dict[str, int]) -> None:
         assert self.stream is not None  # subscribed only with a model
         self.last_sample = time.monotonic()
         self.take_phases()
@@ -215,7 +215,7 @@ class VerifierNode(ManagedNode):
                 throttle_duration_sec=1.0,
             )
 
-    def on_phase(self, msg: String, info: dict) -> None:
+    def on_phase(self, msg: String, info: dict[str, int]) -> None:
         assert self.stream is not None
         out = self.stream.phase(msg.data, info.get("source_timestamp") or None)
         if out.unknown_phase is not None:
