@@ -11,14 +11,17 @@ from __future__ import annotations
 import os
 import statistics
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from rcbht_introspection.io.hiro import find_trials, hiro_root, read_trial
+from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.taxonomy.batch import label_trial
-from rcbht_introspection.taxonomy.config import default_config
+from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config
 from rcbht_introspection.taxonomy.primitives import axis_domain
 from rcbht_introspection.taxonomy.stream import (
     ArmStream,
@@ -26,7 +29,7 @@ from rcbht_introspection.taxonomy.stream import (
     label_trial_streamed,
     load_stream_config,
 )
-from rcbht_introspection.taxonomy.words import AXES, Level
+from rcbht_introspection.taxonomy.words import AXES, Level, Word
 
 THROUGHPUT_TRIALS = 10
 
@@ -39,7 +42,9 @@ def _percentile(values: Sequence[float], q: float) -> float:
     return float(np.percentile(np.asarray(values), q)) if values else float("nan")
 
 
-def push_throughput(trials: list, stream_config, config) -> dict:
+def push_throughput(
+    trials: list[Trial], stream_config: StreamConfig, config: TaxonomyConfig
+) -> dict[str, float]:
     """Samples per second of ArmStream.push() one sample at a time (including finish())."""
 
     samples, cpu, wall = 0, 0.0, 0.0
@@ -72,7 +77,11 @@ def push_throughput(trials: list, stream_config, config) -> dict:
     }
 
 
-def finality_delays(trials: list, stream_config, config) -> dict:
+def finality_delays(
+    trials: list[Trial],
+    stream_config: StreamConfig | Callable[[Trial], StreamConfig],
+    config: TaxonomyConfig,
+) -> dict[str, dict[str, float]]:
     """Per level: how many samples (and seconds) after a word's last sample it is emitted."""
 
     delays: dict[Level, list[int]] = {level: [] for level in Level}
@@ -87,7 +96,13 @@ def finality_delays(trials: list, stream_config, config) -> dict:
         marks = list(trial.state_times)
         m = 0
 
-        def record(words, k: int, finish: bool = False, time_=time_, period=period) -> None:
+        def record(
+            words: list[Word],
+            k: int,
+            finish: bool = False,
+            time_: npt.NDArray[np.float64] = time_,
+            period: float = period,
+        ) -> None:
             for word in words:
                 end = min(int(np.searchsorted(time_, word.end - 1e-9)), len(time_) - 1)
                 d = k - end
@@ -101,7 +116,7 @@ def finality_delays(trials: list, stream_config, config) -> dict:
                 m += 1
             record(stream.push(time_[k], w[k]), k)
         record(stream.finish(), len(time_) - 1, finish=True)
-    out = {}
+    out: dict[str, dict[str, float]] = {}
     for level in Level:
         d, s = delays[level], seconds[level]
         out[level.value] = {
@@ -115,7 +130,9 @@ def finality_delays(trials: list, stream_config, config) -> dict:
     return out
 
 
-def agreement(trials: list, profile_config, config) -> dict:
+def agreement(
+    trials: list[Trial], profile_config: StreamConfig, config: TaxonomyConfig
+) -> dict[str, dict[str, str | float]]:
     """A stream profile vs reference per level: identical word sequences, share of time with
     equal labels, and the number of words of each."""
 
@@ -153,7 +170,7 @@ def agreement(trials: list, profile_config, config) -> dict:
     }
 
 
-def _labels_at(words: list, t: np.ndarray) -> np.ndarray:
+def _labels_at(words: list[Word], t: npt.NDArray[np.float64]) -> npt.NDArray[np.object_]:
     """The label active at each time (the last word starting at or before it)."""
     if not words:
         return np.full(len(t), "", dtype=object)
@@ -163,7 +180,7 @@ def _labels_at(words: list, t: np.ndarray) -> np.ndarray:
     return labels[idx]
 
 
-def run(out_dir: Path) -> dict:
+def run(out_dir: Path) -> dict[str, Any]:
 
     root = hiro_root()
     real_dir, sim_dir = root / "REAL_HIRO_ONE_SA_SUCCESS", root / "SIM_HIRO_ONE_SA_SUCCESS"
@@ -176,7 +193,7 @@ def run(out_dir: Path) -> dict:
     real = [read_trial(f) for f in find_trials([real_dir])]
     sim = [read_trial(f) for f in find_trials([sim_dir])] if sim_dir.is_dir() else []
     load_start = os.getloadavg()[0]
-    result: dict = {}
+    result: dict[str, Any] = {}
 
     result["push_reference"] = push_throughput(real[:THROUGHPUT_TRIALS], reference, config)
     result["push_causal"] = push_throughput(real[:THROUGHPUT_TRIALS], causal, config)
@@ -197,7 +214,7 @@ def run(out_dir: Path) -> dict:
         "ratio_push_many_over_batch": round(statistics.median(many) / statistics.median(batch), 3),
     }
 
-    def given_domains(trial) -> StreamConfig:
+    def given_domains(trial: Trial) -> StreamConfig:
         w = trial.wrench["R"]
         doms = {ax: axis_domain(w[:, AXES.index(ax)], config) for ax in config.domain_axes}
         return StreamConfig(moment_domains=doms)
