@@ -14,7 +14,7 @@ import os
 import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -61,7 +61,7 @@ def _real_features() -> (
     )  # fmt: skip
 
 
-def run(out_dir: Path) -> dict:
+def run(out_dir: Path) -> dict[str, Any]:
     """Median latencies (ms) of predict_proba(1 sample) and partial_fit(4 samples), 100 trees."""
     data = _real_features()
     if data is None:

@@ -15,6 +15,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 from rcbht_introspection.io.hiro import find_trials, hiro_root, read_trial
 from rcbht_introspection.io.rcbht_format import write_trial_words
@@ -35,7 +36,7 @@ def _ms(seconds: float) -> float:
     return round(seconds * 1000, 3)
 
 
-def run(out_dir: Path) -> dict:
+def run(out_dir: Path) -> dict[str, Any]:
 
     dataset = hiro_root() / "REAL_HIRO_ONE_SA_SUCCESS"
     if not dataset.is_dir():

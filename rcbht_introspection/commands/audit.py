@@ -14,7 +14,7 @@ from pathlib import Path
 from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the audit subcommand."""
     p = subparsers.add_parser(
         "audit",

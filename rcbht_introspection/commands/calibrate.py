@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from rcbht_introspection.taxonomy.calibration import Calibration, Comparison
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the calibrate subcommand."""
     p = subparsers.add_parser(
         "calibrate",

@@ -33,7 +33,7 @@ def _have(module: str) -> bool:
         return False
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the `demo` subcommand."""
     p = subparsers.add_parser("demo", help="simulate, train, replay through the ROS nodes, score")
     p.add_argument("--out", type=Path, default=Path("demo_out"))

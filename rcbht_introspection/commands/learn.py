@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the train and evaluate subcommands."""
     train = subparsers.add_parser("train", help="train a sub-task classifier and save the model")
     train.add_argument("inputs", nargs="+", type=Path, metavar="TRIAL_OR_DATASET_DIR")

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from rcbht_introspection.learn.models import SubtaskModel
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the live-eval subcommand."""
     p = subparsers.add_parser(
         "live-eval",

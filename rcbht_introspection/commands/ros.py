@@ -14,7 +14,7 @@ from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.taxonomy import StreamProfile
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the `bag` and `replay-eval` subcommands."""
     bag = subparsers.add_parser("bag", help="convert, replay and record rosbag2 trial bags")
     sub = bag.add_subparsers(dest="bag_command", required=True, metavar="BAG_COMMAND")
@@ -148,7 +148,7 @@ Example (the Baxter pick-and-place bags: tag 0 idle, then 1, 2, 5, 3, 4):
 """
 
 
-def _register_import(sub: argparse._SubParsersAction) -> None:
+def _register_import(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p = sub.add_parser(
         "import",
         help="another robot's ROS 1 / rosbag2 bags -> trial bags",

@@ -13,7 +13,7 @@ TASK_CHOICES: tuple[str, ...] = ("snap-assembly", "peg-in-hole")
 """sim.tasks.SIM_TASKS, spelled out so that `rcbht --help` does not import MuJoCo."""
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the `sim` and `sim-report` subcommands."""
     p = subparsers.add_parser(
         "sim",

@@ -32,7 +32,7 @@ def default_real_dir() -> Path:
 
 
 def _markdown(result: dict[str, Any], accuracy: dict[str, Any]) -> str:
-    subtasks: dict[str, dict] = result["subtasks"]
+    subtasks: dict[str, dict[str, Any]] = result["subtasks"]
     lines = [
         f"Real: {result['real']} ({result['n_real']} trials, golden LLB files); "
         f"simulated: {result['sim']} ({result['n_sim']} trials, batch engine).",

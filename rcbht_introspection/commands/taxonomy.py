@@ -25,12 +25,13 @@ from rcbht_introspection.taxonomy.words import Level
 if TYPE_CHECKING:
     from rcbht_introspection.io.trial import Trial
     from rcbht_introspection.taxonomy.config import TaxonomyConfig
+    from rcbht_introspection.taxonomy.words import TrialWords
 
 ENGINES = ("batch", "stream")
 FORMATS = ("rcbht", "jsonl")
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the label, conformance and plot subcommands."""
     p = subparsers.add_parser("label", help="label trial folders with the RCBHT")
     p.add_argument(
@@ -61,7 +62,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run_plot)
 
 
-def labeller(engine: str, config: TaxonomyConfig) -> Callable:
+def labeller(engine: str, config: TaxonomyConfig) -> Callable[[Trial], TrialWords]:
     """trial -> TrialWords for the chosen engine and taxonomy profile."""
     if engine == "stream":
         from rcbht_introspection.taxonomy.stream import label_trial_streamed

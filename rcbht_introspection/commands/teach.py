@@ -7,7 +7,7 @@ import argparse
 from rcbht_introspection.errors import InputError
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the `teach` subcommand."""
     p = subparsers.add_parser(
         "teach",

@@ -14,7 +14,7 @@ from rcbht_introspection.commands.sensor import add_strict, report_dropped
 from rcbht_introspection.errors import InputError
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the `verify-train` and `verify-eval` subcommands."""
     tr = subparsers.add_parser(
         "verify-train",
@@ -223,7 +223,7 @@ def _backend(scheduler: str | None) -> Iterator[None]:
     from joblib import parallel_config
 
     try:
-        client = Client(scheduler, timeout=30)
+        client = Client(scheduler, timeout=30)  # type: ignore[no-untyped-call, unused-ignore]
     except OSError as exc:
         raise InputError(f"--scheduler {scheduler}: {exc}") from None
     with client, parallel_config(backend="dask"):
