@@ -13,7 +13,12 @@ import numpy as np
 
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config
 from rcbht_introspection.taxonomy.primitives import axis_domain
-from rcbht_introspection.taxonomy.stream import ArmStream, StreamConfig, label_trial_streamed
+from rcbht_introspection.taxonomy.stream import (
+    ArmStream,
+    StreamConfig,
+    TrialLike,
+    label_trial_streamed,
+)
 from rcbht_introspection.taxonomy.words import AXES, Level, TrialWords
 
 # --------------------------------------------------------------------------- layers
@@ -56,7 +61,9 @@ def label_arm(
 
 
 def label_trial(
-    trial, config: TaxonomyConfig | None = None, stream_config: StreamConfig | None = None
+    trial: TrialLike,
+    config: TaxonomyConfig | None = None,
+    stream_config: StreamConfig | None = None,
 ) -> TrialWords:
     """Every arm of a Trial, all three levels (PRIMITIVE = the pre-clean-up Segments).
 

@@ -117,7 +117,9 @@ class BehaviorDurations(BufferedOp):
         return out
 
 
-def behavior_pairs(test: Callable[[Row, Row], bool], label: int | None) -> Callable:
+def behavior_pairs(
+    test: Callable[[Row, Row], bool], label: int | None
+) -> Callable[[Row, Row], Row | None]:
     """A refinement pair decision: merge (MergeLowLevelBehaviors) when `test` accepts."""
 
     def decide(r: Row, m: Row) -> Row | None:
@@ -138,7 +140,7 @@ class RepeatedBehaviors(Op):
 
     def __init__(self) -> None:
         self.blocks: list[Row | None] = []  # blocks[k]: a merged block of 2**k rows
-        self.label: int | None = None
+        self.label: float | None = None
         self.last_end = math.inf  # end of the run's last row (inf: no run)
 
     def oldest_end(self) -> float:

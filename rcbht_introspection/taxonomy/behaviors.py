@@ -40,7 +40,7 @@ FX, CT, PS, PL, AL, SH, U, N = range(1, 9)
  B_MC1, B_MC2, B_T1S, B_T1E, B_T2S, B_T2E, B_TAVG) = range(17)  # fmt: skip
 """Field indices of an LLB record."""
 
-Behavior = list
+Behavior = list[float]
 
 
 def _pair(label: int, m1: Composition, m2: Composition) -> Behavior:
@@ -73,7 +73,7 @@ def match_compositions(
     next_index = index if last else index + 1
     rng = next_index if last else min(index + 1 + window, n - 1)
     if lbl in (MC_K, MC_I, MC_D):
-        kind = {MC_K: FX, MC_I: PS, MC_D: PL}[lbl]
+        kind = {MC_K: FX, MC_I: PS, MC_D: PL}[int(lbl)]
         other = mcs[next_index]
         if other[LBL] == lbl:
             return _pair(kind, cur, other), next_index + 1
@@ -129,9 +129,9 @@ def merge_behaviors(r: Behavior, m: Behavior, label: int | None) -> Behavior:
 def behavior_word(b: Behavior, axis: str, arm: str, seq: int = 0) -> Word:
     """An LLB record as a Word with the llBehaviors keys (mc1/mc2 printed via the MC table)."""
     return Word(
-        axis=axis, level=Level.BEHAVIOR, label=BEHAVIOR_LABELS[b[B_LBL] - 1],
+        axis=axis, level=Level.BEHAVIOR, label=BEHAVIOR_LABELS[int(b[B_LBL]) - 1],
         start=b[B_T1S], end=b[B_T2E], arm=arm, seq=seq,
-        sublabels=(COMPOSITION_LABELS[b[B_MC1] - 1], COMPOSITION_LABELS[b[B_MC2] - 1]),
+        sublabels=(COMPOSITION_LABELS[int(b[B_MC1]) - 1], COMPOSITION_LABELS[int(b[B_MC2]) - 1]),
         features={"averageVal1": b[B_AVG1], "averageVal2": b[B_AVG2], "AVG_MAG_VAL": b[B_MAG],
                   "rmsVal1": b[B_RMS1], "rmsVal2": b[B_RMS2], "AVG_RMS_Val": b[B_RMS],
                   "amplitudeVal1": b[B_AMP1], "amplitudeVal2": b[B_AMP2], "AVG_AMP_VAL": b[B_AMP],

@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
 
 import numpy as np
 
@@ -39,6 +38,7 @@ from rcbht_introspection.taxonomy.primitives import (
     gradient_spectrum,
     segment_arrays,
 )
+from rcbht_introspection.taxonomy.stream import TrialLike
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
 
 REFERENCE_RATE_HZ = 200.0
@@ -63,21 +63,6 @@ CONS_BAND = (0.35, 0.75)
 
 Series = tuple[np.ndarray, np.ndarray]
 """(N,) time and (N, 6) wrench of one arm of one trial."""
-
-
-class TrialLike(Protocol):
-    """What the calibration reads of a trial (io.trial.Trial; taxonomy does not import io)."""
-
-    @property
-    def name(self) -> str: ...
-    @property
-    def time(self) -> np.ndarray: ...
-    @property
-    def wrench(self) -> dict[str, np.ndarray]: ...
-    @property
-    def state_times(self) -> tuple[float, ...]: ...
-    @property
-    def arms(self) -> tuple[str, ...]: ...
 
 
 @dataclass(frozen=True)

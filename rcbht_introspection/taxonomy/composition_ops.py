@@ -431,7 +431,9 @@ class ContactAmplitudes(Op):
         return len(self.held)
 
 
-def similar_pairs(pairs: frozenset, widths: tuple[float, float], label: int) -> Callable:
+def similar_pairs(
+    pairs: frozenset[tuple[int, int]], widths: tuple[float, float], label: int
+) -> Callable[[Row, Row], Row | None]:
     """Steps 6/7 decision: listed label pairs with similar amplitude and avgVal merge as `label`."""
     wa, wm = widths
 

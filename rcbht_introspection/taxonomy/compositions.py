@@ -40,13 +40,13 @@ LBL, AVGV, RMS, AMP, GL1, GL2, T1S, T1E, T2S, T2E, TAVG = range(11)
 """Field indices of an MC record."""
 CONTACTS = frozenset({PC, NC, C})
 
-Composition = list
+Composition = list[float]
 
 # Primitive classes used by the rule table.
 _POS, _NEG, _CONS, _PIMP, _NIMP = "pos", "neg", "cons", "pimp", "nimp"
 
 
-def primitive_class(label: int) -> str | None:
+def primitive_class(label: float) -> str | None:
     """The rule-table class of a primitive label (None for 'none')."""
     if label in POSITIVE:
         return _POS
@@ -169,7 +169,7 @@ def merge_span(
     avg_sum: float,
     rms: float,
     amplitude: float | None,
-    label: int | None,
+    label: float | None,
 ) -> None:
     """Make `r` span the `count` MCs up to `last`: mean avgVal, the given rms/amplitude/label
     (None: kept) and `last`'s t2 half with t1End = t2End. Every MC merge is this plus its quirks."""
@@ -192,7 +192,7 @@ def merge_compositions(
     avg_sum: float,
     rms_max: float,
     amp_max: float | None,
-    label: int | None,
+    label: float | None,
 ) -> None:
     """MergeCompositions(whatComposition = count - 1 >= 1) from the run's avgVal sum and maxima, so
     a run merges as it streams by; the pair form (count 2) also takes `last`'s glabel2."""
@@ -201,13 +201,13 @@ def merge_compositions(
         r[GL2] = last[GL2]
 
 
-def merge_next(r: Composition, m: Composition, label: int | None, amplitude: bool) -> None:
+def merge_next(r: Composition, m: Composition, label: float | None, amplitude: bool) -> None:
     """MergeCompositions(whatComposition = 1): the next MC `m` into `r` (amplitude max if asked)."""
     amp = max(r[AMP], m[AMP]) if amplitude else None
     merge_compositions(r, m, 2, r[AVGV] + m[AVGV], max(r[RMS], m[RMS]), amp, label)
 
 
-def merge_previous(r: Composition, m: Composition, label: int | None, amplitude: bool) -> None:
+def merge_previous(r: Composition, m: Composition, label: float | None, amplitude: bool) -> None:
     """MergeCompositions(whatComposition = 0): the previous MC `m` into `r` (r's t2 half stays)."""
     if label is not None:
         r[LBL] = label
@@ -234,7 +234,7 @@ def merge_adjustment_chain(run: Sequence[Composition], offset: float, step: floa
     return r
 
 
-def relabel_from(glabel: int) -> int | None:
+def relabel_from(glabel: float) -> int | None:
     """Step 3's MC label for a primitive label: pos i, neg d, pimp pc, nimp nc, cons k, else None."""
     if glabel in POSITIVE:
         return I
@@ -258,9 +258,9 @@ CONSTANT_PAIRS = frozenset({(I, K), (K, I), (D, K), (K, D), (D, I), (I, D)})
 def composition_word(m: Composition, axis: str, arm: str, seq: int = 0) -> Word:
     """An MC record as a Word with the Composites keys."""
     return Word(
-        axis=axis, level=Level.COMPOSITION, label=COMPOSITION_LABELS[m[LBL] - 1],
+        axis=axis, level=Level.COMPOSITION, label=COMPOSITION_LABELS[int(m[LBL]) - 1],
         start=m[T1S], end=m[T2E], arm=arm, seq=seq,
-        sublabels=(PRIMITIVE_LABELS[m[GL1] - 1], PRIMITIVE_LABELS[m[GL2] - 1]),
+        sublabels=(PRIMITIVE_LABELS[int(m[GL1]) - 1], PRIMITIVE_LABELS[int(m[GL2]) - 1]),
         features={"Average Val": m[AVGV], "RMS Val": m[RMS], "Amplitude Val": m[AMP],
                   "t1Start": m[T1S], "t1End": m[T1E], "t2Start": m[T2S], "t2End": m[T2E],
                   "tAvgIndex": m[TAVG]},

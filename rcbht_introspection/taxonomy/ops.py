@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from rcbht_introspection.taxonomy.compositions import state_limits
 from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
-Row = list
+Row = list[float]
 
 
 @dataclass
@@ -38,9 +38,9 @@ class StreamContext:
     """Time of the latest sample; unmarked boundaries are not earlier than this."""
     ended: bool = False
     end_time: float = 0.0
-    _limit_key: tuple = ()
+    _limit_key: tuple[int, bool, float] | tuple[()] = ()
     _limit: float | None = None
-    waiting: set = field(default_factory=set)
+    waiting: set[Op] = field(default_factory=set)
     """Operators waiting for time to pass (the 'a'-chain limit); poll them as samples arrive."""
     bound: float | None = None
     """Finality bound in seconds (live profile, pipeline.AxisPipeline): a chain holding a row

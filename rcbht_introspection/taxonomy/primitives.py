@@ -12,7 +12,7 @@ label] with the label as its 1-based integer, so each rule reads like the spec.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -27,7 +27,21 @@ BPOS, MPOS, SPOS, BNEG, MNEG, SNEG, CONS, PIMP, NIMP, NONE = range(1, 11)
 POSITIVE = frozenset({BPOS, MPOS, SPOS})
 NEGATIVE = frozenset({BNEG, MNEG, SNEG})
 
-Primitive = list  # [avg, max, min, start, finish, gradient, label]
+Primitive = list[float]  # [avg, max, min, start, finish, gradient, label]
+"""A primitive record; like MATLAB's double matrices it holds the integer label as a number."""
+BlockStats = tuple[
+    int,
+    list[float],
+    list[float],
+    list[list[float]],
+    list[list[float]],
+    list[list[float]],
+    list[list[float]],
+    list[list[float]],
+    list[float],
+    list[list[float]],
+]
+"""`block_stats`: (m, mean_t, Stt, mean_y, Syy, Sty, max_y, min_y, last_t, last_y) of K blocks."""
 
 
 def ieee_div(a: float, b: float) -> float:
@@ -39,7 +53,7 @@ def ieee_div(a: float, b: float) -> float:
     return math.inf if (a > 0) == (math.copysign(1.0, b) > 0) else -math.inf
 
 
-def running_sum(values) -> float:
+def running_sum(values: Iterable[float]) -> float:
     """Left-to-right float sum (MATLAB's order); builtin sum() compensates on Python >= 3.12."""
     total = 0.0
     for v in values:
@@ -113,7 +127,7 @@ def classify_gradient(g: float, thresholds: Sequence[float]) -> int:
 # --------------------------------------------------------------------------- segmentation
 
 
-def block_stats(t: np.ndarray, y: np.ndarray) -> tuple:
+def block_stats(t: np.ndarray, y: np.ndarray) -> BlockStats:
     """Least-squares statistics of K blocks of m samples: t (K, m), y (K, m, A) -> nested lists.
 
     Returns (m, mean_t, Stt, mean_y, Syy, Sty, max_y, min_y, last_t, last_y); the per-axis entries
@@ -158,7 +172,7 @@ def block_stats(t: np.ndarray, y: np.ndarray) -> tuple:
     )
 
 
-def block_stats_one(ts: list[float], ys: list[list[float]]) -> tuple:
+def block_stats_one(ts: list[float], ys: list[list[float]]) -> BlockStats:
     """`block_stats` of a single block in plain Python (same operations, same order, same bits).
 
     ts: the block's m times; ys: its m samples of A axes. Used per window step by the stream.
@@ -198,7 +212,7 @@ def block_stats_one(ts: list[float], ys: list[list[float]]) -> tuple:
             [[v] for v in ys[-1]])  # fmt: skip
 
 
-def _block_stats_five(ts: list[float], ys: list[list[float]]) -> tuple:
+def _block_stats_five(ts: list[float], ys: list[list[float]]) -> BlockStats:
     """block_stats_one for W = 5 samples, unrolled; Python adds left to right like the loops."""
     t0, t1, t2, t3, t4 = ts
     mt = (t0 + t1 + t2 + t3 + t4) / 5
@@ -492,7 +506,7 @@ PRIMITIVE_NAMES = PRIMITIVE_LABELS
 def primitive_word(p: Primitive, axis: str, arm: str, seq: int = 0) -> Word:
     """A primitive record as a Word with the Segments keys."""
     return Word(
-        axis=axis, level=Level.PRIMITIVE, label=PRIMITIVE_LABELS[p[6] - 1],
+        axis=axis, level=Level.PRIMITIVE, label=PRIMITIVE_LABELS[int(p[6]) - 1],
         start=p[3], end=p[4], arm=arm, seq=seq,
         features={"Average": p[0], "Max Val": p[1], "Min Val": p[2], "Start": p[3],
                   "Finish": p[4], "Gradient": p[5]},

@@ -24,7 +24,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.behaviors import behavior_word
 from rcbht_introspection.taxonomy.compositions import composition_word
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config
-from rcbht_introspection.taxonomy.ops import StreamContext
+from rcbht_introspection.taxonomy.ops import Row, StreamContext
 from rcbht_introspection.taxonomy.pipeline import AxisPipeline
 from rcbht_introspection.taxonomy.primitives import (
     Segmenter,
@@ -50,6 +50,21 @@ STREAM_CONFIG_FILE = "stream.yaml"
 
 NonfinitePolicy = Literal["hold_last", "drop"]
 GapPolicy = Literal["count", "interpolate"]
+
+
+class TrialLike(Protocol):
+    """What the taxonomy reads of a trial (io.trial.Trial; taxonomy does not import io)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def time(self) -> np.ndarray: ...
+    @property
+    def wrench(self) -> dict[str, np.ndarray]: ...
+    @property
+    def state_times(self) -> tuple[float, ...]: ...
+    @property
+    def arms(self) -> tuple[str, ...]: ...
 
 
 @dataclass(frozen=True)
@@ -204,12 +219,12 @@ class ArmStream:
 
     # ------------------------------------------------------------------ words
 
-    def _word(self, level: str, row: list, axis: str) -> Word:
+    def _word(self, level: str, row: Row, axis: str) -> Word:
         self._seq += 1
         make = {"p": primitive_word, "c": composition_word, "b": behavior_word}[level]
         return make(row, axis, self.arm, self._seq)
 
-    def _emit(self, a: int, mcs: list, llbs: list, out: list[Word]) -> None:
+    def _emit(self, a: int, mcs: list[Row], llbs: list[Row], out: list[Word]) -> None:
         axis = AXES[a]
         for m in mcs:
             out.append(self._word("c", m, axis))
@@ -511,7 +526,7 @@ class ArmStream:
 
 
 def label_trial_streamed(
-    trial,
+    trial: TrialLike,
     config: TaxonomyConfig | None = None,
     stream_config: StreamConfig | None = None,
     many: bool = False,
