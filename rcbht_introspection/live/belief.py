@@ -17,10 +17,9 @@ import numpy as np
 
 from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
-from rcbht_introspection.io.trial import AXES
 from rcbht_introspection.live import MODES, BeliefMode
 from rcbht_introspection.live.join import WordLedger
-from rcbht_introspection.taxonomy.words import LEVELS, Level, TrialWords, Word
+from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
 
 UNKNOWN = "unknown"
 

@@ -35,7 +35,9 @@ def compensate_gravity(
     g: float = 9.80665,
 ) -> np.ndarray:
     """The measured wrench minus the tool's weight (module docstring); (6,) or (N, 6)."""
-    return np.asarray(wrench, dtype=np.float64) - gravity_wrench(rotation, mass, centre_of_mass, g)
+    weight = gravity_wrench(rotation, mass, centre_of_mass, g)
+    compensated: np.ndarray = np.asarray(wrench, dtype=np.float64) - weight
+    return compensated
 
 
 def rotation_from_quaternion(x: float, y: float, z: float, w: float) -> np.ndarray:
@@ -43,4 +45,5 @@ def rotation_from_quaternion(x: float, y: float, z: float, w: float) -> np.ndarr
     ValueError for a zero or non-finite one (it would turn every compensated sample into NaN)."""
     if not np.all(np.isfinite([x, y, z, w])):
         raise ValueError(f"quaternion ({x}, {y}, {z}, {w}) is not finite")
-    return Rotation.from_quat([x, y, z, w]).as_matrix()
+    matrix: np.ndarray = Rotation.from_quat([x, y, z, w]).as_matrix()
+    return matrix

@@ -93,7 +93,8 @@ def tare_recording(time: np.ndarray, wrench: np.ndarray, window_s: float) -> np.
     closed = time - time[0] >= window_s  # the comparison Tare.push makes
     n = int(np.argmax(closed)) if closed.any() else len(time)
     wrench = np.asarray(wrench, dtype=np.float64)
-    return wrench - np.asarray(tare_offsets(wrench[:n]))
+    tared: np.ndarray = wrench - np.asarray(tare_offsets(wrench[:n]))
+    return tared
 
 
 class Tare:

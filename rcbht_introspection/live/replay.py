@@ -135,7 +135,7 @@ def node_stream(
 
 
 def _node_outputs(
-    session: SegmenterSession, trial: Trial, end_phase: str, source: Iterator[int]
+    session: SegmenterSession[ArmStream], trial: Trial, end_phase: str, source: Iterator[int]
 ) -> Iterator[tuple[float, Output]]:
     """(stream time, output) of each call, in a trial bag's order (io/bags.write_trial_bag:
     each arm's sample, then the events before the next sample), each message with its source

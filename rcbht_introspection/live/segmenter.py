@@ -243,7 +243,7 @@ class SegmenterSession(Generic[S]):
         return out
 
     def _repeated(
-        self, st: _Arm, stamp_ns: int, wrench: Sequence[float], source_ns: int | None
+        self, st: _Arm[S], stamp_ns: int, wrench: Sequence[float], source_ns: int | None
     ) -> str | None:
         """Why a sample stamped at or before the previous one is rejected (None: held to spread)."""
         if stamp_ns < st.last_ns:
@@ -261,7 +261,7 @@ class SegmenterSession(Generic[S]):
     def _accept(
         self,
         arm: str,
-        st: _Arm,
+        st: _Arm[S],
         stamp_ns: int,
         wrench: Sequence[float],
         source_ns: int | None,
