@@ -81,7 +81,9 @@ class SignalModels:
                 raise ValueError(f"signal {s!r} is not fitted")
         if not cols:
             return np.zeros((len(tf.times), 0))
-        return np.minimum(np.column_stack(cols), SCORE_CAP)  # inf (unknown sub-task) -> the cap
+        # inf (unknown sub-task) -> the cap
+        capped: np.ndarray = np.minimum(np.column_stack(cols), SCORE_CAP)
+        return capped
 
 
 @dataclass
@@ -150,7 +152,8 @@ class Detection:
         """Combined score per tick: the largest normalised signal."""
         if self.normalised.shape[1] == 0:
             return np.zeros(len(self.times))
-        return np.nan_to_num(self.normalised.max(axis=1), posinf=SCORE_CAP)
+        combined: np.ndarray = np.nan_to_num(self.normalised.max(axis=1), posinf=SCORE_CAP)
+        return combined
 
 
 def calibration_folds(

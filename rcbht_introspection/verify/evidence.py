@@ -51,7 +51,7 @@ class EvidenceReader:
         the wrench's spread over the window (stick-slip, vibration)."""
         if self.view == "timing" and self.timing is not None:
             return self.timing.z_row(names, starts, t)
-        mean = np.asarray(features)[kind_columns("mean", self.n_arms)]
+        mean: np.ndarray = np.asarray(features)[kind_columns("mean", self.n_arms)]
         if self.view != "wrench":
             return mean
         nominal = self.level.at(names[-1], t - starts[-1]) if self.level and names else None
@@ -139,7 +139,8 @@ def named_at(namings_: Sequence[tuple[float, str]], t: float) -> str:
 
 def arms_of(tf: TrialFeatures) -> int:
     """Number of arms of a trial's features."""
-    return tf.features.shape[1] // PER_ARM
+    arms: int = tf.features.shape[1] // PER_ARM
+    return arms
 
 
 def reader_of(detector: Detector, view: str, n_arms: int) -> EvidenceReader:

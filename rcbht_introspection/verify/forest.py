@@ -20,7 +20,7 @@ ARRAYS = ("feature", "threshold", "left", "right", "leaf", "value", "roots")
 node indices, whether it is a leaf and, for leaves, the class shares (others: zeros)."""
 
 
-class ForestHead(ClassifierMixin, BaseEstimator):
+class ForestHead(ClassifierMixin, BaseEstimator):  # type: ignore[misc, unused-ignore]
     """A random-forest classifier (scikit-learn conventions) whose fitted state is plain arrays."""
 
     def __init__(
@@ -64,7 +64,8 @@ class ForestHead(ClassifierMixin, BaseEstimator):
         return np.asarray(a["value"][node].mean(axis=1), dtype=float)
 
     def predict(self, X: np.ndarray) -> np.ndarray:
-        return self.classes_[np.argmax(self.predict_proba(X), axis=1)]
+        predicted: np.ndarray = self.classes_[np.argmax(self.predict_proba(X), axis=1)]
+        return predicted
 
     @classmethod
     def from_arrays(

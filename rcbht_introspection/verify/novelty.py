@@ -88,16 +88,18 @@ class TimingModel:
         if phase not in self.phases:
             return np.inf
         p = self.phases.index(phase)
-        return max(0.0, (elapsed - self.high[p]) / self.scale[p])
+        score: float = max(0.0, (elapsed - self.high[p]) / self.scale[p])
+        return score
 
     def ended(self, phase: str, duration: float) -> float:
         """Score of a sub-task that ended after `duration` s (>0 outside the nominal range)."""
         if phase not in self.phases:
             return np.inf
         p = self.phases.index(phase)
-        return max(
+        score: float = max(
             0.0, (self.low[p] - duration) / self.scale[p], (duration - self.high[p]) / self.scale[p]
         )
+        return score
 
     def z_row(self, names: Sequence[str], starts: Sequence[float], t: float) -> np.ndarray:
         """Signed duration so far of each nominal sub-task at stream time t, from the middle of
@@ -267,4 +269,5 @@ class NominalLevel:
         if phase not in self.phases:
             return None
         med = self.median[self.phases.index(phase)]
-        return med[min(max(int(elapsed / BIN_S), 0), len(med) - 1)]
+        nominal: np.ndarray = med[min(max(int(elapsed / BIN_S), 0), len(med) - 1)]
+        return nominal
