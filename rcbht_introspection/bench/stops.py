@@ -27,6 +27,7 @@ from typing import Any
 import rclpy
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
+from rclpy.utilities import try_shutdown
 from std_msgs.msg import String
 
 from rcbht_introspection.grammar.split import SubtaskSample
@@ -253,8 +254,8 @@ def _first_message() -> None:
     while not first:
         rclpy.spin_once(node, timeout_sec=0.1)
     print(subscribed, first[0], flush=True)
-    node.destroy_node()
-    rclpy.try_shutdown()
+    node.destroy_node()  # type: ignore[no-untyped-call, unused-ignore]
+    try_shutdown()
 
 
 def match_gaps(n: int, work: Path, seed: int = 0) -> list[float]:
