@@ -9,7 +9,7 @@ import numpy as np
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.task import HIRO_TASK
-from rcbht_introspection.taxonomy.words import AXES  # noqa: F401  (re-exported)
+from rcbht_introspection.taxonomy.words import AXES as AXES  # re-exported
 
 SUBTASKS: tuple[str, ...] = HIRO_TASK.subtasks
 """The HIRO snap assembly's sub-tasks: the names of a trial whose phases are not given."""
