@@ -18,12 +18,14 @@ import struct
 import sys
 import tempfile
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 from rosbags.interfaces import Connection
+from rosbags.interfaces.typing import Typesdict
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -74,7 +76,7 @@ def _typestore() -> Typestore:
     store = get_typestore(Stores.ROS2_JAZZY)
     msg_dir = interface_msg_dir()
     if msg_dir is not None:
-        types: dict = {}
+        types: Typesdict = {}
         for f in sorted(msg_dir.glob("*.msg")):
             types.update(get_types_from_msg(f.read_text(), f"rcbht_interfaces/msg/{f.stem}"))
         store.register(types)
@@ -318,6 +320,104 @@ def decode_string(raw: bytes) -> str:
     return raw[8 : 8 + n - 1].decode()
 
 
+@dataclass
+class _BagRecords:
+    """What a trial bag holds, decoded: wrench samples per arm, phase events and the trial info."""
+
+    info: dict[str, Any] = field(default_factory=dict)
+    stamps: dict[str, list[int]] = field(default_factory=dict)
+    values: dict[str, list[tuple[float, ...]]] = field(default_factory=dict)
+    phases: list[tuple[int, int, str]] = field(default_factory=list)
+    """(log time, stamp of the last sample before it, name) of each /task_phase event."""
+
+
+def _read_bag_records(path: Path) -> _BagRecords:
+    """Decode the wrench, phase and trial-info messages of a bag in one pass over it."""
+    records = _BagRecords()
+    last_stamp = 0
+    for m in bag_messages(path):
+        try:
+            if m.msgtype == WRENCH_TYPE:
+                t, frame, w = decode_wrench(m.raw)
+                arm = arm_of_topic(m.topic, frame)
+                records.stamps.setdefault(arm, []).append(t)
+                records.values.setdefault(arm, []).append(w)
+                last_stamp = max(last_stamp, t)
+            elif m.topic == PHASE_TOPIC and m.msgtype == STRING_TYPE:
+                records.phases.append((m.t_ns, last_stamp, decode_string(m.raw)))
+            elif m.topic == TRIAL_INFO_TOPIC and m.msgtype == STRING_TYPE:
+                records.info = json.loads(decode_string(m.raw))
+        except (ValueError, struct.error, UnicodeDecodeError, json.JSONDecodeError) as exc:
+            raise InputError(f"malformed {m.msgtype} message: {exc}", path, field=m.topic) from None
+    if not records.stamps:
+        raise InputError("no WrenchStamped messages (/wrench or /<arm>/wrench)", path)
+    return records
+
+
+def _arm_arrays(
+    records: _BagRecords, repeated: RepeatedPolicy | None
+) -> tuple[dict[str, NDArray[np.int64]], dict[str, NDArray[np.float64]], dict[str, dict[str, int]]]:
+    """Stamps and wrench per arm as arrays, with repeated stamps resolved when a policy is given
+    (counts per arm), so each arm's samples have distinct stamps as the live node sees them."""
+    repeats: dict[str, dict[str, int]] = {}
+    arm_stamp: dict[str, NDArray[np.int64]] = {}
+    wrench: dict[str, NDArray[np.float64]] = {}
+    for arm in sorted(records.stamps):
+        arm_stamps = np.asarray(records.stamps[arm], dtype=np.int64)
+        arm_values = np.asarray(records.values[arm], dtype=np.float64).reshape(-1, len(AXES))
+        if repeated is not None and bool((np.diff(arm_stamps) >= 0).all()):
+            arm_stamps, arm_values, repeats[arm] = resolve_repeated_stamps(
+                arm_stamps, arm_values, repeated
+            )
+        arm_stamp[arm], wrench[arm] = arm_stamps, arm_values
+    return arm_stamp, wrench, repeats
+
+
+def _shared_stamps(arm_stamp: dict[str, NDArray[np.int64]], path: Path) -> NDArray[np.int64]:
+    """The first arm's stamps, after checking every other arm was sampled at the same instants
+    (within 1 us): a trial has one time axis for all arms."""
+    arms = sorted(arm_stamp)
+    ref = arm_stamp[arms[0]]
+    for arm in arms[1:]:
+        other = arm_stamp[arm]
+        if len(other) != len(ref) or np.any(np.abs(other - ref) > 1000):
+            raise InputError(f"arm {arm} stamps differ from arm {arms[0]}'s", path, field="stamp")
+    return ref
+
+
+def _trial_time(
+    ref: NDArray[np.int64], origin: int, repeated: RepeatedPolicy | None, path: Path
+) -> NDArray[np.float64]:
+    """Trial time in seconds from `origin`; it must increase (the taxonomy divides by steps)."""
+    time: NDArray[np.float64] = (ref - origin) / _NS
+    if np.any(np.diff(time) <= 0):
+        k = int(np.argmax(np.diff(time) <= 0)) + 1
+        hint = "; see --repeated-stamps" if repeated is None and time[k] == time[k - 1] else ""
+        raise InputError(f"wrench stamps do not increase at message {k}{hint}", path, field="stamp")
+    return time
+
+
+def _phase_starts(
+    records: _BagRecords, end_phases: Sequence[str], first_stamp: int, origin: int
+) -> tuple[list[float], list[str], int]:
+    """(start times, names) of the sub-tasks before the first end phase, and the number of
+    events from the end phase on (the end phase itself included)."""
+    state: list[float] = []
+    names: list[str] = []
+    after_end = 0
+    for log_ns, sample_ns, phase in records.phases:
+        phase = phase.strip()
+        if phase in end_phases or after_end:
+            after_end += 1
+            continue
+        # written bags log events at their trial time; recorded ones at receive time, so
+        # there the event belongs to the last sample received before it
+        t = log_ns if records.info else (sample_ns or first_stamp)
+        state.append((t - origin) / _NS)
+        names.append(phase)
+    return state, names, after_end
+
+
 def read_trial_bag(
     path: Path | str,
     end_phases: Sequence[str] = (END_PHASE,),
@@ -330,64 +430,13 @@ def read_trial_bag(
     the previous one is an error, or with a `repeated` policy resolved as segmenter_node does
     (io/sensor_checks; counts per arm in metadata['repeated_stamps'])."""
     path = Path(path)
-    info: dict = {}
-    stamps: dict[str, list[int]] = {}
-    values: dict[str, list[tuple[float, ...]]] = {}
-    phases: list[tuple[int, int, str]] = []
-    last_stamp = 0
-    for m in bag_messages(path):
-        try:
-            if m.msgtype == WRENCH_TYPE:
-                t, frame, w = decode_wrench(m.raw)
-                arm = arm_of_topic(m.topic, frame)
-                stamps.setdefault(arm, []).append(t)
-                values.setdefault(arm, []).append(w)
-                last_stamp = max(last_stamp, t)
-            elif m.topic == PHASE_TOPIC and m.msgtype == STRING_TYPE:
-                # (log time, stamp of the last sample before it, name)
-                phases.append((m.t_ns, last_stamp, decode_string(m.raw)))
-            elif m.topic == TRIAL_INFO_TOPIC and m.msgtype == STRING_TYPE:
-                info = json.loads(decode_string(m.raw))
-        except (ValueError, struct.error, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise InputError(f"malformed {m.msgtype} message: {exc}", path, field=m.topic) from None
-    if not stamps:
-        raise InputError("no WrenchStamped messages (/wrench or /<arm>/wrench)", path)
-    arms = sorted(stamps)
-    repeats: dict[str, dict[str, int]] = {}
-    arm_stamp: dict[str, np.ndarray] = {}
-    wrench: dict[str, np.ndarray] = {}
-    for arm in arms:
-        arm_stamps = np.asarray(stamps[arm], dtype=np.int64)
-        arm_values = np.asarray(values[arm], dtype=np.float64).reshape(-1, len(AXES))
-        if repeated is not None and bool((np.diff(arm_stamps) >= 0).all()):
-            arm_stamps, arm_values, repeats[arm] = resolve_repeated_stamps(
-                arm_stamps, arm_values, repeated
-            )
-        arm_stamp[arm], wrench[arm] = arm_stamps, arm_values
-    ref = arm_stamp[arms[0]]
-    for arm in arms[1:]:
-        other = arm_stamp[arm]
-        if len(other) != len(ref) or np.any(np.abs(other - ref) > 1000):
-            raise InputError(f"arm {arm} stamps differ from arm {arms[0]}'s", path, field="stamp")
+    records = _read_bag_records(path)
+    info = records.info
+    arm_stamp, wrench, repeats = _arm_arrays(records, repeated)
+    ref = _shared_stamps(arm_stamp, path)
     origin = int(info.get("time_origin_ns", ref[0]))
-    time = (ref - origin) / _NS
-    if np.any(np.diff(time) <= 0):
-        k = int(np.argmax(np.diff(time) <= 0)) + 1
-        hint = "; see --repeated-stamps" if repeated is None and time[k] == time[k - 1] else ""
-        raise InputError(f"wrench stamps do not increase at message {k}{hint}", path, field="stamp")
-    state: list[float] = []
-    names: list[str] = []
-    after_end = 0
-    for log_ns, sample_ns, phase in phases:
-        phase = phase.strip()
-        if phase in end_phases or after_end:
-            after_end += 1
-            continue
-        # written bags log events at their trial time; recorded ones at receive time, so
-        # there the event belongs to the last sample received before it
-        t = log_ns if info else (sample_ns or int(ref[0]))
-        state.append((t - origin) / _NS)
-        names.append(phase)
+    time = _trial_time(ref, origin, repeated, path)
+    state, names, after_end = _phase_starts(records, end_phases, int(ref[0]), origin)
     trial = Trial(
         name=str(info.get("name", path.name.split(".")[0])),
         time=time,
