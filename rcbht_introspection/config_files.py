@@ -52,7 +52,7 @@ def config_path(name: str) -> Path:
     raise InputError(f"configuration file {name} not found", path=candidates[0])
 
 
-class YamlMapping(dict):
+class YamlMapping(dict[Any, Any]):
     """A YAML mapping that remembers its own line and each key's line (1-based)."""
 
     def __init__(self, line: int | None = None) -> None:
@@ -61,7 +61,7 @@ class YamlMapping(dict):
         self.lines: dict[Any, int] = {}
 
 
-class YamlList(list):
+class YamlList(list[Any]):
     """A YAML sequence that remembers its own line and each item's line (1-based)."""
 
     def __init__(self, items: Sequence[Any], line: int | None, lines: list[int]) -> None:
@@ -175,78 +175,114 @@ def _number_hint(value: Any) -> str:
     return ""
 
 
-def _coerce(value: Any, annotation: Any, where: str, path: Path | None, line: int | None) -> Any:
-    """Check and convert one YAML value against a dataclass field annotation."""
+def _field_error(message: str, where: str, path: Path | None, line: int | None) -> InputError:
+    """The one-line error of a config field (file, line, dotted field name)."""
+    return InputError(message, path=path, line=line, field=where)
 
-    def bad(message: str) -> InputError:
-        return InputError(message, path=path, line=line, field=where)
 
+def _coerce_union(
+    value: Any, annotation: Any, where: str, path: Path | None, line: int | None
+) -> Any:
+    """The first member of a Union (Optional) that accepts the value; else the first error."""
+    args = typing.get_args(annotation)
+    if value is None and type(None) in args:
+        return None
+    errors: list[InputError] = []
+    for arg in args:
+        if arg is type(None):
+            continue
+        try:
+            return _coerce(value, arg, where, path, line)
+        except InputError as exc:
+            errors.append(exc)
+    raise errors[0]
+
+
+def _coerce_literal(
+    value: Any, annotation: Any, where: str, path: Path | None, line: int | None
+) -> Any:
+    """A Literal choice: equal to an allowed value and of its type (so True is not 1)."""
+    args = typing.get_args(annotation)
+    if not any(value == a and type(value) is type(a) for a in args):
+        raise _field_error(f"expected {choices_text(args)}, got {_show(value)}", where, path, line)
+    return value
+
+
+def _coerce_sequence(
+    value: Any, annotation: Any, where: str, path: Path | None, line: int | None
+) -> tuple[Any, ...] | list[Any]:
+    """A tuple (fixed or `...` length) or list, item by item with the items' own lines."""
     origin = typing.get_origin(annotation)
-    if dataclasses.is_dataclass(annotation) and isinstance(annotation, type):
-        if not isinstance(value, Mapping):
-            raise bad(f"expected a mapping, got {_show(value)}")
-        return from_mapping(annotation, value, path=path, prefix=f"{where}.", line=line)
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(annotation)
-        if value is None and type(None) in args:
-            return None
-        errors = []
-        for arg in args:
-            if arg is type(None):
-                continue
-            try:
-                return _coerce(value, arg, where, path, line)
-            except InputError as exc:
-                errors.append(exc)
-        raise errors[0]
-    if origin is typing.Literal:
-        args = typing.get_args(annotation)
-        if not any(value == a and type(value) is type(a) for a in args):
-            raise bad(f"expected {choices_text(args)}, got {_show(value)}")
-        return value
-    if origin in (tuple, list):
-        if not isinstance(value, (list, tuple)):
-            raise bad(f"expected a list, got {_show(value)}")
-        args = typing.get_args(annotation)
-        if origin is tuple and args and args[-1] is not Ellipsis:
-            if len(args) != len(value):
-                raise bad(f"expected {len(args)} items, got {len(value)}")
-            item_types = list(args)
-        else:
-            item_types = [args[0] if args else Any] * len(value)
-        items = [
-            _coerce(v, a, f"{where}[{i}]", path, _line_of(value, i, line))
-            for i, (a, v) in enumerate(zip(item_types, value, strict=True))
-        ]
-        return tuple(items) if origin is tuple else items
-    if origin is dict:
-        if not isinstance(value, Mapping):
-            raise bad(f"expected a mapping, got {_show(value)}")
-        ktype, vtype = typing.get_args(annotation) or (Any, Any)
-        out = {}
-        for k, v in value.items():
-            at = _line_of(value, k, line)
-            out[_coerce(k, ktype, f"{where}.{k}", path, at)] = _coerce(
-                v, vtype, f"{where}.{k}", path, at
-            )
-        return out
+    if not isinstance(value, (list, tuple)):
+        raise _field_error(f"expected a list, got {_show(value)}", where, path, line)
+    args = typing.get_args(annotation)
+    if origin is tuple and args and args[-1] is not Ellipsis:
+        if len(args) != len(value):
+            raise _field_error(f"expected {len(args)} items, got {len(value)}", where, path, line)
+        item_types = list(args)
+    else:
+        item_types = [args[0] if args else Any] * len(value)
+    items = [
+        _coerce(v, a, f"{where}[{i}]", path, _line_of(value, i, line))
+        for i, (a, v) in enumerate(zip(item_types, value, strict=True))
+    ]
+    return tuple(items) if origin is tuple else items
+
+
+def _coerce_dict(
+    value: Any, annotation: Any, where: str, path: Path | None, line: int | None
+) -> dict[Any, Any]:
+    """A dict, keys and values checked against its type arguments at each key's line."""
+    if not isinstance(value, Mapping):
+        raise _field_error(f"expected a mapping, got {_show(value)}", where, path, line)
+    ktype, vtype = typing.get_args(annotation) or (Any, Any)
+    out = {}
+    for k, v in value.items():
+        at = _line_of(value, k, line)
+        out[_coerce(k, ktype, f"{where}.{k}", path, at)] = _coerce(
+            v, vtype, f"{where}.{k}", path, at
+        )
+    return out
+
+
+def _coerce_scalar(
+    value: Any, annotation: Any, where: str, path: Path | None, line: int | None
+) -> Any:
+    """float (an int is widened; a bool is not a number), int, bool or str; other types as is."""
     if annotation is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise bad(f"expected a number, got {_show(value)}{_number_hint(value)}")
+            message = f"expected a number, got {_show(value)}{_number_hint(value)}"
+            raise _field_error(message, where, path, line)
         return float(value)
     if annotation is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise bad(f"expected an integer, got {_show(value)}")
+            raise _field_error(f"expected an integer, got {_show(value)}", where, path, line)
         return value
     if annotation is bool:
         if not isinstance(value, bool):
-            raise bad(f"expected true or false, got {_show(value)}")
+            raise _field_error(f"expected true or false, got {_show(value)}", where, path, line)
         return value
-    if annotation is str:
-        if not isinstance(value, str):
-            raise bad(f"expected a string, got {_show(value)}")
-        return value
+    if annotation is str and not isinstance(value, str):
+        raise _field_error(f"expected a string, got {_show(value)}", where, path, line)
     return value
+
+
+def _coerce(value: Any, annotation: Any, where: str, path: Path | None, line: int | None) -> Any:
+    """Check and convert one YAML value against a dataclass field annotation."""
+    origin = typing.get_origin(annotation)
+    if dataclasses.is_dataclass(annotation) and isinstance(annotation, type):
+        if not isinstance(value, Mapping):
+            raise _field_error(f"expected a mapping, got {_show(value)}", where, path, line)
+        return from_mapping(annotation, value, path=path, prefix=f"{where}.", line=line)
+    if origin in (typing.Union, types.UnionType):
+        return _coerce_union(value, annotation, where, path, line)
+    if origin is typing.Literal:
+        return _coerce_literal(value, annotation, where, path, line)
+    if origin in (tuple, list):
+        return _coerce_sequence(value, annotation, where, path, line)
+    if origin is dict:
+        return _coerce_dict(value, annotation, where, path, line)
+    return _coerce_scalar(value, annotation, where, path, line)
 
 
 def from_mapping(
