@@ -51,18 +51,12 @@ class GeometryConfig:
 
 
 @dataclass(frozen=True)
-class PhysicsConfig:
-    """MuJoCo constants: time step, masses, stiffnesses, friction, contact softness, gravity."""
+class ArmPhysicsConfig:
+    """MuJoCo constants every simulated task shares: time step, gravity, the contact model
+    (friction, softness) and the Cartesian servo arm's gains, mass and inertia."""
 
     timestep: float = 0.001
     gravity: float = 9.81
-    male_mass: float = 0.12
-    hand_mass: float = 0.35
-    female_mass: float = 0.25
-    beam_stiffness: float = 0.65
-    """Rotational stiffness (N m/rad) of each cantilever beam about its root."""
-    beam_damping: float = 0.004
-    beam_armature: float = 1.0e-5
     friction: float = 0.3
     contact_solref: tuple[float, float] = (0.008, 1.0)
     contact_solimp: tuple[float, float, float] = (0.95, 0.99, 0.001)
@@ -73,6 +67,20 @@ class PhysicsConfig:
     arm_kd_rot: float = 0.6
     arm_link_mass: float = 0.5
     arm_link_inertia: float = 0.001
+
+
+@dataclass(frozen=True)
+class PhysicsConfig(ArmPhysicsConfig):
+    """MuJoCo constants of the snap assembly: the arm's (ArmPhysicsConfig), the parts' masses,
+    the beams' stiffness and the holding arm's gains."""
+
+    male_mass: float = 0.12
+    hand_mass: float = 0.35
+    female_mass: float = 0.25
+    beam_stiffness: float = 0.65
+    """Rotational stiffness (N m/rad) of each cantilever beam about its root."""
+    beam_damping: float = 0.004
+    beam_armature: float = 1.0e-5
     holder_kp_lin: float = 15000.0
     """Stiffness of the second arm holding the female part (two-arm scenario)."""
     holder_kd_lin: float = 220.0
@@ -81,14 +89,32 @@ class PhysicsConfig:
 
 
 @dataclass(frozen=True)
-class ControllerConfig:
-    """Scripted hybrid force/position controller: speeds, force set-points, gains, time-outs."""
+class ForceLoopConfig:
+    """The force loop every simulated task's controller shares: force filter, guarded-move
+    threshold, admittance gain and ripple, lateral compliance."""
+
+    contact_force: float = 2.0
+    """Guarded move: force (N) that ends the first sub-task."""
+    force_gain: float = 0.00015
+    """Admittance gain (m/s per N) of the force-controlled axis."""
+    force_ripple: float = 0.05
+    """Std of the force loop's hunting around its set-point, as a fraction of the set-point."""
+    force_ripple_time: float = 0.3
+    """Correlation time (s) of that ripple."""
+    lateral_compliance: float = 0.0002
+    """Lateral admittance (m/s per N): yield to the fixed part's push."""
+    force_filter: float = 0.02
+    """Time constant (s) of the controller's force low-pass filter."""
+
+
+@dataclass(frozen=True)
+class ControllerConfig(ForceLoopConfig):
+    """Scripted hybrid force/position controller: the shared force loop (ForceLoopConfig),
+    speeds, force set-points, gains, time-outs."""
 
     start_height: Range = (0.028, 0.04)
     """Initial clearance (m) of the male bottom above the housing top, drawn per trial."""
     approach_speed: Range = (0.005, 0.008)
-    contact_force: float = 2.0
-    """Guarded move: force (N) that ends the approach."""
     approach_timeout: float = 15.0
     tilt: Range = (0.12, 0.22)
     """Initial side-approach tilt (rad) about the y axis, removed during the rotation sub-task."""
@@ -123,25 +149,15 @@ class ControllerConfig:
     retract_time: float = 9.0
     tail_time: float = 0.5
     abort_time: float = 1.5
+    """After a failed insertion: time spent backing off before the trial ends."""
     backoff_speed: float = 0.004
     """Upward speed (m/s) of the back-off after an aborted insertion."""
-    """After a failed insertion: time spent backing off before the trial ends."""
-    force_gain: float = 0.00015
-    """Admittance gain (m/s per N) of the force-controlled axis."""
-    force_ripple: float = 0.05
-    """Std of the force loop's hunting around its set-point, as a fraction of the set-point."""
-    force_ripple_time: float = 0.3
-    """Correlation time (s) of that ripple."""
     max_admittance_speed: float = 0.004
     """Speed limit (m/s) of the admittance loop."""
     lateral_gain: float = 1.5
     """Proportional gain (1/s) pulling the lateral position towards the believed hole centre."""
     centering_time: float = 1.0
     """Insertion: the lateral servo centres the part this long (s), then only complies."""
-    lateral_compliance: float = 0.0002
-    """Lateral admittance (m/s per N) during insertion and mating: yield to the housing's push."""
-    force_filter: float = 0.02
-    """Time constant (s) of the controller's force low-pass filter."""
     holder_force: float = 2.0
     """Two-arm: upward preload (N) of the holding arm; its admittance yields to the insertion force."""
     holder_compliance: float = 0.00015

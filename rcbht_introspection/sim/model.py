@@ -3,9 +3,9 @@
 The male part (camera) is held rigidly by the right arm's end effector; a 6-axis force/torque
 sensor site sits between the hand and the part. The female housing has rigid walls with 45 degree
 lead-in chamfers and four cantilever snap beams, each a hinged spring latch with a hook (lead-in
-ramp, flat retention face). The arm is a Cartesian servo (3 slides + 3 hinges at the tool centre
-point) whose compliance is its finite servo stiffness. In the two-arm scenario the housing is held
-by a second (left) servo arm with its own sensor site; otherwise it is fixed to the world.
+ramp, flat retention face). The arm, its hand, sensors and contact classes are the shared ones
+(sim/arm_model.py). In the two-arm scenario the housing is held by a second (left) servo arm with
+its own sensor site; otherwise it is fixed to the world.
 """
 
 from __future__ import annotations
@@ -16,12 +16,16 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from rcbht_introspection.sim.config import SimConfig
+from rcbht_introspection.sim.arm_model import (
+    arm_actuators_xml,
+    arm_hand_xml,
+    contact_class_xml,
+    ft_sensor_xml,
+    mjcf_document,
+    prism_vertices,
+)
+from rcbht_introspection.sim.config import GeometryConfig, SimConfig
 
-ARM_JOINTS: tuple[str, ...] = ("x", "y", "z", "yaw", "pitch", "roll")
-_JOINT_AXES: dict[str, str] = {
-    "x": "1 0 0", "y": "0 1 0", "z": "0 0 1", "yaw": "0 0 1", "pitch": "0 1 0", "roll": "1 0 0",
-}  # fmt: skip
 SIDES: tuple[int, ...] = (0, 90, 180, 270)
 """Yaw (degrees) of the four housing sides; each side is modelled in a frame facing +x."""
 
@@ -42,57 +46,14 @@ class TrialPhysics:
     controller does not know it (a deviation failure: the part slipped in the gripper)."""
 
 
-def prism_vertices(points_xz: list[tuple[float, float]], y0: float, y1: float) -> str:
-    """Vertex list of a convex prism: a polygon in the x-z plane extruded from y0 to y1."""
-    verts = [(x, y, z) for y in (y0, y1) for x, z in points_xz]
-    return " ".join(f"{v:.6g}" for p in verts for v in p)
-
-
-def arm_joints_xml(prefix: str, kd_lin: float, kd_rot: float) -> str:
-    """Six servo joints of a Cartesian arm: slides first (world axes), then hinges at the TCP."""
-    lines = []
-    for name in ARM_JOINTS:
-        kind = "slide" if name in ("x", "y", "z") else "hinge"
-        damping = kd_lin if kind == "slide" else kd_rot
-        lines.append(
-            f'<joint name="{prefix}_{name}" type="{kind}" axis="{_JOINT_AXES[name]}" '
-            f'damping="{damping:.6g}" limited="false"/>'
-        )
-    return "\n".join(lines)
-
-
-def arm_actuators_xml(prefix: str, kp_lin: float, kp_rot: float) -> str:
-    """Position servos (the arm controller's inner loop) on the six arm joints."""
-    lines = []
-    for name in ARM_JOINTS:
-        kp = kp_lin if name in ("x", "y", "z") else kp_rot
-        lines.append(
-            f'<position name="{prefix}_{name}" joint="{prefix}_{name}" kp="{kp:.6g}" '
-            'ctrllimited="false"/>'
-        )
-    return "\n".join(lines)
-
-
-def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) -> str:
-    """MJCF text of the assembly for one trial."""
-    g, p = config.geometry, config.physics
+def _housing_meshes(g: GeometryConfig) -> list[str]:
+    """The housing's meshes: a wall half on either side of its beam, a beam and a hook."""
     a = g.male_half + g.clearance  # inner half width of the housing opening
-    h = g.wall_height
-    c = g.chamfer
-    tw = g.wall_thickness
-    bt = g.beam_thickness
+    h, c, bt, bw = g.wall_height, g.chamfer, g.beam_thickness, g.beam_half_width
     z_tip = g.male_lower_height + g.hook_play  # height of the hooks' retention face
-    mu = p.friction * physics.friction_scale
-    k_beam = p.beam_stiffness * physics.stiffness_scale
-    solref = " ".join(f"{v:.6g}" for v in p.contact_solref)
-    solimp = " ".join(f"{v:.6g}" for v in p.contact_solimp)
-
-    meshes: list[str] = []
-    wall_geoms: list[str] = []
-    beams: list[str] = []
-    y_in = g.beam_half_width + 0.0008
-    y_out = a + tw
-    wall_profile = [(a, 0.0), (a + tw, 0.0), (a + tw, h), (a + c, h), (a, h - c)]
+    y_in = bw + 0.0008
+    y_out = a + g.wall_thickness
+    wall_profile = [(a, 0.0), (y_out, 0.0), (y_out, h), (a + c, h), (a, h - c)]
     beam_c = min(c, 0.9 * bt)
     root = -g.beam_root_depth
     beam_profile = [
@@ -107,69 +68,82 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
         (-bt / 2 - g.hook_depth, z_tip),
         (-bt / 2, z_tip + g.hook_ramp),
     ]
-    bw = g.beam_half_width
-    meshes.append(f'<mesh name="wall_lo" vertex="{prism_vertices(wall_profile, -y_out, -y_in)}"/>')
-    meshes.append(f'<mesh name="wall_hi" vertex="{prism_vertices(wall_profile, y_in, y_out)}"/>')
-    meshes.append(f'<mesh name="beam" vertex="{prism_vertices(beam_profile, -bw, bw)}"/>')
-    meshes.append(f'<mesh name="hook" vertex="{prism_vertices(hook_profile, -bw, bw)}"/>')
+    return [
+        f'<mesh name="wall_lo" vertex="{prism_vertices(wall_profile, -y_out, -y_in)}"/>',
+        f'<mesh name="wall_hi" vertex="{prism_vertices(wall_profile, y_in, y_out)}"/>',
+        f'<mesh name="beam" vertex="{prism_vertices(beam_profile, -bw, bw)}"/>',
+        f'<mesh name="hook" vertex="{prism_vertices(hook_profile, -bw, bw)}"/>',
+    ]
+
+
+def _snap_beam_xml(i: int, yaw: int, config: SimConfig, physics: TrialPhysics) -> str:
+    """Cantilever snap beam `i` on the side at `yaw`: a hinged spring latch carrying its hook."""
+    g, p = config.geometry, config.physics
+    h, bt = g.wall_height, g.beam_thickness
+    k_beam = p.beam_stiffness * physics.stiffness_scale
+    ang = np.deg2rad(yaw)
+    r = g.male_half + g.clearance + bt / 2
     beam_mass = 0.004
-    for i, yaw in enumerate(SIDES):
-        q = f'euler="0 0 {yaw}"'
-        wall_geoms.append(
-            f'<geom name="wall{i}_lo" class="female" type="mesh" mesh="wall_lo" {q}/>'
-        )
-        wall_geoms.append(
-            f'<geom name="wall{i}_hi" class="female" type="mesh" mesh="wall_hi" {q}/>'
-        )
-        ang = np.deg2rad(yaw)
-        r = a + bt / 2
-        beams.append(
-            f'<body name="beam{i}" pos="{r * np.cos(ang):.6g} {r * np.sin(ang):.6g} 0" {q}>'
-            f'<joint name="beam{i}" type="hinge" pos="0 0 {root:.6g}" axis="0 1 0" stiffness="{k_beam:.6g}" '
-            f'damping="{p.beam_damping:.6g}" armature="{p.beam_armature:.6g}" '
-            'range="-0.05 0.3" limited="true"/>'
-            f'<inertial pos="0 0 {h / 2:.6g}" mass="{beam_mass}" diaginertia="2e-7 2e-7 2e-8"/>'
-            f'<geom name="beam{i}" class="female" type="mesh" mesh="beam"/>'
-            f'<geom name="hook{i}" class="female" type="mesh" mesh="hook"/>'
-            "</body>"
-        )
+    return (
+        f'<body name="beam{i}" pos="{r * np.cos(ang):.6g} {r * np.sin(ang):.6g} 0" euler="0 0 {yaw}">'
+        f'<joint name="beam{i}" type="hinge" pos="0 0 {-g.beam_root_depth:.6g}" axis="0 1 0" stiffness="{k_beam:.6g}" '
+        f'damping="{p.beam_damping:.6g}" armature="{p.beam_armature:.6g}" '
+        'range="-0.05 0.3" limited="true"/>'
+        f'<inertial pos="0 0 {h / 2:.6g}" mass="{beam_mass}" diaginertia="2e-7 2e-7 2e-8"/>'
+        f'<geom name="beam{i}" class="female" type="mesh" mesh="beam"/>'
+        f'<geom name="hook{i}" class="female" type="mesh" mesh="hook"/>'
+        "</body>"
+    )
+
+
+def _housing_xml(config: SimConfig, physics: TrialPhysics) -> str:
+    """The housing's geoms in its own frame: floor, two wall halves and a snap beam per side."""
+    g = config.geometry
     base = (
         f'<geom name="floor" class="female" type="box" size="{g.base_half:.6g} {g.base_half:.6g} '
         f'{g.base_thickness / 2:.6g}" pos="0 0 {-g.base_thickness / 2:.6g}"/>'
     )
-    ox, oy, oz = physics.female_offset
-    female_inner = "\n".join([base, *wall_geoms, *beams])
-    if two_arm:
-        female = (
-            f'<body name="l_hand" pos="{ox:.6g} {oy:.6g} {oz - g.base_thickness - 0.03:.6g}" '
-            f'euler="0 0 {physics.female_yaw:.6g}" gravcomp="1">'
-            f'<inertial pos="0 0 0" mass="{p.arm_link_mass:.6g}" '
-            f'diaginertia="{p.arm_link_inertia:.6g} {p.arm_link_inertia:.6g} {p.arm_link_inertia:.6g}"/>'
-            f"{arm_joints_xml('l', p.holder_kd_lin, p.holder_kd_rot)}"
-            '<geom type="cylinder" size="0.02 0.015" pos="0 0 -0.015" contype="0" conaffinity="0" rgba=".5 .5 .5 1"/>'
-            f'<body name="female" pos="0 0 {g.base_thickness + 0.03:.6g}">'
-            f'<inertial pos="0 0 -0.005" mass="{p.female_mass:.6g}" diaginertia="1e-4 1e-4 1e-4"/>'
-            f'<site name="l_ft" pos="0 0 {-g.base_thickness - 0.02:.6g}" euler="180 0 0"/>'
-            f"{female_inner}</body></body>"
-        )
-    else:
-        female = (
-            f'<body name="female" pos="{ox:.6g} {oy:.6g} {oz:.6g}" '
-            f'euler="0 0 {physics.female_yaw:.6g}">{female_inner}</body>'
-        )
+    walls = [
+        f'<geom name="wall{i}_{half}" class="female" type="mesh" mesh="wall_{half}" euler="0 0 {yaw}"/>'
+        for i, yaw in enumerate(SIDES)
+        for half in ("lo", "hi")
+    ]
+    beams = [_snap_beam_xml(i, yaw, config, physics) for i, yaw in enumerate(SIDES)]
+    return "\n".join([base, *walls, *beams])
 
-    sx, sy, sz = physics.start_pose
-    m = g.male_half
-    hl = g.male_lower_height
-    n = g.male_neck_half
-    hn = g.male_neck_height
+
+def _female_xml(config: SimConfig, physics: TrialPhysics, two_arm: bool) -> str:
+    """The housing's body: fixed to the world, or (two-arm) held by the left arm's hand above
+    its sensor site."""
+    g, p = config.geometry, config.physics
+    ox, oy, oz = physics.female_offset
+    housing = _housing_xml(config, physics)
+    if not two_arm:
+        return (
+            f'<body name="female" pos="{ox:.6g} {oy:.6g} {oz:.6g}" '
+            f'euler="0 0 {physics.female_yaw:.6g}">{housing}</body>'
+        )
+    held = (
+        '<geom type="cylinder" size="0.02 0.015" pos="0 0 -0.015" contype="0" conaffinity="0" rgba=".5 .5 .5 1"/>'
+        f'<body name="female" pos="0 0 {g.base_thickness + 0.03:.6g}">'
+        f'<inertial pos="0 0 -0.005" mass="{p.female_mass:.6g}" diaginertia="1e-4 1e-4 1e-4"/>'
+        f'<site name="l_ft" pos="0 0 {-g.base_thickness - 0.02:.6g}" euler="180 0 0"/>'
+        f"{housing}</body>"
+    )
+    pos = (ox, oy, oz - g.base_thickness - 0.03)
+    damping = (p.holder_kd_lin, p.holder_kd_rot)
+    return arm_hand_xml("l", pos, p, damping, held, yaw=physics.female_yaw)
+
+
+def _male_xml(config: SimConfig, physics: TrialPhysics) -> str:
+    """The right arm's hand holding the male part (displaced by the trial's part offset) under
+    its sensor site."""
+    g, p = config.geometry, config.physics
+    m, hl = g.male_half, g.male_lower_height
+    n, hn = g.male_neck_half, g.male_neck_height
     dx, dy, dyaw = physics.part_offset
     turn = f' euler="0 0 {math.degrees(dyaw):.6g}"' if dyaw else ""  # no attribute when centred
-    male = (
-        f'<body name="r_hand" pos="{sx:.6g} {sy:.6g} {sz:.6g}" gravcomp="1">'
-        f'<inertial pos="0 0 0" mass="{p.arm_link_mass:.6g}" '
-        f'diaginertia="{p.arm_link_inertia:.6g} {p.arm_link_inertia:.6g} {p.arm_link_inertia:.6g}"/>'
-        f"{arm_joints_xml('r', p.arm_kd_lin, p.arm_kd_rot)}"
+    part = (
         '<body name="male" pos="0 0 0">'
         f'<inertial pos="{dx:.6g} {dy:.6g} {hl:.6g}" mass="{p.male_mass + p.hand_mass:.6g}" '
         'diaginertia="2e-4 2e-4 2e-4"/>'
@@ -180,40 +154,28 @@ def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) 
         f'pos="{dx:.6g} {dy:.6g} {hl + hn / 2:.6g}"{turn}/>'
         f'<geom type="cylinder" size="0.02 0.02" pos="0 0 {g.sensor_height + 0.02:.6g}" '
         'contype="0" conaffinity="0" rgba=".6 .6 .6 1"/>'
-        "</body></body>"
+        "</body>"
     )
-    actuators = arm_actuators_xml("r", p.arm_kp_lin, p.arm_kp_rot)
+    return arm_hand_xml("r", physics.start_pose, p, (p.arm_kd_lin, p.arm_kd_rot), part)
+
+
+def build_mjcf(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) -> str:
+    """MJCF text of the assembly for one trial."""
+    p = config.physics
+    style = 'density="1200"'
+    defaults = [
+        contact_class_xml("female", False, p, physics.friction_scale, f'rgba=".2 .4 .8 1" {style}'),
+        contact_class_xml("male", True, p, physics.friction_scale, f'rgba=".8 .5 .2 1" {style}'),
+    ]
+    actuators = [arm_actuators_xml("r", p.arm_kp_lin, p.arm_kp_rot)]
+    sensors = ft_sensor_xml("r")
     if two_arm:
-        actuators += "\n" + arm_actuators_xml("l", p.holder_kp_lin, p.holder_kp_rot)
-    sensors = '<force name="r_force" site="r_ft"/><torque name="r_torque" site="r_ft"/>'
-    if two_arm:
-        sensors += '<force name="l_force" site="l_ft"/><torque name="l_torque" site="l_ft"/>'
-    return f"""<mujoco model="snap_assembly">
-<compiler angle="degree" autolimits="true"/>
-<option timestep="{p.timestep:.6g}" gravity="0 0 {-p.gravity:.6g}" integrator="implicitfast">
-<flag multiccd="enable"/>
-</option>
-<default>
-<default class="female"><geom contype="2" conaffinity="1" friction="{mu:.6g} 0.005 0.0001"
- solref="{solref}" solimp="{solimp}" rgba=".2 .4 .8 1" density="1200"/></default>
-<default class="male"><geom contype="1" conaffinity="2" friction="{mu:.6g} 0.005 0.0001"
- solref="{solref}" solimp="{solimp}" rgba=".8 .5 .2 1" density="1200"/></default>
-</default>
-<asset>
-{chr(10).join(meshes)}
-</asset>
-<worldbody>
-{female}
-{male}
-</worldbody>
-<actuator>
-{actuators}
-</actuator>
-<sensor>
-{sensors}
-</sensor>
-</mujoco>
-"""
+        actuators.append(arm_actuators_xml("l", p.holder_kp_lin, p.holder_kp_rot))
+        sensors += ft_sensor_xml("l")
+    bodies = [_female_xml(config, physics, two_arm), _male_xml(config, physics)]
+    return mjcf_document(
+        "snap_assembly", p, defaults, _housing_meshes(config.geometry), bodies, actuators, sensors
+    )
 
 
 def build_model(config: SimConfig, physics: TrialPhysics, two_arm: bool = False) -> mujoco.MjModel:

@@ -7,7 +7,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rcbht_introspection.config_files import config_path, load_config
-from rcbht_introspection.sim.config import Range, SensorConfig
+from rcbht_introspection.sim.config import (
+    ArmPhysicsConfig,
+    ForceLoopConfig,
+    Range,
+    SensorConfig,
+)
 
 
 @dataclass(frozen=True)
@@ -32,32 +37,21 @@ class PegGeometryConfig:
 
 
 @dataclass(frozen=True)
-class PegPhysicsConfig:
-    """MuJoCo constants: time step, masses, friction, contact and grip softness, arm servo gains."""
+class PegPhysicsConfig(ArmPhysicsConfig):
+    """MuJoCo constants of the peg-in-hole: the arm's (ArmPhysicsConfig), masses, grip softness."""
 
-    timestep: float = 0.001
-    gravity: float = 9.81
     peg_mass: float = 0.06
     gripper_mass: float = 0.4
     """Mass of the gripper between the sensor and the peg (tared away with the peg)."""
-    friction: float = 0.3
-    contact_solref: tuple[float, float] = (0.008, 1.0)
-    contact_solimp: tuple[float, float, float] = (0.95, 0.99, 0.001)
     grip_solref: tuple[float, float] = (0.002, 1.0)
     """Softness of the grip (a weld between gripper and peg, switched off when the gripper opens)."""
     grip_solimp: tuple[float, float, float] = (0.99, 0.999, 0.001)
-    arm_kp_lin: float = 20000.0
-    """Stiffness (N/m) of the arm's Cartesian position servo."""
-    arm_kd_lin: float = 250.0
-    arm_kp_rot: float = 60.0
-    arm_kd_rot: float = 0.6
-    arm_link_mass: float = 0.5
-    arm_link_inertia: float = 0.001
 
 
 @dataclass(frozen=True)
-class PegControllerConfig:
-    """Scripted force/position controller of reach, search, insert and release."""
+class PegControllerConfig(ForceLoopConfig):
+    """Scripted force/position controller of reach, search, insert and release: the shared force
+    loop (ForceLoopConfig, its own gains) and the sub-tasks' set-points and time-outs."""
 
     start_height: Range = (0.008, 0.035)
     """Initial clearance (m) of the peg tip above the block surface, drawn per trial."""
@@ -92,15 +86,8 @@ class PegControllerConfig:
     retreat_speed: Range = (0.01, 0.02)
     retreat_time: Range = (0.5, 2.0)
     force_gain: float = 0.0008
-    """Admittance gain (m/s per N) of the force-controlled axis."""
-    force_ripple: float = 0.05
-    """Std of the force loop's hunting around its set-point, as a fraction of the set-point."""
-    force_ripple_time: float = 0.3
-    """Correlation time (s) of that ripple."""
     lateral_compliance: float = 0.0004
-    """Lateral admittance (m/s per N) during insertion: yield to the hole walls' push."""
-    force_filter: float = 0.02
-    """Time constant (s) of the controller's force low-pass filter."""
+    """Insertion: yield to the hole walls' push."""
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """MJCF of the peg-in-hole task, built in code from a PegConfig.
 
 A square peg is held by a gripper (a weld between gripper and peg, switched off when the gripper
-opens) on a Cartesian servo arm (3 slides + 3 hinges at the peg tip, as the snap assembly's arm);
+opens) on the shared Cartesian servo arm (sim/arm_model.py: 3 slides + 3 hinges at the peg tip);
 a 6-axis force/torque sensor site sits between the arm's hand and the gripper. The hole is cut in
 a fixed block: four walls with a 45 degree lead-in chamfer on their top inner edge and a floor.
 """
@@ -12,7 +12,15 @@ from dataclasses import dataclass
 
 import mujoco
 
-from rcbht_introspection.sim.model import arm_actuators_xml, arm_joints_xml, prism_vertices
+from rcbht_introspection.sim.arm_model import (
+    arm_actuators_xml,
+    arm_hand_xml,
+    contact_class_xml,
+    ft_sensor_xml,
+    mjcf_document,
+    numbers,
+    prism_vertices,
+)
 from rcbht_introspection.sim.peg_config import PegConfig
 
 GRIP = "grip"
@@ -34,19 +42,10 @@ class PegPhysics:
     """Initial peg tip x, y, z (m) in the believed hole frame (surface at z = 0)."""
 
 
-def build_peg_mjcf(config: PegConfig, physics: PegPhysics) -> str:
-    """MJCF text of the peg-in-hole scene for one trial."""
-    g, p = config.geometry, config.physics
-    a = g.peg_half + g.clearance  # half width of the hole
-    w = g.block_half
-    d = g.hole_depth
-    c = g.chamfer
-    mu = p.friction * physics.friction_scale
-    solref = " ".join(f"{v:.6g}" for v in p.contact_solref)
-    solimp = " ".join(f"{v:.6g}" for v in p.contact_solimp)
-    grip_solref = " ".join(f"{v:.6g}" for v in p.grip_solref)
-    grip_solimp = " ".join(f"{v:.6g}" for v in p.grip_solimp)
-    wall_profile = [(a, -d), (w, -d), (w, 0.0), (a + c, 0.0), (a, -c)]
+def _block_xml(config: PegConfig, physics: PegPhysics) -> str:
+    """The block the hole is cut in: its floor and four chamfered walls, at the trial's pose."""
+    g = config.geometry
+    w, d = g.block_half, g.hole_depth
     walls = "".join(
         f'<geom class="block" type="mesh" mesh="wall" euler="0 0 {yaw}"/>' for yaw in WALL_YAWS
     )
@@ -55,23 +54,40 @@ def build_peg_mjcf(config: PegConfig, physics: PegPhysics) -> str:
         f'<geom class="block" type="box" size="{w:.6g} {w:.6g} {g.floor_thickness / 2:.6g}" '
         f'pos="0 0 {-d - g.floor_thickness / 2:.6g}"/>'
     )
-    block = (
+    return (
         f'<body name="block" pos="{ox:.6g} {oy:.6g} {oz:.6g}" euler="0 0 {physics.hole_yaw:.6g}">'
         f"{floor}{walls}</body>"
     )
-    sx, sy, sz = physics.start_pose
-    li = p.arm_link_inertia
-    hand = (
-        f'<body name="r_hand" pos="{sx:.6g} {sy:.6g} {sz:.6g}" gravcomp="1">'
-        f'<inertial pos="0 0 0" mass="{p.arm_link_mass:.6g}" diaginertia="{li:.6g} {li:.6g} {li:.6g}"/>'
-        f"{arm_joints_xml('r', p.arm_kd_lin, p.arm_kd_rot)}"
+
+
+def _wall_mesh(config: PegConfig) -> str:
+    """The mesh of one hole wall: the block's quarter with the lead-in chamfer on its edge."""
+    g = config.geometry
+    a = g.peg_half + g.clearance  # half width of the hole
+    w, d, c = g.block_half, g.hole_depth, g.chamfer
+    wall_profile = [(a, -d), (w, -d), (w, 0.0), (a + c, 0.0), (a, -c)]
+    return f'<mesh name="wall" vertex="{prism_vertices(wall_profile, -w, w)}"/>'
+
+
+def _gripper_xml(config: PegConfig) -> str:
+    """The gripper on the arm's hand, with the sensor site between them."""
+    g, p = config.geometry, config.physics
+    return (
         f'<body name="gripper" pos="0 0 {g.grip_height:.6g}">'
         f'<inertial pos="0 0 0.01" mass="{p.gripper_mass:.6g}" diaginertia="2e-4 2e-4 2e-4"/>'
         f'<site name="r_ft" pos="0 0 {g.sensor_height - g.grip_height:.6g}"/>'
         '<geom type="box" size="0.02 0.012 0.01" pos="0 0 0.01" contype="0" conaffinity="0" '
         'rgba=".6 .6 .6 1"/>'
-        "</body></body>"
+        "</body>"
     )
+
+
+def build_peg_mjcf(config: PegConfig, physics: PegPhysics) -> str:
+    """MJCF text of the peg-in-hole scene for one trial."""
+    g, p = config.geometry, config.physics
+    sx, sy, sz = physics.start_pose
+    damping = (p.arm_kd_lin, p.arm_kd_rot)
+    hand = arm_hand_xml("r", physics.start_pose, p, damping, _gripper_xml(config))
     h = g.peg_half
     peg = (
         f'<body name="peg" pos="{sx:.6g} {sy:.6g} {sz + g.peg_length / 2:.6g}">'
@@ -80,36 +96,24 @@ def build_peg_mjcf(config: PegConfig, physics: PegPhysics) -> str:
         f'mass="{p.peg_mass:.6g}"/>'
         "</body>"
     )
-    return f"""<mujoco model="peg_in_hole">
-<compiler angle="degree" autolimits="true"/>
-<option timestep="{p.timestep:.6g}" gravity="0 0 {-p.gravity:.6g}" integrator="implicitfast">
-<flag multiccd="enable"/>
-</option>
-<default>
-<default class="block"><geom contype="2" conaffinity="1" friction="{mu:.6g} 0.005 0.0001"
- solref="{solref}" solimp="{solimp}" rgba=".3 .3 .35 1"/></default>
-<default class="peg"><geom contype="1" conaffinity="2" friction="{mu:.6g} 0.005 0.0001"
- solref="{solref}" solimp="{solimp}" rgba=".8 .6 .2 1"/></default>
-</default>
-<asset>
-<mesh name="wall" vertex="{prism_vertices(wall_profile, -w, w)}"/>
-</asset>
-<worldbody>
-{block}
-{hand}
-{peg}
-</worldbody>
-<equality>
-<weld name="{GRIP}" body1="gripper" body2="peg" solref="{grip_solref}" solimp="{grip_solimp}"/>
-</equality>
-<actuator>
-{arm_actuators_xml("r", p.arm_kp_lin, p.arm_kp_rot)}
-</actuator>
-<sensor>
-<force name="r_force" site="r_ft"/><torque name="r_torque" site="r_ft"/>
-</sensor>
-</mujoco>
-"""
+    defaults = [
+        contact_class_xml("block", False, p, physics.friction_scale, 'rgba=".3 .3 .35 1"'),
+        contact_class_xml("peg", True, p, physics.friction_scale, 'rgba=".8 .6 .2 1"'),
+    ]
+    weld = (
+        f'<weld name="{GRIP}" body1="gripper" body2="peg" solref="{numbers(p.grip_solref)}" '
+        f'solimp="{numbers(p.grip_solimp)}"/>'
+    )
+    return mjcf_document(
+        "peg_in_hole",
+        p,
+        defaults,
+        [_wall_mesh(config)],
+        [_block_xml(config, physics), hand, peg],
+        [arm_actuators_xml("r", p.arm_kp_lin, p.arm_kp_rot)],
+        ft_sensor_xml("r"),
+        equality=weld,
+    )
 
 
 def build_peg_model(config: PegConfig, physics: PegPhysics) -> mujoco.MjModel:

@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.sim.model import ARM_JOINTS
+from rcbht_introspection.sim.arm_model import ARM_JOINTS
 from rcbht_introspection.sim.peg_config import PegConfig
 from rcbht_introspection.sim.peg_controller import PEG_TASK, PegController, PegPlan, PegState
 from rcbht_introspection.sim.peg_model import GRIP, PegPhysics, build_peg_model

@@ -29,7 +29,8 @@ from rcbht_introspection.sim.failures import (
     draw_deviation,
     failure_classes,
 )
-from rcbht_introspection.sim.model import ARM_JOINTS, TrialPhysics, build_model
+from rcbht_introspection.sim.arm_model import ARM_JOINTS
+from rcbht_introspection.sim.model import TrialPhysics, build_model
 from rcbht_introspection.sim.onset import (
     NO_ONSET,
     STROKE_END,
