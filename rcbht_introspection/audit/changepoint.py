@@ -19,6 +19,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 MIN_SEGMENT = 2
 """Fewest trials on either side of a split."""
@@ -51,7 +52,8 @@ def _centred_ranks(x: np.ndarray) -> np.ndarray:
     from scipy.stats import rankdata
 
     ranks = np.asarray(rankdata(x, axis=0), dtype=np.float64)
-    return ranks - ranks.mean(axis=0)
+    centred: NDArray[np.float64] = ranks - ranks.mean(axis=0)
+    return centred
 
 
 def scan(ranks: np.ndarray, min_segment: int = MIN_SEGMENT) -> np.ndarray:
@@ -171,7 +173,8 @@ def _robust_scaled(x: np.ndarray) -> np.ndarray:
         return x
     spread = np.median(np.abs(np.diff(x, axis=0)), axis=0)
     spread = np.where(spread > 0, spread, np.abs(x).max(axis=0))
-    return x / np.where(spread > 0, spread, 1.0)
+    scaled: NDArray[np.float64] = x / np.where(spread > 0, spread, 1.0)
+    return scaled
 
 
 def robust_sigma(x: np.ndarray) -> float:

@@ -110,7 +110,7 @@ def analyse_subtask(
     x = _log(d, period)
 
     def resolved(start: int, split: int, stop: int) -> bool:
-        return abs(np.median(d[split:stop]) - np.median(d[start:split])) > period * (1 + 1e-9)
+        return bool(abs(np.median(d[split:stop]) - np.median(d[start:split])) > period * (1 + 1e-9))
 
     segmentation = find_changes(
         x,
