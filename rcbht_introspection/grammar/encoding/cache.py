@@ -8,9 +8,12 @@ encoded with an AxisMemo instead and never enter a SampleCache.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar, cast
 
 from rcbht_introspection.grammar.split import SubtaskSample
+
+V = TypeVar("V")
+"""The type of one cached result."""
 
 
 class SampleCache:
@@ -25,11 +28,11 @@ class SampleCache:
         self.entries: dict[int, tuple[SubtaskSample, dict[Any, Any]]] = {}
         self.size = 0
 
-    def get(self, sample: SubtaskSample, key: Any, compute: Callable[[], Any]) -> Any:
+    def get(self, sample: SubtaskSample, key: Any, compute: Callable[[], V]) -> V:
         """The result `key` of `sample`: cached, or `compute()` stored under it."""
         hit = self.entries.get(id(sample))
         if hit is not None and hit[0] is sample and key in hit[1]:
-            return hit[1][key]
+            return cast(V, hit[1][key])  # stored by compute() under the same key
         value = compute()
         if hit is None or hit[0] is not sample:
             self.forget(sample)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.axes import AxisMemo, add_axis_features
@@ -169,7 +170,8 @@ class CompactEncoding:
                 self._raw(sample) if memo is None else compact_raw_features(sample, self.arms, memo)
             )
             out[row] = [raw.get(k, 0.0) for k in self.feature_names]
-        return (out - lower) / scale
+        scaled: NDArray[np.float64] = (out - lower) / scale
+        return scaled
 
     def to_state(self) -> dict[str, Any]:
         """The fitted parameters, as stored in a model file."""

@@ -13,6 +13,7 @@ from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.cache import SampleCache
@@ -72,7 +73,8 @@ def _coverage(edges: np.ndarray, starts: np.ndarray, ends: np.ndarray) -> np.nda
     order = np.argsort(times, kind="stable")
     times, slopes = times[order], np.cumsum(slopes[order])
     values = np.concatenate([[0.0], np.cumsum(slopes[:-1] * np.diff(times))])
-    return np.interp(edges, times, values)
+    covered: NDArray[np.float64] = np.interp(edges, times, values)
+    return covered
 
 
 def _uncached(sample: SubtaskSample, key: Any, compute: Callable[[], Any]) -> Any:
