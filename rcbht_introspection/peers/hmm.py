@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 from hmmlearn.hmm import GaussianHMM
+from numpy.typing import NDArray
 from scipy.linalg import solve_triangular
 from scipy.special import softmax
 from sklearn.base import BaseEstimator, ClassifierMixin
@@ -51,7 +52,8 @@ def one_thread() -> AbstractContextManager[Any]:
     """BLAS and OpenMP on one thread: on small arrays their threads only spin against each
     other, and on 2 busy cores that costs 15x (k-means: 200 ms instead of 1 ms a run; the
     emission densities: 13 ms instead of 0.9 ms for 400 frames)."""
-    return _controller().limit(limits=1)
+    limited: AbstractContextManager[Any] = _controller().limit(limits=1)
+    return limited
 
 
 def as_frames(seq: np.ndarray | Sequence[Sequence[float]]) -> np.ndarray:
@@ -173,7 +175,9 @@ def curve_stats(curves: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     return mean, std
 
 
-class HMMDetector(BaseEstimator):
+# sklearn has no type hints, so its bases are Any: strict mypy refuses to subclass them
+# (unused-ignore: the plain configuration does not check it)
+class HMMDetector(BaseEstimator):  # type: ignore[misc, unused-ignore]
     """Per sub-task GaussianHMM of the successes; a step's score is how far the cumulative
     log-likelihood lies below the successes' mean at that step, in their standard deviations.
 
@@ -235,10 +239,13 @@ class HMMDetector(BaseEstimator):
         loglik = self.loglik(phase, frames)
         mean, std = self.mean_curve_[phase], self.std_curve_[phase]
         index = np.minimum(np.arange(len(loglik)), len(mean) - 1)
-        return (mean[index] - loglik) / std[index]
+        scores: NDArray[np.float64] = (mean[index] - loglik) / std[index]
+        return scores
 
 
-class HMMClassifier(ClassifierMixin, BaseEstimator):
+# sklearn has no type hints, so its bases are Any: strict mypy refuses to subclass them
+# (unused-ignore: the plain configuration does not check it)
+class HMMClassifier(ClassifierMixin, BaseEstimator):  # type: ignore[misc, unused-ignore]
     """One GaussianHMM per failure class on the evidence windows; the class whose HMM gives
     the window the highest likelihood is named.
 
