@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from sklearn.model_selection import GroupKFold, cross_val_score
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
@@ -42,6 +43,12 @@ def make_svm(random_state: int = 0) -> Pipeline:
     )
 
 
+def _checked_predict_proba(estimator: Any, X: np.ndarray) -> NDArray[np.float64]:
+    """estimator.predict_proba(X) as sklearn runs it, input checks included."""
+    proba: NDArray[np.float64] = estimator.predict_proba(X)
+    return proba
+
+
 def svm_predict_proba(estimator: Any, X: np.ndarray) -> np.ndarray:
     """estimator.predict_proba(X), without sklearn's per-call input checks for our SVM pipeline.
 
@@ -50,10 +57,10 @@ def svm_predict_proba(estimator: Any, X: np.ndarray) -> np.ndarray:
     identical. Any other estimator, or input the checks would reject, takes the checked path.
     """
     if not isinstance(estimator, Pipeline):
-        return estimator.predict_proba(X)
+        return _checked_predict_proba(estimator, X)
     steps = estimator.steps
     if len(steps) != 2 or type(steps[0][1]) is not StandardScaler or type(steps[1][1]) is not SVC:
-        return estimator.predict_proba(X)
+        return _checked_predict_proba(estimator, X)
     scaler, svc = steps[0][1], steps[1][1]
     if (
         not isinstance(X, np.ndarray)
@@ -66,13 +73,14 @@ def svm_predict_proba(estimator: Any, X: np.ndarray) -> np.ndarray:
         or svc.n_support_.sum() != svc.support_vectors_.shape[0]
         or not np.isfinite(X).all()
     ):
-        return estimator.predict_proba(X)
+        return _checked_predict_proba(estimator, X)
     Xt = np.array(X, dtype=np.float64, order="C", copy=True)
     if scaler.with_mean:
         Xt -= scaler.mean_
     if scaler.with_std:
         Xt /= scaler.scale_
-    return svc._dense_predict_proba(Xt)
+    proba: NDArray[np.float64] = svc._dense_predict_proba(Xt)
+    return proba
 
 
 def fit_svm(estimator: Pipeline, X: np.ndarray, y: Sequence[str]) -> Pipeline:
