@@ -4,16 +4,18 @@ approach: guarded move down until the contact force exceeds a threshold; rotatio
 part level on its contact edge while an admittance loop keeps a contact force and the lateral servo
 centres it; insertion: ramp the force set-point until the snap hooks give way (force peak, then the
 snap-through drop), stopping at a planned stroke or a time-out; mating: hold a force, then move away
-until the force is released. Sub-task switch times are recorded as the controller makes them.
+until the force is released. The force loop and phase bookkeeping are the shared controller base's
+(sim/arm_control.py).
 """
 
 from __future__ import annotations
 
 import math
-import random
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
-from rcbht_introspection.sim.config import SimConfig
+from rcbht_introspection.sim.arm_control import ArmController, PhaseState, PhaseStep, Tick
+from rcbht_introspection.sim.config import ControllerConfig, SimConfig
+from rcbht_introspection.task import HIRO_TASK
 
 PHASES: tuple[str, ...] = ("approach", "rotation", "insertion", "mating", "backoff", "done")
 
@@ -39,172 +41,166 @@ class ControlPlan:
 
 
 @dataclass
-class ControllerState:
+class ControllerState(PhaseState):
     """What the controller has done so far: phase, switch times, detected events."""
 
     phase: str = "approach"
-    switch_times: list[float] = field(default_factory=lambda: [0.0])
-    phase_start: float = 0.0
     peak_force: float = 0.0
     snap_time: float | None = None
     stroke_time: float | None = None
     seat_time: float | None = None
     hold_end: float | None = None
     release_time: float | None = None
-    aborted: bool = False
 
 
-class SnapController:
+class SnapController(ArmController[ControllerConfig, ControllerState]):
     """Hybrid force/position controller: one `update` per control tick returns the six servo targets."""
 
+    subtasks = HIRO_TASK.subtasks
+
     def __init__(self, config: SimConfig, plan: ControlPlan) -> None:
-        self.cfg = config.controller
+        timestep = config.physics.timestep
+        super().__init__(
+            config.controller, ControllerState(), plan.start, timestep, plan.ripple_seed
+        )
         self.plan = plan
-        self.state = ControllerState()
-        x, y, z = plan.start
-        self.target = [x, y, z, 0.0, plan.tilt, 0.0]
-        self.force = 0.0
+        self.target[4] = plan.tilt
         self.force_set = 0.0
         self.half_width = config.geometry.male_half
         self.pivot_x = 0.0
-        self.lateral = [0.0, 0.0]
         g = config.geometry
         self.hook_top = g.male_lower_height + g.hook_play + g.hook_ramp
         """Believed tool height below which the part is engaged in the snap hooks."""
         self.pivot_z = 0.0
         self.admittance_z = 0.0
         self.trace: list[tuple[float, ...]] | None = None
-        self.rng = random.Random(plan.ripple_seed)
-        self.ripple = 0.0
-        dt = config.physics.timestep
-        self.ripple_kick = self.cfg.force_ripple * math.sqrt(2.0 * dt / self.cfg.force_ripple_time)
         self.seat_floor = -self.cfg.insertion_stroke
         """Lowest believed tool height the insertion may reach before it counts as done."""
 
-    def _switch(self, t: float, phase: str) -> None:
-        st = self.state
-        if phase in ("rotation", "insertion", "mating"):
-            st.switch_times.append(t)
-        st.phase = phase
-        st.phase_start = t
+    def phase_steps(self) -> dict[str, PhaseStep]:
+        """The four sub-tasks' steps and the back-off after an abort."""
+        return {
+            "approach": self._approach,
+            "rotation": self._rotation,
+            "insertion": self._insertion,
+            "mating": self._mating,
+            "backoff": lambda tick: self._back_off(
+                tick, self.cfg.backoff_speed, self.cfg.abort_time
+            ),
+        }
 
-    def update(
-        self, t: float, dt: float, fx: float, fy: float, fz: float, tcp_z: float
-    ) -> list[float]:
-        """Advance one tick given the tool-frame forces (compression fz > 0) and the tool height."""
-        cfg, st, plan, u = self.cfg, self.state, self.plan, self.target
-        alpha = dt / (cfg.force_filter + dt)
-        self.force += alpha * (fz - self.force)
-        self.lateral[0] += alpha * (fx - self.lateral[0])
-        self.lateral[1] += alpha * (fy - self.lateral[1])
-        f = self.force
-        elapsed = t - st.phase_start
+    def _record(self, t: float, force: float, z: float) -> None:
+        """Append the tick to the trace when one is kept: time, force, set-point, height, targets."""
         if self.trace is not None:
-            self.trace.append((t, f, self.force_set, tcp_z, *u))
-        if st.phase == "approach":
-            u[2] -= plan.approach_speed * dt
-            if f > cfg.contact_force:
-                self.force_set = plan.rotation_force
-                self.pivot_x = u[0] + self.half_width * math.cos(u[4])
-                self.pivot_z = u[2] - self.half_width * math.sin(u[4])
-                self.admittance_z = 0.0
-                self._switch(t, "rotation")
-            elif elapsed > cfg.approach_timeout:
-                st.aborted = True
-                self._switch(t, "backoff")
-        elif st.phase == "rotation":
-            # pivot on the contact edge: the edge's x stays put while the part levels out
-            u[4] = max(0.0, u[4] - plan.rotation_speed * dt)
-            self._admit(dt, f)
-            u[0] = self.pivot_x - self.half_width * math.cos(u[4])
-            u[2] = self.pivot_z + self.half_width * math.sin(u[4]) + self.admittance_z
-            if u[4] == 0.0 and elapsed > plan.tilt / plan.rotation_speed + cfg.rotation_settle:
-                st.peak_force = 0.0
-                self._switch(t, "insertion")
-        elif st.phase == "insertion":
-            self._comply(dt, t - st.phase_start < cfg.centering_time)
-            if st.seat_time is None:
-                self.force_set = min(
-                    cfg.insertion_force_max,
-                    plan.rotation_force + plan.insertion_force_rate * elapsed,
-                )
-            if st.snap_time is None:
-                st.peak_force = max(st.peak_force, f)
-                engaged = tcp_z < self.hook_top
-                if (
-                    engaged
-                    and st.peak_force > cfg.snap_min_peak
-                    and f < (1.0 - cfg.snap_drop) * st.peak_force
-                ):
-                    st.snap_time = t
-            if tcp_z <= self.seat_floor:
-                if st.stroke_time is None:
-                    st.stroke_time = t
-                u[2] = max(u[2], tcp_z)  # planned stroke reached: stop descending
-            else:
-                self._admit(dt, f)
-            if (
-                st.snap_time is not None
-                and st.seat_time is None
-                and f > cfg.seat_fraction * plan.hold_force
-                and tcp_z < cfg.seat_tolerance
-            ):
-                st.seat_time = t
-                self.force_set = plan.hold_force
-            if st.seat_time is not None and t - st.seat_time > cfg.seat_settle:
-                self._switch(t, "mating")
-            elif st.stroke_time is not None and t - st.stroke_time > cfg.seat_settle:
-                self.force_set = plan.hold_force  # believes it is done: the snap was missed
-                self._switch(t, "mating")
-            elif elapsed > cfg.insertion_timeout:
-                st.aborted = True
-                self._switch(t, "backoff")
-        elif st.phase == "mating":
-            if st.hold_end is None:
-                self._comply(dt, False)
-                if tcp_z > self.seat_floor:
-                    self._admit(dt, f)
-                if elapsed > plan.hold_time:
-                    st.hold_end = t
-            elif st.release_time is None:
-                u[2] += plan.retract_speed * dt
-                u[0] += plan.retract_lateral[0] * dt  # the move-away path is not purely vertical
-                u[1] += plan.retract_lateral[1] * dt
-                if f < cfg.release_force or t - st.hold_end > cfg.retract_time:
-                    st.release_time = t
-            elif t - st.release_time > cfg.tail_time:
-                self._switch(t, "done")
-        elif st.phase == "backoff":
-            u[2] += cfg.backoff_speed * dt
-            if elapsed > cfg.abort_time:
-                self._switch(t, "done")
-        return u
+            self.trace.append((t, force, self.force_set, z, *self.target))
+
+    def _approach(self, tick: Tick) -> None:
+        """Guarded move down; on contact, pivot on the part's low edge (the rotation)."""
+        u = self.target
+        if self._guarded_move(tick, self.plan.approach_speed, self.cfg.approach_timeout):
+            self.force_set = self.plan.rotation_force
+            self.pivot_x = u[0] + self.half_width * math.cos(u[4])
+            self.pivot_z = u[2] - self.half_width * math.sin(u[4])
+            self.admittance_z = 0.0
+            self._switch(tick.t, "rotation")
+
+    def _rotation(self, tick: Tick) -> None:
+        """Pivot on the contact edge: the edge's x stays put while the part levels out."""
+        u, plan = self.target, self.plan
+        u[4] = max(0.0, u[4] - plan.rotation_speed * tick.dt)
+        self._admit_force(tick.dt, tick.force)
+        u[0] = self.pivot_x - self.half_width * math.cos(u[4])
+        u[2] = self.pivot_z + self.half_width * math.sin(u[4]) + self.admittance_z
+        settle = plan.tilt / plan.rotation_speed + self.cfg.rotation_settle
+        if u[4] == 0.0 and tick.elapsed > settle:
+            self.state.peak_force = 0.0
+            self._switch(tick.t, "insertion")
+
+    def _insertion(self, tick: Tick) -> None:
+        """Ramp the force until the hooks give way, stopping at the planned stroke."""
+        cfg, st = self.cfg, self.state
+        self._comply(tick.dt, tick.elapsed < cfg.centering_time)
+        if st.seat_time is None:
+            self.force_set = min(
+                cfg.insertion_force_max,
+                self.plan.rotation_force + self.plan.insertion_force_rate * tick.elapsed,
+            )
+        if st.snap_time is None:
+            self._watch_snap(tick)
+        if tick.z <= self.seat_floor:
+            if st.stroke_time is None:
+                st.stroke_time = tick.t
+            self.target[2] = max(self.target[2], tick.z)  # planned stroke reached: stop descending
+        else:
+            self._admit_force(tick.dt, tick.force)
+        self._watch_seat(tick)
+        self._end_insertion(tick)
+
+    def _watch_snap(self, tick: Tick) -> None:
+        """Snap-through: once engaged in the hooks, the force drops below its peak by snap_drop."""
+        cfg, st = self.cfg, self.state
+        st.peak_force = max(st.peak_force, tick.force)
+        engaged = tick.z < self.hook_top
+        if (
+            engaged
+            and st.peak_force > cfg.snap_min_peak
+            and tick.force < (1.0 - cfg.snap_drop) * st.peak_force
+        ):
+            st.snap_time = tick.t
+
+    def _watch_seat(self, tick: Tick) -> None:
+        """Seated: after the snap, the force is back near the hold force at the believed seat."""
+        cfg, st = self.cfg, self.state
+        if (
+            st.snap_time is not None
+            and st.seat_time is None
+            and tick.force > cfg.seat_fraction * self.plan.hold_force
+            and tick.z < cfg.seat_tolerance
+        ):
+            st.seat_time = tick.t
+            self.force_set = self.plan.hold_force
+
+    def _end_insertion(self, tick: Tick) -> None:
+        """Mate once seated (or, the snap missed, once the stroke ended); abort on time-out."""
+        cfg, st, t = self.cfg, self.state, tick.t
+        if st.seat_time is not None and t - st.seat_time > cfg.seat_settle:
+            self._switch(t, "mating")
+        elif st.stroke_time is not None and t - st.stroke_time > cfg.seat_settle:
+            self.force_set = self.plan.hold_force  # believes it is done: the snap was missed
+            self._switch(t, "mating")
+        elif tick.elapsed > cfg.insertion_timeout:
+            self._abort(t)
+
+    def _mating(self, tick: Tick) -> None:
+        """Hold the force, then move away until the force is released, then a short tail."""
+        cfg, st, plan, u, t = self.cfg, self.state, self.plan, self.target, tick.t
+        if st.hold_end is None:
+            self._comply(tick.dt, False)
+            if tick.z > self.seat_floor:
+                self._admit_force(tick.dt, tick.force)
+            if tick.elapsed > plan.hold_time:
+                st.hold_end = t
+        elif st.release_time is None:
+            u[2] += plan.retract_speed * tick.dt
+            u[0] += plan.retract_lateral[0] * tick.dt  # the move-away path is not purely vertical
+            u[1] += plan.retract_lateral[1] * tick.dt
+            if tick.force < cfg.release_force or t - st.hold_end > cfg.retract_time:
+                st.release_time = t
+        elif t - st.release_time > cfg.tail_time:
+            self._switch(t, "done")
 
     def _comply(self, dt: float, centre: bool) -> None:
         """Lateral axes: pull towards the believed centre first, then yield to lateral forces."""
         u = self.target
-        for i in (0, 1):
-            if centre:
+        if centre:
+            for i in (0, 1):
                 u[i] += self.cfg.lateral_gain * (0.0 - u[i]) * dt
-            u[i] += self.cfg.lateral_compliance * self.lateral[i] * dt
+        self._yield_laterally(dt)
 
-    def _admit(self, dt: float, f: float) -> None:
-        """Admittance on the tool axis: descend while the force is below its set-point.
-
-        The regulated force hunts around its set-point (an Ornstein-Uhlenbeck ripple of
-        `force_ripple` x set-point), as the real arm's force loop does.
-        """
-        a = dt / self.cfg.force_ripple_time
-        self.ripple += -a * self.ripple + self.ripple_kick * self.rng.gauss(0.0, 1.0)
-        target = self.force_set * (1.0 + self.ripple)
-        limit = self.cfg.max_admittance_speed * dt
-        step = min(limit, max(-limit, self.cfg.force_gain * (target - f) * dt))
-        self.target[2] -= step
-        self.admittance_z -= step
-
-    @property
-    def done(self) -> bool:
-        return self.state.phase == "done"
+    def _admit_force(self, dt: float, f: float) -> None:
+        """The shared admittance towards the current set-point; its travel is kept for the
+        rotation's pivot."""
+        self.admittance_z -= self._admit(dt, f, self.force_set, self.cfg.max_admittance_speed)
 
 
 class HolderController:

@@ -13,9 +13,12 @@ from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
+from numpy.typing import NDArray
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.sim import arm_run
+from rcbht_introspection.sim.arm_run import Wrench, uniform
 from rcbht_introspection.sim.config import FailureType, SensorConfig, SimConfig
 from rcbht_introspection.sim.controller import (
     ControllerState,
@@ -29,7 +32,6 @@ from rcbht_introspection.sim.failures import (
     draw_deviation,
     failure_classes,
 )
-from rcbht_introspection.sim.arm_model import ARM_JOINTS
 from rcbht_introspection.sim.model import TrialPhysics, build_model
 from rcbht_introspection.sim.onset import (
     NO_ONSET,
@@ -40,16 +42,8 @@ from rcbht_introspection.sim.onset import (
     contact_onset,
 )
 from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
-from rcbht_introspection.sim.sensor import (
-    SensorDraw,
-    decimation,
-    draw_sensor,
-    measure,
-    resample,
-)
+from rcbht_introspection.sim.sensor import SensorDraw, decimation, draw_sensor, measure
 
-SETTLE_TIME = 0.3
-"""Time (s) the arm servos settle under gravity before taring and recording start."""
 MAX_DURATION = 80.0
 """Upper bound (s) on one trial; the controller's own time-outs end every trial well before."""
 
@@ -62,13 +56,9 @@ Observer = Callable[[float, str, mujoco.MjModel, mujoco.MjData], None]
 class PhysicsRun:
     """One physics run: tared tool-frame wrench per step (R columns 0-5, L 6-11), events, outcome."""
 
-    wrench: np.ndarray
+    wrench: Wrench
     state: ControllerState
     latched: bool
-
-
-def _uniform(rng: np.random.Generator, r: tuple[float, float]) -> float:
-    return float(rng.uniform(r[0], r[1]))
 
 
 @dataclass(frozen=True)
@@ -94,39 +84,42 @@ def draw_trial(
     deviation = PartDeviation()
     nominal = (ox, oy, oz, yaw)
     if failure == "misalignment":
-        oy = sign * _uniform(rng, fc.misalignment_xy)
+        oy = sign * uniform(rng, fc.misalignment_xy)
     elif failure == "jamming":
-        yaw = sign * _uniform(rng, fc.jamming_yaw)
+        yaw = sign * uniform(rng, fc.jamming_yaw)
     elif failure == "missed_snap":
-        oz = -_uniform(rng, fc.missed_snap_z)
+        oz = -uniform(rng, fc.missed_snap_z)
     elif failure is not None and (dirs := deviation_dirs(failure)) is not None:
         deviation = draw_deviation(fc, dirs, rng)
     elif failure is not None:
         known = ", ".join(failure_classes(fc))
         raise InputError(f"unknown failure type {failure!r} (known: {known})", field="failure")
-    tilt = _uniform(rng, cc.tilt)
+    tilt = uniform(rng, cc.tilt)
     a = g.male_half + g.clearance
     start_x = a + 0.5 * g.chamfer - g.male_half * math.cos(tilt)
-    start_z = g.wall_height + g.male_half * math.sin(tilt) + _uniform(rng, cc.start_height)
+    start_z = g.wall_height + g.male_half * math.sin(tilt) + uniform(rng, cc.start_height)
     physics = TrialPhysics(
         female_offset=(ox, oy, oz),
         female_yaw=math.degrees(yaw),
-        friction_scale=_uniform(rng, var.friction_scale),
-        stiffness_scale=_uniform(rng, var.stiffness_scale),
+        friction_scale=uniform(rng, var.friction_scale),
+        stiffness_scale=uniform(rng, var.stiffness_scale),
         start_pose=(start_x, 0.0, start_z),
         part_offset=(deviation.x, deviation.y, deviation.yaw),
     )
     plan = ControlPlan(
         start=(start_x, 0.0, start_z),
         tilt=tilt,
-        approach_speed=_uniform(rng, cc.approach_speed),
-        rotation_speed=_uniform(rng, cc.rotation_speed),
-        rotation_force=_uniform(rng, cc.rotation_force),
-        insertion_force_rate=_uniform(rng, cc.insertion_force_rate),
-        hold_force=_uniform(rng, cc.hold_force),
-        hold_time=_uniform(rng, cc.hold_time),
-        retract_speed=_uniform(rng, cc.retract_speed),
-        retract_lateral=(_uniform(rng, cc.retract_lateral), _uniform(rng, cc.retract_lateral)),
+        approach_speed=uniform(rng, cc.approach_speed),
+        rotation_speed=uniform(rng, cc.rotation_speed),
+        rotation_force=uniform(rng, cc.rotation_force),
+        insertion_force_rate=uniform(rng, cc.insertion_force_rate),
+        hold_force=uniform(rng, cc.hold_force),
+        hold_time=uniform(rng, cc.hold_time),
+        retract_speed=uniform(rng, cc.retract_speed),
+        retract_lateral=(
+            uniform(rng, cc.retract_lateral),
+            uniform(rng, cc.retract_lateral),
+        ),
         ripple_seed=int(rng.integers(0, 2**31)),
     )
     sensor = draw_sensor(config.sensor, rng, var.bias_force, var.bias_torque, var.noise_scale)
@@ -150,58 +143,42 @@ def run_physics(
     """Run the controller on the model; return the tared wrench per physics step and the events."""
     model = build_model(config, physics, two_arm)
     data = mujoco.MjData(model)
-    dt = model.opt.timestep
-    r_qadr = [model.joint(f"r_{n}").qposadr[0] for n in ARM_JOINTS]
-    r_act = [model.actuator(f"r_{n}").id for n in ARM_JOINTS]
-    l_act = [model.actuator(f"l_{n}").id for n in ARM_JOINTS] if two_arm else []
-    data.qpos[r_qadr[4]] = plan.tilt
-    data.ctrl[r_act[4]] = plan.tilt
-    for _ in range(int(SETTLE_TIME / model.opt.timestep)):
-        mujoco.mj_step(model, data)  # let the servos take the weight before the sensor is tared
+    rig = arm_run.ServoRig(model, data, pitch=plan.tilt)
     controller = SnapController(config, plan)
     if trace is not None:
         controller.trace = trace
-    holder = HolderController(config) if two_arm else None
-    sx, sy, sz = plan.start
-    nsens = model.nsensordata
-    max_steps = int(MAX_DURATION / dt)
-    raw = np.empty((max_steps, nsens))
-    tare = data.sensordata.copy()
-    lz_sensor = 8
-    qz = r_qadr[2]
-    ra = r_act
-    step = 0
-    sensordata = data.sensordata
-    qpos = data.qpos
-    ctrl = data.ctrl
-    while step < max_steps and not controller.done:
-        t = step * dt
-        u = controller.update(
-            t,
-            dt,
-            tare[0] - sensordata[0],
-            tare[1] - sensordata[1],
-            tare[2] - sensordata[2],
-            sz + qpos[qz],
-        )
-        ctrl[ra[0]] = u[0] - sx
-        ctrl[ra[1]] = u[1] - sy
-        ctrl[ra[2]] = u[2] - sz
-        ctrl[ra[3]] = u[3]
-        ctrl[ra[4]] = u[4]
-        ctrl[ra[5]] = u[5]
-        if holder is not None:
-            lu = holder.update(dt, tare[lz_sensor] - sensordata[lz_sensor])
-            ctrl[l_act[2]] = lu[2]
-        mujoco.mj_step(model, data)
-        raw[step] = sensordata
-        if observer is not None:
-            observer(t + dt, controller.state.phase, model, data)
-        step += 1
-    raw = raw[:step]
-    # tool-frame convention: the wrench the part exerts on the sensor (compression: +Fz), tared
-    wrench = tare[None, :] - raw
+    holder = _holder_step(config, rig) if two_arm else None
+    after_step = (
+        _phase_observer(observer, controller, model, data) if observer is not None else None
+    )
+    max_steps = int(MAX_DURATION / rig.dt)
+    wrench = rig.run(controller, plan.start, max_steps, holder, after_step)
     return PhysicsRun(wrench=wrench, state=controller.state, latched=_latched(config, model, data))
+
+
+def _phase_observer(
+    observer: Observer, controller: SnapController, model: mujoco.MjModel, data: mujoco.MjData
+) -> arm_run.StepObserver:
+    """The observer called after each physics step with the controller's phase at that time."""
+
+    def observe(t: float) -> None:
+        observer(t, controller.state.phase, model, data)
+
+    return observe
+
+
+def _holder_step(config: SimConfig, rig: arm_run.ServoRig) -> arm_run.StepHook:
+    """Two-arm: the left arm's step before each physics step, its impedance yielding to the
+    force on its own (tared) sensor along the insertion axis."""
+    holder = HolderController(config)
+    z_servo = rig.model.actuator("l_z").id
+    lz_sensor = 8
+    tare, sensordata, ctrl = rig.tare, rig.data.sensordata, rig.data.ctrl
+
+    def step() -> None:
+        ctrl[z_servo] = holder.update(rig.dt, tare[lz_sensor] - sensordata[lz_sensor])[2]
+
+    return step
 
 
 def _latched(config: SimConfig, model: mujoco.MjModel, data: mujoco.MjData) -> bool:
@@ -236,6 +213,82 @@ def failure_onset(
     return Onset(None, NO_ONSET)
 
 
+def _draw_and_run(
+    config: SimConfig,
+    rng: np.random.Generator,
+    two_arm: bool,
+    failure: FailureType | None,
+) -> tuple[tuple[TrialDraw, PhysicsRun, ContactLog | None], bool]:
+    """One attempt at a trial: draw it, run its physics (a failure's contacts logged for its
+    onset); it agrees when the part latched exactly when a success was asked for."""
+    draw = draw_trial(config, rng, failure)
+    log = ContactLog(config) if failure is not None else None
+    result = run_physics(config, draw.physics, draw.plan, two_arm, observer=log)
+    consistent = result.latched if failure is None else not result.latched
+    return (draw, result, log), consistent
+
+
+def _measured_wrench(
+    config: SimConfig,
+    arms: tuple[str, ...],
+    sensor: SensorDraw,
+    samples: Wrench,
+    time: NDArray[np.float64],
+    rng: np.random.Generator,
+) -> dict[str, Wrench]:
+    """Each recorded arm's wrench through its sensor: the right arm's drawn errors, the left
+    arm's its own (drawn from the same generator, after the right arm's noise)."""
+    wrench: dict[str, Wrench] = {}
+    for arm in arms:
+        cols = slice(0, 6) if arm == "R" else slice(6, 12)
+        errors = sensor if arm == "R" else _other_sensor(sensor, config.sensor, rng)
+        wrench[arm] = measure(samples[:, cols], time, config.sensor, errors, rng)
+    return wrench
+
+
+def _trial_metadata(
+    seed: int,
+    scenario: ScenarioName,
+    failure: FailureType | None,
+    attempts: int,
+    rate_hz: float,
+    draw: TrialDraw,
+    result: PhysicsRun,
+) -> dict[str, object]:
+    """meta.json of a trial: the request, the attempts, the physical outcome and the draw."""
+    state = result.state
+    return {
+        "seed": int(seed),
+        "scenario": scenario,
+        "requested": failure or "success",
+        "attempts": attempts,
+        "latched": result.latched,
+        "rate_hz": rate_hz,
+        "snap_time": state.snap_time,
+        "peak_force": round(float(state.peak_force), 4),
+        "aborted": state.aborted,
+        "female_offset": [round(v, 6) for v in draw.physics.female_offset],
+        "female_yaw_deg": round(draw.physics.female_yaw, 4),
+        "friction_scale": round(draw.physics.friction_scale, 4),
+        "stiffness_scale": round(draw.physics.stiffness_scale, 4),
+        "tilt": round(draw.plan.tilt, 5),
+    }
+
+
+def _failure_metadata(
+    failure: FailureType, onset: Onset, draw: TrialDraw, period: float
+) -> dict[str, object]:
+    """meta.json's failure entry: the class, its onset on the sample clock, the onset's rule and
+    contact, and a deviation's draw."""
+    return {
+        "class": failure,
+        "onset": None if onset.time is None else arm_run.on_clock(onset.time, period),
+        "onset_rule": onset.rule,
+        "onset_contact": onset.contact,
+        "deviation": draw.deviation.to_dict() if deviation_dirs(failure) else None,
+    }
+
+
 def simulate_trial(
     config: SimConfig,
     seed: int,
@@ -247,72 +300,30 @@ def simulate_trial(
     """Simulate one trial (deterministic for `seed`); `failure` None means a successful assembly."""
     scen = get_scenario(scenario)
     k = decimation(rate_hz, config.physics.timestep)
-    attempts = 0
-    watched = failure is not None
-    while True:
-        rng = np.random.default_rng([int(seed), attempts])
-        draw = draw_trial(config, rng, failure)
-        log = ContactLog(config) if watched else None
-        result = run_physics(config, draw.physics, draw.plan, scen.two_arm, observer=log)
-        attempts += 1
-        latched = result.latched
-        consistent = latched if failure is None else not latched
-        if consistent or attempts >= config.failures.max_attempts:
-            break
-    sensor = draw.sensor
-    state = result.state
-    raw = result.wrench
-    samples = resample(raw, k)
-    period = 1.0 / rate_hz
-    time = np.round(np.arange(len(samples)) * period, 9)
-    wrench: dict[str, np.ndarray] = {}
-    sensor_rng = np.random.default_rng([int(seed), attempts, 7])
-    for arm in scen.arms:
-        cols = slice(0, 6) if arm == "R" else slice(6, 12)
-        errors = sensor if arm == "R" else _other_sensor(sensor, config.sensor, sensor_rng)
-        wrench[arm] = measure(samples[:, cols], time, config.sensor, errors, sensor_rng)
-    state_times = tuple(round(round(t / period) * period, 9) for t in state.switch_times)
+    (draw, result, log), attempts = arm_run.redraw_until(
+        seed,
+        config.failures.max_attempts,
+        lambda rng: _draw_and_run(config, rng, scen.two_arm, failure),
+    )
+    latched = result.latched
     if failure is None:
         outcome = "success" if latched else "failure"
     else:
         outcome = failure if not latched else "success"
-    failed = failure is not None and not latched
-    onset = (
-        failure_onset(config, draw, scen.two_arm, result.state, log)
-        if failed and log is not None
-        else None
-    )
-    metadata: dict[str, object] = {
-        "seed": int(seed),
-        "scenario": scenario,
-        "requested": failure or "success",
-        "attempts": attempts,
-        "latched": latched,
-        "rate_hz": rate_hz,
-        "snap_time": state.snap_time,
-        "peak_force": round(float(state.peak_force), 4),
-        "aborted": state.aborted,
-        "female_offset": [round(v, 6) for v in draw.physics.female_offset],
-        "female_yaw_deg": round(draw.physics.female_yaw, 4),
-        "friction_scale": round(draw.physics.friction_scale, 4),
-        "stiffness_scale": round(draw.physics.stiffness_scale, 4),
-        "tilt": round(draw.plan.tilt, 5),
-    }
-    if failure is not None and onset is not None:
-        metadata["failure"] = {
-            "class": failure,
-            "onset": None if onset.time is None else round(round(onset.time / period) * period, 9),
-            "onset_rule": onset.rule,
-            "onset_contact": onset.contact,
-            "deviation": draw.deviation.to_dict() if deviation_dirs(failure) else None,
-        }
-    return Trial(
-        name=name or f"sim-{scenario}-{seed}",
-        time=time,
-        wrench=wrench,
-        state_times=state_times,
-        outcome=outcome,
-        metadata=metadata,
+    metadata = _trial_metadata(seed, scenario, failure, attempts, rate_hz, draw, result)
+    if failure is not None and not latched and log is not None:
+        onset = failure_onset(config, draw, scen.two_arm, result.state, log)
+        metadata["failure"] = _failure_metadata(failure, onset, draw, 1.0 / rate_hz)
+    rng = arm_run.sensor_rng(seed, attempts)
+    return arm_run.sensor_trial(
+        name or f"sim-{scenario}-{seed}",
+        result.wrench,
+        k,
+        rate_hz,
+        lambda samples, time: _measured_wrench(config, scen.arms, draw.sensor, samples, time, rng),
+        result.state.switch_times,
+        outcome,
+        metadata,
     )
 
 
