@@ -287,6 +287,16 @@ def _ratio(a: float, b: float) -> float | None:
 
 def metrics(results: Sequence[RunResult], gate_s: float = GATE_S) -> dict[str, Any]:
     """The protocol's numbers for one method's test runs."""
+    failed = [r for r in results if r.label.failed]
+    return {
+        **_detection_metrics(results, gate_s),
+        **_class_metrics(failed),
+        **_direction_metrics(failed),
+    }
+
+
+def _detection_metrics(results: Sequence[RunResult], gate_s: float) -> dict[str, Any]:
+    """Whether and when each run alarmed: an alarm within `gate_s` after the onset detects."""
     nominal = [r for r in results if not r.label.failed]
     failed = [r for r in results if r.label.failed]
     fp_nominal = sum(r.alarm is not None for r in nominal)
@@ -305,7 +315,7 @@ def metrics(results: Sequence[RunResult], gate_s: float = GATE_S) -> dict[str, A
         else 0.0
     )
     delays = [r.alarm - r.onset for r in tp if r.alarm is not None and r.onset is not None]
-    out: dict[str, Any] = {
+    return {
         "runs": len(results),
         "nominal_runs": len(nominal),
         "failure_runs": len(failed),
@@ -325,6 +335,12 @@ def metrics(results: Sequence[RunResult], gate_s: float = GATE_S) -> dict[str, A
             "p50": float(np.percentile(delays, 50)) if delays else None,
             "p90": float(np.percentile(delays, 90)) if delays else None,
         },
+    }
+
+
+def _class_metrics(failed: Sequence[RunResult]) -> dict[str, Any]:
+    """How often the failure runs were named with their labelled class (overall, per class)."""
+    return {
         "class_accuracy": _ratio(
             sum(r.predicted_class == r.label.failure_class for r in failed), len(failed)
         ),
@@ -346,20 +362,26 @@ def metrics(results: Sequence[RunResult], gate_s: float = GATE_S) -> dict[str, A
             for c in sorted({r.label.failure_class for r in failed})
         },
     }
+
+
+def _direction_metrics(failed: Sequence[RunResult]) -> dict[str, Any]:
+    """Share of deviated runs whose deviation direction was named right, per axis (none: {})."""
     deviated = [r for r in failed if r.label.directions() is not None]
-    if deviated:
+    if not deviated:
+        return {}
+    return {
+        key: {
+            a: _ratio(
+                sum(getattr(r, attr).get(a) == r.label.directions()[a] for r in deviated),  # type: ignore[index]
+                len(deviated),
+            )
+            for a in DIRECTION_AXES
+        }
         for key, attr in (
             ("direction_accuracy", "directions"),
             ("direction_accuracy_given_onset", "directions_given_onset"),
-        ):
-            out[key] = {
-                a: _ratio(
-                    sum(getattr(r, attr).get(a) == r.label.directions()[a] for r in deviated),  # type: ignore[index]
-                    len(deviated),
-                )
-                for a in DIRECTION_AXES
-            }
-    return out
+        )
+    }
 
 
 def _auc(nominal: Sequence[RunResult], failed: Sequence[RunResult]) -> float | None:
