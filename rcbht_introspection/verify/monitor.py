@@ -149,11 +149,47 @@ class VerifierSession:
         return out
 
     def _verdict(self, g: float, features: np.ndarray, last: bool) -> Verdict:
+        """The verdict of the tick at stream time `g` (`last`: the row at the stream's end)."""
         d = self.model.detector
+        i, name, elapsed = self._phase_at(g)
+        starts = [s for _, s in self.phases]
+        scores = self._signal_scores(g, features, last)
+        min_p = d.config.mismatch_min_probability
+        signals = (*d.signals, MISMATCH)
+        thresholds = np.append(d.threshold_of(name), min_p)
+        normalised = np.append(np.asarray(scores) / thresholds[:-1], self._mismatch(g, min_p))
+        combined = float(np.nan_to_num(normalised.max(), posinf=1e6))
+        names = [n for n, _ in self.phases[: i + 1]]
+        tick = Tick(g, name, elapsed, self.reader.vector(features, names, starts[: i + 1], g))
+        rename = self._keep(tick) or last
+        if self.alarm_time is None:
+            rename = self._watch(g, combined, normalised) or rename
+        verdict = Verdict(
+            time=g,
+            phase=name,
+            score=combined,
+            signals={s: float(v) for s, v in zip(signals, normalised, strict=True)},
+            thresholds={s: float(v) for s, v in zip(signals, thresholds, strict=True)},
+            alarm=self.alarm_time is not None,
+            alarm_time=self.alarm_time,
+            onset=self.onset,
+        )
+        return self._named(verdict, rename)
+
+    def _phase_at(self, g: float) -> tuple[int, str, float]:
+        """Index, name and elapsed time of the sub-task running at `g` (-1, '', 0.0: none yet)."""
         starts = [s for _, s in self.phases]
         i = int(np.searchsorted(starts, g, side="right")) - 1
         name = self.phases[i][0] if i >= 0 else ""
         elapsed = g - self.phases[i][1] if i >= 0 else 0.0
+        return i, name, elapsed
+
+    def _signal_scores(self, g: float, features: np.ndarray, last: bool) -> list[float]:
+        """The detector's signals at `g`, in its units and capped (0 before the first event);
+        at the `last` row the running sub-task's duration counts as ended."""
+        d = self.model.detector
+        i, name, elapsed = self._phase_at(g)
+        starts = [s for _, s in self.phases]
         scores = []
         for s in d.signals:
             if s == "wrench" and d.models.neighbours is not None:
@@ -169,49 +205,51 @@ class VerifierSession:
                 scores.append(min(v, SCORE_CAP))
             else:
                 raise ValueError(f"signal {s!r} is not in the verifier model")
-        min_p = d.config.mismatch_min_probability
-        mismatch = max(
+        return scores
+
+    def _mismatch(self, g: float, min_p: float) -> float:
+        """The mismatch signal at `g`: the strongest contradiction so far over `min_p`."""
+        return max(
             (c.probability / min_p for c in self.contradictions if c.time <= g + 1e-9),
             default=0.0,
         )
-        signals = (*d.signals, MISMATCH)
-        thresholds = np.append(d.threshold_of(name), min_p)
-        normalised = np.append(np.asarray(scores) / thresholds[:-1], mismatch)
-        combined = float(np.nan_to_num(normalised.max(), posinf=1e6))
-        names = [n for n, _ in self.phases[: i + 1]]
-        tick = Tick(g, name, elapsed, self.reader.vector(features, names, starts[: i + 1], g))
-        rename = last
+
+    def _keep(self, tick: Tick) -> bool:
+        """Keep `tick` for the characterisation: as evidence after the alarm (whether a span
+        closed, so the class is named again), in the bounded history before it."""
         if self.evidence is not None:
             now = self.reader.now(tick, self.evidence.onset)
-            rename = self.evidence.add(tick.time, tick.vector, now) or rename
-        elif self.alarm_time is None:
+            return self.evidence.add(tick.time, tick.vector, now)
+        if self.alarm_time is None:
             self.history.append(tick)
             if len(self.history) > HISTORY_TICKS:
                 del self.history[: len(self.history) - HISTORY_TICKS]
-        if self.alarm_time is None:
-            if self._excursion is None or self._prev_below:
-                self._excursion = g  # a tick below onset_fraction ended the previous excursion
-            if combined > 1.0:
-                self.alarm_time = g
-                self.onset = self._excursion
-                if int(np.nanargmax(np.nan_to_num(normalised, posinf=1e6))) == len(signals) - 1:
-                    # raised by the mismatch: the evidence is the contradicted sub-task
-                    start = mismatch_onset(self.contradictions, g, min_p)
-                    if start is not None:  # 0.0 is a start (the first sub-task's)
-                        self.onset = start
-                self._start_evidence(self.onset)
-                rename = True
-            self._prev_below = combined < d.config.onset_fraction
-        verdict = Verdict(
-            time=g,
-            phase=name,
-            score=combined,
-            signals={s: float(v) for s, v in zip(signals, normalised, strict=True)},
-            thresholds={s: float(v) for s, v in zip(signals, thresholds, strict=True)},
-            alarm=self.alarm_time is not None,
-            alarm_time=self.alarm_time,
-            onset=self.onset,
-        )
+        return False
+
+    def _watch(self, g: float, combined: float, normalised: np.ndarray) -> bool:
+        """Before the alarm: track the excursion (the onset estimate) and raise the alarm once
+        the combined score passes 1; whether it was raised at this tick."""
+        raised = False
+        if self._excursion is None or self._prev_below:
+            self._excursion = g  # a tick below onset_fraction ended the previous excursion
+        if combined > 1.0:
+            self.alarm_time = g
+            self.onset = self._excursion
+            if int(np.nanargmax(np.nan_to_num(normalised, posinf=1e6))) == len(normalised) - 1:
+                # raised by the mismatch: the evidence is the contradicted sub-task
+                start = mismatch_onset(
+                    self.contradictions, g, self.model.detector.config.mismatch_min_probability
+                )
+                if start is not None:  # 0.0 is a start (the first sub-task's)
+                    self.onset = start
+            self._start_evidence(self.onset)
+            raised = True
+        self._prev_below = combined < self.model.detector.config.onset_fraction
+        return raised
+
+    def _named(self, verdict: Verdict, rename: bool) -> Verdict:
+        """`verdict` with the characteriser's naming once the evidence runs, named again when
+        `rename` (a span closed, the alarm, the stream's end)."""
         ch = self.model.characteriser
         if self.evidence is None or ch is None:
             return verdict
