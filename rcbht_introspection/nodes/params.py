@@ -256,6 +256,20 @@ def _check(cond: bool, field_name: str, message: str, path: Path | None) -> None
 def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
     """Checks beyond the field types (from_mapping checks those, Literal choices included);
     InputError names the parameter."""
+    _check_common(cfg, path)
+    if isinstance(cfg, SegmenterConfig | VerifierConfig):
+        _check_wrench_intake(cfg, path)
+    if isinstance(cfg, VerifierConfig):
+        _check_verifier(cfg, path)
+    if isinstance(cfg, SegmenterConfig):
+        _check_segmenter(cfg, path)
+    if isinstance(cfg, ClassifierConfig):
+        _check_classifier(cfg, path)
+    return cfg
+
+
+def _check_common(cfg: NodeConfig, path: Path | None) -> None:
+    """The parameters every node has: arms, QoS depth, topic names."""
     arms = cfg.arms
     _check(1 <= len(arms) <= 2, "arms", f"expected one or two arms, got {list(arms)}", path)
     _check(
@@ -276,81 +290,94 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
                 f"not a valid ROS topic name: {value!r}",
                 path,
             )
-    if isinstance(cfg, SegmenterConfig | VerifierConfig):
-        _check(
-            len(cfg.wrench_topics) == len(arms),
-            "wrench_topics",
-            f"expected one topic per arm ({len(arms)}), got {len(cfg.wrench_topics)}",
-            path,
-        )
-        _check(bool(cfg.phase_topic), "phase_topic", "must not be empty", path)
-        _check(
-            0 < cfg.event_hold_s <= 10,
-            "event_hold_s",
-            f"must be in (0, 10], got {cfg.event_hold_s}",
-            path,
-        )
-        _check(
-            cfg.event_hold_s <= cfg.event_max_hold_s <= 600,
-            "event_max_hold_s",
-            f"must be in [event_hold_s, 600], got {cfg.event_max_hold_s}",
-            path,
-        )
-        for name in ("taxonomy_config_file", "stream_config_file", "task_file"):
-            value = getattr(cfg, name, "")
-            _check(not value or Path(value).is_file(), name, f"no such file: {value}", path)
-    if isinstance(cfg, VerifierConfig):
-        _check(
-            0 <= cfg.publish_rate_hz <= 1000,
-            "publish_rate_hz",
-            f"must be 0..1000, got {cfg.publish_rate_hz}",
-            path,
-        )
-        _check(bool(cfg.health_topic), "health_topic", "must not be empty", path)
-    if isinstance(cfg, SegmenterConfig):
-        _check(
-            len(cfg.pose_topics) in (0, len(arms)),
-            "pose_topics",
-            f"expected none or one topic per arm ({len(arms)}), got {len(cfg.pose_topics)}",
-            path,
-        )
-        _check(
-            bool(cfg.pose_topics) == cfg.intake.compensates_gravity,
-            "pose_topics",
-            "gravity compensation needs both intake.tool_mass_kg > 0 and a pose topic per arm"
-            f" (tool_mass_kg {cfg.intake.tool_mass_kg}, pose_topics {list(cfg.pose_topics)})",
-            path,
-        )
-        try:
-            check_intake(cfg.intake)
-        except InputError as exc:
-            raise InputError(exc.message, path=path, field=f"intake.{exc.field}") from None
-    if isinstance(cfg, ClassifierConfig):
-        _check(cfg.window_s > 0, "window_s", f"must be > 0, got {cfg.window_s}", path)
-        _check(
-            0 <= cfg.publish_rate_hz <= 1000,
-            "publish_rate_hz",
-            f"must be 0..1000, got {cfg.publish_rate_hz}",
-            path,
-        )
-        try:
-            check_task_state(cfg.state)
-        except InputError as exc:
-            raise InputError(exc.message, path=path, field=f"state.{exc.field}") from None
-        _check(bool(cfg.state_topic), "state_topic", "must not be empty", path)
-        _check(
-            0 <= cfg.teach_history_s <= 3600,
-            "teach_history_s",
-            f"must be in [0, 3600], got {cfg.teach_history_s}",
-            path,
-        )
-        _check(
-            not cfg.teach_config_file or Path(cfg.teach_config_file).is_file(),
-            "teach_config_file",
-            f"no such file: {cfg.teach_config_file}",
-            path,
-        )
-    return cfg
+
+
+def _check_wrench_intake(cfg: SegmenterConfig | VerifierConfig, path: Path | None) -> None:
+    """The nodes that read the robot's wrench and sub-task events: topics, event holds, files."""
+    arms = cfg.arms
+    _check(
+        len(cfg.wrench_topics) == len(arms),
+        "wrench_topics",
+        f"expected one topic per arm ({len(arms)}), got {len(cfg.wrench_topics)}",
+        path,
+    )
+    _check(bool(cfg.phase_topic), "phase_topic", "must not be empty", path)
+    _check(
+        0 < cfg.event_hold_s <= 10,
+        "event_hold_s",
+        f"must be in (0, 10], got {cfg.event_hold_s}",
+        path,
+    )
+    _check(
+        cfg.event_hold_s <= cfg.event_max_hold_s <= 600,
+        "event_max_hold_s",
+        f"must be in [event_hold_s, 600], got {cfg.event_max_hold_s}",
+        path,
+    )
+    for name in ("taxonomy_config_file", "stream_config_file", "task_file"):
+        value = getattr(cfg, name, "")
+        _check(not value or Path(value).is_file(), name, f"no such file: {value}", path)
+
+
+def _check_verifier(cfg: VerifierConfig, path: Path | None) -> None:
+    """verifier_node's own parameters: verdict rate, health topic."""
+    _check(
+        0 <= cfg.publish_rate_hz <= 1000,
+        "publish_rate_hz",
+        f"must be 0..1000, got {cfg.publish_rate_hz}",
+        path,
+    )
+    _check(bool(cfg.health_topic), "health_topic", "must not be empty", path)
+
+
+def _check_segmenter(cfg: SegmenterConfig, path: Path | None) -> None:
+    """segmenter_node's own parameters: pose topics (gravity compensation), the intake."""
+    arms = cfg.arms
+    _check(
+        len(cfg.pose_topics) in (0, len(arms)),
+        "pose_topics",
+        f"expected none or one topic per arm ({len(arms)}), got {len(cfg.pose_topics)}",
+        path,
+    )
+    _check(
+        bool(cfg.pose_topics) == cfg.intake.compensates_gravity,
+        "pose_topics",
+        "gravity compensation needs both intake.tool_mass_kg > 0 and a pose topic per arm"
+        f" (tool_mass_kg {cfg.intake.tool_mass_kg}, pose_topics {list(cfg.pose_topics)})",
+        path,
+    )
+    try:
+        check_intake(cfg.intake)
+    except InputError as exc:
+        raise InputError(exc.message, path=path, field=f"intake.{exc.field}") from None
+
+
+def _check_classifier(cfg: ClassifierConfig, path: Path | None) -> None:
+    """classifier_node's own parameters: window, rate, task state, teaching."""
+    _check(cfg.window_s > 0, "window_s", f"must be > 0, got {cfg.window_s}", path)
+    _check(
+        0 <= cfg.publish_rate_hz <= 1000,
+        "publish_rate_hz",
+        f"must be 0..1000, got {cfg.publish_rate_hz}",
+        path,
+    )
+    try:
+        check_task_state(cfg.state)
+    except InputError as exc:
+        raise InputError(exc.message, path=path, field=f"state.{exc.field}") from None
+    _check(bool(cfg.state_topic), "state_topic", "must not be empty", path)
+    _check(
+        0 <= cfg.teach_history_s <= 3600,
+        "teach_history_s",
+        f"must be in [0, 3600], got {cfg.teach_history_s}",
+        path,
+    )
+    _check(
+        not cfg.teach_config_file or Path(cfg.teach_config_file).is_file(),
+        "teach_config_file",
+        f"no such file: {cfg.teach_config_file}",
+        path,
+    )
 
 
 def config_from_parameters(
