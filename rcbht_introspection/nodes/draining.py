@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 from typing import Any, Protocol, runtime_checkable
 
 from rclpy.callback_groups import CallbackGroup
+from rclpy.context import Context
 from rclpy.executors import Executor, TimeoutException
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
@@ -111,6 +112,41 @@ def _entities(node: Node) -> tuple[tuple[Subscription, ...], tuple[Timer, ...]]:
     return subs, tuple(node.timers)
 
 
+def _hold(
+    handles: contextlib.ExitStack[bool | None],
+    entities: tuple[tuple[Subscription, ...], tuple[Timer, ...]],
+    context: Context,
+) -> Any:
+    """Hold the handles of `entities` (releasing those held so far) and make a wait set sized
+    for them: rclpy's WaitSet needs its entities' handles held while it waits on them."""
+    handles.close()
+    subs, timers = entities
+    for sub in subs:
+        handles.enter_context(sub.handle)
+    for timer in timers:
+        handles.enter_context(timer.handle)
+    return _rclpy.WaitSet(len(subs), 0, len(timers), 0, 0, 0, context.handle)
+
+
+def _wait(
+    wait_set: Any,
+    entities: tuple[tuple[Subscription, ...], tuple[Timer, ...]],
+    stop: StopSignal,
+    timeout_ns: int,
+) -> None:
+    """Wait up to `timeout_ns` for a message on the drained subscriptions or a due timer."""
+    subs, timers = entities
+    wait_set.clear_entities()
+    for sub in subs:
+        wait_set.add_subscription(sub.handle)
+    for timer in timers:
+        wait_set.add_timer(timer.handle)
+    if subs or timers:
+        wait_set.wait(timeout_ns)
+    else:  # rcl refuses an empty wait set
+        stop.wait(HOUSEKEEPING_S)
+
+
 def spin_draining(executor: Executor, node: Node, stop: StopSignal) -> None:
     """Spin `node` until `stop` is requested or the context shuts down; drain on each wake-up."""
     context = executor.context
@@ -127,25 +163,11 @@ def spin_draining(executor: Executor, node: Node, stop: StopSignal) -> None:
             if now_entities != entities:
                 # activate/deactivate created or destroyed subscriptions: a new wait set; the
                 # handles held so far are released (a destroyed entity goes away now)
-                handles.close()
                 entities = now_entities
-                subs, timers = entities
-                for sub in subs:
-                    handles.enter_context(sub.handle)
-                for timer in timers:
-                    handles.enter_context(timer.handle)
-                wait_set = _rclpy.WaitSet(len(subs), 0, len(timers), 0, 0, 0, context.handle)
+                wait_set = _hold(handles, entities, context)
             assert wait_set is not None
             subs, timers = entities
-            wait_set.clear_entities()
-            for sub in subs:
-                wait_set.add_subscription(sub.handle)
-            for timer in timers:
-                wait_set.add_timer(timer.handle)
-            if subs or timers:
-                wait_set.wait(timeout_ns)
-            else:  # rcl refuses an empty wait set
-                stop.wait(HOUSEKEEPING_S)
+            _wait(wait_set, entities, stop, timeout_ns)
             if stop.requested or not context.ok():
                 break
             if subs:
