@@ -33,6 +33,12 @@ if TYPE_CHECKING:
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the train and evaluate subcommands."""
+    _register_train(subparsers)
+    _register_evaluate(subparsers)
+
+
+def _register_train(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`rcbht train`: fit a sub-task classifier on trials and save it."""
     train = subparsers.add_parser("train", help="train a sub-task classifier and save the model")
     train.add_argument("inputs", nargs="+", type=Path, metavar="TRIAL_OR_DATASET_DIR")
     train.add_argument("--out", type=Path, required=True, metavar="MODEL")
@@ -54,6 +60,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     train.set_defaults(func=run_train)
 
+
+def _register_evaluate(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`rcbht evaluate`: the learning-curve or prequential evaluation of a classifier."""
     ev = subparsers.add_parser(
         "evaluate", help="learning-curve or prequential (online teaching) evaluation"
     )
@@ -74,6 +83,33 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="random splits (curve, default 20) or shuffled teaching orders besides the "
         "recording order (prequential, default 4)",
     )
+    _add_prequential_options(ev)
+    ev.add_argument(
+        "--validation-trials",
+        type=int,
+        default=None,
+        help="held-out trials (default: 10 of 46, 8 of 38, 6 of 20, else ~22%%)",
+    )
+    ev.add_argument("--trials", type=int, default=None, help="use only the first N trials")
+    ev.add_argument("--seed", type=int, default=0)
+    ev.add_argument(
+        "--n-estimators",
+        type=int,
+        default=None,
+        help="Mondrian trees (default 100; prequential: the teach config's)",
+    )
+    ev.add_argument(
+        "--no-variant", action="store_true", help="skip the variant without near-empty sub-tasks"
+    )
+    _add_live_scoring_options(ev)
+    ev.add_argument("--json", type=Path, default=None, metavar="OUT")
+    ev.add_argument("--plot", type=Path, default=None, metavar="OUT.png")
+    ev.add_argument("--no-progress", action="store_true")
+    ev.set_defaults(func=run_evaluate)
+
+
+def _add_prequential_options(ev: argparse.ArgumentParser) -> None:
+    """The options of the prequential protocol: held-out trials and the teach settings."""
     ev.add_argument(
         "--held-out",
         type=int,
@@ -96,23 +132,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         metavar="N",
         help="prequential: override the teach config's warmup_windows",
     )
-    ev.add_argument(
-        "--validation-trials",
-        type=int,
-        default=None,
-        help="held-out trials (default: 10 of 46, 8 of 38, 6 of 20, else ~22%%)",
-    )
-    ev.add_argument("--trials", type=int, default=None, help="use only the first N trials")
-    ev.add_argument("--seed", type=int, default=0)
-    ev.add_argument(
-        "--n-estimators",
-        type=int,
-        default=None,
-        help="Mondrian trees (default 100; prequential: the teach config's)",
-    )
-    ev.add_argument(
-        "--no-variant", action="store_true", help="skip the variant without near-empty sub-tasks"
-    )
+
+
+def _add_live_scoring_options(ev: argparse.ArgumentParser) -> None:
+    """The options that score (and train) on live windows: words final by the window's end."""
     ev.add_argument(
         "--live-augment",
         action="store_true",
@@ -131,10 +154,6 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="live_augment settings of the live windows, e.g. stream_profile: live "
         "(default config/live.yaml)",
     )
-    ev.add_argument("--json", type=Path, default=None, metavar="OUT")
-    ev.add_argument("--plot", type=Path, default=None, metavar="OUT.png")
-    ev.add_argument("--no-progress", action="store_true")
-    ev.set_defaults(func=run_evaluate)
 
 
 def _common(parser: argparse.ArgumentParser) -> None:

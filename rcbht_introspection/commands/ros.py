@@ -18,7 +18,16 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     """Add the `bag` and `replay-eval` subcommands."""
     bag = subparsers.add_parser("bag", help="convert, replay and record rosbag2 trial bags")
     sub = bag.add_subparsers(dest="bag_command", required=True, metavar="BAG_COMMAND")
+    _register_from_hiro(sub)
+    _register_replay(sub)
+    _register_record(sub)
+    _register_info(sub)
+    _register_import(sub)
+    _register_replay_eval(subparsers)
 
+
+def _register_from_hiro(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`rcbht bag from-hiro`: HIRO trial folders to trial bags."""
     p = sub.add_parser("from-hiro", help="HIRO trial folder(s) -> bag(s) (/wrench, /task_phase)")
     p.add_argument("trial_dir", type=Path, help="a trial folder or a dataset folder of trials")
     p.add_argument(
@@ -29,6 +38,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     p.set_defaults(func=cmd_from_hiro)
 
+
+def _register_replay(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`rcbht bag replay`: publish a bag with its recorded timing."""
     p = sub.add_parser("replay", help="publish a bag with its recorded timing (ros2 bag play)")
     p.add_argument("bag", type=Path)
     p.add_argument("--rate", type=float, default=1.0, help="playback speed factor (default 1)")
@@ -37,6 +49,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     p.set_defaults(func=cmd_replay)
 
+
+def _register_record(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`rcbht bag record`: record topics to a bag, raw."""
     p = sub.add_parser("record", help="record topics to a bag, raw (ros2 bag record)")
     p.add_argument("topics", nargs="+")
     p.add_argument("--out", type=Path, required=True, help="bag path (x.mcap / x.db3)")
@@ -44,12 +59,18 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("--wait", type=float, default=10.0, help="seconds to wait for the topics")
     p.set_defaults(func=cmd_record)
 
+
+def _register_info(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`rcbht bag info`: what a bag holds."""
     p = sub.add_parser("info", help="topics, types and message counts of a bag")
     p.add_argument("bag", type=Path)
     p.set_defaults(func=cmd_info)
 
-    _register_import(sub)
 
+def _register_replay_eval(
+    subparsers: argparse._SubParsersAction[argparse.ArgumentParser],
+) -> None:
+    """`rcbht replay-eval`: bags through the live nodes over real DDS, scored."""
     p = subparsers.add_parser(
         "replay-eval",
         help="replay bags through segmenter_node and classifier_node (and verifier_node) over real DDS and score them",
@@ -64,6 +85,23 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("--rate", type=float, default=1.0, help="playback speed factor")
     p.add_argument("--json", type=Path, default=None, help="write the scores here")
     p.add_argument("--mode", choices=get_args(BeliefMode), default="boundary")
+    _add_segmenter_options(p)
+    add_state_options(p)
+    p.add_argument("--timeline", action="store_true", help="print the /task_state timeline")
+    _add_teach_first_options(p)
+    p.add_argument(
+        "--verifier",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="verifier file (`rcbht verify-train`): run verifier_node too and report its alarms, "
+        "detection delays against the labelled onsets and false alarms on nominal runs",
+    )
+    p.set_defaults(func=cmd_replay_eval)
+
+
+def _add_segmenter_options(p: argparse.ArgumentParser) -> None:
+    """replay-eval's taxonomy and stream profile of segmenter_node."""
     p.add_argument(
         "--profile",
         default="",
@@ -83,8 +121,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="stream profile of the segmenter (causal: moment-axis words without waiting; "
         "live: every word final within finality_bound_s)",
     )
-    add_state_options(p)
-    p.add_argument("--timeline", action="store_true", help="print the /task_state timeline")
+
+
+def _add_teach_first_options(p: argparse.ArgumentParser) -> None:
+    """replay-eval's teaching run: a classifier without a model, taught the first bags."""
     p.add_argument(
         "--teach-first",
         type=int,
@@ -111,15 +151,6 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         default=None,
         help="with --teach-first: keep the taught model here (must not exist yet)",
     )
-    p.add_argument(
-        "--verifier",
-        type=Path,
-        default=None,
-        metavar="FILE",
-        help="verifier file (`rcbht verify-train`): run verifier_node too and report its alarms, "
-        "detection delays against the labelled onsets and false alarms on nominal runs",
-    )
-    p.set_defaults(func=cmd_replay_eval)
 
 
 IMPORT_HELP = """\
@@ -149,6 +180,7 @@ Example (the Baxter pick-and-place bags: tag 0 idle, then 1, 2, 5, 3, 4):
 
 
 def _register_import(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`rcbht bag import`: another robot's bags to trial bags."""
     p = sub.add_parser(
         "import",
         help="another robot's ROS 1 / rosbag2 bags -> trial bags",

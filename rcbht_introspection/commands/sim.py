@@ -15,6 +15,12 @@ TASK_CHOICES: tuple[str, ...] = ("snap-assembly", "peg-in-hole")
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the `sim` and `sim-report` subcommands."""
+    _register_sim(subparsers)
+    _register_sim_report(subparsers)
+
+
+def _register_sim(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`rcbht sim`: simulate a data set of a contact task."""
     p = subparsers.add_parser(
         "sim",
         help="simulate snap-assembly or peg-in-hole trials with MuJoCo",
@@ -58,6 +64,12 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="sensor output rate; must divide 1 kHz (default: the task's sensor, "
         "200 Hz snap-assembly as HIRO, 100 Hz peg-in-hole)",
     )
+    _add_output_options(p)
+    p.set_defaults(func=run_sim)
+
+
+def _add_output_options(p: argparse.ArgumentParser) -> None:
+    """Where and how `rcbht sim` writes the set, from which config, with what progress bar."""
     p.add_argument("--out", type=Path, required=True, metavar="DIR")
     p.add_argument("--format", choices=("hiro", "bag"), default="hiro", dest="fmt")
     p.add_argument(
@@ -72,8 +84,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         default="auto",
         help="progress bar (auto: on a terminal for more than 4 trials)",
     )
-    p.set_defaults(func=run_sim)
 
+
+def _register_sim_report(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`rcbht sim-report`: a simulated set's realism against the real HIRO set."""
     r = subparsers.add_parser(
         "sim-report",
         help="realism report: simulated vs real LLB label statistics",
