@@ -15,9 +15,14 @@ import importlib.util
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rcbht_introspection.commands.sim import TASK_CHOICES
 from rcbht_introspection.errors import InputError
+
+if TYPE_CHECKING:
+    from rcbht_introspection.io.trial import Trial
+    from rcbht_introspection.verify.model_file import VerifierModel
 
 PARTS: dict[str, tuple[str, str]] = {
     "rclpy": ("ROS 2 Jazzy runtime (rclpy)", "make setup installs the pinned ROS wheels"),
@@ -53,7 +58,8 @@ def _step(text: str) -> None:
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
-    from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
+    """Run the demo's steps in order (module docstring); 1, naming them, when parts are missing."""
+    from rcbht_introspection.io.hiro import shared_hiro
 
     missing = [f"{name} ({how})" for mod, (name, how) in PARTS.items() if not _have(mod)]
     use_sim = args.data in ("sim", "auto")
@@ -68,36 +74,56 @@ def cmd_demo(args: argparse.Namespace) -> int:
             print(f"  - {m}")
         return 1
 
-    from rcbht_introspection.io.bags import write_trial_bag
-    from rcbht_introspection.learn.data import load_trials
-    from rcbht_introspection.learn.live import live_training
-    from rcbht_introspection.learn.model_file import save_model
-    from rcbht_introspection.plots.timeline import plot_timelines
-    from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
-    from rcbht_introspection.replay.scoring import summary
-
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
     if use_sim:
-        from rcbht_introspection.sim.dataset import write_dataset
-
-        if args.held_out < 1 or args.trials - args.held_out < 2:
-            raise InputError("need --held-out >= 1 and at least 2 training trials", field="trials")
-        what = "one-arm" if args.task == "snap-assembly" else f"{args.task} one-arm"
-        _step(f"1. simulate {args.trials} {what} trials (seed {args.seed}) -> {out / 'sim'}")
-        folders = write_dataset(
-            out / "sim", args.trials, scenario="one-arm", seed=args.seed, task=args.task
-        )
-        train, held = folders[: -args.held_out], folders[-args.held_out :]
-        source = "simulator"
+        train, held, source = _simulated_set(args, out)
     else:
-        _step(f"1. the shared REAL HIRO trials in {hiro}")
         assert hiro is not None
-        folders = find_trials([hiro])
-        train = [f for f in folders if int(f.name.rsplit("-", 1)[1]) <= 40]
-        held = [f for f in folders if int(f.name.rsplit("-", 1)[1]) > 40]
-        source = "REAL HIRO (shared data)"
+        train, held, source = _shared_set(hiro)
+    model_path = _train_model(args, train, out)
+    bags, durations = _held_out_bags(held, out)
+    _replay(args, bags, model_path, out, source, durations)
+    if use_sim and args.task == "snap-assembly":
+        _verify_demo(args, out, model_path)
+    else:
+        print("(verification: the simulated snap assembly only; it has failure trials)")
+    print(f"scores: {out / 'replay_eval.json'}  ({time.monotonic() - started:.0f} s in all)")
+    return 0
+
+
+def _simulated_set(args: argparse.Namespace, out: Path) -> tuple[list[Path], list[Path], str]:
+    """Step 1 with the simulator: the training and held-out trial folders, and their source."""
+    from rcbht_introspection.sim.dataset import write_dataset
+
+    if args.held_out < 1 or args.trials - args.held_out < 2:
+        raise InputError("need --held-out >= 1 and at least 2 training trials", field="trials")
+    what = "one-arm" if args.task == "snap-assembly" else f"{args.task} one-arm"
+    _step(f"1. simulate {args.trials} {what} trials (seed {args.seed}) -> {out / 'sim'}")
+    folders = write_dataset(
+        out / "sim", args.trials, scenario="one-arm", seed=args.seed, task=args.task
+    )
+    return folders[: -args.held_out], folders[-args.held_out :], "simulator"
+
+
+def _shared_set(hiro: Path) -> tuple[list[Path], list[Path], str]:
+    """Step 1 with the shared REAL HIRO trials: 1-40 train, 41-46 are replayed."""
+    from rcbht_introspection.io.hiro import find_trials
+
+    _step(f"1. the shared REAL HIRO trials in {hiro}")
+    folders = find_trials([hiro])
+    train = [f for f in folders if int(f.name.rsplit("-", 1)[1]) <= 40]
+    held = [f for f in folders if int(f.name.rsplit("-", 1)[1]) > 40]
+    return train, held, "REAL HIRO (shared data)"
+
+
+def _train_model(args: argparse.Namespace, train: list[Path], out: Path) -> Path:
+    """Step 2: the sub-task model (SVM, with live windows) trained and saved in `out`."""
+    from rcbht_introspection.learn.data import load_trials
+    from rcbht_introspection.learn.live import live_training
+    from rcbht_introspection.learn.model_file import save_model
+
     _step(f"2. train an SVM on {len(train)} trials (plus live windows: config/live.yaml)")
     trials = load_trials(train, words="auto")
     model, n_live = live_training(
@@ -109,6 +135,14 @@ def cmd_demo(args: argparse.Namespace) -> int:
         f"   {model_path}: classes {model.classes_}, {n_samples} sub-task samples "
         f"+ {n_live} live windows"
     )
+    return model_path
+
+
+def _held_out_bags(held: list[Path], out: Path) -> tuple[list[Path], dict[str, float]]:
+    """Step 3: the held-out trials as bags, and each trial's duration (for the plot)."""
+    from rcbht_introspection.io.bags import write_trial_bag
+    from rcbht_introspection.io.hiro import read_trial
+
     _step(f"3. convert {len(held)} held-out trials to bags -> {out / 'bags'}")
     bags = []
     durations = {}
@@ -120,6 +154,23 @@ def cmd_demo(args: argparse.Namespace) -> int:
         write_trial_bag(trial, bag)
         bags.append(bag)
         durations[trial.name] = float(trial.time[-1] - trial.time[0])
+    return bags, durations
+
+
+def _replay(
+    args: argparse.Namespace,
+    bags: list[Path],
+    model_path: Path,
+    out: Path,
+    source: str,
+    durations: dict[str, float],
+) -> None:
+    """Steps 4 and 5: replay the bags through the nodes, save the scores, print and plot the
+    /task_state timeline."""
+    from rcbht_introspection.plots.timeline import plot_timelines
+    from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
+    from rcbht_introspection.replay.scoring import summary
+
     _step(
         f"4. replay at {args.rate}x through segmenter_node + classifier_node "
         "(separate processes, real DDS, localhost only)"
@@ -131,12 +182,6 @@ def cmd_demo(args: argparse.Namespace) -> int:
     print(summary(result, timeline=True))
     plot = plot_timelines(result, out / "task_state_timeline.png", durations)
     print(f"plot: {plot}")
-    if use_sim and args.task == "snap-assembly":
-        _verify_demo(args, out, model_path)
-    else:
-        print("(verification: the simulated snap assembly only; it has failure trials)")
-    print(f"scores: {out / 'replay_eval.json'}  ({time.monotonic() - started:.0f} s in all)")
-    return 0
 
 
 DEMO_FAILURES = ("deviation_x-", "jamming")
@@ -149,19 +194,39 @@ def _verify_demo(args: argparse.Namespace, out: Path, model_path: Path) -> None:
     """Train a verifier on simulated trials of the repeated-program cell (config/sim_cell.yaml:
     a success spread narrow enough for a slipped part to show at its first contact), then replay
     one nominal and one failing held-out cell trial through the nodes with verifier_node."""
-    import numpy as np
-
-    from rcbht_introspection.config_files import config_path
     from rcbht_introspection.io.bags import write_trial_bag
-    from rcbht_introspection.plots.failure_timeline import plot_failure_timeline
     from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
     from rcbht_introspection.replay.verify_scoring import verifier_summary
+
+    verifier, verifier_path, replayed = _train_cell_verifier(args, out)
+    _step("7. replay one nominal and one failing held-out trial with verifier_node")
+    bags = []
+    for trial in replayed:
+        bag = out / "bags_verify" / f"{trial.name}.mcap"
+        bag.unlink(missing_ok=True)
+        write_trial_bag(trial, bag)
+        bags.append(bag)
+    result = replay_eval(
+        bags,
+        model_path,
+        ReplayEvalOptions(rate=args.rate, log_dir=out / "logs_verify", verifier_file=verifier_path),
+    )
+    (out / "verify_eval.json").write_text(json.dumps(result["verifier"], indent=2))
+    print(verifier_summary(result["verifier"]))
+    for trial in replayed:
+        print(f"plot: {_plot_verdicts(trial, verifier, out)}")
+
+
+def _train_cell_verifier(
+    args: argparse.Namespace, out: Path
+) -> tuple[VerifierModel, Path, tuple[Trial, Trial]]:
+    """Step 6: simulate the cell's trials, train and save the verifier; with the held-out
+    nominal and failing trials it has not seen."""
+    from rcbht_introspection.config_files import config_path
     from rcbht_introspection.sim import load_sim_config, simulate_trial
-    from rcbht_introspection.taxonomy.batch import label_trial
     from rcbht_introspection.verify.config import load_verify_config
     from rcbht_introspection.verify.labels import label_of
     from rcbht_introspection.verify.model_file import save_verifier
-    from rcbht_introspection.verify.stream import offline_verdicts
     from rcbht_introspection.verify.train import train_verifier
 
     sim = load_sim_config(config_path("sim_cell.yaml"))
@@ -184,34 +249,30 @@ def _verify_demo(args: argparse.Namespace, out: Path, model_path: Path) -> None:
     verifier = train_verifier(trials, {t.name: label_of(t) for t in trials}, load_verify_config())
     verifier_path = save_verifier(verifier, out / "verifier.npz")
     print(f"   {verifier_path}: {json.dumps(verifier.trained_on)}")
-    _step("7. replay one nominal and one failing held-out trial with verifier_node")
-    bags = []
-    replayed = (nominal, failing)
-    for trial in replayed:
-        bag = out / "bags_verify" / f"{trial.name}.mcap"
-        bag.unlink(missing_ok=True)
-        write_trial_bag(trial, bag)
-        bags.append(bag)
-    result = replay_eval(
-        bags,
-        model_path,
-        ReplayEvalOptions(rate=args.rate, log_dir=out / "logs_verify", verifier_file=verifier_path),
+    return verifier, verifier_path, (nominal, failing)
+
+
+def _plot_verdicts(trial: Trial, verifier: VerifierModel, out: Path) -> Path:
+    """The failure timeline of `trial`: the verdicts verifier_node published for it, tick for
+    tick (computed offline), against its label."""
+    import numpy as np
+
+    from rcbht_introspection.plots.failure_timeline import plot_failure_timeline
+    from rcbht_introspection.taxonomy.batch import label_trial
+    from rcbht_introspection.verify.labels import label_of
+    from rcbht_introspection.verify.stream import offline_verdicts
+
+    verdicts = offline_verdicts(trial, verifier)  # what verifier_node published, tick for tick
+    label = label_of(trial)
+    return plot_failure_timeline(
+        trial,
+        label_trial(trial),
+        np.array([v.time for v in verdicts]),
+        np.array([v.score for v in verdicts]),
+        verdicts[-1].alarm_time if verdicts else None,
+        verdicts[-1].onset if verdicts else None,
+        [(v.time, v.failure_class) for v in verdicts if v.alarm][::10],
+        label.failure_class or "success",
+        label.onset,
+        out / f"failure_timeline_{trial.name}.png",
     )
-    (out / "verify_eval.json").write_text(json.dumps(result["verifier"], indent=2))
-    print(verifier_summary(result["verifier"]))
-    for trial in replayed:
-        verdicts = offline_verdicts(trial, verifier)  # what verifier_node published, tick for tick
-        label = label_of(trial)
-        plot = plot_failure_timeline(
-            trial,
-            label_trial(trial),
-            np.array([v.time for v in verdicts]),
-            np.array([v.score for v in verdicts]),
-            verdicts[-1].alarm_time if verdicts else None,
-            verdicts[-1].onset if verdicts else None,
-            [(v.time, v.failure_class) for v in verdicts if v.alarm][::10],
-            label.failure_class or "success",
-            label.onset,
-            out / f"failure_timeline_{trial.name}.png",
-        )
-        print(f"plot: {plot}")
