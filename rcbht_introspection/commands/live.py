@@ -21,7 +21,12 @@ from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
 from rcbht_introspection.live import MODES, BeliefMode
 
 if TYPE_CHECKING:
+    from rcbht_introspection.io.trial import Trial
+    from rcbht_introspection.learn.live import LiveAugmentConfig
     from rcbht_introspection.learn.models import SubtaskModel
+    from rcbht_introspection.live.replay import StreamedTrial
+    from rcbht_introspection.live.state import TaskStateConfig
+    from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -53,24 +58,11 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 
 def run_live_eval(args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from rcbht_introspection.grammar.encoding.cache import SampleCache
-    from rcbht_introspection.learn.data import find_inputs, load_trials, read_any_trial
-    from rcbht_introspection.learn.live import (
-        load_live_config,
-        stream_factory,
-        train_live_model,
-        trial_live_samples,
-    )
-    from rcbht_introspection.learn.model_file import load_model, profile_mismatch
-    from rcbht_introspection.live.replay import (
-        commanded_phase,
-        node_stream,
-        replay_beliefs,
-        replay_summary,
-    )
-    from rcbht_introspection.taxonomy.config import default_config
+    """Replay the held-out trials through the nodes' code with each model and belief mode;
+    print a line per run and write the JSON."""
+    from rcbht_introspection.learn.data import find_inputs, read_any_trial
+    from rcbht_introspection.learn.live import load_live_config, stream_factory
+    from rcbht_introspection.live.replay import node_stream
 
     paths = find_inputs(args.inputs)
     if not 1 <= args.held_out < len(paths) + (args.model is not None):
@@ -80,25 +72,7 @@ def run_live_eval(args: argparse.Namespace) -> int:
     state = state_from_args(args)
     taxonomy = taxonomy_from_args(args)
     factory = stream_factory(config, taxonomy)
-    models: dict[str, SubtaskModel] = {}
-    if args.model is not None:
-        models["model"] = load_model(args.model)
-        mismatch = profile_mismatch(models["model"], taxonomy or default_config())
-        if mismatch:
-            raise InputError(mismatch, args.model)
-    else:
-        trials = load_trials(train_paths, args.words, taxonomy)
-        samples = [s for t in trials for s in t.samples]
-        live = [s for v in trial_live_samples(train_paths, config, factory).values() for s in v]
-        kw = dict(
-            classifier=args.classifier,
-            encoding=args.encoding,
-            random_state=args.seed,
-            cache=SampleCache(),  # all models encode the same samples
-        )
-        models["before"] = train_live_model(samples, live, None, taxonomy, **kw)
-        models["after"] = train_live_model(samples, live, config, taxonomy, **kw)
-        print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{len(live)} live")
+    models = _live_eval_models(args, train_paths, config, taxonomy, factory)
     held = [read_any_trial(p) for p in held_paths]
     # the held-out trials one after another through the nodes' code, as bags played in turn
     streamed = node_stream(held, factory)
@@ -110,14 +84,7 @@ def run_live_eval(args: argparse.Namespace) -> int:
         "state_rule": dataclasses.asdict(state),
         "results": {},
     }
-    phases = [commanded_phase(s, t) for s, t in zip(streamed, held, strict=True)]
-    weights = [float(t.time[-1] - t.time[0]) for t in held]
-    n_subtasks = sum(len(t.subtask_bounds()) for t in held)
-    result["commanded_phase"] = {
-        "time_accuracy": round(float(np.average([a for a, _ in phases], weights=weights)), 4),
-        "state_changes": sum(n for _, n in phases),
-        "state_changes_per_boundary": round(sum(n for _, n in phases) / max(1, n_subtasks), 3),
-    }
+    result["commanded_phase"] = _commanded_phase_baseline(streamed, held)
     print(
         f"baseline without words (/task_state = the commanded sub-task event): time_accuracy "
         f"{result['commanded_phase']['time_accuracy']}  state changes "
@@ -125,31 +92,102 @@ def run_live_eval(args: argparse.Namespace) -> int:
     )
     for name, model in models.items():
         for mode in modes:
-            began = time.perf_counter()
-            reps = replay_beliefs(
-                streamed, model, mode, args.window_s, trials=held, state_config=state
-            )
-            elapsed = time.perf_counter() - began
-            summary = replay_summary(reps, held)
-            # classification cost per belief update (window split + encoding + predict): the
-            # classifier node pays this once per word batch
-            summary["ms_per_belief"] = round(
-                1000 * elapsed / max(1, sum(r.n_beliefs for r in reps)), 3
-            )
-            summary["timelines"] = {r.name: [(round(t, 3), s) for t, s in r.changes] for r in reps}
+            summary = _replay_scored(args, streamed, held, model, mode, state)
             result["results"][f"{name}/{mode}"] = summary
-            raw, ece = summary["without_state_rule"], summary["expected_calibration_error"]
-            print(
-                f"{name:7s} {mode:8s} time_accuracy {summary['time_accuracy']}"
-                f"  state changes {summary['state_changes']}"
-                f" ({summary['state_changes_per_boundary']} per boundary)"
-                f"  without state rule {raw['time_accuracy']} / {raw['state_changes']}"
-                f"  subtask_accuracy {summary['subtask_accuracy']}"
-                f"  ECE final {ece['final']} running {ece['running']}"
-                f"  ms/belief {summary['ms_per_belief']}"
-                f"  per trial {summary['per_trial']}"
-            )
+            _print_replay_line(name, mode, summary)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(result, indent=2))
     return 0
+
+
+def _live_eval_models(
+    args: argparse.Namespace,
+    train_paths: list[Path],
+    config: LiveAugmentConfig,
+    taxonomy: TaxonomyConfig | None,
+    factory: Any,
+) -> dict[str, SubtaskModel]:
+    """The models to compare: the --model given, or one trained without and one with live
+    windows ("before" and "after") on the training trials."""
+    from rcbht_introspection.grammar.encoding.cache import SampleCache
+    from rcbht_introspection.learn.data import load_trials
+    from rcbht_introspection.learn.live import train_live_model, trial_live_samples
+    from rcbht_introspection.learn.model_file import load_model, profile_mismatch
+    from rcbht_introspection.taxonomy.config import default_config
+
+    models: dict[str, SubtaskModel] = {}
+    if args.model is not None:
+        models["model"] = load_model(args.model)
+        mismatch = profile_mismatch(models["model"], taxonomy or default_config())
+        if mismatch:
+            raise InputError(mismatch, args.model)
+        return models
+    trials = load_trials(train_paths, args.words, taxonomy)
+    samples = [s for t in trials for s in t.samples]
+    live = [s for v in trial_live_samples(train_paths, config, factory).values() for s in v]
+    kw = dict(
+        classifier=args.classifier,
+        encoding=args.encoding,
+        random_state=args.seed,
+        cache=SampleCache(),  # all models encode the same samples
+    )
+    models["before"] = train_live_model(samples, live, None, taxonomy, **kw)
+    models["after"] = train_live_model(samples, live, config, taxonomy, **kw)
+    print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{len(live)} live")
+    return models
+
+
+def _commanded_phase_baseline(
+    streamed: list[StreamedTrial], held: list[Trial]
+) -> dict[str, float | int]:
+    """The baseline without words: /task_state is the commanded sub-task event."""
+    import numpy as np
+
+    from rcbht_introspection.live.replay import commanded_phase
+
+    phases = [commanded_phase(s, t) for s, t in zip(streamed, held, strict=True)]
+    weights = [float(t.time[-1] - t.time[0]) for t in held]
+    n_subtasks = sum(len(t.subtask_bounds()) for t in held)
+    return {
+        "time_accuracy": round(float(np.average([a for a, _ in phases], weights=weights)), 4),
+        "state_changes": sum(n for _, n in phases),
+        "state_changes_per_boundary": round(sum(n for _, n in phases) / max(1, n_subtasks), 3),
+    }
+
+
+def _replay_scored(
+    args: argparse.Namespace,
+    streamed: list[StreamedTrial],
+    held: list[Trial],
+    model: SubtaskModel,
+    mode: BeliefMode,
+    state: TaskStateConfig,
+) -> dict[str, Any]:
+    """The replay of `model` in `mode` scored, with its cost per belief and its timelines."""
+    from rcbht_introspection.live.replay import replay_beliefs, replay_summary
+
+    began = time.perf_counter()
+    reps = replay_beliefs(streamed, model, mode, args.window_s, trials=held, state_config=state)
+    elapsed = time.perf_counter() - began
+    summary = replay_summary(reps, held)
+    # classification cost per belief update (window split + encoding + predict): the
+    # classifier node pays this once per word batch
+    summary["ms_per_belief"] = round(1000 * elapsed / max(1, sum(r.n_beliefs for r in reps)), 3)
+    summary["timelines"] = {r.name: [(round(t, 3), s) for t, s in r.changes] for r in reps}
+    return summary
+
+
+def _print_replay_line(name: str, mode: str, summary: dict[str, Any]) -> None:
+    """One line per (model, mode): the scores with and without the state rule, the cost."""
+    raw, ece = summary["without_state_rule"], summary["expected_calibration_error"]
+    print(
+        f"{name:7s} {mode:8s} time_accuracy {summary['time_accuracy']}"
+        f"  state changes {summary['state_changes']}"
+        f" ({summary['state_changes_per_boundary']} per boundary)"
+        f"  without state rule {raw['time_accuracy']} / {raw['state_changes']}"
+        f"  subtask_accuracy {summary['subtask_accuracy']}"
+        f"  ECE final {ece['final']} running {ece['running']}"
+        f"  ms/belief {summary['ms_per_belief']}"
+        f"  per trial {summary['per_trial']}"
+    )
