@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Literal, get_args
 
@@ -18,11 +19,13 @@ from tqdm import tqdm
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import write_trial
+from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim.config import FailureType, SimConfig
 from rcbht_introspection.sim.failures import failure_classes
 from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
 from rcbht_introspection.sim.sessions import draw_sessions, in_session, session_of
 from rcbht_introspection.sim.tasks import (
+    SimTask,
     SimTaskName,
     TaskConfig,
     check_request,
@@ -95,6 +98,38 @@ def find_trials_in(out: Path) -> list[Path]:
     )
 
 
+def _check_set(fmt: str, n_trials: int, scenario: str, sim_task: SimTask, failures: bool) -> None:
+    """One-line errors for a request the simulator cannot write: format, count, scenario."""
+    if fmt not in FORMATS:
+        raise InputError(f"unknown format {fmt!r} (known: {', '.join(FORMATS)})", field="format")
+    if n_trials < 1:
+        raise InputError(f"need at least one trial, got {n_trials}", field="trials")
+    get_scenario(scenario)
+    check_request(sim_task, scenario, failures)
+
+
+def _write_trial(trial: Trial, out: Path, name: str, fmt: DatasetFormat, sim_task: SimTask) -> Path:
+    """Write one trial: a rosbag2 file, or a HIRO folder with its meta.json."""
+    if fmt == "bag":
+        path = out / f"{name}.mcap"
+        write_trial_bag(trial, path)
+        return path
+    path = write_trial(trial, out / name, task=sim_task.task)
+    (path / "meta.json").write_text(json.dumps(trial.metadata, indent=1) + "\n")
+    return path
+
+
+def _index_entry(name: str, trial: Trial) -> dict[str, object]:
+    """A trial's entry in sim_meta.json: name, outcome, switch times, end and its metadata."""
+    return {
+        "name": name,
+        "outcome": trial.outcome,
+        "state_times": list(trial.state_times),
+        "end_time": trial.end_time,
+        **trial.metadata,
+    }
+
+
 def write_dataset(
     out_dir: Path | str,
     n_trials: int,
@@ -112,24 +147,18 @@ def write_dataset(
     """Simulate `n_trials` trials of `task` into `out_dir`; returns the written trial folders (or
     bag files). `rate_hz` None is the task's sensor rate (config sensor.rate_hz); `sessions` > 1
     splits the trials into recording sessions with a sensor bias and drift each (sim/sessions.py)."""
-    if fmt not in FORMATS:
-        raise InputError(f"unknown format {fmt!r} (known: {', '.join(FORMATS)})", field="format")
-    if n_trials < 1:
-        raise InputError(f"need at least one trial, got {n_trials}", field="trials")
-    get_scenario(scenario)
     sim_task = get_sim_task(task)
-    check_request(sim_task, scenario, failures)
+    _check_set(fmt, n_trials, scenario, sim_task, failures)
     config = config or sim_task.load_config(None)
     rate = config.sensor.rate_hz if rate_hz is None else rate_hz
     simulate = trial_simulator(sim_task, config, scenario, rate)
     days = draw_sessions(sessions, seed, config.sensor) if sessions > 1 else []
-    write_bag = write_trial_bag if fmt == "bag" else None
     out = Path(out_dir)
     _clear_previous_set(out)
     out.mkdir(parents=True, exist_ok=True)
     types = failure_classes(config.failures) if isinstance(config, SimConfig) else ()
     plan = trial_plan(n_trials, seed, failures, types)
-    items = enumerate(plan)
+    items: Iterable[tuple[int, tuple[int, FailureType | None]]] = enumerate(plan)
     if progress:
         items = tqdm(items, total=len(plan), desc="simulating", unit="trial")
     written: list[Path] = []
@@ -139,34 +168,9 @@ def write_dataset(
         trial = simulate(trial_seed, failure, name)
         if days:
             trial = in_session(trial, days[session_of(i, n_trials, sessions)])
-        if write_bag is not None:
-            path = out / f"{name}.mcap"
-            write_bag(trial, path)
-        else:
-            path = write_trial(trial, out / name, task=sim_task.task)
-            (path / "meta.json").write_text(json.dumps(trial.metadata, indent=1) + "\n")
-        written.append(path)
-        index.append(
-            {
-                "name": name,
-                "outcome": trial.outcome,
-                "state_times": list(trial.state_times),
-                "end_time": trial.end_time,
-                **trial.metadata,
-            }
-        )
-    (out / "sim_meta.json").write_text(
-        json.dumps(
-            {
-                "task": sim_task.name,
-                "scenario": scenario,
-                "seed": seed,
-                "rate_hz": rate,
-                "format": fmt,
-                "trials": index,
-            },
-            indent=1,
-        )
-        + "\n"
-    )
+        written.append(_write_trial(trial, out, name, fmt, sim_task))
+        index.append(_index_entry(name, trial))
+    meta: dict[str, object] = {"task": sim_task.name, "scenario": scenario, "seed": seed}
+    meta.update({"rate_hz": rate, "format": fmt, "trials": index})
+    (out / "sim_meta.json").write_text(json.dumps(meta, indent=1) + "\n")
     return written
