@@ -10,6 +10,7 @@ from pathlib import Path
 import matplotlib
 from matplotlib.figure import Figure  # no pyplot: no backend, no global figure state
 
+from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.taxonomy.words import AXES, Level, TrialWords
 
 BAND_LEVELS: tuple[Level, ...] = (Level.PRIMITIVE, Level.COMPOSITION, Level.BEHAVIOR)
@@ -22,7 +23,7 @@ def _colours(labels: tuple[str, ...]) -> dict[str, tuple[float, float, float, fl
     return {label: cmap(i % 10) for i, label in enumerate(labels)}
 
 
-def plot_trial(trial, words: TrialWords, out: Path, arm: str | None = None) -> Path:
+def plot_trial(trial: Trial, words: TrialWords, out: Path, arm: str | None = None) -> Path:
     """Draw six axes (signal + three label bands each) with sub-task boundaries into `out`."""
 
     arm = arm or (trial.arms[0] if trial.arms else "R")

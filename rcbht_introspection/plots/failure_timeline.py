@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure  # no pyplot: no backend, no global figure state
+from numpy.typing import NDArray
 
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.plots.timeline import PALETTE, subtask_colors
@@ -17,8 +18,8 @@ from rcbht_introspection.taxonomy.words import AXES, BEHAVIOR_LABELS, Level, Tri
 def plot_failure_timeline(
     trial: Trial,
     words: TrialWords,
-    times: np.ndarray,
-    score: np.ndarray,
+    times: NDArray[np.float64],
+    score: NDArray[np.float64],
     alarm: float | None,
     onset_estimate: float | None,
     classes_over_time: Sequence[tuple[float, str]],

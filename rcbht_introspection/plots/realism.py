@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure  # no pyplot: no backend, no global figure state
+from numpy.typing import NDArray
 
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.trial import SUBTASKS
@@ -56,11 +59,12 @@ def plot_variability(real: SetStats, sim: SetStats, path: Path) -> None:
     fig = Figure(figsize=(16, 4.2))
     a1, a2, a3 = fig.subplots(1, 3)
     positions = np.arange(len(SUBTASKS)) * 3.0
-    for ax, getter, title in (
+    panels: tuple[tuple[Axes, Callable[[SetStats, str], NDArray[np.float64]], str], ...] = (
         (a1, lambda s, st: s.durations(st), "sub-task duration (s)"),
         (a2, lambda s, st: s.magnitudes(st, "Fz"), "mean |Fz| per trial (N)"),
         (a3, lambda s, st: s.counts(st, "Fz").astype(float), "LLB words on Fz per trial"),
-    ):
+    )
+    for ax, getter, title in panels:
         r = ax.boxplot(
             [getter(real, st) for st in SUBTASKS],
             positions=positions - 0.5,

@@ -441,7 +441,7 @@ def _wait_taught(
     def learned() -> bool:
         nonlocal status
         status = call_teach(client, teach_request(""))
-        return status.pending == 0
+        return bool(status.pending == 0)
 
     if not wait_until(learned, options.teach_timeout, poll=0.05):
         raise InputError(f"not learned within {options.teach_timeout} s", rec.playback.bag)

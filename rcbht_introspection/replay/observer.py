@@ -209,7 +209,7 @@ class VerdictObserver:
         """stream id -> health carried by its latest verdict"""
         self.health: list[tuple[int, str]] = []
         """(source ns, value) of each /task_health message"""
-        latched = QoSProfile(depth=1, reliability=qos.reliability)
+        latched = QoSProfile(depth=1, reliability=qos.reliability)  # type: ignore[no-untyped-call, unused-ignore]  # rclpy's QoSProfile takes **kwargs
         latched.durability = DurabilityPolicy.TRANSIENT_LOCAL
         self.subs = [
             # (msg, MessageInfo) callbacks, which rclpy passes to two-argument callables
@@ -217,7 +217,7 @@ class VerdictObserver:
             node.create_subscription(String, cfg.health_topic, self.on_health, latched),  # type: ignore[arg-type]
         ]
 
-    def on_verdict(self, msg: Any, info: dict) -> None:
+    def on_verdict(self, msg: Any, info: dict[str, int]) -> None:
         """One Verdict (executor thread): at most one per step_s of stream time."""
         alarm = None if math.isnan(msg.alarm_time) else float(msg.alarm_time)
         onset = None if math.isnan(msg.onset) else float(msg.onset)
@@ -238,7 +238,8 @@ class VerdictObserver:
                 _furthest_signal(msg),
             )
 
-    def on_health(self, msg: String, info: dict) -> None:
+    def on_health(self, msg: String, info: dict[str, int]) -> None:
+        """One /task_health value (executor thread), stamped with its source timestamp."""
         with self.lock:
             self.health.append((int(info.get("source_timestamp") or time.time_ns()), msg.data))
 

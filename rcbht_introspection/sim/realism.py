@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import find_trials, read_trial
@@ -44,7 +45,7 @@ class SetStats:
     name: str
     trials: list[TrialStats] = field(default_factory=list)
 
-    def frequencies(self, subtask: str, axis: str) -> np.ndarray:
+    def frequencies(self, subtask: str, axis: str) -> NDArray[np.float64]:
         """Relative frequency of each BEHAVIOR_LABELS label in (sub-task, axis) over the set."""
         counts = np.zeros(len(BEHAVIOR_LABELS))
         for t in self.trials:
@@ -54,13 +55,16 @@ class SetStats:
         total = counts.sum()
         return counts / total if total else counts
 
-    def durations(self, subtask: str) -> np.ndarray:
+    def durations(self, subtask: str) -> NDArray[np.float64]:
+        """Duration (s) of the sub-task in each trial that has it."""
         return np.array([t.durations[subtask] for t in self.trials if subtask in t.durations])
 
-    def counts(self, subtask: str, axis: str) -> np.ndarray:
+    def counts(self, subtask: str, axis: str) -> NDArray[np.int_]:
+        """Number of LLB words of (sub-task, axis) in each trial."""
         return np.array([len(t.labels.get((subtask, axis), [])) for t in self.trials])
 
-    def magnitudes(self, subtask: str, axis: str) -> np.ndarray:
+    def magnitudes(self, subtask: str, axis: str) -> NDArray[np.float64]:
+        """Mean |wrench| of (sub-task, axis) in each trial that has it."""
         return np.array(
             [t.mean_abs[(subtask, axis)] for t in self.trials if (subtask, axis) in t.mean_abs]
         )
@@ -125,7 +129,7 @@ def set_stats(
     return stats
 
 
-def total_variation(p: np.ndarray, q: np.ndarray) -> float:
+def total_variation(p: NDArray[np.float64], q: NDArray[np.float64]) -> float:
     """Total-variation distance of two label distributions (0 equal, 1 disjoint)."""
     return float(0.5 * np.abs(p - q).sum())
 

@@ -10,6 +10,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.signal import lfilter
 
 from rcbht_introspection.errors import InputError
@@ -20,8 +21,8 @@ from rcbht_introspection.sim.config import Range, SensorConfig
 class SensorDraw:
     """Per-trial sensor errors: constant bias (6,), drift amplitude and period, noise scale."""
 
-    bias: np.ndarray
-    drift: np.ndarray
+    bias: NDArray[np.float64]
+    drift: NDArray[np.float64]
     drift_period: float
     drift_phase: float
     noise_scale: float
@@ -64,19 +65,20 @@ def decimation(rate_hz: float, timestep: float) -> int:
     return k
 
 
-def resample(raw: np.ndarray, k: int) -> np.ndarray:
+def resample(raw: NDArray[np.float64], k: int) -> NDArray[np.float64]:
     """Box-average consecutive blocks of `k` physics samples (drops an incomplete last block)."""
     n = len(raw) // k
-    return raw[: n * k].reshape(n, k, raw.shape[1]).mean(axis=1)
+    blocks: NDArray[np.float64] = raw[: n * k].reshape(n, k, raw.shape[1]).mean(axis=1)
+    return blocks
 
 
 def measure(
-    wrench: np.ndarray,
-    time: np.ndarray,
+    wrench: NDArray[np.float64],
+    time: NDArray[np.float64],
     config: SensorConfig,
     draw: SensorDraw,
     rng: np.random.Generator,
-) -> np.ndarray:
+) -> NDArray[np.float64]:
     """Add bias, slow drift, white noise and quantization to a true (tared) wrench (N, 6)."""
     std = np.array([config.noise_force] * 3 + [config.noise_torque] * 3) * draw.noise_scale
     q = np.array([config.quantization_force] * 3 + [config.quantization_torque] * 3)
@@ -88,17 +90,18 @@ def measure(
     slow = (config.wander_force, config.wander_torque, config.wander_time)
     for force_std, torque_std, tau in (fast, slow):
         out += ornstein_uhlenbeck(time, force_std, torque_std, tau, draw.noise_scale, rng)
-    return np.round(out / q) * q
+    quantized: NDArray[np.float64] = np.round(out / q) * q
+    return quantized
 
 
 def ornstein_uhlenbeck(
-    time: np.ndarray,
+    time: NDArray[np.float64],
     force_std: float,
     torque_std: float,
     tau: float,
     scale: float,
     rng: np.random.Generator,
-) -> np.ndarray:
+) -> NDArray[np.float64]:
     """Low-frequency disturbance (N, 6): an exact-discretised Ornstein-Uhlenbeck process."""
 
     n = len(time)
@@ -109,5 +112,7 @@ def ornstein_uhlenbeck(
     std = np.array([force_std] * 3 + [torque_std] * 3) * scale
     kicks = rng.normal(0.0, 1.0, (n, 6)) * std[None, :] * np.sqrt(1.0 - a * a)
     start = rng.normal(0.0, 1.0, 6) * std  # stationary from the first sample
-    out, _ = lfilter([1.0], [1.0, -a], kicks, axis=0, zi=(a * start)[None, :])
-    return out
+    filtered: tuple[NDArray[np.float64], NDArray[np.float64]] = lfilter(
+        [1.0], [1.0, -a], kicks, axis=0, zi=(a * start)[None, :]
+    )
+    return filtered[0]

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import NDArray
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import SESSION_RECORD
@@ -23,8 +24,8 @@ class SessionSensor:
     """One session's sensor: a bias (6,) and a drift per second (6,)."""
 
     name: str
-    bias: np.ndarray
-    drift: np.ndarray
+    bias: NDArray[np.float64]
+    drift: NDArray[np.float64]
 
 
 def draw_sessions(sessions: int, seed: int, config: SensorConfig) -> list[SessionSensor]:
