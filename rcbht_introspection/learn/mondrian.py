@@ -13,11 +13,16 @@ from __future__ import annotations
 import numbers
 from collections import deque
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.utils.multiclass import check_classification_targets
 from sklearn.utils.validation import check_is_fitted, check_random_state, validate_data
+
+if TYPE_CHECKING:
+    from sklearn.utils import Tags
 
 NO_NODE = -1
 POINTWISE_BATCH = 16
@@ -74,7 +79,8 @@ class NodePool:
     def nbytes(self) -> int:
         """Bytes of the node arrays as allocated (capacity, not only the used size)."""
         names = ("left", "right", "parent", "feature", "threshold", "tau", "lower", "upper")
-        return sum(getattr(self, n).nbytes for n in names) + self.counts.nbytes
+        total: int = sum(getattr(self, n).nbytes for n in names) + self.counts.nbytes
+        return total
 
     def _grow(self) -> None:
         capacity = 2 * len(self.left)
@@ -91,6 +97,35 @@ class NodePool:
             new[: len(old)] = old
             setattr(self, name, new)
         self.points.extend([None] * (capacity - len(self.points)))
+
+
+def _declared_classes(classes: ArrayLike, y: ArrayLike) -> np.ndarray:
+    """The sorted classes partial_fit is told of; every label of the batch must be among them."""
+    declared = np.unique(np.asarray(classes))
+    missing = np.setdiff1d(np.unique(y), declared)
+    if len(missing):
+        raise ValueError(f"labels {missing.tolist()} are not in classes {declared.tolist()}")
+    return declared
+
+
+def _uninformed_proba(n: int, n_classes: int) -> NDArray[np.float64]:
+    """The prediction of a forest that cannot tell classes apart yet (one class known, or a
+    tree without a root): certainty for a single class, else uniform."""
+    proba = np.zeros((n, n_classes))
+    proba[:, 0] = 1.0
+    if n_classes > 1:
+        proba[:] = 1.0 / n_classes
+    return proba
+
+
+class _NewPoints(NamedTuple):
+    """Points entering a block in ExtendMondrianBlock: indices, rows, box and class counts."""
+
+    idx: NDArray[np.intp]
+    data: NDArray[np.float32]
+    low: NDArray[np.float32]
+    high: NDArray[np.float32]
+    counts: NDArray[np.float64]
 
 
 @dataclass
@@ -112,7 +147,9 @@ class LearnedState:
     """The random stream online updates continue with."""
 
 
-class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
+# sklearn has no type hints, so its bases are Any: strict mypy refuses to subclass them
+# (unused-ignore: the plain configuration does not check it)
+class MondrianForestClassifier(ClassifierMixin, BaseEstimator):  # type: ignore[misc, unused-ignore]
     """Online random forest whose trees are Mondrian processes (NIPS 2014).
 
     Parameters: n_estimators (trees, 100 as in the seed paper), discount_factor (gamma = this
@@ -123,6 +160,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
     forests, and adds labels it has not seen to classes_ (kept sorted).
     """
 
+    classes_: np.ndarray
     _X: np.ndarray
     _y: np.ndarray
 
@@ -141,7 +179,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self.max_points = max_points
 
     # ---------------------------------------------------------------- sklearn plumbing
-    def __sklearn_tags__(self):
+    def __sklearn_tags__(self) -> Tags:
         tags = super().__sklearn_tags__()
         tags.classifier_tags.multi_class = True
         tags.non_deterministic = False
@@ -168,22 +206,24 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         ):
             raise ValueError(f"max_points must be None or an integer >= 0, got {self.max_points!r}")
 
-    def fit(self, X, y) -> MondrianForestClassifier:
+    def fit(self, X: ArrayLike, y: ArrayLike) -> MondrianForestClassifier:
         """Grow n_estimators Mondrian trees on (X, y) from scratch."""
         self._check_params()
-        X, y = validate_data(self, X, y, dtype=np.float64)
-        X = X.astype(FEATURE_DTYPE)
+        checked, y = validate_data(self, X, y, dtype=np.float64)
+        features = checked.astype(FEATURE_DTYPE)
         check_classification_targets(y)
         self.classes_, y_index = np.unique(y, return_inverse=True)
-        self._start(X.shape[1])
-        self._add_data(X, y_index)
+        self._start(features.shape[1])
+        self._add_data(features, y_index)
         for tree in range(self.n_estimators):
             self._roots[tree] = self._grow(np.arange(len(y_index)), NO_NODE, 0.0, tree)
         self._forget()
         self._update_posterior()
         return self
 
-    def partial_fit(self, X, y, classes=None) -> MondrianForestClassifier:
+    def partial_fit(
+        self, X: ArrayLike, y: ArrayLike, classes: ArrayLike | None = None
+    ) -> MondrianForestClassifier:
         """Extend every tree with a mini-batch; labels not yet known join classes_.
 
         `classes` may name labels before they are taught (e.g. a first mini-batch that misses
@@ -193,20 +233,14 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         first = not hasattr(self, "classes_")
         if first:
             self._check_params()
-        X, y = validate_data(self, X, y, dtype=np.float64, reset=first)
-        X = X.astype(FEATURE_DTYPE)
+        checked, y = validate_data(self, X, y, dtype=np.float64, reset=first)
+        features = checked.astype(FEATURE_DTYPE)
         check_classification_targets(y)
-        declared = None if classes is None else np.unique(np.asarray(classes))
-        if declared is not None:
-            missing = np.setdiff1d(np.unique(y), declared)
-            if len(missing):
-                raise ValueError(
-                    f"labels {missing.tolist()} are not in classes {declared.tolist()}"
-                )
+        declared = None if classes is None else _declared_classes(classes, y)
         wanted = np.unique(y) if declared is None else declared
         if first:
             self.classes_ = wanted
-            self._start(X.shape[1])
+            self._start(features.shape[1])
         else:
             if declared is not None and len(np.setdiff1d(self.classes_, declared)):
                 raise ValueError(
@@ -215,7 +249,13 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
                 )
             self._add_classes(wanted)
         y_index = np.searchsorted(self.classes_, y).astype(np.intp)
-        new = self._add_data(X, y_index)
+        self._extend_forest(self._add_data(features, y_index))
+        self._forget()
+        self._update_posterior()
+        return self
+
+    def _extend_forest(self, new: NDArray[np.intp]) -> None:
+        """Add the stored rows `new` to every tree (grow the trees if none has a root yet)."""
         if (self._roots == NO_NODE).all():
             for tree in range(self.n_estimators):
                 self._roots[tree] = self._grow(new, NO_NODE, 0.0, tree)
@@ -227,9 +267,6 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         else:
             for tree in range(self.n_estimators):
                 self._extend(tree, int(self._roots[tree]), new)
-        self._forget()
-        self._update_posterior()
-        return self
 
     def _add_classes(self, labels: np.ndarray) -> None:
         """Grow classes_ (sorted) by the new ones among `labels`: count columns and stored
@@ -411,10 +448,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
                 continue
             rate = extent.sum()
             pool.tau[node] = tau_par + self._rng.exponential(1.0 / rate)
-            dim = int(np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right"))
-            dim = min(dim, len(extent) - 1)
-            while extent[dim] <= 0:  # guard the float edge of the cumulative sum
-                dim -= 1
+            dim = self._cut_dimension(extent, rate)
             cut = np.float64(self._rng.uniform(lower[dim], upper[dim]))  # float64: never rounded
             go_left = data[:, dim] <= cut
             left, right = self._new_node(tree), self._new_node(tree)
@@ -425,94 +459,128 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             stack.append((right, idx[~go_left], node, pool.tau[node]))
         return root
 
-    def _extend(self, tree: int, node: int, idx: np.ndarray) -> None:
+    def _extend(self, tree: int, node: int, idx: NDArray[np.intp]) -> None:
         """ExtendMondrianBlock: add points `idx` to the block at `node` (may insert a parent)."""
-        pool, X, y = self._pool, self._X, self._y
-        n_classes = pool.counts.shape[1]
+        pool = self._pool
         stack = [(node, idx)]
         while stack:
             node, idx = stack.pop()
             if len(idx) == 0:
                 continue
-            if len(idx) == 1:  # the common case deep in a tree: no reductions needed
-                data = X[idx]
-                low = high = data[0]
-                new_counts = np.zeros(n_classes)
-                new_counts[y[idx[0]]] = 1.0
-            else:
-                data = X[idx]
-                low, high = data.min(axis=0), data.max(axis=0)
-                new_counts = np.bincount(y[idx], minlength=n_classes).astype(np.float64)
+            new = self._new_points(idx)
             lower, upper = pool.lower[node], pool.upper[node]  # views, valid until pool.new()
             parent = int(pool.parent[node])
             tau_parent = 0.0 if parent == NO_NODE else float(pool.tau[parent])
             if pool.left[node] == NO_NODE:  # paused leaf: absorb, regrow if no longer pure
-                sealed = self._sealed(node)
-                np.minimum(lower, low, out=lower)
-                np.maximum(upper, high, out=upper)
-                pool.counts[node] += new_counts
-                if sealed or not self._room(tree, 2):
-                    continue  # it can never regrow: counts only, the points are not kept
-                points = np.concatenate([pool.points[node], idx])
-                if self._paused(pool.counts[node], len(points), lower, upper):
-                    pool.points[node] = points
-                else:
-                    self._regrow(tree, node, points, parent, tau_parent)
+                self._absorb(tree, node, new, parent, tau_parent)
                 continue
-            e_lower = lower - low
-            e_upper = high - upper
+            e_lower = lower - new.low
+            e_upper = new.high - upper
             np.maximum(e_lower, 0.0, out=e_lower)
             np.maximum(e_upper, 0.0, out=e_upper)
             rate = float(e_lower.sum()) + float(e_upper.sum())
             split_time = tau_parent + self._rng.exponential(1.0 / rate) if rate > 0 else np.inf
             if split_time < pool.tau[node] and self._room(tree, 2):
-                extent = e_lower.astype(np.float64) + e_upper
-                dim = int(
-                    np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right")
-                )
-                dim = min(dim, len(extent) - 1)
-                while extent[dim] <= 0:
-                    dim -= 1
-                # cuts stay float64 so they are never rounded onto a data value
-                if self._rng.random() * extent[dim] <= e_lower[dim]:
-                    cut = np.float64(self._rng.uniform(low[dim], lower[dim]))
-                    old_is_left = False
-                else:
-                    cut = np.float64(self._rng.uniform(upper[dim], high[dim]))
-                    old_is_left = True
-                new_parent = self._new_node(tree)
-                pool.parent[new_parent] = parent
-                pool.lower[new_parent] = np.minimum(pool.lower[node], low)
-                pool.upper[new_parent] = np.maximum(pool.upper[node], high)
-                pool.counts[new_parent] = pool.counts[node] + new_counts
-                pool.tau[new_parent] = split_time
-                pool.feature[new_parent], pool.threshold[new_parent] = dim, cut
-                self._replace_child(tree, parent, node, new_parent)
-                pool.parent[node] = new_parent
-                left_side = data[:, dim] <= cut
-                near, far = (
-                    (idx[left_side], idx[~left_side])
-                    if old_is_left
-                    else (idx[~left_side], idx[left_side])
-                )
-                sibling = self._grow(far, new_parent, split_time, tree)
-                if old_is_left:
-                    pool.left[new_parent], pool.right[new_parent] = node, sibling
-                else:
-                    pool.left[new_parent], pool.right[new_parent] = sibling, node
+                near = self._cut_above(tree, node, new, e_lower, e_upper, rate, split_time)
                 stack.append((node, near))
             else:
-                np.minimum(lower, low, out=lower)
-                np.maximum(upper, high, out=upper)
-                pool.counts[node] += new_counts
-                feature, threshold = pool.feature[node], pool.threshold[node]
-                if len(idx) == 1:
-                    child = pool.left[node] if data[0, feature] <= threshold else pool.right[node]
-                    stack.append((int(child), idx))
-                else:
-                    go_left = data[:, feature] <= threshold
-                    stack.append((int(pool.left[node]), idx[go_left]))
-                    stack.append((int(pool.right[node]), idx[~go_left]))
+                stack.extend(self._widen_and_route(node, new))
+
+    def _new_points(self, idx: NDArray[np.intp]) -> _NewPoints:
+        """The rows, box and class counts of points `idx` entering a block (one point, the
+        common case deep in a tree, needs no reductions)."""
+        n_classes = self._pool.counts.shape[1]
+        data = self._X[idx]
+        if len(idx) == 1:
+            counts = np.zeros(n_classes)
+            counts[self._y[idx[0]]] = 1.0
+            return _NewPoints(idx, data, data[0], data[0], counts)
+        counts = np.bincount(self._y[idx], minlength=n_classes).astype(np.float64)
+        return _NewPoints(idx, data, data.min(axis=0), data.max(axis=0), counts)
+
+    def _absorb(
+        self, tree: int, node: int, new: _NewPoints, parent: int, tau_parent: float
+    ) -> None:
+        """A paused leaf takes the new points: its box and counts widen, and it regrows as a
+        fresh block once it is no longer pure (a sealed or out-of-budget leaf keeps counts only)."""
+        pool = self._pool
+        lower, upper = pool.lower[node], pool.upper[node]
+        sealed = self._sealed(node)
+        np.minimum(lower, new.low, out=lower)
+        np.maximum(upper, new.high, out=upper)
+        pool.counts[node] += new.counts
+        if sealed or not self._room(tree, 2):
+            return  # it can never regrow: counts only, the points are not kept
+        points = np.concatenate([pool.points[node], new.idx])
+        if self._paused(pool.counts[node], len(points), lower, upper):
+            pool.points[node] = points
+        else:
+            self._regrow(tree, node, points, parent, tau_parent)
+
+    def _cut_above(
+        self, tree: int, node: int, new: _NewPoints, e_lower: NDArray[np.float32],
+        e_upper: NDArray[np.float32], rate: float, split_time: float,
+    ) -> NDArray[np.intp]:  # fmt: skip
+        """Insert a parent cutting outside the box of `node` at `split_time`: the new points
+        beyond the cut grow the sibling block; return those on the node's side."""
+        pool = self._pool
+        low, high, data = new.low, new.high, new.data
+        lower, upper = pool.lower[node], pool.upper[node]
+        parent = int(pool.parent[node])
+        extent = e_lower.astype(np.float64) + e_upper
+        dim = self._cut_dimension(extent, rate)
+        # cuts stay float64 so they are never rounded onto a data value
+        if self._rng.random() * extent[dim] <= e_lower[dim]:
+            cut = np.float64(self._rng.uniform(low[dim], lower[dim]))
+            old_is_left = False
+        else:
+            cut = np.float64(self._rng.uniform(upper[dim], high[dim]))
+            old_is_left = True
+        new_parent = self._new_node(tree)
+        pool.parent[new_parent] = parent
+        pool.lower[new_parent] = np.minimum(pool.lower[node], low)
+        pool.upper[new_parent] = np.maximum(pool.upper[node], high)
+        pool.counts[new_parent] = pool.counts[node] + new.counts
+        pool.tau[new_parent] = split_time
+        pool.feature[new_parent], pool.threshold[new_parent] = dim, cut
+        self._replace_child(tree, parent, node, new_parent)
+        pool.parent[node] = new_parent
+        left_side = data[:, dim] <= cut
+        idx = new.idx
+        near, far = (
+            (idx[left_side], idx[~left_side]) if old_is_left else (idx[~left_side], idx[left_side])
+        )
+        sibling = self._grow(far, new_parent, split_time, tree)
+        if old_is_left:
+            pool.left[new_parent], pool.right[new_parent] = node, sibling
+        else:
+            pool.left[new_parent], pool.right[new_parent] = sibling, node
+        return near
+
+    def _widen_and_route(self, node: int, new: _NewPoints) -> list[tuple[int, NDArray[np.intp]]]:
+        """No cut above an inner node: widen its box and counts by the new points, and send
+        each point on to the child its split puts it in."""
+        pool = self._pool
+        lower, upper = pool.lower[node], pool.upper[node]
+        np.minimum(lower, new.low, out=lower)
+        np.maximum(upper, new.high, out=upper)
+        pool.counts[node] += new.counts
+        feature, threshold = pool.feature[node], pool.threshold[node]
+        idx, data = new.idx, new.data
+        if len(idx) == 1:
+            child = pool.left[node] if data[0, feature] <= threshold else pool.right[node]
+            return [(int(child), idx)]
+        go_left = data[:, feature] <= threshold
+        return [(int(pool.left[node]), idx[go_left]), (int(pool.right[node]), idx[~go_left])]
+
+    def _cut_dimension(self, extent: np.ndarray, rate: float) -> int:
+        """Draw the dimension of a cut with probability proportional to `extent` (its sum is
+        `rate`); the float edge of the cumulative sum never picks a dimension of zero extent."""
+        dim = int(np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right"))
+        dim = min(dim, len(extent) - 1)
+        while extent[dim] <= 0:
+            dim -= 1
+        return dim
 
     def _extend_point(self, point: int) -> None:
         """ExtendMondrianBlock for one point in every tree, level by level with NumPy.
@@ -567,10 +635,7 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         pool = self._pool
         parent = int(pool.parent[node])
         extent = e_lower.astype(np.float64) + e_upper
-        dim = int(np.searchsorted(np.cumsum(extent), self._rng.random() * rate, side="right"))
-        dim = min(dim, len(extent) - 1)
-        while extent[dim] <= 0:
-            dim -= 1
+        dim = self._cut_dimension(extent, rate)
         lower_side = self._rng.random() * extent[dim] <= e_lower[dim]
         if lower_side:
             cut = np.float64(self._rng.uniform(x[dim], pool.lower[node, dim]))
@@ -653,21 +718,35 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         self._n_customers = cnt.sum(axis=1)
 
     # ---------------------------------------------------------------- prediction
-    def predict_proba(self, X) -> np.ndarray:
+    def predict_proba(self, X: ArrayLike) -> NDArray[np.float64]:
         """Mean over trees of the predictive class distribution (rows sum to 1)."""
         check_is_fitted(self, "classes_")
-        X = validate_data(self, X, dtype=np.float64, reset=False).astype(FEATURE_DTYPE)
-        n, n_classes, n_trees = len(X), len(self.classes_), self.n_estimators
+        features = validate_data(self, X, dtype=np.float64, reset=False).astype(FEATURE_DTYPE)
+        n, n_classes, n_trees = len(features), len(self.classes_), self.n_estimators
         if n_classes == 1 or (self._roots == NO_NODE).any():
-            proba = np.zeros((n, n_classes))
-            proba[:, 0] = 1.0
-            if n_classes > 1:
-                proba[:] = 1.0 / n_classes
-            return proba
-        gamma = self.gamma_
+            return _uninformed_proba(n, n_classes)
         # 1. walk every (sample, tree) path down to its leaf
-        sample = np.repeat(np.arange(n), n_trees)
-        node = np.tile(self._roots, n)
+        paths, sample = self._leaf_paths(features)
+        valid = paths != NO_NODE
+        nodes = paths[valid]
+        x = features[np.broadcast_to(sample, paths.shape)[valid]]
+        # 2. probability that the test point separates from the tree at each node of its path
+        eta, p_sep, reach = self._separation(paths, valid, nodes, x)
+        # 3. posterior of a new node cut above the path node (separated) or the leaf's own
+        contrib = self._path_contributions(nodes, eta, p_sep, reach)
+        full = np.zeros((*paths.shape, n_classes))
+        full[valid] = contrib
+        per_tree = full.sum(axis=0).reshape(n, n_trees, n_classes)
+        proba: NDArray[np.float64] = per_tree.mean(axis=1)
+        proba /= proba.sum(axis=1, keepdims=True)
+        return proba
+
+    def _leaf_paths(self, X: NDArray[np.float32]) -> tuple[NDArray[np.int32], NDArray[np.intp]]:
+        """The nodes of every (sample, tree) path from the root down to its leaf, (depth,
+        n * n_trees) with NO_NODE past the leaf, and the sample of each column; all paths
+        advance together one level per step."""
+        sample = np.repeat(np.arange(len(X)), self.n_estimators)
+        node = np.tile(self._roots, len(X))
         rows = [node]
         alive = np.flatnonzero(self._left[node] != NO_NODE)
         while len(alive):
@@ -679,11 +758,18 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
             step[alive] = node[alive]
             rows.append(step)
             alive = alive[self._left[node[alive]] != NO_NODE]
-        paths = np.stack(rows)  # (depth, n * n_trees), NO_NODE past the leaf
-        valid = paths != NO_NODE
-        nodes = paths[valid]
-        x = X[np.broadcast_to(sample, paths.shape)[valid]]
-        # 2. probability that the test point separates from the tree at each node of its path
+        return np.stack(rows), sample
+
+    def _separation(
+        self,
+        paths: NDArray[np.int32],
+        valid: NDArray[np.bool_],
+        nodes: NDArray[np.int32],
+        x: NDArray[np.float32],
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """For each valid path node: how far the test point lies outside its box (eta), the
+        probability that a cut separates the point there, and the probability that no cut
+        separated it higher up the path."""
         eta = (
             np.maximum(self._lower[nodes] - x, 0.0) + np.maximum(x - self._upper[nodes], 0.0)
         ).sum(axis=1)
@@ -697,38 +783,49 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):
         sep[valid] = p_sep
         not_before = np.ones(paths.shape)
         not_before[1:] = np.cumprod(1.0 - sep[:-1], axis=0)
-        weight_sep = not_before[valid] * p_sep
-        # 3. posterior of a new node cut above the path node (separated) or the leaf's own
-        contrib = np.zeros((len(nodes), n_classes))
-        o = np.flatnonzero(outside)
-        if len(o):
-            on, oe = nodes[o], eta[o]
-            d_bar = oe / (oe + gamma)
-            fin = np.isfinite(delta[o])
-            if fin.any():
-                fe, fd = oe[fin], delta[o][fin]
-                d_bar[fin] *= np.expm1(-(fe + gamma) * fd) / np.expm1(-fe * fd)
-            mean = (
-                self._cnt[on]
-                - d_bar[:, None] * self._tables[on]
-                + (d_bar * self._n_tables[on])[:, None] * self._parent_posterior[on]
-            ) / self._n_customers[on][:, None]
-            contrib[o] = weight_sep[o][:, None] * mean
-        leaf = self._left[nodes] == NO_NODE
-        contrib[leaf] += (
-            ((not_before[valid] * (1.0 - p_sep))[leaf])[:, None] * self._posterior[nodes[leaf]]
-        )
-        full = np.zeros((*paths.shape, n_classes))
-        full[valid] = contrib
-        proba = full.sum(axis=0)
-        proba = proba.reshape(n, n_trees, n_classes).mean(axis=1)
-        proba /= proba.sum(axis=1, keepdims=True)
-        return proba
+        return eta, p_sep, not_before[valid]
 
-    def predict(self, X) -> np.ndarray:
+    def _path_contributions(
+        self,
+        nodes: NDArray[np.int32],
+        eta: NDArray[np.float64],
+        p_sep: NDArray[np.float64],
+        reach: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """Each path node's weighted share of the tree's prediction: the posterior of a new
+        node cut above it when the point separates there, plus the leaf's own posterior."""
+        contrib = np.zeros((len(nodes), len(self.classes_)))
+        o = np.flatnonzero(eta > 0)
+        if len(o):
+            contrib[o] = (reach * p_sep)[o][:, None] * self._separated_posterior(nodes[o], eta[o])
+        leaf = self._left[nodes] == NO_NODE
+        contrib[leaf] += ((reach * (1.0 - p_sep))[leaf])[:, None] * self._posterior[nodes[leaf]]
+        return contrib
+
+    def _separated_posterior(
+        self, nodes: NDArray[np.int32], eta: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Posterior mean of a new node cut above each of `nodes` (the test point outside its
+        box by `eta`): the node's counts with the expected discount, smoothed by its parent."""
+        gamma = self.gamma_
+        delta = self._delta[nodes]
+        d_bar = eta / (eta + gamma)
+        fin = np.isfinite(delta)
+        if fin.any():
+            fe, fd = eta[fin], delta[fin]
+            d_bar[fin] *= np.expm1(-(fe + gamma) * fd) / np.expm1(-fe * fd)
+        mean: NDArray[np.float64] = (
+            self._cnt[nodes]
+            - d_bar[:, None] * self._tables[nodes]
+            + (d_bar * self._n_tables[nodes])[:, None] * self._parent_posterior[nodes]
+        ) / self._n_customers[nodes][:, None]
+        return mean
+
+    def predict(self, X: ArrayLike) -> np.ndarray:
         """The class with the largest predictive probability."""
         proba = self.predict_proba(X)
-        return self.classes_[np.argmax(proba, axis=1)]
+        labels: np.ndarray = self.classes_[np.argmax(proba, axis=1)]
+        return labels
 
     # ---------------------------------------------------------------- introspection
     @property
