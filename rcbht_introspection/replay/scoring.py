@@ -272,6 +272,136 @@ def _belief_key(b: Belief) -> tuple[object, ...]:
     return (b.subtask, b.probabilities, b.start, b.end, b.phase, b.final, b.n_words, b.blind)
 
 
+@dataclass
+class _Tally:
+    """Running totals of a scoring pass over the bags."""
+
+    correct: int = 0
+    total: int = 0
+    verdicts_match: bool = True
+    words_match: bool = True
+    dropped: int = 0
+    rejected: int = 0
+    state_changes: int = 0
+    latencies: Latencies = field(default_factory=Latencies)
+    time_acc: list[tuple[float, float]] = field(default_factory=list)
+    """(time accuracy, duration) of each bag"""
+    final_conf: list[float] = field(default_factory=list)
+    final_hit: list[bool] = field(default_factory=list)
+    running_conf: list[float] = field(default_factory=list)
+    running_hit: list[bool] = field(default_factory=list)
+
+    def accepted(
+        self, rec: BagRecord, arms: Sequence[str], prev_accepted: dict[str, int]
+    ) -> dict[str, int]:
+        """Samples the segmenter accepted for this bag per arm (its counters are cumulative:
+        `prev_accepted` holds and is moved to the counts after the previous bag)."""
+        accepted = {}
+        for arm in arms:
+            acc, rej = rec.ends.get((arm, "primitives"), (prev_accepted[arm], 0))
+            accepted[arm] = acc - prev_accepted[arm]
+            prev_accepted[arm] = acc
+            self.rejected = max(self.rejected, rej)
+        return accepted
+
+    def calibration(
+        self, rec: BagRecord, trial: Trial, finals: list[Belief], truth: list[str]
+    ) -> None:
+        """The top label's confidence and hit of each final belief and each running one."""
+        for b, true in zip(finals, truth, strict=False):
+            if b.probabilities:
+                conf, hit = top_label([b.probabilities], b.classes, [true])
+                self.final_conf.append(float(conf[0]))
+                self.final_hit.append(bool(hit[0]))
+        running = [
+            r.belief
+            for r in rec.beliefs
+            if not r.belief.final and r.belief.probabilities and r.belief.subtask != UNKNOWN
+        ]
+        at = offline.truth_at(trial, np.asarray([b.end for b in running], dtype=float))
+        for b, true in zip(running, at, strict=True):
+            conf, hit = top_label([b.probabilities], b.classes, [str(true)])
+            self.running_conf.append(float(conf[0]))
+            self.running_hit.append(bool(hit[0]))
+
+
+def _bag_scores(
+    tally: _Tally, rec: BagRecord, trial: Trial, arms: Sequence[str], prev_accepted: dict[str, int]
+) -> dict[str, Any]:
+    """One bag's record against its truth (verdicts, time accuracy, drops), added to `tally`."""
+    truth = [s for s, _, _ in trial.subtask_bounds()]
+    finals = [r.belief for r in rec.beliefs if r.belief.final]
+    verdicts = [b.subtask for b in finals]
+    tally.total += len(truth)
+    tally.correct += sum(1 for v, t in zip(verdicts, truth, strict=False) if v == t)
+    bag_dropped = rec.playback.published - sum(tally.accepted(rec, arms, prev_accepted).values())
+    tally.dropped += bag_dropped
+    tally.latencies.add(rec)
+    tally.calibration(rec, trial, finals, truth)
+    changes = state_timeline(rec)
+    acc_t = offline.time_accuracy(trial, changes, initial=rec.initial_state)
+    tally.state_changes += len(changes)
+    duration = float(trial.time[-1] - trial.time[0])
+    tally.time_acc.append((acc_t, duration))
+    return {
+        "name": trial.name,
+        "truth": truth,
+        "truth_starts": [round(s - float(trial.time[0]), 6) for _, s, _ in trial.subtask_bounds()],
+        "duration": round(duration, 6),
+        "verdicts": verdicts,
+        "final_probabilities": [dict(zip(b.classes, b.probabilities, strict=True)) for b in finals],
+        "time_accuracy": round(acc_t, 4),
+        "timeline": [(round(t, 3), s) for t, s in changes],
+        "initial_state": rec.initial_state,
+        "published_wrench": rec.playback.published,
+        "dropped_wrench": bag_dropped,
+        "play_s": round(rec.playback.play_s, 2),
+        "node_words": sum(len(v) for v in rec.words.values()),
+    }
+
+
+def _offline_bag(
+    tally: _Tally,
+    bag_out: dict[str, Any],
+    rec: BagRecord,
+    trial: Trial,
+    arms: Sequence[str],
+    mode: BeliefMode,
+    reference: Reference,
+    run: LiveReplay,
+) -> None:
+    """Add one bag's comparison with the offline run (words, verdicts, states, beliefs)."""
+    bag_out.update(_offline_comparison(rec, trial, bag_out["verdicts"], arms, reference))
+    tally.words_match &= bag_out["words_match_offline"]
+    if mode == "boundary":
+        tally.verdicts_match &= bag_out["verdicts_match_offline"]
+    bag_out.update(
+        {
+            "offline_timeline": [(round(t, 3), s) for t, s in run.changes],
+            "offline_time_accuracy": round(run.time_accuracy, 4),
+            "states_match_offline": [s for _, s in rec.states] == [s for _, s in run.changes],
+            "beliefs_match_offline": [_belief_key(r.belief) for r in rec.beliefs]
+            == [_belief_key(b) for b in run.beliefs],
+        }
+    )
+
+
+def _offline_summary(
+    bags_out: list[dict[str, Any]], runs: list[LiveReplay], tally: _Tally, weight: float
+) -> dict[str, Any]:
+    """Whether every bag's states and beliefs matched the offline run, and its accuracy."""
+    return {
+        "states_match_offline": all(b["states_match_offline"] for b in bags_out),
+        "beliefs_match_offline": all(b["beliefs_match_offline"] for b in bags_out),
+        "offline_time_accuracy": round(
+            sum(r.time_accuracy * d for r, (_, d) in zip(runs, tally.time_acc, strict=True))
+            / weight,
+            4,
+        ),
+        "offline_state_changes": sum(len(r.changes) for r in runs),
+    }
+
+
 def score(
     records: Sequence[BagRecord],
     trials: Sequence[Trial],
@@ -284,124 +414,43 @@ def score(
 
     `accepted_before`: per arm, the samples the segmenter accepted for bags played before these
     (its counters are cumulative), e.g. the bags a teaching replay taught."""
-    correct = total = 0
-    verdicts_match = words_match = True
-    dropped = rejected = state_changes = 0
-    latencies = Latencies()
-    time_acc: list[tuple[float, float]] = []
-    final_conf: list[float] = []
-    final_hit: list[bool] = []
-    running_conf: list[float] = []
-    running_hit: list[bool] = []
+    tally = _Tally()
     bags_out = []
     prev_accepted = {arm: (accepted_before or {}).get(arm, 0) for arm in arms}
     offline_runs = _offline_states(records, trials, mode, reference) if reference else []
     for k, (rec, trial) in enumerate(zip(records, trials, strict=True)):
-        truth = [s for s, _, _ in trial.subtask_bounds()]
-        finals = [r.belief for r in rec.beliefs if r.belief.final]
-        verdicts = [b.subtask for b in finals]
-        total += len(truth)
-        correct += sum(1 for v, t in zip(verdicts, truth, strict=False) if v == t)
-        # samples accepted by the segmenter for this bag (its counters are cumulative)
-        accepted = {}
-        for arm in arms:
-            acc, rej = rec.ends.get((arm, "primitives"), (prev_accepted[arm], 0))
-            accepted[arm] = acc - prev_accepted[arm]
-            prev_accepted[arm] = acc
-            rejected = max(rejected, rej)
-        bag_dropped = rec.playback.published - sum(accepted.values())
-        dropped += bag_dropped
-        latencies.add(rec)
-        for b, true in zip(finals, truth, strict=False):
-            if b.probabilities:
-                conf, hit = top_label([b.probabilities], b.classes, [true])
-                final_conf.append(float(conf[0]))
-                final_hit.append(bool(hit[0]))
-        running = [
-            r.belief
-            for r in rec.beliefs
-            if not r.belief.final and r.belief.probabilities and r.belief.subtask != UNKNOWN
-        ]
-        at = offline.truth_at(trial, np.asarray([b.end for b in running], dtype=float))
-        for b, true in zip(running, at, strict=True):
-            conf, hit = top_label([b.probabilities], b.classes, [str(true)])
-            running_conf.append(float(conf[0]))
-            running_hit.append(bool(hit[0]))
-        changes = state_timeline(rec)
-        acc_t = offline.time_accuracy(trial, changes, initial=rec.initial_state)
-        state_changes += len(changes)
-        duration = float(trial.time[-1] - trial.time[0])
-        time_acc.append((acc_t, duration))
-        bag_out: dict[str, Any] = {
-            "name": trial.name,
-            "truth": truth,
-            "truth_starts": [
-                round(s - float(trial.time[0]), 6) for _, s, _ in trial.subtask_bounds()
-            ],
-            "duration": round(duration, 6),
-            "verdicts": verdicts,
-            "final_probabilities": [
-                dict(zip(b.classes, b.probabilities, strict=True)) for b in finals
-            ],
-            "time_accuracy": round(acc_t, 4),
-            "timeline": [(round(t, 3), s) for t, s in changes],
-            "initial_state": rec.initial_state,
-            "published_wrench": rec.playback.published,
-            "dropped_wrench": bag_dropped,
-            "play_s": round(rec.playback.play_s, 2),
-            "node_words": sum(len(v) for v in rec.words.values()),
-        }
+        bag_out = _bag_scores(tally, rec, trial, arms, prev_accepted)
         if reference is not None:
-            bag_out.update(_offline_comparison(rec, trial, verdicts, arms, reference))
-            words_match &= bag_out["words_match_offline"]
-            if mode == "boundary":
-                verdicts_match &= bag_out["verdicts_match_offline"]
-            run = offline_runs[k]
-            bag_out.update(
-                {
-                    "offline_timeline": [(round(t, 3), s) for t, s in run.changes],
-                    "offline_time_accuracy": round(run.time_accuracy, 4),
-                    "states_match_offline": [s for _, s in rec.states]
-                    == [s for _, s in run.changes],
-                    "beliefs_match_offline": [_belief_key(r.belief) for r in rec.beliefs]
-                    == [_belief_key(b) for b in run.beliefs],
-                }
-            )
+            _offline_bag(tally, bag_out, rec, trial, arms, mode, reference, offline_runs[k])
         bags_out.append(bag_out)
-    weight = sum(d for _, d in time_acc) or 1.0
+    weight = sum(d for _, d in tally.time_acc) or 1.0
     boundary = mode == "boundary"
     offline_states: dict[str, Any] = {}
     if reference is not None:
-        offline_states = {
-            "states_match_offline": all(b["states_match_offline"] for b in bags_out),
-            "beliefs_match_offline": all(b["beliefs_match_offline"] for b in bags_out),
-            "offline_time_accuracy": round(
-                sum(r.time_accuracy * d for r, (_, d) in zip(offline_runs, time_acc, strict=True))
-                / weight,
-                4,
-            ),
-            "offline_state_changes": sum(len(r.changes) for r in offline_runs),
-        }
+        offline_states = _offline_summary(bags_out, offline_runs, tally, weight)
+    total, correct, lat = tally.total, tally.correct, tally.latencies
     return {
         "subtask_accuracy": round(correct / total, 4) if total and boundary else None,
         "subtasks": total,
         "subtasks_correct": correct,
-        "verdicts_match_offline": verdicts_match if reference is not None and boundary else None,
-        "time_accuracy": round(sum(a * d for a, d in time_acc) / weight, 4),
-        "state_changes": state_changes,
-        "state_changes_per_boundary": round(state_changes / total, 3) if total else None,
+        "verdicts_match_offline": (
+            tally.verdicts_match if reference is not None and boundary else None
+        ),
+        "time_accuracy": round(sum(a * d for a, d in tally.time_acc) / weight, 4),
+        "state_changes": tally.state_changes,
+        "state_changes_per_boundary": round(tally.state_changes / total, 3) if total else None,
         "expected_calibration_error": {
-            "final": _rounded(expected_calibration_error(final_conf, final_hit)),
-            "running": _rounded(expected_calibration_error(running_conf, running_hit)),
+            "final": _rounded(expected_calibration_error(tally.final_conf, tally.final_hit)),
+            "running": _rounded(expected_calibration_error(tally.running_conf, tally.running_hit)),
         },
-        "dropped_wrench": dropped,
-        "rejected_wrench": rejected,
-        "words_match_offline": words_match if reference is not None else None,
+        "dropped_wrench": tally.dropped,
+        "rejected_wrench": tally.rejected,
+        "words_match_offline": tally.words_match if reference is not None else None,
         **offline_states,
-        "latency_ms": offline.percentiles_ms(latencies.belief),
-        "latency_received_ms": offline.percentiles_ms(latencies.received),
-        "word_latency_ms": offline.percentiles_ms(latencies.word),
-        "event_latency_ms": offline.percentiles_ms(latencies.event),
+        "latency_ms": offline.percentiles_ms(lat.belief),
+        "latency_received_ms": offline.percentiles_ms(lat.received),
+        "word_latency_ms": offline.percentiles_ms(lat.word),
+        "event_latency_ms": offline.percentiles_ms(lat.event),
         "per_bag": bags_out,
     }
 
