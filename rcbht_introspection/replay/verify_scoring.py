@@ -19,7 +19,7 @@ import numpy as np
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
 from rcbht_introspection.verify.features import trial_features
-from rcbht_introspection.verify.labels import label_of
+from rcbht_introspection.verify.labels import TrialLabel, label_of
 from rcbht_introspection.verify.mismatch import MISMATCH
 from rcbht_introspection.verify.model_file import VerifierModel
 from rcbht_introspection.verify.stream import offline_verdicts
@@ -99,6 +99,63 @@ def _outcome(r: RunResult, gate_s: float) -> str:
     return "detected" if r.alarm <= r.onset + gate_s else "late"
 
 
+def _true_onset(trial: Trial, label: TrialLabel, model: VerifierModel) -> tuple[float | None, str]:
+    """A failed trial's onset and where it comes from: its label, else the model's timing
+    estimate from the trial's features; none for a success."""
+    if not label.failed:
+        return None, ""
+    if label.onset is not None:
+        return label.onset, "label"
+    timing = model.detector.models.timing
+    if timing is None:
+        return None, ""
+    return onset_for(label, trial_features(trial, model.config), timing)
+
+
+def _run_result(
+    rec: VerdictRecord, trial: Trial, label: TrialLabel, onset: float | None, source: str
+) -> RunResult:
+    """The node's run in the offline protocol's form (no score series: not observed)."""
+    return RunResult(
+        trial=trial.name,
+        label=label,
+        onset=onset,
+        onset_source=source,
+        run_score=rec.max_score,
+        alarm=rec.alarm_time,
+        alarm_signal="",
+        onset_estimate=rec.onset_estimate,
+        predicted_class=rec.final_class,
+        class_by_evidence={},
+        class_given_onset="",
+        directions=rec.directions,
+        directions_given_onset={},
+        times=np.zeros(0),
+        score=np.zeros(0),
+        classes_over_time=[],
+    )
+
+
+def _offline_match(rec: VerdictRecord, trial: Trial, model: VerifierModel) -> dict[str, Any]:
+    """The offline verifier's alarm and class on the same trial, and whether the node agrees."""
+    reference = offline_verdicts(trial, model)
+    offline_alarm = reference[-1].alarm_time if reference else None
+    offline_class = next((v.failure_class for v in reversed(reference) if v.alarm), "")
+    if rec.alarm_signal == MISMATCH:
+        # raised by a classifier verdict, at the tick after it arrived over DDS: the
+        # offline verifier (no beliefs) must only not have alarmed before it
+        same = offline_alarm is None or (
+            rec.alarm_time is not None and offline_alarm >= rec.alarm_time
+        )
+    else:
+        same = offline_alarm == rec.alarm_time and offline_class == rec.final_class
+    return {
+        "offline_alarm_time": offline_alarm,
+        "offline_final_class": offline_class,
+        "matches_offline": same and len(reference) == rec.verdicts,
+    }
+
+
 def verifier_scores(
     records: Sequence[VerdictRecord],
     trials: Sequence[Trial],
@@ -109,71 +166,31 @@ def verifier_scores(
     """Per run (alarm, class, delay vs onset, offline alarm) and the protocol's summary."""
     runs: list[RunResult] = []
     per_run: list[dict[str, Any]] = []
-    timing = model.detector.models.timing
     for rec, trial in zip(records, trials, strict=True):
         label = label_of(trial)
-        onset, source = None, ""
-        if label.failed:
-            if label.onset is not None:
-                onset, source = label.onset, "label"
-            elif timing is not None:
-                tf = trial_features(trial, model.config)
-                onset, source = onset_for(label, tf, timing)
-        run = RunResult(
-            trial=trial.name,
-            label=label,
-            onset=onset,
-            onset_source=source,
-            run_score=rec.max_score,
-            alarm=rec.alarm_time,
-            alarm_signal="",
-            onset_estimate=rec.onset_estimate,
-            predicted_class=rec.final_class,
-            class_by_evidence={},
-            class_given_onset="",
-            directions=rec.directions,
-            directions_given_onset={},
-            times=np.zeros(0),
-            score=np.zeros(0),
-            classes_over_time=[],
-        )
+        onset, source = _true_onset(trial, label, model)
+        run = _run_result(rec, trial, label, onset, source)
         runs.append(run)
+        alarm = rec.alarm_time
         row: dict[str, Any] = {
             "trial": trial.name,
             "outcome": label.outcome,
             "failure_class": label.failure_class,
             "onset": onset,
             "onset_source": source,
-            "alarm_time": rec.alarm_time,
+            "alarm_time": alarm,
             "alarm_health": rec.alarm_health,
             "final_class": rec.final_class,
             "detection_delay_s": (
-                rec.alarm_time - onset if rec.alarm_time is not None and onset is not None else None
+                alarm - onset if alarm is not None and onset is not None else None
             ),
             "result": _outcome(run, gate_s),
             "health_seen": rec.health_seen,
             "verdicts": rec.verdicts,
+            "alarm_signal": rec.alarm_signal,
         }
-        row["alarm_signal"] = rec.alarm_signal
         if offline:
-            reference = offline_verdicts(trial, model)
-            offline_alarm = reference[-1].alarm_time if reference else None
-            row["offline_alarm_time"] = offline_alarm
-            row["offline_final_class"] = next(
-                (v.failure_class for v in reversed(reference) if v.alarm), ""
-            )
-            if rec.alarm_signal == MISMATCH:
-                # raised by a classifier verdict, at the tick after it arrived over DDS: the
-                # offline verifier (no beliefs) must only not have alarmed before it
-                same = offline_alarm is None or (
-                    rec.alarm_time is not None and offline_alarm >= rec.alarm_time
-                )
-            else:
-                same = (
-                    offline_alarm == rec.alarm_time
-                    and row["offline_final_class"] == rec.final_class
-                )
-            row["matches_offline"] = same and len(reference) == rec.verdicts
+            row.update(_offline_match(rec, trial, model))
         per_run.append(row)
     summary = metrics(runs, gate_s)
     summary.pop("class_accuracy_after_alarm_s", None)  # not observed through the nodes
