@@ -27,6 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from rclpy.node import Node
+
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import (
     PHASE_TOPIC,
@@ -56,6 +58,7 @@ from rcbht_introspection.replay.observer import DiagnosticWatch, Observer, Verdi
 from rcbht_introspection.replay.scoring import (
     BagRecord,
     Latencies,
+    Mark,
     Playback,
     Reference,
     bag_record,
@@ -194,33 +197,15 @@ def teach_path(work: Path, options: ReplayEvalOptions) -> Path:
     return Path(options.teach_file) if options.teach_file else work / "taught.rcbht"
 
 
-def replay_eval(
-    bags: list[Path], model_path: Path | None, options: ReplayEvalOptions
-) -> dict[str, Any]:
-    """Run the live pipeline on `bags` and return the scores (see module doc).
-
-    Without a model (None) the classifier publishes "unknown"; latencies and drops still count.
-    """
+def _check_request(bags: list[Path], model_path: Path | None, options: ReplayEvalOptions) -> None:
+    """One-line errors for a replay that cannot run: no model file, a bad rate, teaching
+    options that do not fit, a model of another taxonomy profile."""
     if model_path is not None and not Path(model_path).is_file():
         raise InputError("no such model file", model_path)
     if options.rate <= 0:
         raise InputError(f"rate must be > 0, got {options.rate}", field="rate")
     if options.teach_first:
-        if model_path is not None:
-            raise InputError("teaching starts without a model: give no --model")
-        if not 0 < options.teach_first < len(bags):
-            raise InputError(
-                f"teach_first must be in [1, {len(bags) - 1}] (bags left to score), "
-                f"got {options.teach_first}",
-                field="teach_first",
-            )
-        if options.mode != "boundary":
-            raise InputError("teaching needs boundary mode (sub-task verdicts)", field="mode")
-        if options.teach_file is not None and Path(options.teach_file).exists():
-            raise InputError(
-                "the taught model's file exists already (a cold start needs none)",
-                options.teach_file,
-            )
+        _check_teaching(len(bags), model_path, options)
     if model_path is not None:
         taxonomy = load_taxonomy_config(
             options.profile or None, options.taxonomy_config_file or None
@@ -228,11 +213,338 @@ def replay_eval(
         mismatch = profile_mismatch(load_model(model_path), taxonomy)
         if mismatch:
             raise InputError(mismatch, model_path)
+
+
+def _check_teaching(n_bags: int, model_path: Path | None, options: ReplayEvalOptions) -> None:
+    """A teaching replay starts cold, teaches some bags and scores the rest in boundary mode."""
+    if model_path is not None:
+        raise InputError("teaching starts without a model: give no --model")
+    if not 0 < options.teach_first < n_bags:
+        raise InputError(
+            f"teach_first must be in [1, {n_bags - 1}] (bags left to score), "
+            f"got {options.teach_first}",
+            field="teach_first",
+        )
+    if options.mode != "boundary":
+        raise InputError("teaching needs boundary mode (sub-task verdicts)", field="mode")
+    if options.teach_file is not None and Path(options.teach_file).exists():
+        raise InputError(
+            "the taught model's file exists already (a cold start needs none)",
+            options.teach_file,
+        )
+
+
+def _read_bags(bags: list[Path]) -> tuple[list[Trial], tuple[str, ...]]:
+    """The bags' trials and their arms (every bag must have the first one's)."""
     trials = [read_trial_bag(b) for b in bags]
     arms = trials[0].arms
     for b, t in zip(bags, trials, strict=True):
         if t.arms != arms:
             raise InputError(f"arms {list(t.arms)} differ from the first bag's {list(arms)}", b)
+    return trials, arms
+
+
+@dataclass(frozen=True)
+class _Workspace:
+    """Where and how a replay's nodes run: work folder, environment, domain, configurations."""
+
+    work: Path
+    env: dict[str, str]
+    domain_id: int
+    seg: SegmenterConfig
+    classifier: ClassifierConfig
+    seg_params: Path
+    cls_params: Path
+    started: float
+    """time.monotonic() when the nodes were about to start"""
+
+
+def _start_nodes(
+    procs: list[NodeProcess], ws: _Workspace, arms: tuple[str, ...], options: ReplayEvalOptions
+) -> VerifierConfig | None:
+    """Start the node processes into `procs` (one at a time: a failed start still stops the
+    earlier ones); the verifier's configuration when it runs."""
+    work, env = ws.work, ws.env
+    procs.append(NodeProcess("segmenter_node", ws.seg_params, env, work / "segmenter_node.log"))
+    procs.append(NodeProcess("classifier_node", ws.cls_params, env, work / "classifier_node.log"))
+    if options.verifier_file is None:
+        return None
+    ver_cfg, ver_params = verifier_params(work, arms, options.verifier_file)
+    procs.append(NodeProcess("verifier_node", ver_params, env, work / "verifier_node.log"))
+    return ver_cfg
+
+
+class _Graph:
+    """This process's side of the ROS graph: the observers, the bag player, and the checks
+    that the nodes are connected (or the classifier gone)."""
+
+    def __init__(
+        self,
+        node: Node,
+        ws: _Workspace,
+        ver_cfg: VerifierConfig | None,
+        bags: list[Path],
+        arms: tuple[str, ...],
+        procs: list[NodeProcess],
+        options: ReplayEvalOptions,
+    ) -> None:
+        qos = qos_profile(ws.seg.qos_depth, "reliable")
+        self.node = node
+        self.arms = arms
+        self.procs = procs
+        self.options = options
+        self.observer = Observer(node, ws.seg, ws.classifier, qos)
+        self.verdicts = VerdictObserver(node, ver_cfg, qos) if ver_cfg else None
+        self.player = BagPlayer(node, qos)
+        self.messages = [list(bag_messages(b)) for b in bags]
+        for msgs in self.messages:
+            self.player.prepare(msgs)
+        self.needed = [wrench_topic(a, arms) for a in arms] + [PHASE_TOPIC]
+        self.classifier_inputs = ["/" + t for t in self.observer.word_topics.values()] + [
+            "/" + ws.seg.applied_phase_topic
+        ]
+        self.diagnostics = DiagnosticWatch(node)
+
+    def ready(self) -> bool:
+        """Every reader and writer of the replay has matched its peers."""
+        # the graph shows a reader before the writer's side has matched it (and a writer before
+        # the reader's side has); messages sent in between are lost, so the nodes' own
+        # /diagnostics must count the segmenter's readers (observer, classifier), the verifier's
+        # reader (observer) and the publishers both nodes' intake matched
+        verdicts, diagnostics = self.verdicts, self.diagnostics
+        readers = 2 if verdicts is not None else 1  # segmenter (+ verifier)
+        publishers = self.player.publishers
+        return (
+            all(publishers[t].get_subscription_count() >= readers for t in self.needed)
+            and all(s.get_publisher_count() > 0 for s in self.observer.subs)
+            and (verdicts is None or all(s.get_publisher_count() > 0 for s in verdicts.subs))
+            and all(self.node.count_subscribers(t) >= 2 for t in self.classifier_inputs)
+            and diagnostics.segmenter_matched() >= 2
+            and diagnostics.intake_matched()
+            and (verdicts is None or diagnostics.verifier_matched())
+        )
+
+    def classifier_gone(self) -> bool:
+        """The graph and the segmenter's diagnostics no longer see the classifier."""
+        return self.diagnostics.segmenter_matched() < 2 and all(
+            self.node.count_subscribers(t) < 2 for t in self.classifier_inputs
+        )
+
+    def play(
+        self, bag: Path, msgs: list[BagMessage], stream_id: int
+    ) -> tuple[BagRecord, VerdictRecord | None]:
+        """Play one bag, wait until every verdict and end-of-stream arrived; return its records
+        (the classifier's, and the verifier's when it runs)."""
+        observer, options = self.observer, self.options
+        observer.convert()
+        with observer.lock:
+            since = observer.obs.mark()
+        playback = Playback(bag)
+        t0 = time.monotonic()
+        self.player.play(msgs, rate=options.rate, on_publish=playback.on_publish)
+        playback.play_s = time.monotonic() - t0
+        drain = _BagDrain(self, stream_id, since, playback, msgs)
+        wait_for_nodes(
+            drain.done,
+            options.drain_timeout,
+            self.procs,
+            f"the verdicts of {bag.name}",
+            drain.progress,
+        )
+        observer.convert()
+        verdict_record = self.verdicts.record(stream_id) if self.verdicts is not None else None
+        if verdict_record is not None:
+            verdict_record.latencies_ns = verdict_latencies(
+                playback.pub_series, verdict_record.arrivals
+            )
+        with observer.lock:
+            return bag_record(observer.obs, since, stream_id, self.arms, playback), verdict_record
+
+
+class _BagDrain:
+    """What a played bag still waits for: its verdicts, its end of stream on every arm, the
+    last state change, and the verifier reaching the bag's end."""
+
+    def __init__(
+        self, graph: _Graph, stream_id: int, since: Mark, playback: Playback, msgs: list[BagMessage]
+    ) -> None:
+        self.graph = graph
+        self.stream_id = stream_id
+        self.since = since
+        self.playback = playback
+        n_subtasks = sum(1 for m in msgs if m.topic == PHASE_TOPIC) - 1  # minus the end event
+        self.n_subtasks = 0 if graph.options.mode == "window" else n_subtasks  # window: none
+        stamps = [decode_wrench(m.raw)[0] for m in msgs if m.msgtype == WRENCH_TYPE]
+        self.end_time = (max(stamps) - min(stamps)) / 1e9 if stamps else 0.0
+
+    def done(self) -> bool:
+        """Everything of the bag has arrived."""
+        observer, verdicts = self.graph.observer, self.graph.verdicts
+        if not observer.ended(self.stream_id, self.graph.arms):
+            return False
+        finals = observer.finals_since(self.since.beliefs)
+        return (
+            len(finals) >= self.n_subtasks
+            # a state change published with the last verdict belongs to this bag
+            and (not finals or observer.state_settled(finals[-1].sent_ns))
+            and (verdicts is None or verdicts.reached(self.stream_id, self.end_time))
+        )
+
+    def progress(self) -> str:
+        """What has arrived so far (for a time-out's message)."""
+        observer, since = self.graph.observer, self.since
+        obs = observer.obs
+        return (
+            f"{len(observer.finals_since(since.beliefs))}/{self.n_subtasks} verdicts, end of stream "
+            f"{sorted(k[1:] for k in obs.ends if k[0] == self.stream_id)}, "
+            f"{self.playback.published} wrench published; received "
+            f"{len(obs.word_arrivals) - since.word_arrivals} word messages, "
+            f"{len(obs.beliefs) - since.beliefs} beliefs, "
+            f"{len(obs.states) - since.states} state changes, {len(obs.phases)} events"
+        )
+
+
+Plays = list[tuple[Path, list[BagMessage]]]
+"""Each bag with its messages, in play order."""
+
+
+def _teach(
+    graph: _Graph, plays: Plays, trials: list[Trial], options: ReplayEvalOptions
+) -> tuple[dict[str, Any], dict[str, int]]:
+    """Play and teach the first teach_first bags (module doc); the teaching report and the
+    samples the segmenter accepted so far per arm."""
+    k = options.teach_first
+    client = teach_client(graph.node)
+    taught = []
+    beside = Latencies()  # bags played while the previous one was learned
+    learning: tuple[BagRecord, Trial, _Sent] | None = None
+    accepted_before: dict[str, int] = {}
+    for stream_id, (bag, msgs) in enumerate(plays[:k]):
+        rec, _ = graph.play(bag, msgs, stream_id)
+        if learning is not None:
+            beside.add(rec)
+            taught.append(_wait_taught(client, *learning, options))
+        sent = _send_teach(client, rec, trials[stream_id])
+        learning = (rec, trials[stream_id], sent)
+        if not options.teach_beside or stream_id == k - 1:
+            taught.append(_wait_taught(client, *learning, options))
+            learning = None
+        accepted_before = {a: rec.ends.get((a, "primitives"), (0, 0))[0] for a in graph.arms}
+    report = _teach_summary(taught)
+    if options.teach_beside:
+        report["latency_beside_ms"] = percentiles_ms(beside.belief)
+    return report, accepted_before
+
+
+def _restart_classifier(
+    graph: _Graph,
+    ws: _Workspace,
+    codes: dict[str, int | None],
+    plays: Plays,
+    records: list[BagRecord],
+) -> dict[str, Any]:
+    """Restart the classifier from its saved model and replay the scored bags: the verdicts
+    before and after."""
+    procs, options, k = graph.procs, graph.options, graph.options.teach_first
+    procs[1].interrupt()
+    codes["classifier_node (taught)"] = procs[1].stop()
+    # the graph and the segmenter's diagnostics must first see it gone
+    wait_for_nodes(
+        graph.classifier_gone,
+        options.startup_timeout,
+        procs[:1],
+        "the classifier to leave the graph",
+    )
+    procs[1] = NodeProcess(
+        "classifier_node", ws.cls_params, ws.env, ws.work / "classifier_node_restarted.log"
+    )
+    wait_for_nodes(graph.ready, options.startup_timeout, procs, "the restarted classifier")
+    again = [
+        graph.play(bag, msgs, stream_id)[0]
+        for stream_id, (bag, msgs) in enumerate(plays[k:], start=len(plays))
+    ]
+    return _restart_summary(records, again)
+
+
+def _live_session(
+    bags: list[Path],
+    trials: list[Trial],
+    ws: _Workspace,
+    options: ReplayEvalOptions,
+    procs: list[NodeProcess],
+    codes: dict[str, int | None],
+    result: dict[str, Any],
+) -> tuple[list[BagRecord], list[VerdictRecord], dict[str, int]]:
+    """Start the nodes, connect, teach (when asked), play the scored bags (and again after a
+    restart); the records, the verifier's records and the samples accepted before."""
+    arms = trials[0].arms
+    ver_cfg = _start_nodes(procs, ws, arms, options)
+    with RosSession("rcbht_replay_eval", domain_id=ws.domain_id) as ros:
+        graph = _Graph(ros.node, ws, ver_cfg, bags, arms, procs, options)
+        wait_for_nodes(graph.ready, options.startup_timeout, procs, "the nodes to connect")
+        result["startup_s"] = round(time.monotonic() - ws.started, 2)
+        plays = list(zip(bags, graph.messages, strict=True))
+        accepted_before: dict[str, int] = {}
+        k = options.teach_first
+        if k:
+            result["teach"], accepted_before = _teach(graph, plays, trials, options)
+        played = [
+            graph.play(bag, msgs, stream_id)
+            for stream_id, (bag, msgs) in enumerate(plays[k:], start=k)
+        ]
+        records = [rec for rec, _ in played]
+        verdict_records = [v for _, v in played if v is not None]
+        if k and options.teach_restart:
+            result["restart"] = _restart_classifier(graph, ws, codes, plays, records)
+    return records, verdict_records, accepted_before
+
+
+def _stop_nodes(
+    procs: list[NodeProcess],
+    codes: dict[str, int | None],
+    result: dict[str, Any],
+    options: ReplayEvalOptions,
+    domain_id: int,
+) -> None:
+    """Stop every node (keeping a failed one's log tail), kill any left, release the domain."""
+    for p in procs:  # both stop at once: a Ctrl-C of the harness ends within seconds
+        p.interrupt()
+    try:
+        for p in procs:
+            codes[p.name] = p.stop()
+            if codes[p.name] != 0:  # the node log is in a temporary folder: keep its end
+                result.setdefault("shutdown_logs", {})[p.name] = p.tail(40)
+    finally:
+        for p in procs:  # a second Ctrl-C while waiting: no node is left behind
+            if p.alive():
+                p.proc.kill()
+        if not options.domain_id:
+            release_domain(domain_id)  # its nodes are gone
+
+
+def _verifier_report(
+    records: list[VerdictRecord],
+    trials: list[Trial],
+    verifier: VerifierModel,
+    options: ReplayEvalOptions,
+) -> dict[str, Any]:
+    """The verifier's part of the report: its file, scores and sample -> verdict latency."""
+    return {
+        "file": str(options.verifier_file),
+        **verifier_scores(records, trials, verifier, options.offline),
+        "sample_to_verdict_ms": percentiles_ms([n for r in records for n in r.latencies_ns]),
+    }
+
+
+def replay_eval(
+    bags: list[Path], model_path: Path | None, options: ReplayEvalOptions
+) -> dict[str, Any]:
+    """Run the live pipeline on `bags` and return the scores (see module doc).
+
+    Without a model (None) the classifier publishes "unknown"; latencies and drops still count.
+    """
+    _check_request(bags, model_path, options)
+    trials, arms = _read_bags(bags)
     verifier = check_verifier(options.verifier_file, arms) if options.verifier_file else None
     domain_id = options.domain_id or lease_domain()
     tmp = tempfile.TemporaryDirectory(prefix="rcbht-replay-")
@@ -240,139 +552,17 @@ def replay_eval(
     work.mkdir(parents=True, exist_ok=True)
     env = ros_env(domain_id, work / "ros_log")
     seg, cls_cfg, seg_params, cls_params = _params(work, arms, model_path, options)
-    started = time.monotonic()
+    ws = _Workspace(work, env, domain_id, seg, cls_cfg, seg_params, cls_params, time.monotonic())
     result: dict[str, Any] = {}
-    verdict_records: list[VerdictRecord] = []
+    codes: dict[str, int | None] = {}
     with environment(env), sigterm_as_interrupt():
         procs: list[NodeProcess] = []
-        codes: dict[str, int | None] = {}
         try:
-            procs.append(
-                NodeProcess("segmenter_node", seg_params, env, work / "segmenter_node.log")
+            records, verdict_records, accepted_before = _live_session(
+                bags, trials, ws, options, procs, codes, result
             )
-            procs.append(
-                NodeProcess("classifier_node", cls_params, env, work / "classifier_node.log")
-            )
-            ver_cfg = None
-            if options.verifier_file is not None:
-                ver_cfg, ver_params = verifier_params(work, arms, options.verifier_file)
-                procs.append(
-                    NodeProcess("verifier_node", ver_params, env, work / "verifier_node.log")
-                )
-            with RosSession("rcbht_replay_eval", domain_id=domain_id) as ros:
-                qos = qos_profile(seg.qos_depth, "reliable")
-                observer = Observer(ros.node, seg, cls_cfg, qos)
-                verdicts = VerdictObserver(ros.node, ver_cfg, qos) if ver_cfg else None
-                player = BagPlayer(ros.node, qos)
-                all_messages = [list(bag_messages(b)) for b in bags]
-                for msgs in all_messages:
-                    player.prepare(msgs)
-                needed = [wrench_topic(a, arms) for a in arms] + [PHASE_TOPIC]
-                classifier_inputs = ["/" + t for t in observer.word_topics.values()] + [
-                    "/" + seg.applied_phase_topic
-                ]
-
-                diagnostics = DiagnosticWatch(ros.node)
-                matched = diagnostics.segmenter_matched
-
-                def ready() -> bool:
-                    # the graph shows a reader before the writer's side has matched it (and a
-                    # writer before the reader's side has); messages sent in between are lost,
-                    # so the nodes' own /diagnostics must count the segmenter's readers
-                    # (observer, classifier), the verifier's reader (observer) and the
-                    # publishers both nodes' intake matched
-                    readers = 2 if verdicts is not None else 1  # segmenter (+ verifier)
-                    return (
-                        all(
-                            player.publishers[t].get_subscription_count() >= readers for t in needed
-                        )
-                        and all(s.get_publisher_count() > 0 for s in observer.subs)
-                        and (
-                            verdicts is None
-                            or all(s.get_publisher_count() > 0 for s in verdicts.subs)
-                        )
-                        and all(ros.node.count_subscribers(t) >= 2 for t in classifier_inputs)
-                        and matched() >= 2
-                        and diagnostics.intake_matched()
-                        and (verdicts is None or diagnostics.verifier_matched())
-                    )
-
-                wait_for_nodes(ready, options.startup_timeout, procs, "the nodes to connect")
-                result["startup_s"] = round(time.monotonic() - started, 2)
-                plays = list(zip(bags, all_messages, strict=True))
-                accepted_before: dict[str, int] = {}
-                k = options.teach_first
-                if k:
-                    client = teach_client(ros.node)
-                    taught = []
-                    beside = Latencies()  # bags played while the previous one was learned
-                    learning: tuple[BagRecord, Trial, _Sent] | None = None
-                    for stream_id, (bag, msgs) in enumerate(plays[:k]):
-                        rec, _ = _play_one(
-                            bag, msgs, stream_id, player, observer, procs, options, arms, verdicts
-                        )
-                        if learning is not None:
-                            beside.add(rec)
-                            taught.append(_wait_taught(client, *learning, options))
-                        sent = _send_teach(client, rec, trials[stream_id])
-                        learning = (rec, trials[stream_id], sent)
-                        if not options.teach_beside or stream_id == k - 1:
-                            taught.append(_wait_taught(client, *learning, options))
-                            learning = None
-                        accepted_before = {
-                            a: rec.ends.get((a, "primitives"), (0, 0))[0] for a in arms
-                        }
-                    result["teach"] = _teach_summary(taught)
-                    if options.teach_beside:
-                        result["teach"]["latency_beside_ms"] = percentiles_ms(beside.belief)
-                played = [
-                    _play_one(
-                        bag, msgs, stream_id, player, observer, procs, options, arms, verdicts
-                    )
-                    for stream_id, (bag, msgs) in enumerate(plays[k:], start=k)
-                ]
-                records = [rec for rec, _ in played]
-                verdict_records = [v for _, v in played if v is not None]
-                if k and options.teach_restart:
-                    procs[1].interrupt()
-                    codes["classifier_node (taught)"] = procs[1].stop()
-                    # the graph and the segmenter's diagnostics must first see it gone
-                    wait_for_nodes(
-                        lambda: (
-                            matched() < 2
-                            and all(ros.node.count_subscribers(t) < 2 for t in classifier_inputs)
-                        ),
-                        options.startup_timeout,
-                        procs[:1],
-                        "the classifier to leave the graph",
-                    )
-                    procs[1] = NodeProcess(
-                        "classifier_node", cls_params, env, work / "classifier_node_restarted.log"
-                    )
-                    wait_for_nodes(
-                        ready, options.startup_timeout, procs, "the restarted classifier"
-                    )
-                    again = [
-                        _play_one(
-                            bag, msgs, stream_id, player, observer, procs, options, arms, verdicts
-                        )[0]
-                        for stream_id, (bag, msgs) in enumerate(plays[k:], start=len(plays))
-                    ]
-                    result["restart"] = _restart_summary(records, again)
         finally:
-            for p in procs:  # both stop at once: a Ctrl-C of the harness ends within seconds
-                p.interrupt()
-            try:
-                for p in procs:
-                    codes[p.name] = p.stop()
-                    if codes[p.name] != 0:  # the node log is in a temporary folder: keep its end
-                        result.setdefault("shutdown_logs", {})[p.name] = p.tail(40)
-            finally:
-                for p in procs:  # a second Ctrl-C while waiting: no node is left behind
-                    if p.alive():
-                        p.proc.kill()
-                if not options.domain_id:
-                    release_domain(domain_id)  # its nodes are gone
+            _stop_nodes(procs, codes, result, options, domain_id)
     scored_trials = trials[options.teach_first :]
     if options.teach_first:
         model_path = teach_path(work, options)
@@ -380,13 +570,7 @@ def replay_eval(
         _score(records, scored_trials, model_path, options, cls_cfg, arms, accepted_before)
     )
     if verifier is not None:
-        result["verifier"] = {
-            "file": str(options.verifier_file),
-            **verifier_scores(verdict_records, scored_trials, verifier, options.offline),
-            "sample_to_verdict_ms": percentiles_ms(
-                [n for r in verdict_records for n in r.latencies_ns]
-            ),
-        }
+        result["verifier"] = _verifier_report(verdict_records, scored_trials, verifier, options)
     result.update(
         {
             "bags": [str(b) for b in bags],
@@ -399,7 +583,7 @@ def replay_eval(
             "domain_id": domain_id,
             "exit_codes": codes,
             "clean_shutdown": all(c == 0 for c in codes.values()),
-            "wall_s": round(time.monotonic() - started, 2),
+            "wall_s": round(time.monotonic() - ws.started, 2),
         }
     )
     tmp.cleanup()
@@ -507,69 +691,3 @@ def _score(
     if options.offline and model_path is not None:
         reference = load_reference(model_path, options, classifier)
     return score(records, trials, arms, options.mode, reference, accepted_before)
-
-
-def _play_one(
-    bag: Path,
-    msgs: list[BagMessage],
-    stream_id: int,
-    player: BagPlayer,
-    observer: Observer,
-    procs: list[NodeProcess],
-    options: ReplayEvalOptions,
-    arms: tuple[str, ...],
-    verdicts: VerdictObserver | None = None,
-) -> tuple[BagRecord, VerdictRecord | None]:
-    """Play one bag, wait until every verdict and end-of-stream arrived; return its records
-    (the classifier's, and the verifier's when it runs)."""
-    observer.convert()
-    with observer.lock:
-        since = observer.obs.mark()
-    playback = Playback(bag)
-    t0 = time.monotonic()
-    player.play(msgs, rate=options.rate, on_publish=playback.on_publish)
-    playback.play_s = time.monotonic() - t0
-    n_subtasks = sum(1 for m in msgs if m.topic == PHASE_TOPIC) - 1  # minus the end event
-    if options.mode == "window":
-        n_subtasks = 0  # window mode issues no sub-task verdicts
-    obs = observer.obs
-
-    def progress() -> str:
-        return (
-            f"{len(observer.finals_since(since.beliefs))}/{n_subtasks} verdicts, end of stream "
-            f"{sorted(k[1:] for k in obs.ends if k[0] == stream_id)}, "
-            f"{playback.published} wrench published; received "
-            f"{len(obs.word_arrivals) - since.word_arrivals} word messages, "
-            f"{len(obs.beliefs) - since.beliefs} beliefs, "
-            f"{len(obs.states) - since.states} state changes, {len(obs.phases)} events"
-        )
-
-    stamps = [decode_wrench(m.raw)[0] for m in msgs if m.msgtype == WRENCH_TYPE]
-    end_time = (max(stamps) - min(stamps)) / 1e9 if stamps else 0.0
-
-    def done() -> bool:
-        if not observer.ended(stream_id, arms):
-            return False
-        finals = observer.finals_since(since.beliefs)
-        return (
-            len(finals) >= n_subtasks
-            # a state change published with the last verdict belongs to this bag
-            and (not finals or observer.state_settled(finals[-1].sent_ns))
-            and (verdicts is None or verdicts.reached(stream_id, end_time))
-        )
-
-    wait_for_nodes(
-        done,
-        options.drain_timeout,
-        procs,
-        f"the verdicts of {bag.name}",
-        progress,
-    )
-    observer.convert()
-    verdict_record = verdicts.record(stream_id) if verdicts is not None else None
-    if verdict_record is not None:
-        verdict_record.latencies_ns = verdict_latencies(
-            playback.pub_series, verdict_record.arrivals
-        )
-    with observer.lock:
-        return bag_record(observer.obs, since, stream_id, arms, playback), verdict_record
