@@ -13,11 +13,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 from sklearn.ensemble import RandomForestClassifier
 
 from rcbht_introspection.errors import InputError
@@ -28,7 +29,8 @@ from rcbht_introspection.io.sensor_checks import RepeatedPolicy
 from rcbht_introspection.learn import ClassifierKind
 from rcbht_introspection.learn.data import TrialSamples, load_samples, task_of_trials
 from rcbht_introspection.learn.live import load_live_config, stream_factory, trial_live_samples
-from rcbht_introspection.learn.models import train_model
+from rcbht_introspection.learn.models import SubtaskModel, train_model
+from rcbht_introspection.task import Task
 from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
 VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
@@ -81,7 +83,9 @@ def default_validation(n_trials: int, two_arm: bool = False) -> int:
 
 
 def _log_duration(samples: Sequence[SubtaskSample]) -> np.ndarray:
-    return np.log(np.maximum([[s.duration] for s in samples], 1e-3))
+    """(n, 1) log sub-task durations (floored at 1 ms): the duration-only reference's feature."""
+    logs: NDArray[np.float64] = np.log(np.maximum([[s.duration] for s in samples], 1e-3))
+    return logs
 
 
 def _duration_model(samples: Sequence[SubtaskSample], seed: int) -> RandomForestClassifier:
@@ -113,16 +117,27 @@ def _steady(curve_rows: list[list[float]]) -> list[float]:
     return out
 
 
-def evaluate(
-    trials: Sequence[TrialSamples],
-    protocol: Protocol = Protocol(),
-    progress: Callable[[int], None] | None = None,
-) -> dict[str, Any]:
-    """Run the protocol; returns the JSON-ready result (keys documented in docs/learning.md)."""
+@dataclass(frozen=True)
+class _Plan:
+    """The trials and curve steps of one evaluation run."""
+
+    task: Task
+    complete: list[TrialSamples]
+    """Trials that hold every sub-task of the task (the others are excluded)."""
+    excluded: list[str]
+    n_val: int
+    n_train: int
+    steps: list[int]
+    """Training trial counts of the curve."""
+    tail_steps: list[int]
+    """The last third of the steps: the steady state."""
+
+
+def _plan(trials: Sequence[TrialSamples], protocol: Protocol) -> _Plan:
+    """Split sizes and curve steps of `protocol` on `trials` (too few trials is an InputError)."""
     task = task_of_trials(trials)
     complete = [t for t in trials if t.covers(task)]
     excluded = [t.trial for t in trials if not t.covers(task)]
-    names = task.subtasks
     two_arm = any(len(s.words.arms) > 1 for t in complete for s in t.samples[:1])
     n_val = protocol.n_validation or default_validation(len(complete), two_arm)
     start = protocol.start_trials or START_TRIALS[protocol.classifier]
@@ -134,153 +149,264 @@ def evaluate(
         )
     steps = list(range(start, n_train + 1))
     tail_steps = steps[len(steps) - max(1, math.ceil(len(steps) / 3)) :]
-    curve = np.full((protocol.permutations, len(steps)), math.nan)
-    base_curve = np.full((protocol.permutations, len(steps)), math.nan)
-    variant_curve = np.full((protocol.permutations, len(tail_steps)), math.nan)
-    variant_base = np.full((protocol.permutations, len(tail_steps)), math.nan)
-    final_acc, fit_seconds, predict_ms = [], [], []
-    confusion = np.zeros((len(names), len(names)), dtype=int)
-    prefix_acc: dict[float, list[float]] = {f: [] for f in PREFIX_FRACTIONS}
-    prefix_base: dict[float, list[float]] = {f: [] for f in PREFIX_FRACTIONS}
-    near_empty = lambda s: s.duration < protocol.near_empty_seconds  # noqa: E731
-    n_near_empty = sum(near_empty(s) for t in complete for s in t.samples)
+    return _Plan(task, complete, excluded, n_val, n_train, steps, tail_steps)
+
+
+@dataclass
+class _Tally:
+    """What the permutations measure, filled step by step: curves are (permutation, step)."""
+
+    curve: NDArray[np.float64]
+    base_curve: NDArray[np.float64]
+    variant_curve: NDArray[np.float64]
+    variant_base: NDArray[np.float64]
+    confusion: NDArray[np.int_]
+    final_acc: list[float] = field(default_factory=list)
+    fit_seconds: list[float] = field(default_factory=list)
+    predict_ms: list[float] = field(default_factory=list)
+    prefix_acc: dict[float, list[float]] = field(
+        default_factory=lambda: {f: [] for f in PREFIX_FRACTIONS}
+    )
+    prefix_base: dict[float, list[float]] = field(
+        default_factory=lambda: {f: [] for f in PREFIX_FRACTIONS}
+    )
+    live_acc: list[float] = field(default_factory=list)
+
+    @classmethod
+    def empty(cls, plan: _Plan, permutations: int) -> _Tally:
+        """NaN curves (a step not run stays NaN) and an empty confusion matrix."""
+        n_names = len(plan.task.subtasks)
+        return cls(
+            curve=np.full((permutations, len(plan.steps)), math.nan),
+            base_curve=np.full((permutations, len(plan.steps)), math.nan),
+            variant_curve=np.full((permutations, len(plan.tail_steps)), math.nan),
+            variant_base=np.full((permutations, len(plan.tail_steps)), math.nan),
+            confusion=np.zeros((n_names, n_names), dtype=int),
+        )
+
+
+class _Run:
+    """One evaluation: the protocol and its plan, the live windows, one sample cache shared by
+    every model (they all encode the same samples: each is computed once) and the tally."""
+
+    def __init__(
+        self,
+        protocol: Protocol,
+        plan: _Plan,
+        live: dict[str, list[SubtaskSample]],
+        progress: Callable[[int], None] | None,
+    ) -> None:
+        self.protocol = protocol
+        self.plan = plan
+        self.live = live
+        self.progress = progress
+        self.cache = SampleCache()
+        self.tally = _Tally.empty(plan, protocol.permutations)
+        self.n_near_empty = _count_near_empty(plan.complete, protocol)
+
+    def near_empty(self, sample: SubtaskSample) -> bool:
+        """A sub-task too short to carry words (dropped in the variant)."""
+        return sample.duration < self.protocol.near_empty_seconds
+
+    def train(self, samples: Sequence[SubtaskSample], perm: int) -> SubtaskModel:
+        """A model of the protocol's classifier and encoding, seeded by the permutation."""
+        p = self.protocol
+        return train_model(
+            samples, p.classifier, p.encoding,
+            random_state=p.seed + perm, n_estimators=p.n_estimators,
+            max_nodes=p.max_nodes, max_points=p.max_points,
+            augment_prefixes=p.augment_prefixes, cache=self.cache, task=self.plan.task,
+        )  # fmt: skip
+
+    def permutation(self, perm: int) -> None:
+        """One random order of the trials: validation trials first, then a curve that trains
+        on one more of the remaining trials per step."""
+        plan, tally, seed = self.plan, self.tally, self.protocol.seed + perm
+        rng = np.random.default_rng(seed)
+        order = [plan.complete[i] for i in rng.permutation(len(plan.complete))]
+        validation, training = order[: plan.n_val], order[plan.n_val :]
+        val_samples = [s for t in validation for s in t.samples]
+        val_kept = [s for s in val_samples if not self.near_empty(s)]
+        for j, k in enumerate(plan.steps):
+            train_samples = [s for t in training[:k] for s in t.samples]
+            began = time.perf_counter()
+            model = self.train(train_samples, perm)
+            elapsed = time.perf_counter() - began
+            tally.curve[perm, j] = _accuracy(model.predict_samples(val_samples), val_samples)
+            duration = _duration_model(train_samples, seed)
+            tally.base_curve[perm, j] = _accuracy(
+                duration.predict(_log_duration(val_samples)), val_samples
+            )
+            if self.protocol.variant and k in plan.tail_steps and self.n_near_empty:
+                self.variant(perm, plan.tail_steps.index(k), train_samples, val_kept)
+            if self.progress:
+                self.progress(1)
+            if k == plan.n_train:  # last step = one random trial split
+                self.tally.fit_seconds.append(elapsed)
+                self.final_split(model, val_samples)
+                self.live_split(perm, model, train_samples, training, validation)
+                self.prefix_split(model, duration, val_samples)
+
+    def variant(
+        self, perm: int, i: int, train_samples: list[SubtaskSample], val_kept: list[SubtaskSample]
+    ) -> None:
+        """Steady-state step `i` of the variant: near-empty sub-tasks dropped everywhere."""
+        kept = [s for s in train_samples if not self.near_empty(s)]
+        variant = self.train(kept, perm)
+        self.tally.variant_curve[perm, i] = _accuracy(variant.predict_samples(val_kept), val_kept)
+        vbase = _duration_model(kept, self.protocol.seed + perm)
+        self.tally.variant_base[perm, i] = _accuracy(
+            vbase.predict(_log_duration(val_kept)), val_kept
+        )
+
+    def final_split(self, model: SubtaskModel, val_samples: list[SubtaskSample]) -> None:
+        """The full-training model as one trial split: accuracy, confusion, prediction time."""
+        names = self.plan.task.subtasks
+        predicted = model.predict_samples(val_samples)
+        self.tally.final_acc.append(_accuracy(predicted, val_samples))
+        for p, s in zip(predicted, val_samples, strict=True):
+            if p in names and s.subtask in names:
+                self.tally.confusion[names.index(s.subtask), names.index(p)] += 1
+        timings = []
+        for s in val_samples[: min(len(val_samples), 12)]:
+            t0 = time.perf_counter()
+            model.predict_proba_samples([s])
+            timings.append(time.perf_counter() - t0)
+        self.tally.predict_ms.append(1000 * float(np.median(timings)))
+
+    def live_split(
+        self,
+        perm: int,
+        model: SubtaskModel,
+        train_samples: list[SubtaskSample],
+        training: list[TrialSamples],
+        validation: list[TrialSamples],
+    ) -> None:
+        """Accuracy on the validation trials' running windows (when live windows are scored):
+        the live head (complete + live windows of the training trials) when augmenting, else
+        the model itself (learn/live.py)."""
+        if not self.live:
+            return
+        head = model
+        if self.protocol.live_augment:
+            live_train = train_samples + [s for t in training for s in self.live[t.trial]]
+            head = self.train(live_train, perm)
+        windows = [s for t in validation for s in self.live[t.trial]]
+        self.tally.live_acc.append(_accuracy(head.predict_samples(windows), windows))
+
+    def prefix_split(
+        self,
+        model: SubtaskModel,
+        duration: RandomForestClassifier,
+        val_samples: list[SubtaskSample],
+    ) -> None:
+        """Accuracy on the first fractions of the validation sub-tasks (when prefixes are on)."""
+        if not self.protocol.prefixes:
+            return
+        for f in PREFIX_FRACTIONS:
+            prefixes = [prefix_sample(s, f) for s in val_samples]
+            self.tally.prefix_acc[f].append(_accuracy(model.predict_samples(prefixes), prefixes))
+            self.tally.prefix_base[f].append(
+                _accuracy(duration.predict(_log_duration(prefixes)), prefixes)
+            )
+
+
+def _count_near_empty(complete: Sequence[TrialSamples], protocol: Protocol) -> int:
+    """Sub-tasks shorter than protocol.near_empty_seconds among the complete trials."""
+    return sum(s.duration < protocol.near_empty_seconds for t in complete for s in t.samples)
+
+
+def evaluate(
+    trials: Sequence[TrialSamples],
+    protocol: Protocol = Protocol(),
+    progress: Callable[[int], None] | None = None,
+) -> dict[str, Any]:
+    """Run the protocol; returns the JSON-ready result (keys documented in docs/learning.md)."""
+    plan = _plan(trials, protocol)
     live = (
-        _live_windows(complete, protocol.taxonomy, protocol.repeated, protocol.live_config)
+        _live_windows(plan.complete, protocol.taxonomy, protocol.repeated, protocol.live_config)
         if protocol.live_augment or protocol.live_score
         else {}
     )
-    live_acc: list[float] = []
-    cache = SampleCache()  # every model here encodes the same samples: compute each once
-
+    run = _Run(protocol, plan, live, progress)
     for perm in range(protocol.permutations):
-        rng = np.random.default_rng(protocol.seed + perm)
-        order = [complete[i] for i in rng.permutation(len(complete))]
-        validation, training = order[:n_val], order[n_val:]
-        val_samples = [s for t in validation for s in t.samples]
-        val_kept = [s for s in val_samples if not near_empty(s)]
-        for j, k in enumerate(steps):
-            train_samples = [s for t in training[:k] for s in t.samples]
-            began = time.perf_counter()
-            model = train_model(
-                train_samples, protocol.classifier, protocol.encoding,
-                random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
-                max_nodes=protocol.max_nodes, max_points=protocol.max_points,
-                augment_prefixes=protocol.augment_prefixes, cache=cache, task=task,
-            )  # fmt: skip
-            elapsed = time.perf_counter() - began
-            curve[perm, j] = _accuracy(model.predict_samples(val_samples), val_samples)
-            duration = _duration_model(train_samples, protocol.seed + perm)
-            base_curve[perm, j] = _accuracy(
-                duration.predict(_log_duration(val_samples)), val_samples
-            )
-            if protocol.variant and k in tail_steps and n_near_empty:
-                kept = [s for s in train_samples if not near_empty(s)]
-                variant = train_model(
-                    kept, protocol.classifier, protocol.encoding,
-                    random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
-                    max_nodes=protocol.max_nodes, max_points=protocol.max_points,
-                    augment_prefixes=protocol.augment_prefixes, cache=cache, task=task,
-                )  # fmt: skip
-                i = tail_steps.index(k)
-                variant_curve[perm, i] = _accuracy(variant.predict_samples(val_kept), val_kept)
-                vbase = _duration_model(kept, protocol.seed + perm)
-                variant_base[perm, i] = _accuracy(vbase.predict(_log_duration(val_kept)), val_kept)
-            if progress:
-                progress(1)
-            if k != n_train:
-                continue
-            # last step = one random trial split
-            fit_seconds.append(elapsed)
-            predicted = model.predict_samples(val_samples)
-            final_acc.append(_accuracy(predicted, val_samples))
-            for p, s in zip(predicted, val_samples, strict=True):
-                if p in names and s.subtask in names:
-                    confusion[names.index(s.subtask), names.index(p)] += 1
-            timings = []
-            for s in val_samples[: min(len(val_samples), 12)]:
-                t0 = time.perf_counter()
-                model.predict_proba_samples([s])
-                timings.append(time.perf_counter() - t0)
-            predict_ms.append(1000 * float(np.median(timings)))
-            if live:
-                # running windows: the live head (complete + live windows of the training
-                # trials) when augmenting, else the model itself (learn/live.py)
-                head = model
-                if protocol.live_augment:
-                    live_train = train_samples + [s for t in training for s in live[t.trial]]
-                    head = train_model(
-                        live_train, protocol.classifier, protocol.encoding,
-                        random_state=protocol.seed + perm, n_estimators=protocol.n_estimators,
-                        max_nodes=protocol.max_nodes, max_points=protocol.max_points,
-                        augment_prefixes=protocol.augment_prefixes, cache=cache, task=task,
-                    )  # fmt: skip
-                windows = [s for t in validation for s in live[t.trial]]
-                live_acc.append(_accuracy(head.predict_samples(windows), windows))
-            if protocol.prefixes:
-                for f in PREFIX_FRACTIONS:
-                    prefixes = [prefix_sample(s, f) for s in val_samples]
-                    prefix_acc[f].append(_accuracy(model.predict_samples(prefixes), prefixes))
-                    prefix_base[f].append(
-                        _accuracy(duration.predict(_log_duration(prefixes)), prefixes)
-                    )
+        run.permutation(perm)
+    result = _curve_result(plan, protocol, run.tally)
+    if live:
+        result["live_augment"] = protocol.live_augment
+        result["live_accuracy"] = {
+            **_mean_std(run.tally.live_acc),
+            "n_windows": sum(map(len, live.values())),
+        }
+    if protocol.variant:
+        result["without_near_empty"] = _variant_result(
+            protocol, run.tally, run.n_near_empty, result
+        )
+    return result
 
-    rows = confusion.sum(axis=1)
-    result: dict[str, Any] = {
+
+def _step_curve(curve: NDArray[np.float64], steps: list[int]) -> list[dict[str, float]]:
+    """Mean and spread over permutations of each curve step."""
+    return [{"n_train_trials": k, **_mean_std(curve[:, j].tolist())} for j, k in enumerate(steps)]
+
+
+def _curve_result(plan: _Plan, protocol: Protocol, tally: _Tally) -> dict[str, Any]:
+    """The JSON-ready curve, split, confusion, timing and prefix figures of a finished run."""
+    names = plan.task.subtasks
+    rows = tally.confusion.sum(axis=1)
+    final_acc, fit_seconds, predict_ms = tally.final_acc, tally.fit_seconds, tally.predict_ms
+    return {
         "classifier": protocol.classifier,
         "encoding": protocol.encoding,
         "augment_prefixes": list(protocol.augment_prefixes),
         "permutations": protocol.permutations,
-        "n_trials": len(complete),
-        "n_validation_trials": n_val,
-        "n_training_trials": n_train,
-        "excluded_trials": excluded,
-        "steady_state_accuracy": _mean_std(_steady(curve.tolist())),
-        "steady_state_steps": tail_steps,
-        "curve": [
-            {"n_train_trials": k, **_mean_std(curve[:, j].tolist())} for j, k in enumerate(steps)
-        ],
+        "n_trials": len(plan.complete),
+        "n_validation_trials": plan.n_val,
+        "n_training_trials": plan.n_train,
+        "excluded_trials": plan.excluded,
+        "steady_state_accuracy": _mean_std(_steady(tally.curve.tolist())),
+        "steady_state_steps": plan.tail_steps,
+        "curve": _step_curve(tally.curve, plan.steps),
         "per_class_accuracy": {
-            name: (float(confusion[i, i] / rows[i]) if rows[i] else math.nan)
+            name: (float(tally.confusion[i, i] / rows[i]) if rows[i] else math.nan)
             for i, name in enumerate(names)
         },
-        "confusion_matrix": confusion.tolist(),
+        "confusion_matrix": tally.confusion.tolist(),
         "confusion_labels": list(names),
-        "task": task.to_dict(),
+        "task": plan.task.to_dict(),
         "trial_splits": {**_mean_std(final_acc), "n": len(final_acc)},
         "best_of_splits": float(np.nanmax(final_acc)) if final_acc else math.nan,
         "fit_seconds": float(np.mean(fit_seconds)) if fit_seconds else math.nan,
         "predict_ms": float(np.median(predict_ms)) if predict_ms else math.nan,
         "duration_baseline": {
-            **_mean_std(_steady(base_curve.tolist())),
-            "curve": [
-                {"n_train_trials": k, **_mean_std(base_curve[:, j].tolist())}
-                for j, k in enumerate(steps)
-            ],
+            **_mean_std(_steady(tally.base_curve.tolist())),
+            "curve": _step_curve(tally.base_curve, plan.steps),
         },
         "prefix_accuracy": {
             f"{int(f * 100)}%": {
-                **_mean_std(prefix_acc[f]),
-                "duration_baseline": _mean_std(prefix_base[f])["mean"],
+                **_mean_std(tally.prefix_acc[f]),
+                "duration_baseline": _mean_std(tally.prefix_base[f])["mean"],
             }
             for f in PREFIX_FRACTIONS
-            if prefix_acc[f]
+            if tally.prefix_acc[f]
         },
     }
-    if live:
-        result["live_augment"] = protocol.live_augment
-        result["live_accuracy"] = {**_mean_std(live_acc), "n_windows": sum(map(len, live.values()))}
-    if protocol.variant:
-        result["without_near_empty"] = {
-            "near_empty_seconds": protocol.near_empty_seconds,
-            "n_samples_removed": int(n_near_empty),
-            "steady_state_accuracy": _mean_std(np.nanmean(variant_curve, axis=1).tolist())
-            if n_near_empty
-            else result["steady_state_accuracy"],
-            "duration_baseline": _mean_std(np.nanmean(variant_base, axis=1).tolist())
-            if n_near_empty
-            else {k: result["duration_baseline"][k] for k in ("mean", "std")},
-        }
-    return result
+
+
+def _variant_result(
+    protocol: Protocol, tally: _Tally, n_near_empty: int, result: dict[str, Any]
+) -> dict[str, Any]:
+    """The steady state without near-empty sub-tasks (the full run's when there are none)."""
+    return {
+        "near_empty_seconds": protocol.near_empty_seconds,
+        "n_samples_removed": int(n_near_empty),
+        "steady_state_accuracy": _mean_std(np.nanmean(tally.variant_curve, axis=1).tolist())
+        if n_near_empty
+        else result["steady_state_accuracy"],
+        "duration_baseline": _mean_std(np.nanmean(tally.variant_base, axis=1).tolist())
+        if n_near_empty
+        else {k: result["duration_baseline"][k] for k in ("mean", "std")},
+    }
 
 
 def _live_windows(
