@@ -28,7 +28,7 @@ from rcbht_introspection.learn.evaluate import (
     _log_duration,
     default_validation,
 )
-from rcbht_introspection.learn.models import train_model
+from rcbht_introspection.learn.models import SubtaskModel, train_model
 from rcbht_introspection.learn.online import OnlineLearner, TeachConfig
 from rcbht_introspection.task import Task
 
@@ -79,6 +79,88 @@ def split_trials(
     return complete[:-n_held], complete[-n_held:]
 
 
+def _teaching_order(
+    pool: Sequence[TrialSamples], order_index: int, seed: int
+) -> list[TrialSamples]:
+    """Order 0 is the recording order; order i > 0 a permutation drawn with seed + i."""
+    if order_index == 0:
+        return list(pool)
+    rng = np.random.default_rng(seed + order_index)
+    return [pool[i] for i in rng.permutation(len(pool))]
+
+
+class _Teaching:
+    """One prequential run: teaches every order and fills the scores and the teach timings."""
+
+    def __init__(
+        self,
+        protocol: PrequentialProtocol,
+        task: Task,
+        steps: list[int],
+        held: Sequence[TrialSamples],
+        progress: Callable[[int], None] | None,
+    ) -> None:
+        self.protocol = protocol
+        self.task = task
+        self.steps = steps
+        self.held_samples = [s for t in held for s in t.samples]
+        self.progress = progress
+        self.n_orders = 1 + protocol.permutations
+        shape = (self.n_orders, len(steps))
+        self.scores = _Scores(*(np.full(shape, math.nan) for _ in range(5)))
+        self.cache = SampleCache()  # batch, SVM and duration models encode the same samples
+        self.timing: dict[str, list[float]] = {"refit": [], "extend": [], "copy": [], "batch": []}
+
+    def teach_order(self, order_index: int, order: list[TrialSamples]) -> None:
+        """Teach `order` trial by trial, each predicted first (test-then-train); score the
+        models at the steps."""
+        seed = self.protocol.seed + order_index
+        learner = OnlineLearner(self.protocol.teach, task=self.task, random_state=seed)
+        correct = seen = 0
+        for n_taught, trial in enumerate(order, start=1):
+            if learner.model is not None:
+                predicted = learner.model.predict_samples(trial.samples)
+                correct += sum(
+                    p == s.subtask for p, s in zip(predicted, trial.samples, strict=True)
+                )
+                seen += len(trial.samples)
+            warm = learner.warming_up
+            t0 = time.perf_counter()
+            model = learner.teach(trial.samples)
+            self.timing["refit" if warm else "extend"].append(time.perf_counter() - t0)
+            if not warm:
+                self.timing["copy"].append(learner.last_copy_s)
+            if self.progress:
+                self.progress(1)
+            if n_taught in self.steps:
+                taught = [s for t in order[:n_taught] for s in t.samples]
+                running = correct / seen if seen else math.nan
+                self.score_step(order_index, self.steps.index(n_taught), model, taught, running)
+
+    def score_step(
+        self,
+        order_index: int,
+        j: int,
+        model: SubtaskModel,
+        taught: list[SubtaskSample],
+        running: float,
+    ) -> None:
+        """Held-out accuracy at step j of the online model, a batch Mondrian and an SVM
+        trained on the same samples, and the duration-only baseline."""
+        held, scores, seed = self.held_samples, self.scores, self.protocol.seed + order_index
+        scores.online[order_index, j] = _accuracy(model.predict_samples(held), held)
+        scores.running[order_index, j] = running
+        t0 = time.perf_counter()
+        batch = _batch(taught, "mondrian", self.protocol.teach, seed, self.task, self.cache)
+        self.timing["batch"].append(time.perf_counter() - t0)
+        scores.batch[order_index, j] = _accuracy(batch.predict_samples(held), held)
+        if self.protocol.svm:
+            svm = _batch(taught, "svm", self.protocol.teach, seed, self.task, self.cache)
+            scores.svm[order_index, j] = _accuracy(svm.predict_samples(held), held)
+        duration = _duration_model(taught, seed)
+        scores.duration[order_index, j] = _accuracy(duration.predict(_log_duration(held)), held)
+
+
 def prequential(
     trials: Sequence[TrialSamples],
     protocol: PrequentialProtocol = PrequentialProtocol(),
@@ -91,59 +173,9 @@ def prequential(
     steps = [k for k in protocol.steps if 1 <= k <= len(pool)]
     if not steps:
         raise InputError(f"no step of {list(protocol.steps)} fits {len(pool)} teaching trials")
-    held_samples = [s for t in held for s in t.samples]
-    n_orders = 1 + protocol.permutations
-    shape = (n_orders, len(steps))
-    scores = _Scores(*(np.full(shape, math.nan) for _ in range(5)))
-    cache = SampleCache()  # batch, SVM and duration models encode the same samples
-    timing: dict[str, list[float]] = {"refit": [], "extend": [], "copy": [], "batch": []}
-    for order_index in range(n_orders):
-        if order_index == 0:
-            order = list(pool)
-        else:
-            rng = np.random.default_rng(protocol.seed + order_index)
-            order = [pool[i] for i in rng.permutation(len(pool))]
-        seed = protocol.seed + order_index
-        learner = OnlineLearner(protocol.teach, task=task, random_state=seed)
-        correct = seen = 0
-        for n_taught, trial in enumerate(order, start=1):
-            if learner.model is not None:
-                predicted = learner.model.predict_samples(trial.samples)
-                correct += sum(
-                    p == s.subtask for p, s in zip(predicted, trial.samples, strict=True)
-                )
-                seen += len(trial.samples)
-            warm = learner.warming_up
-            t0 = time.perf_counter()
-            model = learner.teach(trial.samples)
-            timing["refit" if warm else "extend"].append(time.perf_counter() - t0)
-            if not warm:
-                timing["copy"].append(learner.last_copy_s)
-            if progress:
-                progress(1)
-            if n_taught not in steps:
-                continue
-            j = steps.index(n_taught)
-            taught = [s for t in order[:n_taught] for s in t.samples]
-            scores.online[order_index, j] = _accuracy(
-                model.predict_samples(held_samples), held_samples
-            )
-            scores.running[order_index, j] = correct / seen if seen else math.nan
-            t0 = time.perf_counter()
-            batch = _batch(taught, "mondrian", protocol.teach, seed, task, cache)
-            timing["batch"].append(time.perf_counter() - t0)
-            scores.batch[order_index, j] = _accuracy(
-                batch.predict_samples(held_samples), held_samples
-            )
-            if protocol.svm:
-                svm = _batch(taught, "svm", protocol.teach, seed, task, cache)
-                scores.svm[order_index, j] = _accuracy(
-                    svm.predict_samples(held_samples), held_samples
-                )
-            duration = _duration_model(taught, seed)
-            scores.duration[order_index, j] = _accuracy(
-                duration.predict(_log_duration(held_samples)), held_samples
-            )
+    run = _Teaching(protocol, task, steps, held, progress)
+    for order_index in range(run.n_orders):
+        run.teach_order(order_index, _teaching_order(pool, order_index, protocol.seed))
     result: dict[str, Any] = {
         "protocol": "prequential",
         "classifier": "mondrian",
@@ -154,7 +186,7 @@ def prequential(
             "n_estimators": protocol.teach.n_estimators,
         },
         "steps": steps,
-        "orders": n_orders,
+        "orders": run.n_orders,
         "permutations": protocol.permutations,
         "n_trials": len(pool) + len(held),
         "n_training_trials": len(pool),
@@ -162,9 +194,17 @@ def prequential(
         "excluded_trials": [t.trial for t in trials if not t.covers(task)],
         "task": task.to_dict(),
         "seconds": time.perf_counter() - began,
-        "teach_seconds": {k: _mean(v) for k, v in timing.items() if k != "batch"},
-        "batch_fit_seconds": _mean(timing["batch"]),
+        "teach_seconds": {k: _mean(v) for k, v in run.timing.items() if k != "batch"},
+        "batch_fit_seconds": _mean(run.timing["batch"]),
     }
+    result.update(_score_tables(run.scores))
+    return result
+
+
+def _score_tables(scores: _Scores) -> dict[str, Any]:
+    """The JSON-ready accuracy tables: per model the mean and spread per step over the orders,
+    the online and batch accuracy of each order, and the test-then-train curve."""
+    result: dict[str, Any] = {}
     for key, table in (
         ("prequential", scores.online),
         ("batch", scores.batch),
