@@ -119,6 +119,25 @@ def model_from_env(name: str, out_dir: Path) -> Path | None:
     return Path(text)
 
 
+def _scenario_bags(
+    work: Path, name: str, arms: int, sources: list[Trial], replays_one_arm: bool
+) -> list[Path]:
+    """The trial bags of one scenario, written under work/name (two arms: each trial's arm R
+    beside the next one's); `replays_one_arm`: the one-arm scenario's bags, written already."""
+    bags = []
+    for i, trial in enumerate(sources):
+        if arms == 2:
+            trial = two_arm_trial(trial, sources[(i + 1) % len(sources)])
+        bag = work / name / f"{i:02d}-{trial.name}.mcap"
+        if replays_one_arm:  # the one-arm bags again
+            bag = work / "one_arm_1kHz" / f"{i:02d}-{trial.name}.mcap"
+            bags.append(bag)
+            continue
+        write_trial_bag(trial, bag)
+        bags.append(bag)
+    return bags
+
+
 def run(out_dir: Path) -> dict[str, Any]:
     """Both scenarios; figures per scenario plus the load average around them."""
 
@@ -138,17 +157,7 @@ def run(out_dir: Path) -> dict[str, Any]:
     results["verifier"] = str(verifier)
     scenarios = (("one_arm_1kHz", 1, None), ("two_arm_2x1kHz", 2, None))
     for name, arms, verifier_file in (*scenarios, ("one_arm_1kHz_verifier", 1, verifier)):
-        bags = []
-        for i, trial in enumerate(sources):
-            if arms == 2:
-                trial = two_arm_trial(trial, sources[(i + 1) % len(sources)])
-            bag = work / name / f"{i:02d}-{trial.name}.mcap"
-            if verifier_file is not None:  # the one-arm bags again
-                bag = work / "one_arm_1kHz" / f"{i:02d}-{trial.name}.mcap"
-                bags.append(bag)
-                continue
-            write_trial_bag(trial, bag)
-            bags.append(bag)
+        bags = _scenario_bags(work, name, arms, sources, replays_one_arm=verifier_file is not None)
         load_before = os.getloadavg()
         t0 = time.monotonic()
         options = ReplayEvalOptions(
