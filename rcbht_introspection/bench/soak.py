@@ -39,6 +39,7 @@ from rcbht_introspection.bench.soak_traffic import (
     ARMS,
     SoakObserver,
     SoakPublisher,
+    Source,
     trial_source,
 )
 from rcbht_introspection.errors import InputError
@@ -107,6 +108,47 @@ def run(out_dir: Path) -> dict[str, Any]:
     model = ros.model_from_env("RCBHT_SOAK_MODEL", work)
     domain_id = lease_domain()  # held for the whole run
     env = ros_env(domain_id, work / "ros_log")
+    seg_params, cls_params = _node_params(work, model)
+    result: dict[str, Any] = {
+        "duration_s_target": seconds,
+        "sample_s": sample_s,
+        "source": source.name,
+        "playback_rate_x": source.rate,
+        "arms": list(ARMS),
+        "model": str(model) if model else None,
+        "domain_id": domain_id,
+        "machine": machine(),
+        "aborted": None,
+    }
+    soak = _Soak(work, env, seg_params, cls_params)
+    result["load_avg_before"] = [round(x, 2) for x in os.getloadavg()]
+    with environment(env):
+        soak.start("segmenter_node", "segmenter_node")
+        soak.start("classifier_node", "classifier_node_1")
+        try:
+            with RosSession("rcbht_soak", domain_id=domain_id) as session:
+                soak.play(session, source, seconds, sample_s, restart_at, result)
+        except InputError as exc:
+            result["aborted"] = str(exc).splitlines()[0]
+            result["aborted_log_tail"] = str(exc)
+        finally:
+            soak.stop_nodes(result)
+    result["load_avg_after"] = [round(x, 2) for x in os.getloadavg()]
+    if soak.publisher is None or soak.observer is None:
+        result["wall_s"] = round(time.monotonic() - wall0, 1)
+        return result
+    result.update(
+        _figures(
+            soak.publisher, soak.observer, soak.tracked, soak.tracked_self, soak.restart, soak.load
+        )
+    )
+    result["wall_s"] = round(time.monotonic() - wall0, 1)
+    print(summary(result), flush=True)
+    return result
+
+
+def _node_params(work: Path, model: Path | None) -> tuple[Path, Path]:
+    """The parameter files of segmenter_node and classifier_node (two arms, boundary mode)."""
     seg_params = write_params(
         work / "segmenter.yaml",
         SegmenterConfig,
@@ -121,49 +163,53 @@ def run(out_dir: Path) -> dict[str, Any]:
             "arms": list(ARMS),
         },
     )
-    result: dict[str, Any] = {
-        "duration_s_target": seconds,
-        "sample_s": sample_s,
-        "source": source.name,
-        "playback_rate_x": source.rate,
-        "arms": list(ARMS),
-        "model": str(model) if model else None,
-        "domain_id": domain_id,
-        "machine": machine(),
-        "aborted": None,
-    }
-    load: list[list[float]] = []
-    tracked: list[Tracked] = []
-    nodes: dict[str, Any] = {}
-    restart: dict[str, Any] = {}
-    t_start = time.monotonic()
-    publisher: SoakPublisher | None = None
-    observer: SoakObserver | None = None
+    return seg_params, cls_params
 
-    # this process (publisher and observer) is sampled too, for reference
-    tracked_self = Tracked("soak_driver", os.getpid(), 0.0)
 
-    def now() -> float:
-        return time.monotonic() - t_start
+class _Soak:
+    """One soak run's state: the node processes, their samples, the publisher and observer."""
 
-    def start(module: str, name: str) -> None:
-        params = seg_params if module == "segmenter_node" else cls_params
-        node = NodeProcess(module, params, env, work / f"{name}.log")
+    def __init__(self, work: Path, env: dict[str, str], seg_params: Path, cls_params: Path) -> None:
+        self.work = work
+        self.env = env
+        self.seg_params = seg_params
+        self.cls_params = cls_params
+        self.load: list[list[float]] = []
+        self.tracked: list[Tracked] = []
+        self.nodes: dict[str, Any] = {}
+        self.restart: dict[str, Any] = {}
+        self.t_start = time.monotonic()
+        self.publisher: SoakPublisher | None = None
+        self.observer: SoakObserver | None = None
+        # this process (publisher and observer) is sampled too, for reference
+        self.tracked_self = Tracked("soak_driver", os.getpid(), 0.0)
+
+    def now(self) -> float:
+        """Seconds since the run started (since publishing began, once it has)."""
+        return time.monotonic() - self.t_start
+
+    def start(self, module: str, name: str) -> None:
+        """Start a node process as `name`, tracked from now on."""
+        params = self.seg_params if module == "segmenter_node" else self.cls_params
+        node = NodeProcess(module, params, self.env, self.work / f"{name}.log")
         node.name = name
-        nodes[name] = node
-        tracked.append(Tracked(name, node.proc.pid, now()))
+        self.nodes[name] = node
+        self.tracked.append(Tracked(name, node.proc.pid, self.now()))
 
-    def sample_all() -> None:
-        t = now()
-        for p in tracked:
+    def sample_all(self) -> None:
+        """Sample RSS and CPU of every running process (this one too) and the load average."""
+        t = self.now()
+        for p in self.tracked:
             if not p.stopped:
                 p.sample(t)
-        tracked_self.sample(t)
-        load.append([round(t, 1), *(round(x, 2) for x in os.getloadavg())])
+        self.tracked_self.sample(t)
+        self.load.append([round(t, 1), *(round(x, 2) for x in os.getloadavg())])
 
-    def progress() -> dict[str, Any]:
-        assert publisher is not None and observer is not None
-        st = publisher.stats
+    def progress(self) -> dict[str, Any]:
+        """What has flowed so far: published, accepted, verdicts, RSS, load."""
+        assert self.publisher is not None and self.observer is not None
+        observer = self.observer
+        st = self.publisher.stats
         with observer.lock:
             counts = {
                 "accepted": dict(observer.accepted),
@@ -174,110 +220,126 @@ def run(out_dir: Path) -> dict[str, Any]:
                 "verdicts": list(observer.verdicts),
             }
         return {
-            "t_s": round(now(), 1),
+            "t_s": round(self.now(), 1),
             "published": {a: n + st.in_trial for a, n in st.published.items()},
             "trials": len(st.trials),
             **counts,
-            "rss_mib": {p.name: p.samples[-1][1] for p in tracked if p.samples},
-            "load_avg": load[-1][1:] if load else None,
+            "rss_mib": {p.name: p.samples[-1][1] for p in self.tracked if p.samples},
+            "load_avg": self.load[-1][1:] if self.load else None,
         }
 
-    result["load_avg_before"] = [round(x, 2) for x in os.getloadavg()]
-    with environment(env):
-        start("segmenter_node", "segmenter_node")
-        start("classifier_node", "classifier_node_1")
-        try:
-            with RosSession("rcbht_soak", domain_id=domain_id) as session:
-                qos = qos_profile(SegmenterConfig().qos_depth, "reliable")
-                observer = SoakObserver(session.node, qos)
-                publisher = SoakPublisher(session.node, qos, source, seconds)
-                result["startup_s"] = round(
-                    wait_for_nodes(
-                        lambda: publisher.matched() and observer.connected(session.node),
-                        STARTUP_TIMEOUT_S,
-                        list(nodes.values()),
-                        "the nodes to connect",
-                    ),
-                    2,
+    def play(
+        self,
+        session: RosSession,
+        source: Source,
+        seconds: float,
+        sample_s: float,
+        restart_at: float,
+        result: dict[str, Any],
+    ) -> None:
+        """Connect, publish `source` for `seconds` (sampling every `sample_s`, restarting the
+        classifier at `restart_at` of the run), then wait for the nodes to drain."""
+        qos = qos_profile(SegmenterConfig().qos_depth, "reliable")
+        observer = self.observer = SoakObserver(session.node, qos)
+        publisher = self.publisher = SoakPublisher(session.node, qos, source, seconds)
+        result["startup_s"] = round(
+            wait_for_nodes(
+                lambda: publisher.matched() and observer.connected(session.node),
+                STARTUP_TIMEOUT_S,
+                list(self.nodes.values()),
+                "the nodes to connect",
+            ),
+            2,
+        )
+        self.t_start = time.monotonic()
+        for p in self.tracked:
+            p.started_s = 0.0
+        publisher.start()
+        self._publish(session, restart_at * seconds, sample_s, result)
+        publisher.stop_event.set()
+        publisher.join(30.0)
+        published_end = self.now()
+        if result["aborted"] is None:
+            self._drain(result)
+        self.sample_all()
+        result["publish_s"] = round(published_end, 1)
+
+    def _publish(
+        self, session: RosSession, restart_s: float, sample_s: float, result: dict[str, Any]
+    ) -> None:
+        """While the publisher runs: restart the classifier once at `restart_s`, sample every
+        `sample_s` (progress.json and a line), stop at a node process that exited."""
+        assert self.publisher is not None and self.observer is not None
+        next_sample = 0.0
+        while not self.publisher.stats.done:
+            t = self.now()
+            if not self.restart and t >= restart_s:
+                self.restart.update(
+                    _restart(
+                        self.nodes, self.tracked, self.observer, session.node, self.now, self.start
+                    )
                 )
-                t_start = time.monotonic()
-                for p in tracked:
-                    p.started_s = 0.0
-                publisher.start()
-                next_sample = 0.0
-                restart_s = restart_at * seconds
-                while not publisher.stats.done:
-                    t = now()
-                    if not restart and t >= restart_s:
-                        restart.update(_restart(nodes, tracked, observer, session.node, now, start))
-                        if now() < next_sample:  # else the periodic sample right below
-                            sample_all()
-                    if t >= next_sample:
-                        sample_all()
-                        next_sample += sample_s
-                        (work / "progress.json").write_text(json.dumps(progress(), indent=1))
-                        print(f"soak {json.dumps(progress())}", flush=True)
-                    dead = [
-                        (n, node)
-                        for n, node in nodes.items()
-                        if not node.alive() and not _by_name(tracked, n).stopped
-                    ]
-                    if dead:
-                        name, node = dead[0]
-                        result["aborted"] = (
-                            f"{name} exited (code {node.proc.returncode}) at {t:.0f} s"
-                        )
-                        result["aborted_log_tail"] = node.tail(40)
-                        break
-                    time.sleep(min(0.2, max(0.01, next_sample - now())))
-                publisher.stop_event.set()
-                publisher.join(30.0)
-                published_end = now()
-                st = publisher.stats
-                if result["aborted"] is None:
+                if self.now() < next_sample:  # else the periodic sample right below
+                    self.sample_all()
+            if t >= next_sample:
+                self.sample_all()
+                next_sample += sample_s
+                (self.work / "progress.json").write_text(json.dumps(self.progress(), indent=1))
+                print(f"soak {json.dumps(self.progress())}", flush=True)
+            if self._aborted_by_exit(t, result):
+                break
+            time.sleep(min(0.2, max(0.01, next_sample - self.now())))
 
-                    def drained() -> bool:
-                        with observer.lock:
-                            return observer.applied["end"] >= st.end_events and all(
-                                observer.streams_ended[a] >= st.end_events
-                                and observer.accepted[a] + observer.rejected[a] >= st.published[a]
-                                for a in ARMS
-                            )
+    def _aborted_by_exit(self, t: float, result: dict[str, Any]) -> bool:
+        """Whether a node process exited on its own: the run is aborted with its log tail."""
+        dead = [
+            (n, node)
+            for n, node in self.nodes.items()
+            if not node.alive() and not _by_name(self.tracked, n).stopped
+        ]
+        if not dead:
+            return False
+        name, node = dead[0]
+        result["aborted"] = f"{name} exited (code {node.proc.returncode}) at {t:.0f} s"
+        result["aborted_log_tail"] = node.tail(40)
+        return True
 
-                    running = [
-                        n for name, n in nodes.items() if not _by_name(tracked, name).stopped
-                    ]
-                    try:
-                        result["drain_s"] = round(
-                            wait_for_nodes(drained, DRAIN_TIMEOUT_S, running, "the drain"), 2
-                        )
-                    except InputError as exc:
-                        result["aborted"] = f"drain: {str(exc).splitlines()[0]}"
-                        result["aborted_log_tail"] = str(exc)
-                sample_all()
-                result["publish_s"] = round(published_end, 1)
+    def _drain(self, result: dict[str, Any]) -> None:
+        """Wait until the nodes took every sample and event published (else the run aborts)."""
+        assert self.publisher is not None and self.observer is not None
+        observer = self.observer
+        st = self.publisher.stats
+
+        def drained() -> bool:
+            with observer.lock:
+                return observer.applied["end"] >= st.end_events and all(
+                    observer.streams_ended[a] >= st.end_events
+                    and observer.accepted[a] + observer.rejected[a] >= st.published[a]
+                    for a in ARMS
+                )
+
+        running = [n for name, n in self.nodes.items() if not _by_name(self.tracked, name).stopped]
+        try:
+            result["drain_s"] = round(
+                wait_for_nodes(drained, DRAIN_TIMEOUT_S, running, "the drain"), 2
+            )
         except InputError as exc:
-            result["aborted"] = str(exc).splitlines()[0]
+            result["aborted"] = f"drain: {str(exc).splitlines()[0]}"
             result["aborted_log_tail"] = str(exc)
-        finally:
-            if publisher is not None:
-                publisher.stop_event.set()
-            t_end = now()
-            # downstream first: the classifier, then the segmenter
-            for name in sorted(nodes, key=lambda n: n.startswith("segmenter")):
-                p = _by_name(tracked, name)
-                if not p.stopped:
-                    _stop(nodes[name], p, t_end)
-                    if p.exit_code != 0:
-                        result.setdefault("shutdown_logs", {})[name] = nodes[name].tail(40)
-    result["load_avg_after"] = [round(x, 2) for x in os.getloadavg()]
-    if publisher is None or observer is None:
-        result["wall_s"] = round(time.monotonic() - wall0, 1)
-        return result
-    result.update(_figures(publisher, observer, tracked, tracked_self, restart, load))
-    result["wall_s"] = round(time.monotonic() - wall0, 1)
-    print(summary(result), flush=True)
-    return result
+
+    def stop_nodes(self, result: dict[str, Any]) -> None:
+        """Stop the publisher and the node processes still running, downstream first (the
+        classifier, then the segmenter); keep the log tail of any that exited uncleanly."""
+        if self.publisher is not None:
+            self.publisher.stop_event.set()
+        t_end = self.now()
+        # downstream first: the classifier, then the segmenter
+        for name in sorted(self.nodes, key=lambda n: n.startswith("segmenter")):
+            p = _by_name(self.tracked, name)
+            if not p.stopped:
+                _stop(self.nodes[name], p, t_end)
+                if p.exit_code != 0:
+                    result.setdefault("shutdown_logs", {})[name] = self.nodes[name].tail(40)
 
 
 def _by_name(tracked: list[Tracked], name: str) -> Tracked:
