@@ -136,42 +136,47 @@ def _parse(path: Path, table: list[list[str]]) -> dict[str, TrialLabel]:
             continue
         if len(row) != width:
             raise InputError(f"expected {width} cells, got {len(row)}", path, line=line)
-        trial, outcome, cls = (c.strip() for c in row[:3])
+        trial = row[0].strip()
         if not trial:
             raise InputError("empty trial name", path, line=line, field="trial")
         if trial in labels:
             raise InputError(f"trial {trial!r} labelled twice", path, line=line, field="trial")
-        if outcome not in (SUCCESS, FAILURE):
-            raise InputError(
-                f"expected success or failure, got {outcome!r}", path, line=line, field="outcome"
-            )
-        if outcome == SUCCESS and cls:
-            raise InputError(
-                "a success has no failure class", path, line=line, field="failure_class"
-            )
-        onset = _number(row[3], 1.0, path, line, "onset_s")
-        if onset is not None and onset < 0:
-            raise InputError(f"must be >= 0, got {onset}", path, line=line, field="onset_s")
-        if onset is not None and outcome == SUCCESS:
-            raise InputError("a success has no onset", path, line=line, field="onset_s")
-        dev = [
-            _number(row[4], 1e-3, path, line, "dev_x_mm"),
-            _number(row[5], 1e-3, path, line, "dev_y_mm"),
-            _number(row[6], math.pi / 180.0, path, line, "dev_yaw_deg"),
-        ]
-        deviation = None
-        if any(v is not None for v in dev):
-            deviation = (dev[0] or 0.0, dev[1] or 0.0, dev[2] or 0.0)
-        labels[trial] = TrialLabel(
-            trial=trial,
-            outcome=outcome,
-            failure_class=cls or (FAILURE if outcome == FAILURE else ""),
-            onset=onset,
-            deviation=deviation,
-            line=line,
-            session=row[7].strip() if width > len(COLUMNS) else "",
-        )
+        labels[trial] = _parse_row(path, line, row, width)
     return labels
+
+
+def _parse_row(path: Path, line: int, row: list[str], width: int) -> TrialLabel:
+    """One labels row (of `width` cells, a new trial name) as a TrialLabel; InputError names
+    the bad cell."""
+    trial, outcome, cls = (c.strip() for c in row[:3])
+    if outcome not in (SUCCESS, FAILURE):
+        raise InputError(
+            f"expected success or failure, got {outcome!r}", path, line=line, field="outcome"
+        )
+    if outcome == SUCCESS and cls:
+        raise InputError("a success has no failure class", path, line=line, field="failure_class")
+    onset = _number(row[3], 1.0, path, line, "onset_s")
+    if onset is not None and onset < 0:
+        raise InputError(f"must be >= 0, got {onset}", path, line=line, field="onset_s")
+    if onset is not None and outcome == SUCCESS:
+        raise InputError("a success has no onset", path, line=line, field="onset_s")
+    dev = [
+        _number(row[4], 1e-3, path, line, "dev_x_mm"),
+        _number(row[5], 1e-3, path, line, "dev_y_mm"),
+        _number(row[6], math.pi / 180.0, path, line, "dev_yaw_deg"),
+    ]
+    deviation = None
+    if any(v is not None for v in dev):
+        deviation = (dev[0] or 0.0, dev[1] or 0.0, dev[2] or 0.0)
+    return TrialLabel(
+        trial=trial,
+        outcome=outcome,
+        failure_class=cls or (FAILURE if outcome == FAILURE else ""),
+        onset=onset,
+        deviation=deviation,
+        line=line,
+        session=row[7].strip() if width > len(COLUMNS) else "",
+    )
 
 
 def check_labels_cover(
