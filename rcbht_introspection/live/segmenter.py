@@ -233,14 +233,18 @@ class SegmenterSession(Generic[S]):
             out.rejected = reason
             return out
         if st.held:
-            held, st.held = st.held, []
-            previous = st.last_ns
-            for i, (values, source) in enumerate(held, start=1):
-                at = spread_stamp(previous, stamp_ns, i, len(held))
-                self._accept(arm, st, int(at), values, source, out)
-            counts.respaced += len(held)
+            self._release_held(arm, st, stamp_ns, out)
         self._accept(arm, st, stamp_ns, wrench, source_ns, out)
         return out
+
+    def _release_held(self, arm: str, st: _Arm[S], stamp_ns: int, out: Output) -> None:
+        """Accept the samples held at the previous stamp, spread evenly up to `stamp_ns`."""
+        held, st.held = st.held, []
+        previous = st.last_ns
+        for i, (values, source) in enumerate(held, start=1):
+            at = spread_stamp(previous, stamp_ns, i, len(held))
+            self._accept(arm, st, int(at), values, source, out)
+        self.counts[arm].respaced += len(held)
 
     def _repeated(
         self, st: _Arm[S], stamp_ns: int, wrench: Sequence[float], source_ns: int | None
