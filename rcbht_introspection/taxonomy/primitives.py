@@ -100,15 +100,26 @@ def classify_gradient(g: float, thresholds: Sequence[float]) -> int:
     """Label integer of one gradient (GradientClassification.m); g == nimp exactly is 'none'."""
     pimp, bpos, mpos, spos, sneg, mneg, bneg, nimp = thresholds
     if g >= 0:
-        if g >= pimp:
-            return PIMP
-        if g >= bpos:
-            return BPOS
-        if g >= mpos:
-            return MPOS
-        if g >= spos:
-            return SPOS
-        return CONS
+        return _rising_label(g, pimp, bpos, mpos, spos)
+    return _falling_label(g, sneg, mneg, bneg, nimp)
+
+
+def _rising_label(g: float, pimp: float, bpos: float, mpos: float, spos: float) -> int:
+    """Label of a gradient g >= 0: pimp, bpos, mpos, spos from the steepest, else cons."""
+    if g >= pimp:
+        return PIMP
+    if g >= bpos:
+        return BPOS
+    if g >= mpos:
+        return MPOS
+    if g >= spos:
+        return SPOS
+    return CONS
+
+
+def _falling_label(g: float, sneg: float, mneg: float, bneg: float, nimp: float) -> int:
+    """Label of a gradient that is not >= 0: nimp, bneg, mneg, sneg from the steepest, else
+    cons; g == nimp exactly and nan are 'none', as in the original."""
     if g < nimp:
         return NIMP
     if g == nimp:
@@ -231,6 +242,40 @@ def _block_stats_five(ts: list[float], ys: list[list[float]]) -> BlockStats:
             [[v] for v in ys[-1]])  # fmt: skip
 
 
+def _fitted_segment(slope: float, wmt: float, wmy: float, ts: float, finish: float) -> list[float]:
+    """The closed segment [avg, max, min, start, finish, gradient] of the line through the
+    window mean (wmt, wmy) from ts to finish; a one-sample segment ends finish / 20 later."""
+    f0 = wmy + slope * (ts - wmt)
+    f1 = wmy + slope * (finish - wmt)
+    if finish == ts:  # a one-sample segment (after the first window closed)
+        finish = finish + finish / 20
+    hi, lo = (f0, f1) if f0 >= f1 else (f1, f0)
+    return [fitted_average(hi, lo), hi, lo, ts, finish, slope]
+
+
+def _point_and_block(pt: float, py: float, stats: BlockStats, a: int, j: int) -> list[float]:
+    """The open-segment state [n, mt, my, Stt, Syy, Sty, max, min, start] of the sample at
+    (pt, py) merged with block j of axis a: a segment after the first restarts there."""
+    m, bmt, bstt, bmy, bsyy, bsty, bmax, bmin, _blt, _bly = stats
+    # S = point(i) (+) block j
+    nn = 1.0 + m
+    dt = bmt[j] - pt
+    dy = bmy[a][j] - py
+    f = m / nn
+    amax, amin = bmax[a][j], bmin[a][j]
+    return [
+        nn,
+        pt + dt * m / nn,
+        py + dy * m / nn,
+        bstt[j] + dt * dt * f,
+        bsyy[a][j] + dy * dy * f,
+        bsty[a][j] + dt * dy * f,
+        amax if amax > py else py,
+        amin if amin < py else py,
+        pt,
+    ]
+
+
 class Segmenter:
     """Growing-window regression segmentation of A axes (fitRegressionCurves.m), fed block by block.
 
@@ -272,96 +317,15 @@ class Segmenter:
             [1.0, self.first_t, v, 0.0, 0.0, 0.0, v, v, self.first_t] for v in self.first_y
         ]
 
-    def feed_blocks(self, stats: tuple[Any, ...], count: int, final: bool = False) -> list[int]:
+    def feed_blocks(self, stats: BlockStats, count: int, final: bool = False) -> list[int]:
         """Advance every axis over `count` blocks (block_stats output); returns axes that closed.
 
         With `final`, the last of the blocks is the partial last pass (possibly empty: count may
         include one block of n = 0 given as None stats) and the final segments are emitted.
         """
-        m, bmt, bstt, bmy, bsyy, bsty, bmax, bmin, blt, bly = stats
-        threshold, zero = self.threshold, self.zero
-        closed: list[int] = []
-        k0 = self.blocks
+        m, _bmt, _bstt, _bmy, _bsyy, _bsty, _bmax, _bmin, blt, bly = stats
         n_full = count - 1 if final else count
-        for a in range(self.n_axes):
-            floor = self.floors[a]
-            n, mt, my, stt, syy, sty, smax, smin, ts = self.state[a]
-            pt, py = self.last_t, self.last_y[a]
-            segs = self.segments[a]
-            before = len(segs)
-            amy, asyy, asty, amax, amin, aly = bmy[a], bsyy[a], bsty[a], bmax[a], bmin[a], bly[a]
-            for j in range(n_full):
-                # W = S (+) block j  (Chan et al. pairwise update)
-                bt = bmt[j]
-                by = amy[j]
-                nn = n + m
-                dt = bt - mt
-                dy = by - my
-                f = n * m / nn
-                wtt = stt + bstt[j] + dt * dt * f
-                wyy = syy + asyy[j] + dy * dy * f
-                wty = sty + asty[j] + dt * dy * f
-                # R^2 = 1 - SSres/SStot with the original's zero clamps and nan/inf -> 1
-                if wyy < zero:
-                    good = True
-                else:
-                    ssres = wyy - wty * wty / wtt if wtt > 0 else wyy
-                    # floor 0: ssres <= 0 is already < zero, so the original test is unchanged
-                    good = ssres < zero or ssres <= nn * floor or 1.0 - ssres / wyy > threshold
-                if good:
-                    n, stt, syy, sty = nn, wtt, wyy, wty
-                    mt = mt + dt * m / nn
-                    my = my + dy * m / nn
-                    v = amax[j]
-                    if v > smax:
-                        smax = v
-                    v = amin[j]
-                    if v < smin:
-                        smin = v
-                else:
-                    slope = wty / wtt if wtt > 0 else 0.0
-                    wmt = mt + dt * m / nn
-                    wmy = my + dy * m / nn
-                    lt, ly = blt[j], aly[j]
-                    # the first window of the signal keeps all of it; later ones end at i
-                    finish = lt if k0 + j == 0 else pt
-                    f0 = wmy + slope * (ts - wmt)
-                    f1 = wmy + slope * (finish - wmt)
-                    if finish == ts:  # a one-sample segment (after the first window closed)
-                        finish = finish + finish / 20
-                    hi, lo = (f0, f1) if f0 >= f1 else (f1, f0)
-                    segs.append([fitted_average(hi, lo), hi, lo, ts, finish, slope])
-                    if k0 + j == 0:
-                        n, mt, my, stt, syy, sty, smax, smin, ts = (
-                            1.0,
-                            lt,
-                            ly,
-                            0.0,
-                            0.0,
-                            0.0,
-                            ly,
-                            ly,
-                            lt,
-                        )
-                    else:
-                        # S = point(i) (+) block j
-                        nn = 1.0 + m
-                        dt = bt - pt
-                        dy = by - py
-                        f = m / nn
-                        n = nn
-                        stt = bstt[j] + dt * dt * f
-                        syy = asyy[j] + dy * dy * f
-                        sty = asty[j] + dt * dy * f
-                        mt = pt + dt * m / nn
-                        my = py + dy * m / nn
-                        smax = amax[j] if amax[j] > py else py
-                        smin = amin[j] if amin[j] < py else py
-                        ts = pt
-                pt, py = blt[j], aly[j]
-            self.state[a] = [n, mt, my, stt, syy, sty, smax, smin, ts]
-            if len(segs) != before:
-                closed.append(a)
+        closed = [a for a in range(self.n_axes) if self._advance_axis(a, stats, n_full)]
         if n_full:
             self.blocks += n_full
             self.last_t = blt[n_full - 1]
@@ -369,6 +333,69 @@ class Segmenter:
         if final:
             self.finish(stats if count > n_full and m else None, count - 1)
         return closed
+
+    def _advance_axis(self, a: int, stats: BlockStats, n_full: int) -> bool:
+        """Grow axis a's open segment over the first `n_full` blocks while the line still fits,
+        closing it and starting the next where it does not; True if a segment closed."""
+        m, bmt, bstt, bmy, bsyy, bsty, bmax, bmin, blt, bly = stats
+        threshold, zero, floor, k0 = self.threshold, self.zero, self.floors[a], self.blocks
+        n, mt, my, stt, syy, sty, smax, smin, ts = self.state[a]
+        pt, py = self.last_t, self.last_y[a]
+        segs = self.segments[a]
+        before = len(segs)
+        amy, asyy, asty, amax, amin, aly = bmy[a], bsyy[a], bsty[a], bmax[a], bmin[a], bly[a]
+        for j in range(n_full):
+            # W = S (+) block j  (Chan et al. pairwise update)
+            bt = bmt[j]
+            by = amy[j]
+            nn = n + m
+            dt = bt - mt
+            dy = by - my
+            f = n * m / nn
+            wtt = stt + bstt[j] + dt * dt * f
+            wyy = syy + asyy[j] + dy * dy * f
+            wty = sty + asty[j] + dt * dy * f
+            # R^2 = 1 - SSres/SStot with the original's zero clamps and nan/inf -> 1
+            if wyy < zero:
+                good = True
+            else:
+                ssres = wyy - wty * wty / wtt if wtt > 0 else wyy
+                # floor 0: ssres <= 0 is already < zero, so the original test is unchanged
+                good = ssres < zero or ssres <= nn * floor or 1.0 - ssres / wyy > threshold
+            if good:
+                n, stt, syy, sty = nn, wtt, wyy, wty
+                mt = mt + dt * m / nn
+                my = my + dy * m / nn
+                v = amax[j]
+                if v > smax:
+                    smax = v
+                v = amin[j]
+                if v < smin:
+                    smin = v
+            else:
+                slope = wty / wtt if wtt > 0 else 0.0
+                lt, ly = blt[j], aly[j]
+                # the first window of the signal keeps all of it; later ones end at i
+                first = k0 + j == 0
+                wmt, wmy = mt + dt * m / nn, my + dy * m / nn
+                segs.append(_fitted_segment(slope, wmt, wmy, ts, lt if first else pt))
+                if first:
+                    n, mt, my, stt, syy, sty, smax, smin, ts = (
+                        1.0,
+                        lt,
+                        ly,
+                        0.0,
+                        0.0,
+                        0.0,
+                        ly,
+                        ly,
+                        lt,
+                    )
+                else:
+                    n, mt, my, stt, syy, sty, smax, smin, ts = _point_and_block(pt, py, stats, a, j)
+            pt, py = blt[j], aly[j]
+        self.state[a] = [n, mt, my, stt, syy, sty, smax, smin, ts]
+        return len(segs) != before
 
     def finish(self, stats: tuple[Any, ...] | None = None, j: int = 0) -> None:
         """The last pass (with block j of `stats`, the partial last window, if any): wStart..N
