@@ -70,7 +70,6 @@ class BehaviorDurations(BufferedOp):
     def _step(self, ended: bool) -> list[Row]:
         """Decide pairs from the front until one needs more rows or the pass stops."""
         out: list[Row] = []
-        cfg = self.config
         while self.rows:
             if self.stopped:
                 out.extend(self.rows)
@@ -86,35 +85,47 @@ class BehaviorDurations(BufferedOp):
                     continue
                 break
             r, m = self.rows[0], self.rows[1]
-            if (
-                r[bh.B_LBL] != bh.CT
-                and m[bh.B_LBL] != bh.CT
-                and r[bh.B_MC2] not in (mc.U, mc.Z)
-                and m[bh.B_MC2] not in (mc.U, mc.Z)
-            ):
-                ratio = pr.ieee_div(abs(m[bh.B_AMP]), abs(r[bh.B_AMP]))
-                if ratio == 0 or ratio == math.inf or ratio > cfg.behavior_amplitude_ratio:
+            if _duration_refinable(r, m):
+                merged = self._merge_by_duration(r, m)
+                if merged is None:
                     self.stopped = True
                     continue
-                if r[bh.B_MC2] != 6 and m[bh.B_MC2] != 6:
-                    p1, p2 = r[bh.B_T2E] - r[bh.B_T1S], m[bh.B_T2E] - m[bh.B_T1S]
-                elif r[bh.B_MC2] == 6:
-                    p1, p2 = r[bh.B_T1E] - r[bh.B_T1S], m[bh.B_T2E] - m[bh.B_T1S]
-                else:
-                    p1, p2 = r[bh.B_T2E] - r[bh.B_T1S], m[bh.B_T1E] - m[bh.B_T1S]
-                d = pr.ieee_div(p1, p2)
-                if d > cfg.behavior_duration_ratio or d < 1 / cfg.behavior_duration_ratio:
-                    if d > cfg.behavior_duration_ratio:
-                        out.append(bh.merge_behaviors(r, m, None))
-                    else:
-                        out.append(bh.merge_behaviors(m, r, None))
-                    del self.rows[:2]
-                    self.skip = 1  # idx += 2 then += 1: the row after the pair is not examined
-                    continue
-                self.stopped = True
+                out.append(merged)
+                del self.rows[:2]
+                self.skip = 1  # idx += 2 then += 1: the row after the pair is not examined
                 continue
             out.append(self.rows.pop(0))
         return out
+
+    def _merge_by_duration(self, r: Row, m: Row) -> Row | None:
+        """The pair merged into the longer one when their amplitudes are comparable and their
+        durations differ by more than the ratio; None when the pass stops at this pair."""
+        cfg = self.config
+        ratio = pr.ieee_div(abs(m[bh.B_AMP]), abs(r[bh.B_AMP]))
+        if ratio == 0 or ratio == math.inf or ratio > cfg.behavior_amplitude_ratio:
+            return None
+        if r[bh.B_MC2] != 6 and m[bh.B_MC2] != 6:
+            p1, p2 = r[bh.B_T2E] - r[bh.B_T1S], m[bh.B_T2E] - m[bh.B_T1S]
+        elif r[bh.B_MC2] == 6:
+            p1, p2 = r[bh.B_T1E] - r[bh.B_T1S], m[bh.B_T2E] - m[bh.B_T1S]
+        else:
+            p1, p2 = r[bh.B_T2E] - r[bh.B_T1S], m[bh.B_T1E] - m[bh.B_T1S]
+        d = pr.ieee_div(p1, p2)
+        if d > cfg.behavior_duration_ratio:
+            return bh.merge_behaviors(r, m, None)
+        if d < 1 / cfg.behavior_duration_ratio:
+            return bh.merge_behaviors(m, r, None)
+        return None
+
+
+def _duration_refinable(r: Row, m: Row) -> bool:
+    """Step 1 examines a pair only when neither is a contact and neither ends in 'u' or 'z'."""
+    return (
+        r[bh.B_LBL] != bh.CT
+        and m[bh.B_LBL] != bh.CT
+        and r[bh.B_MC2] not in (mc.U, mc.Z)
+        and m[bh.B_MC2] not in (mc.U, mc.Z)
+    )
 
 
 def behavior_pairs(
