@@ -265,47 +265,61 @@ class ArmStream:
 
     def _intake(self, t: float, values: list[float]) -> list[tuple[float, list[float]]]:
         """Apply the bad-input policies; the samples to feed (none, one, or gap fill)."""
-        sc = self.stream_config
+        accepted = self._accepted(t, values)
+        if accepted is None:
+            return []
+        samples = [(t, accepted)]
+        if self._started:
+            dt = t - self._last_t
+            period = self._period
+            if period is not None and dt > self.stream_config.max_gap_periods * period:
+                self.counters.gaps += 1
+                if self.stream_config.gap_policy == "interpolate":
+                    samples = [*self._gap_fill(t, accepted, dt, period), (t, accepted)]
+            else:
+                self._track_rate(dt)
+        return samples
+
+    def _accepted(self, t: float, values: list[float]) -> list[float] | None:
+        """The sample's values after the malformed, non-finite and stamp-order policies (a
+        non-finite value may hold the last one); None when the sample is dropped (counted)."""
         c = self.counters
         if len(values) != len(AXES):
             c.malformed_samples += 1
-            return []
+            return None
         if not math.isfinite(t):
             c.malformed_samples += 1
-            return []
+            return None
         if not all(math.isfinite(v) for v in values):
             c.nonfinite_samples += 1
-            if sc.nonfinite == "drop" or self._last_y is None:
-                return []
+            if self.stream_config.nonfinite == "drop" or self._last_y is None:
+                return None
             values = [
                 v if math.isfinite(v) else last
                 for v, last in zip(values, self._last_y, strict=True)
             ]
         if t == self._last_t:
             c.duplicate_stamps += 1
-            return []
+            return None
         if t < self._last_t:
             c.decreasing_stamps += 1
-            return []
-        samples = [(t, values)]
-        if self._started:
-            dt = t - self._last_t
-            period = self._period
-            if period is not None and dt > sc.max_gap_periods * period:
-                c.gaps += 1
-                if sc.gap_policy == "interpolate":
-                    n = int(dt / period + 0.5) - 1
-                    last_y = self._last_y or values
-                    fill = []
-                    for k in range(1, n + 1):
-                        f = k / (n + 1)
-                        fill.append((self._last_t + k * dt / (n + 1),
-                                     [a + f * (b - a) for a, b in zip(last_y, values, strict=True)]))  # fmt: skip
-                    c.interpolated_samples += len(fill)
-                    samples = [*fill, (t, values)]
-            else:
-                self._track_rate(dt)
-        return samples
+            return None
+        return values
+
+    def _gap_fill(
+        self, t: float, values: list[float], dt: float, period: float
+    ) -> list[tuple[float, list[float]]]:
+        """Samples interpolated linearly from the last one at the nominal period across a gap
+        of dt before (t, values), so the windows keep their length in time (counted)."""
+        n = int(dt / period + 0.5) - 1
+        last_y = self._last_y or values
+        fill = []
+        for k in range(1, n + 1):
+            f = k / (n + 1)
+            fill.append((self._last_t + k * dt / (n + 1),
+                         [a + f * (b - a) for a, b in zip(last_y, values, strict=True)]))  # fmt: skip
+        self.counters.interpolated_samples += len(fill)
+        return fill
 
     def _track_rate(self, dt: float) -> None:
         """Nominal period from the first intervals; a sustained change is counted and adopted."""
