@@ -38,6 +38,32 @@ def _clip(word: Word, start: float | None = None, end: float | None = None) -> W
     return replace(word, start=new_start, end=new_end)
 
 
+def _deal_sequence(
+    sequence: Sequence[Word], marks: Sequence[float], parts: list[TrialWords]
+) -> None:
+    """Deal one axis's words, in order, to the sub-task parts: a word ending before the next
+    mark stays, one ending at it closes the part, one crossing it is cut in two."""
+    state = 0
+    for word in sequence:
+        current = word
+        while True:
+            mark = marks[state]
+            if current.end < mark:
+                parts[state].add(current)
+                break
+            if current.end == mark:
+                parts[state].add(current)
+                state += 1
+                break
+            parts[state].add(_clip(current, end=mark))
+            state += 1
+            if state >= len(marks):
+                break
+            current = _clip(current, start=mark)
+        if state >= len(marks):
+            break
+
+
 def split_words(
     words: TrialWords,
     state_times: Sequence[float],
@@ -63,25 +89,7 @@ def split_words(
                 # keep every (arm, level, axis) key present in every part, even if empty
                 for part in parts:
                     part.words.setdefault(arm, {}).setdefault(level, {}).setdefault(axis, [])
-                state = 0
-                for word in sequence:
-                    current = word
-                    while True:
-                        mark = marks[state]
-                        if current.end < mark:
-                            parts[state].add(current)
-                            break
-                        if current.end == mark:
-                            parts[state].add(current)
-                            state += 1
-                            break
-                        parts[state].add(_clip(current, end=mark))
-                        state += 1
-                        if state >= len(marks):
-                            break
-                        current = _clip(current, start=mark)
-                    if state >= len(marks):
-                        break
+                _deal_sequence(sequence, marks, parts)
     return [
         SubtaskSample(words.name, names[i], starts[i], marks[i], parts[i])
         for i in range(len(starts))
