@@ -49,19 +49,9 @@ def _ordered(steps: np.ndarray, allow_repeated: bool) -> bool:
     return bool((steps >= 0).all() if allow_repeated else (steps > 0).all())
 
 
-def read_table(
-    path: Path, columns: tuple[str, ...] = COLUMNS, allow_repeated: bool = False
-) -> np.ndarray:
-    """Parse a whitespace table of len(columns) numeric columns; time (column 0) strictly increasing
-    (with `allow_repeated`, a time may equal the one before it: io/sensor_checks resolves those).
-
-    Fast path: NumPy's C parser, accepted only if every value is finite and time increases;
-    anything else is re-parsed line by line to name the file, line and field of the problem.
-    """
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+def _fast_table(text: str, columns: tuple[str, ...], allow_repeated: bool) -> np.ndarray | None:
+    """The table by NumPy's C parser when it is well formed (every value finite, time in
+    order); None sends it to the line-by-line parser, which names the problem."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -75,23 +65,48 @@ def read_table(
             return np.ascontiguousarray(fast)
     except ValueError:
         pass
+    return None
+
+
+def _table_row(parts: list[str], columns: tuple[str, ...], path: Path, lineno: int) -> list[float]:
+    """The finite numbers of one table line, one per column (else an InputError naming it)."""
+    if len(parts) != len(columns):
+        raise InputError(f"expected {len(columns)} columns, found {len(parts)}", path, lineno)
+    row = []
+    for name, part in zip(columns, parts, strict=True):
+        try:
+            value = float(part)
+        except ValueError:
+            raise InputError(f"not a number: {part!r}", path, lineno, name) from None
+        if not math.isfinite(value):
+            raise InputError(f"not a finite number: {part!r}", path, lineno, name)
+        row.append(value)
+    return row
+
+
+def read_table(
+    path: Path, columns: tuple[str, ...] = COLUMNS, allow_repeated: bool = False
+) -> np.ndarray:
+    """Parse a whitespace table of len(columns) numeric columns; time (column 0) strictly increasing
+    (with `allow_repeated`, a time may equal the one before it: io/sensor_checks resolves those).
+
+    Fast path: NumPy's C parser, accepted only if every value is finite and time increases;
+    anything else is re-parsed line by line to name the file, line and field of the problem.
+    """
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+    fast = _fast_table(text, columns, allow_repeated)
+    if fast is not None:
+        return fast
     rows: list[list[float]] = []
     last_t = -math.inf
     for lineno, line in enumerate(text.splitlines(), start=1):
         parts = line.split()
         if not parts:
             continue
-        if len(parts) != len(columns):
-            raise InputError(f"expected {len(columns)} columns, found {len(parts)}", path, lineno)
-        row = []
-        for name, part in zip(columns, parts, strict=True):
-            try:
-                value = float(part)
-            except ValueError:
-                raise InputError(f"not a number: {part!r}", path, lineno, name) from None
-            if not math.isfinite(value):
-                raise InputError(f"not a finite number: {part!r}", path, lineno, name)
-            row.append(value)
+        row = _table_row(parts, columns, path, lineno)
         if row[0] < last_t or (row[0] == last_t and not allow_repeated):
             hint = "" if allow_repeated or row[0] < last_t else "; see --repeated-stamps"
             raise InputError(
