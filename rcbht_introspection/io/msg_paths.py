@@ -84,6 +84,18 @@ def resolve_path(
     spec: str, topics: Mapping[str, str | None], fielddefs: Fielddefs, bag: Path | str
 ) -> FieldPath:
     """Resolve `/topic` or `/topic.field.subfield` in a bag, or raise an InputError naming it."""
+    topic, fields, msgtype = _topic_of(spec, topics, bag)
+    walked, leaf, header = _descend(spec, topic, fields, msgtype, fielddefs, bag)
+    walked, leaf, header = _unwrap(walked, leaf, header, fielddefs)
+    if leaf == WRENCH_STAMPED:
+        header = (*walked, "header")
+    return FieldPath(spec, topic, walked, leaf, header)
+
+
+def _topic_of(
+    spec: str, topics: Mapping[str, str | None], bag: Path | str
+) -> tuple[str, tuple[str, ...], str]:
+    """(topic, field names, message type) of a path: a topic of the bag with one type."""
     if not spec.startswith("/"):
         raise InputError("a topic starts with '/' (`/topic` or `/topic.field`)", bag, field=spec)
     topic, _, rest = spec.partition(".")
@@ -95,6 +107,19 @@ def resolve_path(
     msgtype = topics[topic]
     if msgtype is None:
         raise InputError("the topic holds messages of several types", bag, field=spec)
+    return topic, fields, msgtype
+
+
+def _descend(
+    spec: str,
+    topic: str,
+    fields: tuple[str, ...],
+    msgtype: str,
+    fielddefs: Fielddefs,
+    bag: Path | str,
+) -> tuple[tuple[str, ...], str, tuple[str, ...] | None]:
+    """Follow the field names from the topic's type: (fields walked, type reached, path of the
+    nearest std_msgs/Header on the way); a missing field or an array is an InputError."""
     leaf: str = msgtype
     header: tuple[str, ...] | None = None
     walked: tuple[str, ...] = ()
@@ -113,7 +138,14 @@ def resolve_path(
             raise InputError(f"{name!r} is an array; a path cannot go into arrays", bag, field=spec)
         walked = (*walked, name)
         leaf = arg if node == Nodetype.NAME else arg[0]
-    # a message of one field stands for it (std_msgs/String -> data), wrenches stay messages
+    return walked, leaf, header
+
+
+def _unwrap(
+    walked: tuple[str, ...], leaf: str, header: tuple[str, ...] | None, fielddefs: Fielddefs
+) -> tuple[tuple[str, ...], str, tuple[str, ...] | None]:
+    """A message of one field stands for it (std_msgs/String -> data), wrenches stay messages:
+    follow such single fields down, noting headers on the way."""
     while leaf in fielddefs and leaf not in (WRENCH, WRENCH_STAMPED):
         own = _header_field(fielddefs, leaf)
         header = (*walked, own) if own else header
@@ -123,6 +155,4 @@ def resolve_path(
         name, (node, arg) = members[0]
         walked = (*walked, name)
         leaf = arg if node == Nodetype.NAME else arg[0]
-    if leaf == WRENCH_STAMPED:
-        header = (*walked, "header")
-    return FieldPath(spec, topic, walked, leaf, header)
+    return walked, leaf, header
