@@ -57,6 +57,24 @@ class PhaseCsv:
     rows: tuple[tuple[float, str], ...]
 
 
+def _phase_row(cells: list[str], time_column: str, path: Path, number: int) -> tuple[float, str]:
+    """(seconds, phase name) of one CSV line: a finite number and a name that is not empty."""
+    if len(cells) != 2:
+        raise InputError(f"expected 2 columns, got {len(cells)}", path, line=number)
+    try:
+        seconds = float(cells[0])
+        if not math.isfinite(seconds):
+            raise ValueError
+    except ValueError:
+        raise InputError(
+            f"not a number: {cells[0]!r}", path, line=number, field=time_column
+        ) from None
+    name = cells[1].strip()
+    if not name:
+        raise InputError("empty phase name", path, line=number, field="phase")
+    return seconds, name
+
+
 def read_phase_csv(path: Path | str) -> PhaseCsv:
     """A CSV file `time,phase` (seconds from the first wrench sample) or `stamp,phase` (absolute
     seconds, the clock of the wrench stamps), one event per line, times not decreasing."""
@@ -75,19 +93,7 @@ def read_phase_csv(path: Path | str) -> PhaseCsv:
     for number, cells in enumerate(lines[1:], start=2):
         if not any(c.strip() for c in cells):
             continue
-        if len(cells) != 2:
-            raise InputError(f"expected 2 columns, got {len(cells)}", path, line=number)
-        try:
-            seconds = float(cells[0])
-            if not math.isfinite(seconds):
-                raise ValueError
-        except ValueError:
-            raise InputError(
-                f"not a number: {cells[0]!r}", path, line=number, field=header[0]
-            ) from None
-        name = cells[1].strip()
-        if not name:
-            raise InputError("empty phase name", path, line=number, field="phase")
+        seconds, name = _phase_row(cells, header[0], path, number)
         if rows and seconds < rows[-1][0]:
             raise InputError(
                 f"{seconds} comes before the previous time {rows[-1][0]}",
