@@ -346,11 +346,9 @@ class Segmenter:
         amy, asyy, asty, amax, amin, aly = bmy[a], bsyy[a], bsty[a], bmax[a], bmin[a], bly[a]
         for j in range(n_full):
             # W = S (+) block j  (Chan et al. pairwise update)
-            bt = bmt[j]
-            by = amy[j]
+            bt, by = bmt[j], amy[j]
             nn = n + m
-            dt = bt - mt
-            dy = by - my
+            dt, dy = bt - mt, by - my
             f = n * m / nn
             wtt = stt + bstt[j] + dt * dt * f
             wyy = syy + asyy[j] + dy * dy * f
