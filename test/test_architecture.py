@@ -154,3 +154,34 @@ def test_the_cli_help_imports_no_engine() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=PACKAGE.parent
     )
     assert out.stdout.strip() == "[]", out.stdout
+
+
+MAX_FUNCTION_LINES = 60
+
+
+def _long_functions(source: str) -> list[tuple[str, int]]:
+    """(name, lines) of every function in `source` longer than MAX_FUNCTION_LINES."""
+    return [
+        (node.name, node.end_lineno - node.lineno + 1)
+        for node in ast.walk(ast.parse(source))
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+        and node.end_lineno is not None
+        and node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES
+    ]
+
+
+def test_no_function_of_the_package_is_over_60_lines() -> None:
+    long = {
+        str(path.relative_to(PACKAGE)): found
+        for path in sorted(PACKAGE.rglob("*.py"))
+        if (found := _long_functions(path.read_text()))
+    }
+    assert not long, long
+
+
+def test_the_length_check_sees_a_long_function() -> None:
+    def function(name: str, lines: int) -> str:
+        return f"def {name}():\n" + "".join(f"    x{i} = {i}\n" for i in range(lines - 1))
+
+    assert _long_functions(function("f", MAX_FUNCTION_LINES + 1)) == [("f", 61)]
+    assert _long_functions(function("g", MAX_FUNCTION_LINES)) == []

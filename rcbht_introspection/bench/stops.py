@@ -254,7 +254,7 @@ def _first_message() -> None:
     while not first:
         rclpy.spin_once(node, timeout_sec=0.1)
     print(subscribed, first[0], flush=True)
-    node.destroy_node()  # type: ignore[no-untyped-call, unused-ignore]
+    node.destroy_node()  # type: ignore[no-untyped-call]
     try_shutdown()
 
 

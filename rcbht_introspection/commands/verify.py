@@ -223,7 +223,7 @@ def _backend(scheduler: str | None) -> Iterator[None]:
     from joblib import parallel_config
 
     try:
-        client = Client(scheduler, timeout=30)  # type: ignore[no-untyped-call, unused-ignore]
+        client = Client(scheduler, timeout=30)  # type: ignore[no-untyped-call]
     except OSError as exc:
         raise InputError(f"--scheduler {scheduler}: {exc}") from None
     with client, parallel_config(backend="dask"):

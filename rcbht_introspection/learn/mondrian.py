@@ -148,8 +148,7 @@ class LearnedState:
 
 
 # sklearn has no type hints, so its bases are Any: strict mypy refuses to subclass them
-# (unused-ignore: the plain configuration does not check it)
-class MondrianForestClassifier(ClassifierMixin, BaseEstimator):  # type: ignore[misc, unused-ignore]
+class MondrianForestClassifier(ClassifierMixin, BaseEstimator):  # type: ignore[misc]
     """Online random forest whose trees are Mondrian processes (NIPS 2014).
 
     Parameters: n_estimators (trees, 100 as in the seed paper), discount_factor (gamma = this

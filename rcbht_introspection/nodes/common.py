@@ -45,7 +45,7 @@ from rcbht_introspection.nodes.params import (
 
 def qos_profile(depth: int, reliability: Reliability) -> QoSProfile:
     """Keep-last QoS of `depth`, reliable or best effort."""
-    return QoSProfile(  # type: ignore[no-untyped-call, unused-ignore]  # rclpy's QoSProfile takes **kwargs
+    return QoSProfile(  # type: ignore[no-untyped-call]  # rclpy's QoSProfile takes **kwargs
         history=HistoryPolicy.KEEP_LAST,
         depth=depth,
         reliability=ReliabilityPolicy.RELIABLE
@@ -156,7 +156,7 @@ class ManagedNode(LifecycleNode):
 
     def get_logger(self) -> NodeLogger:
         """The node's logger: rclpy's Node.get_logger, seen through the typed NodeLogger."""
-        logger: NodeLogger = super().get_logger()  # type: ignore[no-untyped-call, unused-ignore]
+        logger: NodeLogger = super().get_logger()  # type: ignore[no-untyped-call]
         return logger
 
     # --- lifecycle ----------------------------------------------------------------------------
@@ -239,7 +239,7 @@ class ManagedNode(LifecycleNode):
         """The process ends: shut down from whatever state the node is in (logs its statistics)."""
         if self.state_label != "finalized":
             try:
-                self.trigger_shutdown()  # type: ignore[no-untyped-call, unused-ignore]
+                self.trigger_shutdown()  # type: ignore[no-untyped-call]
             except RuntimeError as exc:  # rclpy's state machine refused (RCLError)
                 self.get_logger().error(f"shutdown transition refused: {exc}")
 
@@ -282,10 +282,10 @@ def run(
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         if node.autostart and not stop.requested:
-            configured = node.trigger_configure() == TransitionCallbackReturn.SUCCESS  # type: ignore[no-untyped-call, unused-ignore]
+            configured = node.trigger_configure() == TransitionCallbackReturn.SUCCESS  # type: ignore[no-untyped-call]
             if configured:
                 stop.up()  # a stop from here shuts the node down in order (statistics line)
-            if not configured or node.trigger_activate() != TransitionCallbackReturn.SUCCESS:  # type: ignore[no-untyped-call, unused-ignore]
+            if not configured or node.trigger_activate() != TransitionCallbackReturn.SUCCESS:  # type: ignore[no-untyped-call]
                 # one line naming the parameter; the node never started
                 print(f"[{name}] error: {node.config_error}", file=sys.stderr, flush=True)
                 return 2
@@ -301,7 +301,7 @@ def run(
         if executor is not None:
             executor.shutdown(timeout_sec=0)  # releases what its last wait still holds
         if node is not None:
-            node.destroy_node()  # type: ignore[no-untyped-call, unused-ignore]
+            node.destroy_node()  # type: ignore[no-untyped-call]
         try_shutdown()
         stop.exiting()
     return 0
@@ -359,7 +359,7 @@ class RosSession:
         self._stop.set()
         self._thread.join()
         self.executor.shutdown(timeout_sec=0)
-        self.node.destroy_node()  # type: ignore[no-untyped-call, unused-ignore]
+        self.node.destroy_node()  # type: ignore[no-untyped-call]
         try_shutdown(context=self.context)
 
     def __enter__(self) -> RosSession:

@@ -100,7 +100,7 @@ def serve_ready(executor: Executor, limit: int) -> int:
         except TimeoutException:
             return done
         handler()
-        error = handler.exception()  # type: ignore[no-untyped-call, unused-ignore]  # rclpy's Task is untyped
+        error = handler.exception()  # type: ignore[no-untyped-call]  # rclpy's Task is untyped
         if error is not None:
             raise error
     return limit

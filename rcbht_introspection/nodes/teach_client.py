@@ -46,8 +46,8 @@ def call_teach(client: Client, request: Any, timeout: float = 20.0) -> Any:
         futures.append(client.call_async(request))
         left = deadline - time.monotonic()
         # rclpy's Future is untyped
-        if wait_until(lambda: any(f.done() for f in futures), max(0.0, min(RESEND_S, left))):  # type: ignore[no-untyped-call, unused-ignore]
-            return next(f for f in futures if f.done()).result()  # type: ignore[no-untyped-call, unused-ignore]
+        if wait_until(lambda: any(f.done() for f in futures), max(0.0, min(RESEND_S, left))):  # type: ignore[no-untyped-call]
+            return next(f for f in futures if f.done()).result()  # type: ignore[no-untyped-call]
     raise InputError(f"no response from {client.srv_name} within {timeout:g} s")
 
 

@@ -176,8 +176,7 @@ def curve_stats(curves: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
 
 
 # sklearn has no type hints, so its bases are Any: strict mypy refuses to subclass them
-# (unused-ignore: the plain configuration does not check it)
-class HMMDetector(BaseEstimator):  # type: ignore[misc, unused-ignore]
+class HMMDetector(BaseEstimator):  # type: ignore[misc]
     """Per sub-task GaussianHMM of the successes; a step's score is how far the cumulative
     log-likelihood lies below the successes' mean at that step, in their standard deviations.
 
@@ -244,8 +243,7 @@ class HMMDetector(BaseEstimator):  # type: ignore[misc, unused-ignore]
 
 
 # sklearn has no type hints, so its bases are Any: strict mypy refuses to subclass them
-# (unused-ignore: the plain configuration does not check it)
-class HMMClassifier(ClassifierMixin, BaseEstimator):  # type: ignore[misc, unused-ignore]
+class HMMClassifier(ClassifierMixin, BaseEstimator):  # type: ignore[misc]
     """One GaussianHMM per failure class on the evidence windows; the class whose HMM gives
     the window the highest likelihood is named.
 

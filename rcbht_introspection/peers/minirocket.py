@@ -54,8 +54,7 @@ def to_panel(windows: Sequence[np.ndarray], n_points: int) -> np.ndarray:
 
 
 # sklearn has no type hints, so its bases are Any: strict mypy refuses to subclass them
-# (unused-ignore: the plain configuration does not check it)
-class MiniRocketClassifier(ClassifierMixin, BaseEstimator):  # type: ignore[misc, unused-ignore]
+class MiniRocketClassifier(ClassifierMixin, BaseEstimator):  # type: ignore[misc]
     """Resample to n_points, MiniRocket (multivariate), StandardScaler, RidgeClassifierCV.
 
     No predict_proba (a ridge classifier has none); `decision_function` gives the ridge

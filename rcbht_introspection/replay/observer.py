@@ -209,7 +209,7 @@ class VerdictObserver:
         """stream id -> health carried by its latest verdict"""
         self.health: list[tuple[int, str]] = []
         """(source ns, value) of each /task_health message"""
-        latched = QoSProfile(depth=1, reliability=qos.reliability)  # type: ignore[no-untyped-call, unused-ignore]  # rclpy's QoSProfile takes **kwargs
+        latched = QoSProfile(depth=1, reliability=qos.reliability)  # type: ignore[no-untyped-call]  # rclpy's QoSProfile takes **kwargs
         latched.durability = DurabilityPolicy.TRANSIENT_LOCAL
         self.subs = [
             # (msg, MessageInfo) callbacks, which rclpy passes to two-argument callables

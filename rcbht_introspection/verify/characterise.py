@@ -118,7 +118,7 @@ def sign_table(labels: Sequence[TrialLabel]) -> dict[tuple[str, ...], str]:
     return {key: names[0] for key, names in owners.items() if len(names) == 1}
 
 
-class Characteriser(BaseEstimator):  # type: ignore[misc, unused-ignore]
+class Characteriser(BaseEstimator):  # type: ignore[misc]
     """Evidence features -> failure class, its probabilities and the deviation directions."""
 
     def __init__(

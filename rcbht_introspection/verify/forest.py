@@ -20,7 +20,7 @@ ARRAYS = ("feature", "threshold", "left", "right", "leaf", "value", "roots")
 node indices, whether it is a leaf and, for leaves, the class shares (others: zeros)."""
 
 
-class ForestHead(ClassifierMixin, BaseEstimator):  # type: ignore[misc, unused-ignore]
+class ForestHead(ClassifierMixin, BaseEstimator):  # type: ignore[misc]
     """A random-forest classifier (scikit-learn conventions) whose fitted state is plain arrays."""
 
     def __init__(
