@@ -19,11 +19,24 @@ setup(
         # put them there under colcon and under plain pip alike (console_scripts go to bin/ with pip)
         (f"lib/{package_name}", ["scripts/segmenter_node", "scripts/classifier_node", "scripts/verifier_node"]),
     ],
-    install_requires=["setuptools"],
-    # peer baselines (rcbht_introspection/peers/): the pins of requirements-peers.txt, which
-    # `make setup` installs; the core and the nodes never import them
-    # fleet: verify-eval --scheduler on a dask.distributed cluster (pinned in requirements.txt)
+    # the runtime (nodes, core, bag tools, CLI) beside rclpy and the messages, at the pins of
+    # requirements*.txt (a test keeps them equal)
+    install_requires=[
+        "numpy==2.3.5",
+        "scipy==1.17.1",
+        "scikit-learn==1.9.1",
+        "PyYAML==6.0.3",
+        "rosbags==0.11.9",
+        "skops==0.16.0",
+        "joblib==1.6.0",
+    ],
+    # optional tools around the core, all installed by `make setup`: the MuJoCo simulator, the
+    # plots, terminal progress bars, the anchors' peer baselines (requirements-peers.txt) and
+    # verify-eval --scheduler on a dask.distributed cluster
     extras_require={
+        "sim": ["mujoco==4.0.0", "tqdm==4.70.1"],
+        "plots": ["matplotlib==3.11.2"],
+        "progress": ["tqdm==4.70.1"],
         "peers": ["hmmlearn==0.3.3", "aeon==1.6.0"],
         "fleet": ["dask==2026.8.0", "distributed==2026.8.0"],
     },

@@ -385,12 +385,13 @@ ROSDEP_KEYS = {
     "mujoco": "python3-mujoco-pip",
     "skops": "python3-skops-pip",
 }
-ROSDISTRO_PIP_KEYS = {"python3-rosbags-pip", "python3-mujoco-pip"}  # defined by rosdistro
-OPTIONAL_EXTRAS = {"peers"}
-"""Packages of an optional pip extra (setup.py extras_require): verify-eval's anchor methods."""
-OPTIONAL_IMPORTS = {"dask"}
+ROSDISTRO_PIP_KEYS = {"python3-rosbags-pip"}  # defined by rosdistro
+OPTIONAL_EXTRAS = {"peers", "sim", "plots"}
+"""Packages of an optional pip extra (setup.py extras_require): verify-eval's anchor methods,
+the MuJoCo simulator and the plots; a robot that runs the nodes needs none of them."""
+OPTIONAL_IMPORTS = {"dask", "tqdm"}
 """Modules of an optional pip extra imported where a command option asks for them (fleet:
-verify-eval --scheduler)."""
+verify-eval --scheduler) or with a fallback (progress: plain lines without tqdm)."""
 
 
 def test_package_xml_lists_every_run_dependency() -> None:
@@ -422,6 +423,10 @@ def test_package_xml_lists_every_run_dependency() -> None:
     needed |= {"launch", "launch_ros", "lifecycle_msgs", "diagnostic_msgs"}
     assert not needed - exec_depends, (
         f"package.xml misses exec_depend {sorted(needed - exec_depends)}"
+    )
+    libraries = {d for d in exec_depends if d.startswith("python3-")}
+    assert libraries <= needed, (
+        f"package.xml lists beyond the runtime: {sorted(libraries - needed)}"
     )
     local_keys = yaml.safe_load((REPO / "rosdep.yaml").read_text())
     for key in exec_depends:

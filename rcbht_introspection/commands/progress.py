@@ -75,11 +75,14 @@ def is_terminal(stream: TextIO) -> bool:
 
 
 def progress_bar(total: int, desc: str, unit: str, stream: TextIO | None = None) -> Progress:
-    """A tqdm bar when `stream` (default stderr) is a terminal, else a PlainProgress."""
+    """A tqdm bar when `stream` (default stderr) is a terminal and tqdm is installed (an
+    optional extra), else a PlainProgress."""
     stream = sys.stderr if stream is None else stream
     if is_terminal(stream):
-        from tqdm import tqdm
-
+        try:
+            from tqdm import tqdm
+        except ImportError:
+            return PlainProgress(total, desc, unit, stream)
         bar: Progress = tqdm(total=total, desc=desc, unit=unit, file=stream)
         return bar
     return PlainProgress(total, desc, unit, stream)

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from rcbht_introspection.commands.progress import progress_bar
 from rcbht_introspection.errors import InputError
 
 TASK_CHOICES: tuple[str, ...] = ("snap-assembly", "peg-in-hole")
@@ -117,6 +118,7 @@ def run_sim(args: argparse.Namespace) -> int:
     progress = args.progress == "on" or (
         args.progress == "auto" and args.trials > 4 and sys.stderr.isatty()
     )
+    bar = progress_bar(args.trials, "simulating", "trial") if progress else None
     start = time.perf_counter()
     written = write_dataset(
         args.out,
@@ -126,12 +128,14 @@ def run_sim(args: argparse.Namespace) -> int:
         failures=args.failures,
         rate_hz=args.rate,
         fmt=args.fmt,
-        progress=progress,
+        progress=bar.update if bar is not None else None,
         config=config,
         task=args.task,
         sessions=args.sessions,
     )
     elapsed = time.perf_counter() - start
+    if bar is not None:
+        bar.close()
     kind = args.scenario if args.task == "snap-assembly" else f"{args.task} {args.scenario}"
     print(f"wrote {len(written)} {kind} trials to {args.out} in {elapsed:.1f} s")
     return 0

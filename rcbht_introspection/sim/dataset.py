@@ -10,11 +10,9 @@ from __future__ import annotations
 
 import json
 import shutil
-from collections.abc import Iterable
+from collections.abc import Callable
 from pathlib import Path
 from typing import Literal, get_args
-
-from tqdm import tqdm
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import write_trial_bag
@@ -139,14 +137,15 @@ def write_dataset(
     failures: bool = False,
     rate_hz: float | None = None,
     fmt: DatasetFormat = "hiro",
-    progress: bool = False,
+    progress: Callable[[int], object] | None = None,
     config: TaskConfig | None = None,
     task: SimTaskName = "snap-assembly",
     sessions: int = 1,
 ) -> list[Path]:
     """Simulate `n_trials` trials of `task` into `out_dir`; returns the written trial folders (or
     bag files). `rate_hz` None is the task's sensor rate (config sensor.rate_hz); `sessions` > 1
-    splits the trials into recording sessions with a sensor bias and drift each (sim/sessions.py)."""
+    splits the trials into recording sessions with a sensor bias and drift each (sim/sessions.py);
+    `progress` is called with 1 after each trial."""
     sim_task = get_sim_task(task)
     _check_set(fmt, n_trials, scenario, sim_task, failures)
     config = config or sim_task.load_config(None)
@@ -158,18 +157,17 @@ def write_dataset(
     out.mkdir(parents=True, exist_ok=True)
     types = failure_classes(config.failures) if isinstance(config, SimConfig) else ()
     plan = trial_plan(n_trials, seed, failures, types)
-    items: Iterable[tuple[int, tuple[int, FailureType | None]]] = enumerate(plan)
-    if progress:
-        items = tqdm(items, total=len(plan), desc="simulating", unit="trial")
     written: list[Path] = []
     index: list[dict[str, object]] = []
-    for i, (trial_seed, failure) in items:
+    for i, (trial_seed, failure) in enumerate(plan):
         name = trial_name(scenario, i, failure, sim_task.label)
         trial = simulate(trial_seed, failure, name)
         if days:
             trial = in_session(trial, days[session_of(i, n_trials, sessions)])
         written.append(_write_trial(trial, out, name, fmt, sim_task))
         index.append(_index_entry(name, trial))
+        if progress is not None:
+            progress(1)
     meta: dict[str, object] = {"task": sim_task.name, "scenario": scenario, "seed": seed}
     meta.update({"rate_hz": rate, "format": fmt, "trials": index})
     (out / "sim_meta.json").write_text(json.dumps(meta, indent=1) + "\n")
