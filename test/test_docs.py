@@ -16,7 +16,7 @@ from rcbht_introspection.nodes.params import (
     descriptions,
 )
 
-DOCS = Path(__file__).resolve().parents[1] / "docs" / "ros.md"
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "ros-parameters.md"
 AUTOSTART = ("autostart", True, "configure and activate at start-up, without a manager")
 
 
