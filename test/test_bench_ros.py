@@ -20,6 +20,10 @@ def test_ros_benchmark_short(
     if bench_model is not None:  # the session's copy of the model run() would train
         monkeypatch.setenv("RCBHT_BENCH_ROS_MODEL", str(bench_model))
     result = ros.run(tmp_path)
+    floor = result["dds_floor_1kHz"]
+    assert floor["published"] == 2 * 1000 and floor["exit_codes"] == [0, 0]
+    assert 0 <= floor["dropped"] < floor["published"] == floor["latency_ms"]["n"] + floor["dropped"]
+    assert floor["latency_ms"]["p50"] > 0
     for name, arms in (("one_arm_1kHz", 1), ("two_arm_2x1kHz", 2)):
         r = result[name]
         assert r["arms"] == arms
@@ -28,6 +32,8 @@ def test_ros_benchmark_short(
         assert r["achieved_rate_hz_per_arm"] > 500
         assert r["latency_ms"]["n"] > 0 and r["word_latency_ms"]["n"] > 0
         assert r["clean_shutdown"], (r["exit_codes"], r["shutdown_logs"])
+        ratio = r["latency_ms"]["p99"] / floor["latency_ms"]["p99"]
+        assert r["latency_p99_over_floor"] == pytest.approx(ratio, abs=0.01)
     v = result["one_arm_1kHz_verifier"]
     assert v["clean_shutdown"], (v["exit_codes"], v["shutdown_logs"])
     assert v["sample_to_verdict_ms"]["n"] > 0 and v["latency_ms"]["n"] > 0

@@ -20,11 +20,13 @@ from __future__ import annotations
 import os
 import shutil
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from rcbht_introspection.bench.dds_floor import run_floor
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
@@ -139,8 +141,8 @@ def _scenario_bags(
 
 
 def run(out_dir: Path) -> dict[str, Any]:
-    """Both scenarios; figures per scenario plus the load average around them."""
-
+    """The DDS floor, then each scenario; figures per scenario, their latency p99 as a ratio to
+    the floor's p99, and the load average around them."""
     seconds = float(os.environ.get("RCBHT_BENCH_ROS_SECONDS", "60"))
     rate = TARGET_RATE_HZ / SOURCE_RATE_HZ
     work = Path(out_dir) / "ros"
@@ -155,40 +157,62 @@ def run(out_dir: Path) -> dict[str, Any]:
     }
     verifier = bench_verifier(work)
     results["verifier"] = str(verifier)
+    results["dds_floor_1kHz"] = floor = _timed(run_floor, TARGET_RATE_HZ, seconds)
     scenarios = (("one_arm_1kHz", 1, None), ("two_arm_2x1kHz", 2, None))
     for name, arms, verifier_file in (*scenarios, ("one_arm_1kHz_verifier", 1, verifier)):
         bags = _scenario_bags(work, name, arms, sources, replays_one_arm=verifier_file is not None)
-        load_before = os.getloadavg()
-        t0 = time.monotonic()
         options = ReplayEvalOptions(
             rate=rate, offline=False, log_dir=work / f"{name}_logs", verifier_file=verifier_file
         )
-        r = replay_eval(bags, model, options)
-        play_s = sum(b["play_s"] for b in r["per_bag"])
-        published = sum(b["published_wrench"] for b in r["per_bag"])
-        results[name] = {
-            "arms": arms,
-            "wrench_published": published,
-            "wrench_dropped": r["dropped_wrench"],
-            "wrench_rejected": r["rejected_wrench"],
-            "playback_s": round(play_s, 2),
-            "achieved_rate_hz_per_arm": round(published / arms / play_s, 1) if play_s else None,
-            "latency_ms": r["latency_ms"],
-            "latency_received_ms": r["latency_received_ms"],
-            "word_latency_ms": r["word_latency_ms"],
-            "clean_shutdown": r["clean_shutdown"],
-            "exit_codes": r["exit_codes"],
-            "shutdown_logs": r.get("shutdown_logs", {}),
-            "domain_id": r["domain_id"],
-            "wall_s": round(time.monotonic() - t0, 1),
-            "load_avg_before": [round(x, 2) for x in load_before],
-            "load_avg_after": [round(x, 2) for x in os.getloadavg()],
-        }
-        if verifier_file is not None:
-            results[name]["sample_to_verdict_ms"] = r["verifier"]["sample_to_verdict_ms"]
-            results[name]["verdicts"] = sum(v["verdicts"] for v in r["verifier"]["runs"])
+        results[name] = _timed(_scenario, bags, model, options, arms)
+        results[name]["latency_p99_over_floor"] = _over(results[name]["latency_ms"], floor)
     results["one_arm_1kHz_teaching"] = _teaching_beside(sources, rate, work)
     return results
+
+
+def _over(latency: dict[str, Any], floor: dict[str, Any]) -> float | None:
+    """A latency's p99 as a multiple of the DDS floor's p99."""
+    p99, base = latency.get("p99"), floor["latency_ms"].get("p99")
+    return round(p99 / base, 2) if p99 is not None and base else None
+
+
+def _timed(measure: Callable[..., dict[str, Any]], *args: Any) -> dict[str, Any]:
+    """A measurement's figures with its wall time and the load average before and after."""
+    load_before = os.getloadavg()
+    t0 = time.monotonic()
+    figures = measure(*args)
+    figures["wall_s"] = round(time.monotonic() - t0, 1)
+    figures["load_avg_before"] = [round(x, 2) for x in load_before]
+    figures["load_avg_after"] = [round(x, 2) for x in os.getloadavg()]
+    return figures
+
+
+def _scenario(
+    bags: list[Path], model: Path | None, options: ReplayEvalOptions, arms: int
+) -> dict[str, Any]:
+    """One scenario's figures: its bags replayed through the node processes."""
+    r = replay_eval(bags, model, options)
+    play_s = sum(b["play_s"] for b in r["per_bag"])
+    published = sum(b["published_wrench"] for b in r["per_bag"])
+    figures = {
+        "arms": arms,
+        "wrench_published": published,
+        "wrench_dropped": r["dropped_wrench"],
+        "wrench_rejected": r["rejected_wrench"],
+        "playback_s": round(play_s, 2),
+        "achieved_rate_hz_per_arm": round(published / arms / play_s, 1) if play_s else None,
+        "latency_ms": r["latency_ms"],
+        "latency_received_ms": r["latency_received_ms"],
+        "word_latency_ms": r["word_latency_ms"],
+        "clean_shutdown": r["clean_shutdown"],
+        "exit_codes": r["exit_codes"],
+        "shutdown_logs": r.get("shutdown_logs", {}),
+        "domain_id": r["domain_id"],
+    }
+    if "verifier" in r:
+        figures["sample_to_verdict_ms"] = r["verifier"]["sample_to_verdict_ms"]
+        figures["verdicts"] = sum(v["verdicts"] for v in r["verifier"]["runs"])
+    return figures
 
 
 def _teaching_beside(sources: list[Trial], rate: float, work: Path) -> dict[str, Any]:
