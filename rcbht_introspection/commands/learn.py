@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, get_args
 
@@ -28,6 +29,7 @@ if TYPE_CHECKING:
     from collections.abc import Callable
 
     from rcbht_introspection.learn.data import TrialSamples
+    from rcbht_introspection.learn.evaluate import Protocol
     from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
 
@@ -100,6 +102,11 @@ def _register_evaluate(subparsers: argparse._SubParsersAction[argparse.ArgumentP
     )
     ev.add_argument(
         "--no-variant", action="store_true", help="skip the variant without near-empty sub-tasks"
+    )
+    ev.add_argument(
+        "--no-peers",
+        action="store_true",
+        help="leave out minirocket_baseline (MiniRocket on the raw wrench: the peers extra)",
     )
     _add_live_scoring_options(ev)
     ev.add_argument("--json", type=Path, default=None, metavar="OUT")
@@ -286,7 +293,7 @@ def _clean(value: Any) -> Any:
 
 
 def run_evaluate(args: argparse.Namespace) -> int:
-    from rcbht_introspection.learn.evaluate import Protocol, evaluate, total_steps
+    from rcbht_introspection.learn.evaluate import evaluate, total_steps
 
     if args.protocol == "prequential":
         return run_prequential(args)
@@ -307,23 +314,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
     read = input_record(trials)
     if args.trials is not None:
         trials = trials[: args.trials]
-    protocol = Protocol(
-        classifier=args.classifier,
-        encoding=args.encoding,
-        permutations=args.permutations,
-        n_validation=args.validation_trials,
-        seed=args.seed,
-        n_estimators=n_estimators,
-        max_nodes=budget["max_nodes"],
-        max_points=budget["max_points"],
-        variant=not args.no_variant,
-        augment_prefixes=tuple(args.augment_prefixes),
-        live_augment=args.live_augment,
-        live_score=args.live_score,
-        taxonomy=taxonomy,
-        repeated=repeated_policy(args),
-        live_config=args.live_config,
-    )
+    protocol = _curve_protocol(args, taxonomy, n_estimators, budget)
     result = _with_progress(
         args,
         total_steps(trials, protocol),
@@ -342,12 +333,57 @@ def run_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _curve_protocol(
+    args: argparse.Namespace,
+    taxonomy: TaxonomyConfig | None,
+    n_estimators: int,
+    budget: dict[str, int | None],
+) -> Protocol:
+    """The learning-curve protocol of the options; MiniRocket (the peers) unless --no-peers or
+    aeon is not importable (then a note on stderr)."""
+    from rcbht_introspection.learn.evaluate import Protocol
+
+    return Protocol(
+        classifier=args.classifier,
+        encoding=args.encoding,
+        permutations=args.permutations,
+        n_validation=args.validation_trials,
+        seed=args.seed,
+        n_estimators=n_estimators,
+        max_nodes=budget["max_nodes"],
+        max_points=budget["max_points"],
+        variant=not args.no_variant,
+        augment_prefixes=tuple(args.augment_prefixes),
+        live_augment=args.live_augment,
+        live_score=args.live_score,
+        taxonomy=taxonomy,
+        repeated=repeated_policy(args),
+        live_config=args.live_config,
+        peers=not args.no_peers and _peers_importable(),
+    )
+
+
+def _peers_importable() -> bool:
+    """True when the peers extra's aeon imports; else a one-line note on stderr."""
+    from rcbht_introspection.peers.subtask_baseline import aeon_importable
+
+    if aeon_importable():
+        return True
+    print(
+        "rcbht evaluate: note: aeon is not importable (the peers extra): no minirocket_baseline",
+        file=sys.stderr,
+    )
+    return False
+
+
 def _report_curve(args: argparse.Namespace, result: dict[str, Any]) -> None:
     """Print the learning curve's summary; write its JSON and plot when asked."""
     ss, base = result["steady_state_accuracy"], result["duration_baseline"]
+    peer = result.get("minirocket_baseline")
+    minirocket = f"minirocket {_show(peer['mean'])} +- {_show(peer['std'])}, " if peer else ""
     print(
         f"{args.classifier}/{args.encoding}: steady state {ss['mean']:.4f} +- {ss['std']:.4f}, "
-        f"duration only {base['mean']:.4f} +- {base['std']:.4f}, "
+        f"duration only {base['mean']:.4f} +- {base['std']:.4f}, {minirocket}"
         f"best of splits {result['best_of_splits']:.4f} ({result['n_trials']} trials, "
         f"{result['n_validation_trials']} held out, {args.permutations} permutations)"
     )
@@ -446,6 +482,7 @@ def _refuse_curve_options(args: argparse.Namespace) -> None:
         "--validation-trials (use --held-out)": args.validation_trials is not None,
         "--plot": args.plot is not None,
         "--no-variant": args.no_variant,
+        "--no-peers": args.no_peers,
     }
     for option, given in refused.items():
         if given:

@@ -6,6 +6,11 @@ to all of them, and scored on the validation sub-tasks. The steady state is the 
 third of the curve. Each permutation's last step is also one random trial split (every trial
 holds all four sub-tasks, so the split is stratified by sub-task); the best of those splits is
 reported only to compare with the paper's best-of-many-splits figure.
+
+Two references are scored on the same permutations, splits and steps: the sub-task duration
+alone (duration_baseline) and, with `Protocol.peers`, MiniRocket on each sub-task's raw wrench
+(minirocket_baseline, peers/subtask_baseline.py; at the steady-state steps only, as it costs
+about a second a fit).
 """
 
 from __future__ import annotations
@@ -15,7 +20,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,12 +31,21 @@ from rcbht_introspection.grammar import EncodingName
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.sensor_checks import RepeatedPolicy
+from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn import ClassifierKind
-from rcbht_introspection.learn.data import TrialSamples, load_samples, task_of_trials
+from rcbht_introspection.learn.data import (
+    TrialSamples,
+    load_samples,
+    read_any_trial,
+    task_of_trials,
+)
 from rcbht_introspection.learn.live import load_live_config, stream_factory, trial_live_samples
 from rcbht_introspection.learn.models import SubtaskModel, train_model
 from rcbht_introspection.task import Task
 from rcbht_introspection.taxonomy.config import TaxonomyConfig
+
+if TYPE_CHECKING:
+    from rcbht_introspection.peers.subtask_baseline import SubtaskWrench
 
 VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
 """The paper's held-out trial counts by data-set size (REAL 36/10, SIM 30/8, two-arm 14/6)."""
@@ -73,6 +87,9 @@ class Protocol:
     """Repeated-stamp policy the live windows' trials are read with, as the trials were."""
     live_config: Path | None = None
     """live_augment settings of the live windows, e.g. their stream profile (None: config/live.yaml)."""
+    peers: bool = False
+    """Also score MiniRocket on the raw wrench (minirocket_baseline); needs the peers extra (aeon):
+    check peers.subtask_baseline.aeon_importable() first."""
 
 
 def default_validation(n_trials: int, two_arm: bool = False) -> int:
@@ -171,6 +188,13 @@ class _Tally:
         default_factory=lambda: {f: [] for f in PREFIX_FRACTIONS}
     )
     live_acc: list[float] = field(default_factory=list)
+    peer_curve: NDArray[np.float64] = field(default_factory=lambda: np.empty((0, 0)))
+    """MiniRocket's accuracy at the steady-state steps (permutation, tail step)."""
+    peer_final: list[float] = field(default_factory=list)
+    peer_final_samples: list[int] = field(default_factory=list)
+    prefix_peer: dict[float, list[float]] = field(
+        default_factory=lambda: {f: [] for f in PREFIX_FRACTIONS}
+    )
 
     @classmethod
     def empty(cls, plan: _Plan, permutations: int) -> _Tally:
@@ -182,6 +206,7 @@ class _Tally:
             variant_curve=np.full((permutations, len(plan.tail_steps)), math.nan),
             variant_base=np.full((permutations, len(plan.tail_steps)), math.nan),
             confusion=np.zeros((n_names, n_names), dtype=int),
+            peer_curve=np.full((permutations, len(plan.tail_steps)), math.nan),
         )
 
 
@@ -203,6 +228,11 @@ class _Run:
         self.cache = SampleCache()
         self.tally = _Tally.empty(plan, protocol.permutations)
         self.n_near_empty = _count_near_empty(plan.complete, protocol)
+        self.peer: SubtaskWrench | None = None
+        if protocol.peers:
+            from rcbht_introspection.peers.subtask_baseline import SubtaskWrench
+
+            self.peer = SubtaskWrench(_read_trials(plan.complete, protocol.repeated))
 
     def near_empty(self, sample: SubtaskSample) -> bool:
         """A sub-task too short to carry words (dropped in the variant)."""
@@ -239,6 +269,8 @@ class _Run:
             )
             if self.protocol.variant and k in plan.tail_steps and self.n_near_empty:
                 self.variant(perm, plan.tail_steps.index(k), train_samples, val_kept)
+            if self.peer is not None and k in plan.tail_steps:
+                self.peer_step(self.peer, perm, k, train_samples, val_samples)
             if self.progress:
                 self.progress(1)
             if k == plan.n_train:  # last step = one random trial split
@@ -258,6 +290,27 @@ class _Run:
         self.tally.variant_base[perm, i] = _accuracy(
             vbase.predict(_log_duration(val_kept)), val_kept
         )
+
+    def peer_step(
+        self,
+        peer: SubtaskWrench,
+        perm: int,
+        k: int,
+        train_samples: list[SubtaskSample],
+        val_samples: list[SubtaskSample],
+    ) -> None:
+        """MiniRocket at steady-state step `k` (seeded as the model); at the last step also
+        its trial split and its prefixes, as the model's."""
+        model = peer.fit(train_samples, self.protocol.seed + perm)
+        accuracy = peer.accuracy(model, val_samples)
+        self.tally.peer_curve[perm, self.plan.tail_steps.index(k)] = accuracy
+        if k != self.plan.n_train:
+            return
+        self.tally.peer_final.append(accuracy)
+        self.tally.peer_final_samples.append(len(val_samples))
+        if self.protocol.prefixes:
+            for f in PREFIX_FRACTIONS:
+                self.tally.prefix_peer[f].append(peer.accuracy(model, val_samples, f))
 
     def final_split(self, model: SubtaskModel, val_samples: list[SubtaskSample]) -> None:
         """The full-training model as one trial split: accuracy, confusion, prediction time."""
@@ -311,6 +364,18 @@ class _Run:
             )
 
 
+def _read_trials(
+    trials: Sequence[TrialSamples], repeated: RepeatedPolicy | None
+) -> dict[str, Trial]:
+    """Each sample's trial (its wrench), by the samples' trial name, read with the trial's
+    repeated-stamp policy (golden trials: `repeated`, as their live windows are)."""
+    out: dict[str, Trial] = {}
+    for t in trials:
+        trial = read_any_trial(t.path, t.repeated or repeated)
+        out.update({s.trial: trial for s in t.samples})
+    return out
+
+
 def _count_near_empty(complete: Sequence[TrialSamples], protocol: Protocol) -> int:
     """Sub-tasks shorter than protocol.near_empty_seconds among the complete trials."""
     return sum(s.duration < protocol.near_empty_seconds for t in complete for s in t.samples)
@@ -338,6 +403,8 @@ def evaluate(
             **_mean_std(run.tally.live_acc),
             "n_windows": sum(map(len, live.values())),
         }
+    if run.peer is not None:
+        _add_peer_result(result, plan, run.tally)
     if protocol.variant:
         result["without_near_empty"] = _variant_result(
             protocol, run.tally, run.n_near_empty, result
@@ -391,6 +458,26 @@ def _curve_result(plan: _Plan, protocol: Protocol, tally: _Tally) -> dict[str, A
             if tally.prefix_acc[f]
         },
     }
+
+
+def _add_peer_result(result: dict[str, Any], plan: _Plan, tally: _Tally) -> None:
+    """minirocket_baseline beside duration_baseline: its steady state (the mean of each
+    permutation's steady-state steps, as the model's), curve at those steps and trial splits
+    (`n_subtasks`: validation sub-tasks scored in all); its prefix accuracies beside the
+    model's."""
+    final = tally.peer_final
+    result["minirocket_baseline"] = {
+        **_mean_std(np.nanmean(tally.peer_curve, axis=1).tolist()),
+        "curve": _step_curve(tally.peer_curve, plan.tail_steps),
+        "trial_splits": {**_mean_std(final), "n": len(final)},
+        "n_subtasks": int(sum(tally.peer_final_samples)),
+    }
+    for f in PREFIX_FRACTIONS:
+        key = f"{int(f * 100)}%"
+        if key in result["prefix_accuracy"] and tally.prefix_peer[f]:
+            result["prefix_accuracy"][key]["minirocket_baseline"] = _mean_std(tally.prefix_peer[f])[
+                "mean"
+            ]
 
 
 def _variant_result(
