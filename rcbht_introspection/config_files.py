@@ -4,7 +4,7 @@ Every tunable number lives in one frozen dataclass per concern (taxonomy, stream
 classifier node, simulator, live augmentation); this module checks a YAML mapping against the
 dataclass's field types (nested dataclasses, tuples, dicts, Literal choices) and builds the object.
 Every error is an InputError naming file, line and field, e.g.
-`config/sim.yaml, line 31, field physics.friction: expected a number, got 'abc'`; the lines come
+`config/sim/snap.yaml, line 31, field physics.friction: expected a number, got 'abc'`; the lines come
 from PyYAML's node marks.
 """
 

@@ -51,7 +51,7 @@ CELL_FIXTURE = replace(SimConfig().variation, offset_xy=0.0002, offset_z=0.0002,
 
 
 def cell_with_slips(xy: tuple[float, float], yaw: tuple[float, float]) -> SimConfig:
-    """The cell (sim_cell.yaml) with other deviation sizes (m, rad)."""
+    """The cell (sim/cell.yaml) with other deviation sizes (m, rad)."""
     failures = replace(SimConfig().failures, deviation_xy=xy, deviation_yaw=yaw)
     return replace(SimConfig(), controller=CELL_PROGRAM, variation=CELL_FIXTURE, failures=failures)
 
@@ -84,8 +84,8 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
             StreamConfig(profile="live", finality_bound_s=1.9),
         ),
     ],
-    "sim.yaml": [(load_sim_config, SimConfig())],
-    "sim_deviation_b.yaml": [
+    "sim/snap.yaml": [(load_sim_config, SimConfig())],
+    "sim/deviation_b.yaml": [
         (
             load_sim_config,
             replace(
@@ -96,16 +96,16 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
             ),
         )
     ],
-    "sim_cell.yaml": [
+    "sim/cell.yaml": [
         (load_sim_config, replace(SimConfig(), controller=CELL_PROGRAM, variation=CELL_FIXTURE))
     ],
-    "sim_cell_deviation_a.yaml": [
+    "sim/cell_deviation_a.yaml": [
         (load_sim_config, cell_with_slips((0.0015, 0.00205), (0.04, 0.06)))
     ],
-    "sim_cell_deviation_b.yaml": [
+    "sim/cell_deviation_b.yaml": [
         (load_sim_config, cell_with_slips((0.00205, 0.0025), (0.06, 0.08)))
     ],
-    "sim_peg.yaml": [(load_peg_config, PegConfig())],
+    "sim/peg.yaml": [(load_peg_config, PegConfig())],
     "live.yaml": [(load_live_config, LiveAugmentConfig())],
     "teach.yaml": [(load_teach_config, TeachConfig())],
     "verify.yaml": [(load_verify_config, VerifyConfig())],
@@ -118,7 +118,8 @@ loader was unified)."""
 
 
 def test_every_shipped_yaml_file_is_covered() -> None:
-    assert {p.name for p in REPO_CONFIG_DIR.glob("*.yaml")} == set(SHIPPED)
+    shipped = REPO_CONFIG_DIR.rglob("*.yaml")
+    assert {p.relative_to(REPO_CONFIG_DIR).as_posix() for p in shipped} == set(SHIPPED)
 
 
 @pytest.mark.parametrize("name", sorted(SHIPPED))

@@ -170,6 +170,6 @@ def test_the_measured_comment_check_leaves_settings_alone() -> None:
 def test_config_comments_hold_no_measured_figures() -> None:
     """A config comment says what a setting does; measured results live in docs/results*.md."""
     found = []
-    for path in sorted((ROOT / "config").glob("*.yaml")):
+    for path in sorted((ROOT / "config").rglob("*.yaml")):
         found += [f"{path.name}: {line}" for line in measured_comments(path.read_text())]
     assert not found, found

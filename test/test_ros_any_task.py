@@ -17,7 +17,7 @@ from rcbht_introspection.io.bags import read_trial_bag
 pytestmark = [pytest.mark.ros]
 
 PEG = ("reach", "search", "insert", "release")
-"""The peg-in-hole task's sub-tasks (config/sim_peg.yaml), none of them HIRO's."""
+"""The peg-in-hole task's sub-tasks (config/sim/peg.yaml), none of them HIRO's."""
 TRIALS = 8
 HELD_OUT = 2
 RATE = "5"

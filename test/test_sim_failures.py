@@ -81,7 +81,7 @@ def test_a_bad_deviation_class_in_the_config_names_file_line_and_field(tmp_path:
 
 def test_second_deviation_family_overrides_only_the_sizes(config: SimConfig) -> None:
     root = Path(__file__).resolve().parents[1]
-    other = load_sim_config(root / "config" / "sim_deviation_b.yaml")
+    other = load_sim_config(root / "config" / "sim/deviation_b.yaml")
     assert other.failures.deviation_classes == config.failures.deviation_classes
     assert other.geometry == config.geometry and other.controller == config.controller
     a, b = config.failures, other.failures
@@ -89,11 +89,11 @@ def test_second_deviation_family_overrides_only_the_sizes(config: SimConfig) -> 
 
 
 def test_the_cell_repeats_one_program_against_a_fixtured_housing(config: SimConfig) -> None:
-    """config/sim_cell.yaml: every drawn controller value is a constant, the housing's pose
+    """config/sim/cell.yaml: every drawn controller value is a constant, the housing's pose
     error is below the default's, the rest is the default; its deviation_a and deviation_b twins
     differ from it in the deviation sizes only: the lower and the upper part of its own."""
     root = Path(__file__).resolve().parents[1] / "config"
-    cell = load_sim_config(root / "sim_cell.yaml")
+    cell = load_sim_config(root / "sim/cell.yaml")
     ranges = [
         v for v in dataclasses.asdict(cell.controller).values() if isinstance(v, tuple | list)
     ]
@@ -110,8 +110,8 @@ def test_the_cell_repeats_one_program_against_a_fixtured_housing(config: SimConf
         config.failures,
         config.sensor,
     )
-    low = load_sim_config(root / "sim_cell_deviation_a.yaml")
-    high = load_sim_config(root / "sim_cell_deviation_b.yaml")
+    low = load_sim_config(root / "sim/cell_deviation_a.yaml")
+    high = load_sim_config(root / "sim/cell_deviation_b.yaml")
     f = cell.failures
     sizes = {"deviation_xy": f.deviation_xy, "deviation_yaw": f.deviation_yaw}
     for part in (low, high):

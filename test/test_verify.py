@@ -346,9 +346,9 @@ def test_a_constant_bias_raises_no_alarm_the_raw_wrench_does(trials: list[Trial]
 
 @pytest.fixture(scope="module")
 def cell_successes() -> list[Trial]:
-    """Ten successes of the repeated-program cell (config/sim_cell.yaml), whose nominal runs
+    """Ten successes of the repeated-program cell (config/sim/cell.yaml), whose nominal runs
     are alike, as a fixed robot program's are."""
-    cell = load_sim_config(Path(__file__).resolve().parents[1] / "config" / "sim_cell.yaml")
+    cell = load_sim_config(Path(__file__).resolve().parents[1] / "config" / "sim/cell.yaml")
     return [simulate_trial(cell, 500 + i, name=f"S-{i:02d}") for i in range(10)]
 
 

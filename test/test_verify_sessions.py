@@ -29,7 +29,7 @@ PER_SESSION = 20
 def sessions(tmp_path_factory: pytest.TempPathFactory) -> list[list[Trial]]:
     """Successes of two recording sessions of the repeated-program cell (about 35 s)."""
     root = tmp_path_factory.mktemp("sessions")
-    config = load_sim_config(Path(__file__).parents[1] / "config" / "sim_cell.yaml")
+    config = load_sim_config(Path(__file__).parents[1] / "config" / "sim/cell.yaml")
     paths = write_dataset(root, SESSIONS * PER_SESSION, seed=41, config=config, sessions=SESSIONS)
     trials = [read_trial(p) for p in paths]
     out: list[list[Trial]] = [[] for _ in range(SESSIONS)]

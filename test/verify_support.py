@@ -4,7 +4,7 @@
 failure (misalignment, jamming, missed_snap in turn). The first seven (four successes, three
 failures) train the verifier; the last three (a misalignment, a success, a jamming) are held out.
 
-`cell_verifier`: 26 trials of one repeated robot program (config/sim_cell.yaml), where the
+`cell_verifier`: 26 trials of one repeated robot program (config/sim/cell.yaml), where the
 failures differ from the successes in their first contact: the first 23 (12 successes, one
 failure of each of the 11 classes) train it; the last three (a misalignment, a success, a
 jamming) are held out. With so few successes the thresholds are the largest held-out ones: on
@@ -37,7 +37,7 @@ def cell_verifier(root: Path) -> tuple[Path, list[Trial]]:
     """(verifier file, held-out trials) of the repeated-program cell, made under `root`."""
     from rcbht_introspection.sim import load_sim_config
 
-    cell = load_sim_config(Path(__file__).resolve().parents[1] / "config" / "sim_cell.yaml")
+    cell = load_sim_config(Path(__file__).resolve().parents[1] / "config" / "sim/cell.yaml")
     return _verifier(root, CELL_TRIALS, CELL_SEED, CELL_TRAIN, cell)
 
 

@@ -1,7 +1,7 @@
 """Verifier cost per tick after the alarm, offline, no ROS: what verifier_node's state
 (VerifierSession) spends on each verdict once the evidence runs.
 
-A verifier is trained on the project's simulated cell (config/sim_cell.yaml: TRAIN_SUCCESSES
+A verifier is trained on the project's simulated cell (config/sim/cell.yaml: TRAIN_SUCCESSES
 successes, FAILURES_PER_CLASS failures of every class). A held-out failing trial is fed as the
 node is fed a replayed bag, then its last sample is held for HOLD_S more seconds of stream time
 (a robot left in contact after the alarm). Every tick after the alarm adds to the running
@@ -44,7 +44,7 @@ TEST_CLASS = "deviation_x+y+"
 
 
 def _train_set() -> tuple[list[Trial], SimConfig]:
-    config = load_sim_config(config_path("sim_cell.yaml"))
+    config = load_sim_config(config_path("sim/cell.yaml"))
     trials = [simulate_trial(config, seed, name=f"S-{seed}") for seed in range(TRAIN_SUCCESSES)]
     for k, failure in enumerate(failure_classes(config.failures)):
         for j in range(FAILURES_PER_CLASS):

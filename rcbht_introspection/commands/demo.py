@@ -187,11 +187,11 @@ def _replay(
 DEMO_FAILURES = ("deviation_x-", "jamming")
 """Failure classes the demo's verifier learns; the held-out failing trial is of the first."""
 CELL_SUCCESSES = 12
-"""Successful cell trials the demo's verifier learns from (config/sim_cell.yaml)."""
+"""Successful cell trials the demo's verifier learns from (config/sim/cell.yaml)."""
 
 
 def _verify_demo(args: argparse.Namespace, out: Path, model_path: Path) -> None:
-    """Train a verifier on simulated trials of the repeated-program cell (config/sim_cell.yaml:
+    """Train a verifier on simulated trials of the repeated-program cell (config/sim/cell.yaml:
     a success spread narrow enough for a slipped part to show at its first contact), then replay
     one nominal and one failing held-out cell trial through the nodes with verifier_node."""
     from rcbht_introspection.io.bags import write_trial_bag
@@ -229,7 +229,7 @@ def _train_cell_verifier(
     from rcbht_introspection.verify.model_file import save_verifier
     from rcbht_introspection.verify.train import train_verifier
 
-    sim = load_sim_config(config_path("sim_cell.yaml"))
+    sim = load_sim_config(config_path("sim/cell.yaml"))
     base = 1000 * (args.seed + 1)
     successes = [
         simulate_trial(sim, base + 100 + i, name=f"CELL-S-{i + 1:02d}")
@@ -243,7 +243,7 @@ def _train_cell_verifier(
     failing = simulate_trial(sim, base + 199, failure=DEMO_FAILURES[0], name="CELL-F-99-held")
     _step(
         f"6. train a verifier on {len(successes)} successes and {len(failures)} failures "
-        f"({', '.join(DEMO_FAILURES)}) of one robot program repeated (config/sim_cell.yaml)"
+        f"({', '.join(DEMO_FAILURES)}) of one robot program repeated (config/sim/cell.yaml)"
     )
     trials = successes + failures
     verifier = train_verifier(trials, {t.name: label_of(t) for t in trials}, load_verify_config())

@@ -77,7 +77,7 @@ def _add_output_options(p: argparse.ArgumentParser) -> None:
         "--config",
         type=Path,
         default=None,
-        help="sim config YAML (default config/sim.yaml, peg-in-hole: config/sim_peg.yaml)",
+        help="sim config YAML (default config/sim/snap.yaml, peg-in-hole: config/sim/peg.yaml)",
     )
     p.add_argument(
         "--progress",

@@ -1,4 +1,4 @@
-"""Typed configuration of the snap-assembly simulator (config/sim.yaml): every physical constant,
+"""Typed configuration of the snap-assembly simulator (config/sim/snap.yaml): every physical constant,
 controller gain, variation range and failure offset lives here, none in the code."""
 
 from __future__ import annotations
@@ -300,6 +300,6 @@ def check_failures(config: SimConfig) -> None:
 
 
 def load_sim_config(path: Path | str | None = None) -> SimConfig:
-    """Load config/sim.yaml (or `path`); unknown keys and wrong types give one-line errors."""
-    path = path if path is not None else config_path("sim.yaml")
+    """Load config/sim/snap.yaml (or `path`); unknown keys and wrong types give one-line errors."""
+    path = path if path is not None else config_path("sim/snap.yaml")
     return load_config(SimConfig, path, check=check_failures)

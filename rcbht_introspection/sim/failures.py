@@ -1,4 +1,4 @@
-"""Failure classes of the snap-assembly simulator: the families of config/sim.yaml and the
+"""Failure classes of the snap-assembly simulator: the families of config/sim/snap.yaml and the
 deviation classes (the held part slipped in the hand by a signed x, y and/or yaw offset)."""
 
 from __future__ import annotations

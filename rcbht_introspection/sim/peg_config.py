@@ -1,4 +1,4 @@
-"""Typed configuration of the peg-in-hole simulator (config/sim_peg.yaml): geometry, physics,
+"""Typed configuration of the peg-in-hole simulator (config/sim/peg.yaml): geometry, physics,
 controller set-points, per-trial variation and the (Robotiq-like) sensor, none in the code."""
 
 from __future__ import annotations
@@ -139,5 +139,5 @@ class PegConfig:
 
 
 def load_peg_config(path: Path | str | None = None) -> PegConfig:
-    """Load config/sim_peg.yaml (or `path`); unknown keys and wrong types give one-line errors."""
-    return load_config(PegConfig, path if path is not None else config_path("sim_peg.yaml"))
+    """Load config/sim/peg.yaml (or `path`); unknown keys and wrong types give one-line errors."""
+    return load_config(PegConfig, path if path is not None else config_path("sim/peg.yaml"))

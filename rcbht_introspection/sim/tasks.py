@@ -21,7 +21,7 @@ from rcbht_introspection.task import HIRO_TASK, Task
 SimTaskName = Literal["snap-assembly", "peg-in-hole"]
 SIM_TASKS: tuple[str, ...] = get_args(SimTaskName)
 TaskConfig = SimConfig | PegConfig
-"""The configuration of either task (config/sim.yaml or config/sim_peg.yaml)."""
+"""The configuration of either task (config/sim/snap.yaml or config/sim/peg.yaml)."""
 TrialSimulator = Callable[[int, FailureType | None, str], Trial]
 """(trial seed, failure type or None, trial name) -> the simulated trial."""
 
@@ -45,14 +45,14 @@ SIM_TASK_TABLE: dict[str, SimTask] = {  # keyed by SimTaskName; looked up by any
     "snap-assembly": SimTask(
         "snap-assembly",
         HIRO_TASK,
-        "sim.yaml",
+        "sim/snap.yaml",
         load_sim_config,
         ("one-arm", "two-arm"),
         True,
         None,
     ),
     "peg-in-hole": SimTask(
-        "peg-in-hole", PEG_TASK, "sim_peg.yaml", load_peg_config, ("one-arm",), False, "PEG"
+        "peg-in-hole", PEG_TASK, "sim/peg.yaml", load_peg_config, ("one-arm",), False, "PEG"
     ),
 }
 
