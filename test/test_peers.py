@@ -87,15 +87,27 @@ def _package_of(path: Path) -> str:
     return ".".join(path.relative_to(REPO).with_suffix("").parts[:-1])
 
 
-def _module_level_imports(path: Path, package: str) -> set[str]:
-    """Absolute names imported outside functions (what importing the module runs) by the
-    module at `path` of `package`."""
+def _is_type_checking_block(node: ast.AST) -> bool:
+    """`if TYPE_CHECKING:` holds imports for the type checker only; they never run."""
+    if not isinstance(node, ast.If):
+        return False
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
+
+
+def _module_level_imports_of(source: str, package: str) -> set[str]:
+    """Absolute names imported outside functions and `if TYPE_CHECKING:` by `source`."""
+
     names: set[str] = set()
-    todo: list[ast.AST] = [ast.parse(path.read_text())]
+    todo: list[ast.AST] = [ast.parse(source)]
     while todo:
         node = todo.pop()
         for child in ast.iter_child_nodes(node):
             if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+                continue
+            if _is_type_checking_block(child):
                 continue
             if isinstance(child, ast.Import):
                 names.update(alias.name for alias in child.names)
@@ -105,6 +117,23 @@ def _module_level_imports(path: Path, package: str) -> set[str]:
                 names.update(f"{module}.{alias.name}" for alias in child.names)
             todo.append(child)
     return names
+
+
+def _module_level_imports(path: Path, package: str) -> set[str]:
+    """What importing the module at `path` of `package` imports."""
+    return _module_level_imports_of(path.read_text(), package)
+
+
+def test_the_import_scan_sees_module_level_imports_and_skips_type_checking_blocks() -> None:
+    source = (
+        "from typing import TYPE_CHECKING\n"
+        "from .peers import a\n"
+        "if TYPE_CHECKING:\n    from aeon import b\n"
+        "if True:\n    import hmmlearn\n"
+        "def f():\n    import numba\n"
+    )
+    names = _module_level_imports_of(source, "rcbht_introspection")
+    assert names == {"typing.TYPE_CHECKING", "rcbht_introspection.peers.a", "hmmlearn"}
 
 
 @pytest.mark.parametrize("subpackage", NO_PEERS_AT_IMPORT)
