@@ -72,6 +72,18 @@ def test_an_event_waits_for_the_batch_in_flight_and_a_lost_piece_blocks_no_later
     assert belief.phase == "rotation" and belief.n_words == 2  # both words reach t=1.0
 
 
+def test_a_complete_batch_of_one_arm_does_not_drop_the_other_arm_s_batch_in_flight() -> None:
+    """Arms publish on topics of their own: L's batch completing says nothing about R's."""
+    session = _session()
+    session.receive([_phase("approach", 0.0)])
+    r_first = _words(Level.PRIMITIVE, [1], 1.0, batch_size=2)
+    left = WordsInput(**{**vars(_words(Level.PRIMITIVE, [1], 1.0, batch_size=1)), "arm": "L"})
+    r_second = _words(Level.COMPOSITION, [2], 1.0, batch_size=2)
+    assert [b.n_words for b, _ in session.receive([r_first, left]).beliefs] == []
+    [(belief, _)] = session.receive([r_second]).beliefs  # R's batch completes: a belief
+    assert belief.n_words == 3
+
+
 def test_a_watermark_moves_numbering_on_but_is_no_evidence() -> None:
     session = _session()
     step = session.receive([_words(Level.BEHAVIOR, [], 1.0, batch_size=0, seq_end=7)])

@@ -167,8 +167,10 @@ class ClassifierSession:
         count, _ = self.open.get(key, (0, item.batch_size))
         if count + 1 < item.batch_size:
             self.open[key] = (count + 1, item.batch_size)
-        else:  # complete: a batch still open was published before it, so its missing
-            self.open = {}  # messages never will arrive (lost, or joined late)
+        else:  # complete: a batch of this arm still open was published before it, so its
+            # missing messages never will arrive (lost, or joined late); the other arm's topics
+            # are not ordered with this one's
+            self.open = {k: v for k, v in self.open.items() if k[0] != item.arm}
         self._trigger(item.stamp_ns)
 
     def _phase(self, item: PhaseInput, step: Step) -> None:
