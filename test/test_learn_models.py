@@ -15,8 +15,9 @@ from conftest import SIM_FAILURE, SIM_JAMMED, SIM_SUCCESS, SOURCES, dataset_root
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.io.hiro import find_trials
+from rcbht_introspection.io.safe_file import checksum
 from rcbht_introspection.learn.data import load_samples, load_trials
-from rcbht_introspection.learn.model_file import _checksum, load_model, save_model
+from rcbht_introspection.learn.model_file import load_model, save_model
 from rcbht_introspection.learn.models import train_model
 
 REAL = "REAL_HIRO_ONE_SA_SUCCESS"
@@ -135,7 +136,7 @@ def test_a_budgeted_forest_with_a_grown_class_set_round_trips(
 
     def before_budgets(header: dict, arrays: dict) -> None:
         del header["mondrian"]["max_nodes"], header["mondrian"]["max_points"]
-        header["checksum"] = _checksum(header, {k: v for k, v in arrays.items() if k != "header"})
+        header["checksum"] = checksum(header, {k: v for k, v in arrays.items() if k != "header"})
 
     unbounded = train_model(train[:8], "mondrian", "compact")
     path = save_model(unbounded, tmp_path / "old.npz")

@@ -145,9 +145,9 @@ def test_model_file_without_a_task_is_a_hiro_model(tmp_path: Path, sim_data: Pat
     header = json.loads(files["header"].tobytes().decode())
     assert header["task"]["subtasks"] == list(HIRO_TASK.subtasks)
     del header["task"]
-    from rcbht_introspection.learn.model_file import _checksum
+    from rcbht_introspection.io.safe_file import checksum
 
-    header["checksum"] = _checksum(header, {k: v for k, v in files.items() if k != "header"})
+    header["checksum"] = checksum(header, {k: v for k, v in files.items() if k != "header"})
     files["header"] = np.frombuffer(json.dumps(header).encode(), dtype=np.uint8)
     with (tmp_path / "old.rcbht").open("wb") as handle:
         np.savez_compressed(handle, **files)  # type: ignore[arg-type]

@@ -18,8 +18,8 @@ from sklearn.ensemble import RandomForestClassifier
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import find_trials, read_trial
+from rcbht_introspection.io.safe_file import read_safe_npz, write_safe_npz
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.learn.model_file import read_safe_npz, write_safe_npz
 from rcbht_introspection.sim import load_sim_config, simulate_trial
 from rcbht_introspection.verify.characterise import (
     FAILURE,

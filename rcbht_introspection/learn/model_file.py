@@ -1,6 +1,6 @@
 """The safe sub-task model file: loading never executes code.
 
-A model file is a NumPy .npz read with allow_pickle=False: a JSON header (format version,
+A model file is a safe file (io/safe_file.py): a JSON header (format version,
 classifier, encoding with its fitted parameters, class names, taxonomy profile, SHA-256 of all
 content) and plain arrays. The SVM pipeline is stored with skops and loaded with an explicit
 trusted-type list, the Mondrian forest as its node arrays (mondrian_state.py).
@@ -8,12 +8,6 @@ trusted-type list, the Mondrian forest as its node arrays (mondrian_state.py).
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
-import threading
-import zipfile
-import zlib
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +16,7 @@ import skops.io as sio
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.registry import encoding_from_state
+from rcbht_introspection.io.safe_file import read_checked, write_safe_npz
 from rcbht_introspection.learn.models import SubtaskModel
 from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
 from rcbht_introspection.task import Task, task_of_names
@@ -37,74 +32,6 @@ SVM_TRUSTED_TYPES: tuple[str, ...] = (
 """The only types a stored SVM pipeline may contain (checked before skops builds anything)."""
 LIVE_PREFIX = "live__"
 """Array-name prefix of the live head's arrays in a model file."""
-
-
-def _checksum(header: dict[str, Any], arrays: dict[str, np.ndarray]) -> str:
-    """SHA-256 over the header (without its checksum) and every array's name, dtype, shape, bytes."""
-    digest = hashlib.sha256()
-    digest.update(
-        json.dumps({k: v for k, v in header.items() if k != "checksum"}, sort_keys=True).encode()
-    )
-    for name in sorted(arrays):
-        value = np.ascontiguousarray(arrays[name])
-        digest.update(f"{name}|{value.dtype.str}|{value.shape}".encode())
-        digest.update(value.tobytes())
-    return digest.hexdigest()
-
-
-def write_safe_npz(
-    path: Path, header: dict[str, Any], arrays: dict[str, np.ndarray], compress: bool = True
-) -> None:
-    """Write a JSON header (with the checksum added) and plain arrays as .npz, atomically: to a
-    temporary file beside `path`, then renamed over it. `compress=False` stores the arrays
-    uncompressed (larger, but written and read faster); readers take either."""
-    header["checksum"] = _checksum(header, arrays)
-    payload = {"header": np.frombuffer(json.dumps(header).encode(), dtype=np.uint8), **arrays}
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-    try:
-        with tmp.open("wb") as handle:
-            # numpy's stub has a bool `allow_pickle` keyword beside **arrays, so mypy takes any
-            # str-keyed ** dict as possibly feeding it; the keys here are array names
-            write = np.savez_compressed if compress else np.savez
-            write(handle, **payload)  # type: ignore[arg-type]
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def read_safe_npz(path: Path, kind: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """(header, arrays) of a file written by write_safe_npz, without its format check; any
-    unreadable, header-less or non-JSON file is a one-line InputError naming `kind`."""
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            arrays = {name: npz[name] for name in npz.files}
-    except FileNotFoundError:
-        raise InputError(f"{kind} file not found", path) from None
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, zlib.error) as exc:
-        raise InputError(f"not a readable {kind} file ({type(exc).__name__})", path) from None
-    if "header" not in arrays:
-        raise InputError(f"not an rcbht {kind} file (no header)", path)
-    try:
-        header = json.loads(arrays.pop("header").tobytes().decode())
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        raise InputError(f"{kind} header is not valid JSON", path, field="header") from None
-    if not isinstance(header, dict):
-        raise InputError(f"{kind} header is not a mapping", path, field="header")
-    return header, arrays
-
-
-def check_checksum(
-    header: dict[str, Any], arrays: dict[str, np.ndarray], path: Path, kind: str
-) -> None:
-    """One-line InputError when the file's content does not match its checksum."""
-    if header.get("checksum") != _checksum(header, arrays):
-        raise InputError(
-            f"checksum mismatch: the {kind} file is corrupt or was modified", path, field="checksum"
-        )
 
 
 def save_model(model: SubtaskModel, path: Path | str, compress: bool = True) -> Path:
@@ -147,17 +74,7 @@ def _model_parts(model: SubtaskModel) -> tuple[dict[str, Any], dict[str, np.ndar
 def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskModel:
     """Read a model file; a corrupt, tampered, foreign or wrong-version file is a one-line InputError."""
     path = Path(path)
-    header, arrays = read_safe_npz(path, "model")
-    if header.get("format") != FORMAT:
-        raise InputError("not an rcbht sub-task model file", path, field="format")
-    if header.get("format_version") != FORMAT_VERSION:
-        raise InputError(
-            f"model format version {header.get('format_version')!r} is not supported "
-            f"(this version reads {FORMAT_VERSION}); retrain with `rcbht train`",
-            path,
-            field="format_version",
-        )
-    check_checksum(header, arrays, path, "model")
+    header, arrays = read_checked(path, "model", FORMAT, FORMAT_VERSION, "rcbht train")
     main = {k: v for k, v in arrays.items() if not k.startswith(LIVE_PREFIX)}
     model = _model_from_parts(header, main, path, expect_encoding)
     if isinstance(header.get("live"), dict):

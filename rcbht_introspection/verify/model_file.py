@@ -13,7 +13,7 @@ import numpy as np
 
 from rcbht_introspection.config_files import from_mapping
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.learn.model_file import check_checksum, read_safe_npz, write_safe_npz
+from rcbht_introspection.io.safe_file import read_checked, write_safe_npz
 from rcbht_introspection.verify.characterise import FAILURE, Characteriser, Constant
 from rcbht_introspection.verify.config import VerifyConfig, check_verify_config
 from rcbht_introspection.verify.detector import Detector, SignalModels
@@ -165,17 +165,7 @@ def _characteriser(c: dict[str, Any], arrays: dict[str, np.ndarray]) -> Characte
 def load_verifier(path: Path | str) -> VerifierModel:
     """Read a verifier file; a corrupt, tampered, foreign or wrong-version file is a one-line error."""
     path = Path(path)
-    header, arrays = read_safe_npz(path, KIND)
-    if header.get("format") != FORMAT:
-        raise InputError("not an rcbht verifier file", path, field="format")
-    if header.get("format_version") != FORMAT_VERSION:
-        raise InputError(
-            f"verifier format version {header.get('format_version')!r} is not supported "
-            f"(this version reads {FORMAT_VERSION}); retrain with `rcbht verify-train`",
-            path,
-            field="format_version",
-        )
-    check_checksum(header, arrays, path, KIND)
+    header, arrays = read_checked(path, KIND, FORMAT, FORMAT_VERSION, "rcbht verify-train")
     try:
         config = from_mapping(VerifyConfig, header["config"], path=path, prefix="config.")
         try:
