@@ -24,9 +24,13 @@ def test_ros_benchmark_short(
     assert floor["published"] == 2 * 1000 and floor["exit_codes"] == [0, 0]
     assert 0 <= floor["dropped"] < floor["published"] == floor["latency_ms"]["n"] + floor["dropped"]
     assert floor["latency_ms"]["p50"] > 0
-    for name, arms in (("one_arm_1kHz", 1), ("two_arm_2x1kHz", 2)):
+    scenarios = [(n, a, spin) for n, a, v, spin in ros.SCENARIOS if not v]
+    assert {spin for _, _, spin in scenarios} == {"executor", "draining"}
+    for name, arms, spin in scenarios:
         r = result[name]
-        assert r["arms"] == arms
+        assert r["arms"] == arms and r["spin"] == spin
+        cpu = r["cpu_us_per_sample"]
+        assert set(cpu) == {"segmenter_node", "classifier_node"} and min(cpu.values()) > 0
         assert r["wrench_published"] >= 2 * 1000 * arms * 0.9
         assert 0 <= r["wrench_dropped"] <= r["wrench_published"]
         assert r["achieved_rate_hz_per_arm"] > 500

@@ -102,3 +102,43 @@ def test_spin_draining_follows_subscriptions_made_and_destroyed_while_it_spins(
         node.destroy_node()
         sender.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def test_without_the_private_api_a_draining_node_spins_on_rclpy_s_executor(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`spin: draining` where rclpy lacks the private wait set: the node configures, says why
+    in one line, and takes its input through rclpy's executor (the public path)."""
+    require_ros()
+    for key, value in ros_env(tmp_path).items():
+        monkeypatch.setenv(key, value)
+    import rclpy
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+    from rclpy.lifecycle import TransitionCallbackReturn
+    from rclpy.parameter import Parameter
+    from rclpy.signals import SignalHandlerOptions
+
+    from rcbht_introspection.nodes import draining
+    from rcbht_introspection.nodes.segmenter_node import SegmenterNode
+
+    def drains() -> bool:
+        node = SegmenterNode()
+        try:
+            [result] = node.set_parameters([Parameter("spin", value="draining")])
+            assert result.successful, result.reason
+            assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+            assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+            assert node.inputs is not None and node.inputs.draining == node.draining
+            return node.draining
+        finally:
+            node.destroy_node()
+
+    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        assert draining.unavailable() is None
+        assert drains()
+        monkeypatch.delattr(rclpy_implementation, "WaitSet")
+        assert draining.unavailable() == "rclpy's private API has no WaitSet"
+        assert not drains()
+    finally:
+        rclpy.try_shutdown()

@@ -11,6 +11,7 @@ import pytest
 from ros_support import require_ros
 
 from rcbht_introspection.cli import main
+from rcbht_introspection.nodes.params import Spin
 
 pytestmark = [pytest.mark.ros, pytest.mark.shared_data, pytest.mark.slow]
 
@@ -58,9 +59,12 @@ def test_replay_eval_of_held_out_trials(hiro_data: Path, model: Path, tmp_path: 
         assert b["published_wrench"] > 5000 and b["node_words"] == b["offline_words"] > 0
 
 
-def test_two_arm_replay_matches_offline(hiro_data: Path, model: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("spin", ["executor", "draining"])
+def test_two_arm_replay_matches_offline(
+    hiro_data: Path, model: Path, tmp_path: Path, spin: Spin
+) -> None:
     """Two arms (/L/wrench, /R/wrench at 2 x 1 kHz): per-arm words, verdicts, beliefs and
-    /task_state as offline."""
+    /task_state as offline, whichever spin the nodes use (rclpy's executor, or draining)."""
     require_ros()
     from rcbht_introspection.bench.ros import two_arm_trial
     from rcbht_introspection.io.bags import write_trial_bag
@@ -72,7 +76,7 @@ def test_two_arm_replay_matches_offline(hiro_data: Path, model: Path, tmp_path: 
         read_trial(real / "20121127-HIROSA-S-44"), read_trial(real / "20121127-HIROSA-S-45")
     )
     write_trial_bag(trial, tmp_path / "two.mcap")
-    result = replay_eval([tmp_path / "two.mcap"], model, ReplayEvalOptions(rate=5))
+    result = replay_eval([tmp_path / "two.mcap"], model, ReplayEvalOptions(rate=5, spin=spin))
     bag = result["per_bag"][0]
     assert result["words_match_offline"], bag["words_mismatch"]
     assert result["verdicts_match_offline"], (bag["verdicts"], bag["offline_verdicts"])

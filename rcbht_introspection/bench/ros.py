@@ -2,7 +2,9 @@
 
 Two scenarios through segmenter_node + classifier_node as separate processes (the replay-eval
 machinery): one arm at 1 kHz and two arms at 2 x 1 kHz, each for RCBHT_BENCH_ROS_SECONDS of
-playback (default 60); a third plays the one-arm bags with verifier_node beside them, giving
+playback (default 60), with the nodes' default spin (rclpy's executor) and again with
+`spin: draining` on the same bags (latency and each node's CPU per sample, so the optional spin
+is kept only while it pays); a third plays the one-arm bags with verifier_node beside them, giving
 sample -> verdict latency (the verifier's input is the wrench, not the words) beside word ->
 belief in the same run. The verifier is trained on other successful trials (detection only).
 A fourth plays the one-arm trials (at least three) to a classifier started without a model and
@@ -18,6 +20,7 @@ instead (skips the training).
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import time
 from collections.abc import Callable
@@ -34,6 +37,7 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.live import live_training
 from rcbht_introspection.learn.model_file import save_model
+from rcbht_introspection.nodes.params import Spin
 from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
 from rcbht_introspection.verify.config import load_verify_config
 from rcbht_introspection.verify.labels import SUCCESS, TrialLabel
@@ -121,23 +125,27 @@ def model_from_env(name: str, out_dir: Path) -> Path | None:
     return Path(text)
 
 
-def _scenario_bags(
-    work: Path, name: str, arms: int, sources: list[Trial], replays_one_arm: bool
-) -> list[Path]:
-    """The trial bags of one scenario, written under work/name (two arms: each trial's arm R
-    beside the next one's); `replays_one_arm`: the one-arm scenario's bags, written already."""
+def _scenario_bags(work: Path, name: str, arms: int, sources: list[Trial]) -> list[Path]:
+    """The trial bags of a scenario, written under work/name (two arms: each trial's arm R
+    beside the next one's)."""
     bags = []
     for i, trial in enumerate(sources):
         if arms == 2:
             trial = two_arm_trial(trial, sources[(i + 1) % len(sources)])
-        bag = work / name / f"{i:02d}-{trial.name}.mcap"
-        if replays_one_arm:  # the one-arm bags again
-            bag = work / "one_arm_1kHz" / f"{i:02d}-{trial.name}.mcap"
-            bags.append(bag)
-            continue
-        write_trial_bag(trial, bag)
-        bags.append(bag)
+        bags.append(work / name / f"{i:02d}-{trial.name}.mcap")
+        write_trial_bag(trial, bags[-1])
     return bags
+
+
+SCENARIOS: tuple[tuple[str, int, bool, Spin], ...] = (
+    ("one_arm_1kHz", 1, False, "executor"),
+    ("two_arm_2x1kHz", 2, False, "executor"),
+    ("one_arm_1kHz_verifier", 1, True, "executor"),
+    ("one_arm_1kHz_draining", 1, False, "draining"),
+    ("two_arm_2x1kHz_draining", 2, False, "draining"),
+)
+"""(name, arms, with verifier_node, the nodes' spin): the default spin, then the draining one
+on the same bags."""
 
 
 def run(out_dir: Path) -> dict[str, Any]:
@@ -158,13 +166,16 @@ def run(out_dir: Path) -> dict[str, Any]:
     verifier = bench_verifier(work)
     results["verifier"] = str(verifier)
     results["dds_floor_1kHz"] = floor = _timed(run_floor, TARGET_RATE_HZ, seconds)
-    scenarios = (("one_arm_1kHz", 1, None), ("two_arm_2x1kHz", 2, None))
-    for name, arms, verifier_file in (*scenarios, ("one_arm_1kHz_verifier", 1, verifier)):
-        bags = _scenario_bags(work, name, arms, sources, replays_one_arm=verifier_file is not None)
+    bags = {arms: _scenario_bags(work, f"{arms}_arm", arms, sources) for arms in (1, 2)}
+    for name, arms, verifier_file, spin in SCENARIOS:
         options = ReplayEvalOptions(
-            rate=rate, offline=False, log_dir=work / f"{name}_logs", verifier_file=verifier_file
+            rate=rate,
+            offline=False,
+            log_dir=work / f"{name}_logs",
+            verifier_file=verifier if verifier_file else None,
+            spin=spin,
         )
-        results[name] = _timed(_scenario, bags, model, options, arms)
+        results[name] = _timed(_scenario, bags[arms], model, options, arms)
         results[name]["latency_p99_over_floor"] = _over(results[name]["latency_ms"], floor)
     results["one_arm_1kHz_teaching"] = _teaching_beside(sources, rate, work)
     return results
@@ -209,17 +220,37 @@ def _scenario(
         "shutdown_logs": r.get("shutdown_logs", {}),
         "domain_id": r["domain_id"],
     }
+    if options.log_dir is not None and published:
+        figures["spin"] = options.spin
+        figures["cpu_us_per_sample"] = {
+            node: round(cpu_s / published * 1e6, 1)
+            for node, cpu_s in node_cpu_s(Path(options.log_dir)).items()
+        }
     if "verifier" in r:
         figures["sample_to_verdict_ms"] = r["verifier"]["sample_to_verdict_ms"]
         figures["verdicts"] = sum(v["verdicts"] for v in r["verifier"]["runs"])
     return figures
 
 
+CPU_LINE = re.compile(r"CPU ([0-9.]+) s after")
+"""The CPU time a node logs in its last line (statistics at deactivate)."""
+
+
+def node_cpu_s(log_dir: Path) -> dict[str, float]:
+    """Each node's process CPU seconds as it logged them when it stopped (its last CPU line)."""
+    out = {}
+    for log in sorted(log_dir.glob("*_node.log")):
+        found = CPU_LINE.findall(log.read_text(errors="replace"))
+        if found:
+            out[log.stem] = float(found[-1])
+    return out
+
+
 def _teaching_beside(sources: list[Trial], rate: float, work: Path) -> dict[str, Any]:
     """The one-arm bags (at least three: more trials are written when a short run has fewer)
     to a cold-started classifier, each but the last taught while the next one plays; the
     latency beside teaching, and on the last trial with the taught model alone."""
-    bags = [work / "one_arm_1kHz" / f"{i:02d}-{t.name}.mcap" for i, t in enumerate(sources)]
+    bags = [work / "1_arm" / f"{i:02d}-{t.name}.mcap" for i, t in enumerate(sources)]
     extra = _sources(0.0, at_least=3)[len(bags) :] if len(bags) < 3 else []
     for i, trial in enumerate(extra, start=len(bags)):
         bags.append(work / "one_arm_1kHz_teaching" / f"{i:02d}-{trial.name}.mcap")

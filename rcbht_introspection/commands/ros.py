@@ -11,6 +11,7 @@ from typing import get_args
 from rcbht_introspection.commands.options import add_state_options, state_from_args
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
+from rcbht_introspection.nodes.params import Spin
 from rcbht_introspection.taxonomy import StreamProfile
 
 
@@ -120,6 +121,12 @@ def _add_segmenter_options(p: argparse.ArgumentParser) -> None:
         default="reference",
         help="stream profile of the segmenter (causal: moment-axis words without waiting; "
         "live: every word final within finality_bound_s)",
+    )
+    p.add_argument(
+        "--spin",
+        choices=get_args(Spin),
+        default="executor",
+        help="the nodes' spin: rclpy's executor, or draining (bursts through rclpy's private API)",
     )
 
 
@@ -402,6 +409,7 @@ def cmd_replay_eval(args: argparse.Namespace) -> int:
         if args.taxonomy_config
         else "",
         stream_profile=args.stream_profile,
+        spin=args.spin,
         state=state_from_args(args),
         teach_first=args.teach_first,
         teach_restart=args.teach_restart,

@@ -57,6 +57,8 @@ class ClassifierNode(ManagedNode):
         self.watch = CounterWatch()
         self.latency = LatencyWindow()
         self.teaching: Teaching | None = None
+        self.burst: list[tuple[int, WordsInput | PhaseInput]] = []
+        """Inputs the executor delivered since the last settled() (the executor path)."""
 
     def configure(self, cfg: ClassifierConfig) -> None:
         self.cfg = cfg
@@ -137,8 +139,8 @@ class ClassifierNode(ManagedNode):
         cfg = self.cfg
         # events the latched rcbht/phase replays were published before this moment
         self.session.rejoin(time.time_ns())
-        # the inputs are taken by drain() (draining.spin_draining), not by executor callbacks
-        drained = DrainedGroup()
+        # `spin: draining`: the inputs are taken by drain(), not by executor callbacks
+        drained = DrainedGroup() if self.draining else None
         self.word_subs = [
             (
                 arm,
@@ -261,18 +263,23 @@ class ClassifierNode(ManagedNode):
         for level, line in self.teaching.notes():
             {"info": log.info, "warning": log.warning}.get(level, log.error)(line)
 
-    def on_words(self, arm: str, msg: WordsMsg, info: dict[str, int] | None = None) -> None:
-        """One Words message (the executor path; drain() takes bursts)."""
-        self.publish_step(self.session.receive([words_input(arm, msg)]))
+    def on_words(self, arm: str, msg: WordsMsg, info: dict[str, int]) -> None:
+        """One Words message (the executor path): handed over with its burst, at settled()."""
+        self.burst.append((info.get("source_timestamp", 0), words_input(arm, msg)))
 
     def on_phase(self, msg: PhaseMsg, info: dict[str, int]) -> None:
-        """One Phase message (the executor path; drain() takes bursts)."""
-        self.publish_step(self.session.receive([phase_input(msg, info.get("source_timestamp"))]))
+        """One Phase message (the executor path): handed over with its burst, at settled()."""
+        published = info.get("source_timestamp")
+        self.burst.append((published or 0, phase_input(msg, published)))
+
+    def settled(self) -> None:
+        """The executor ran every callback whose message was delivered: hand the burst over."""
+        burst, self.burst = self.burst, []
+        if burst:
+            self.hand_over(burst)
 
     def drain(self) -> None:
-        """Take every message already delivered and hand it to the session in publication order
-        (DDS source timestamps of the one segmenter): the session classifies where the inputs
-        say, not once per burst, so /task_state does not depend on how DDS grouped them."""
+        """`spin: draining`: take every message already delivered and hand it over."""
         taken: list[tuple[int, WordsInput | PhaseInput]] = []
         for _ in range(10000):
             before = len(taken)
@@ -286,8 +293,14 @@ class ClassifierNode(ManagedNode):
                 taken.append((published or 0, phase_input(msg, published)))
             if len(taken) == before:
                 break
-        taken.sort(key=lambda t: t[0])
-        self.publish_step(self.session.receive(item for _, item in taken))
+        self.hand_over(taken)
+
+    def hand_over(self, burst: list[tuple[int, WordsInput | PhaseInput]]) -> None:
+        """Hand a burst to the session in publication order (DDS source timestamps of the one
+        segmenter): the session classifies where the inputs say, not once per burst, so
+        /task_state does not depend on how DDS or the executor grouped them."""
+        burst.sort(key=lambda t: t[0])
+        self.publish_step(self.session.receive(item for _, item in burst))
 
     def publish_step(self, step: Step) -> None:
         """Publish what the session produced (verdicts and beliefs, then each /task_state

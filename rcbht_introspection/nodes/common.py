@@ -7,13 +7,11 @@ import sys
 import threading
 import time
 import traceback
-from collections.abc import Callable, Sequence
-from functools import partial
+from collections.abc import Callable
 from typing import Any, Protocol
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -22,14 +20,18 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
-from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
-from std_msgs.msg import String
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live.health import ERROR, Health
 from rcbht_introspection.nodes.conversions import diagnostic_array
-from rcbht_introspection.nodes.draining import serve_ready, spin_draining
+from rcbht_introspection.nodes.draining import (
+    HOUSEKEEPING_S,
+    serve_ready,
+    spin_draining,
+    unavailable,
+)
+from rcbht_introspection.nodes.intake import Intake
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import (
     ClassifierConfig,
@@ -130,6 +132,10 @@ class ManagedNode(LifecycleNode):
         self.autostart = bool(autostart.value)
         self.state_label = "unconfigured"
         self.config_error = ""
+        self.draining = False
+        """Whether the high-rate inputs are drained (parameter `spin`, read at configure)."""
+        self.inputs: Intake | None = None
+        """The wrench and /task_phase subscriptions while active (segmenter, verifier)."""
         self.stop: StopSignal | None = None
         """The process's stop request (set by run()); a manager's shutdown transition sets it."""
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -153,6 +159,18 @@ class ManagedNode(LifecycleNode):
     def health(self, period_s: float) -> list[Health]:
         """Statuses for /diagnostics covering the last `period_s` seconds."""
         return []
+
+    def settled(self) -> None:
+        """The executor ran every callback whose message was delivered (a burst is complete):
+        the robot's intake hands its burst over in publication order."""
+        if self.inputs is not None:
+            self.inputs.settled()
+
+    def drain(self) -> None:
+        """`spin: draining`: take and handle every message already delivered on the drained
+        subscriptions (the robot's intake, in order)."""
+        if self.inputs is not None:
+            self.inputs.drain()
 
     def get_logger(self) -> NodeLogger:
         """The node's logger: rclpy's Node.get_logger, seen through the typed NodeLogger."""
@@ -197,9 +215,15 @@ class ManagedNode(LifecycleNode):
             self.destroy_publisher(pub)
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        return self._transition(
-            "configure", lambda: self.configure(read_config(self, self.config_class)), "inactive"
-        )
+        return self._transition("configure", self._configure, "inactive")
+
+    def _configure(self) -> None:
+        cfg = read_config(self, self.config_class)
+        self.draining = cfg.spin == "draining"
+        if self.draining and (why := unavailable()) is not None:
+            self.draining = False
+            self.get_logger().warning(f"spin: draining unavailable ({why}): rclpy's executor spins")
+        self.configure(cfg)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         result = self._transition("activate", self.activate, "active")
@@ -294,7 +318,7 @@ def run(
         # out of the cyclic collector, whose full passes over them stall a 1 kHz callback
         gc.collect()
         gc.freeze()
-        spin_draining(executor, node, stop)
+        spin(executor, node, stop)
     finally:
         if node is not None:
             node.finish()
@@ -305,6 +329,29 @@ def run(
         try_shutdown()
         stop.exiting()
     return 0
+
+
+BURST_CALLBACKS = 10_000
+"""Most callbacks the executor path runs before the node is told its burst is complete."""
+
+
+def spin(executor: SingleThreadedExecutor, node: ManagedNode, stop: StopSignal) -> None:
+    """Spin `node` until `stop`: rclpy's executor, or the draining spin while the node's
+    configuration asks for it (the parameter `spin` takes effect at each configure)."""
+    while executor.context.ok() and not stop.requested:
+        if node.draining:
+            spin_draining(executor, node, stop, keep=lambda: node.draining)
+        else:
+            spin_bursts(executor, node, stop)
+
+
+def spin_bursts(executor: SingleThreadedExecutor, node: ManagedNode, stop: StopSignal) -> None:
+    """rclpy's executor, a burst at a time: wait for a callback, run every callback whose
+    message is delivered by then, and tell the node (`settled`) before waiting again."""
+    while executor.context.ok() and not stop.requested and not node.draining:
+        executor.spin_once(timeout_sec=HOUSEKEEPING_S)
+        serve_ready(executor, BURST_CALLBACKS)
+        node.settled()
 
 
 SETTLE_CALLBACKS = 10_000
@@ -367,42 +414,3 @@ class RosSession:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def subscribe_intake(
-    node: Node,
-    arms: Sequence[str],
-    wrench_topics: Sequence[str],
-    phase_topic: str,
-    on_sample: Callable[[str, bytes, dict[str, int]], None],
-    on_phase: Callable[..., None],
-    qos: QoSProfile,
-    group: Any,
-) -> tuple[list[tuple[str, Subscription]], Subscription]:
-    """The wrench subscription of each arm and the /task_phase subscription of a node that reads
-    the robot's intake (segmenter_node, verifier_node), in `group` (a DrainedGroup: drain() takes
-    them, not executor callbacks). Raw CDR wrench: decoding six doubles and a stamp beats
-    building message objects; on_phase takes (msg, MessageInfo), which rclpy passes to
-    two-argument callbacks."""
-    wrench = [
-        (
-            arm,
-            node.create_subscription(
-                WrenchStamped, topic, partial(on_sample, arm), qos, raw=True, callback_group=group
-            ),
-        )
-        for arm, topic in zip(arms, wrench_topics, strict=True)
-    ]
-    phase = node.create_subscription(String, phase_topic, on_phase, qos, callback_group=group)
-    return wrench, phase
-
-
-def intake_publishers(
-    wrench: Sequence[tuple[str, Subscription]], phase: Subscription | None
-) -> int:
-    """Fewest publishers matched on any intake topic (0 when not subscribed). A harness waits
-    for >= 1 before it plays: a writer can match this reader before this reader matches the
-    writer, and DDS drops what it sends in between."""
-    if not wrench or phase is None:
-        return 0
-    return min(sub.get_publisher_count() for sub in (*(s for _, s in wrench), phase))

@@ -1,4 +1,5 @@
-"""The draining spin: the one place that uses rclpy's private API (checked against rclpy 7.1.6).
+"""The draining spin (`spin: draining`): the one place that uses rclpy's private API (checked
+against rclpy 7.1.6); nodes use rclpy's executor where `unavailable()` says why it cannot run.
 
 rclpy's executor rebuilds a wait set over every entity of the node (parameter and lifecycle
 services, QoS events, ...) on each wake-up: ~0.3 ms of CPU per 1 kHz sample. `spin_draining`
@@ -17,13 +18,17 @@ from typing import Any, Protocol, runtime_checkable
 
 from rclpy.callback_groups import CallbackGroup
 from rclpy.context import Context
-from rclpy.executors import Executor, TimeoutException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.executors import Executor, ShutdownException, TimeoutException
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 
 from rcbht_introspection.nodes.lifetime import StopSignal
+
+try:  # private: absent or changed in another rclpy, where nodes fall back to the executor
+    from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+except ImportError:  # pragma: no cover - depends on the rclpy build
+    _rclpy = None
 
 VERIFIED_RCLPY = "7.1.6"
 """The rclpy release whose private WaitSet / take_message API this module was verified with."""
@@ -32,6 +37,18 @@ HOUSEKEEPING_S = 0.02
 longest a stop request waits to be seen."""
 HOUSEKEEPING_CALLBACKS = 16
 """Most executor callbacks served per housekeeping round (the hot inputs must not wait long)."""
+
+
+def unavailable() -> str | None:
+    """Why the draining spin cannot run with this rclpy (None: it can): the private wait set
+    and take_message it uses must exist."""
+    if _rclpy is None:
+        return "rclpy has no rclpy_implementation module"
+    for owner, name in (("", "WaitSet"), ("Subscription", "take_message")):
+        holder = getattr(_rclpy, owner, None) if owner else _rclpy
+        if holder is None or not hasattr(holder, name):
+            return f"rclpy's private API has no {'.'.join(filter(None, (owner, name)))}"
+    return None
 
 
 class DrainedGroup(CallbackGroup):
@@ -97,7 +114,7 @@ def serve_ready(executor: Executor, limit: int) -> int:
     for done in range(limit):
         try:
             handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0)
-        except TimeoutException:
+        except (TimeoutException, ShutdownException):
             return done
         handler()
         error = handler.exception()  # type: ignore[no-untyped-call]  # rclpy's Task is untyped
@@ -147,8 +164,11 @@ def _wait(
         stop.wait(HOUSEKEEPING_S)
 
 
-def spin_draining(executor: Executor, node: Node, stop: StopSignal) -> None:
-    """Spin `node` until `stop` is requested or the context shuts down; drain on each wake-up."""
+def spin_draining(
+    executor: Executor, node: Node, stop: StopSignal, keep: Callable[[], bool] = lambda: True
+) -> None:
+    """Spin `node` until `stop` is requested, the context shuts down or `keep()` turns false
+    (a reconfigured node that no longer drains); drain on each wake-up."""
     context = executor.context
     if not isinstance(node, Draining):
         raise TypeError(f"{type(node).__name__} has no drain()")
@@ -158,7 +178,7 @@ def spin_draining(executor: Executor, node: Node, stop: StopSignal) -> None:
     with contextlib.ExitStack() as outer:
         handles = outer.enter_context(contextlib.ExitStack())
         wait_set = None
-        while context.ok() and not stop.requested:
+        while context.ok() and not stop.requested and keep():
             now_entities = _entities(node)
             if now_entities != entities:
                 # activate/deactivate created or destroyed subscriptions: a new wait set; the

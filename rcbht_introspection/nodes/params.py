@@ -30,7 +30,16 @@ from rcbht_introspection.taxonomy import StreamProfile
 
 Reliability = Literal["reliable", "best_effort"]
 """QoS reliability of every subscription and publisher of a node."""
+Spin = Literal["executor", "draining"]
+"""How a node takes its high-rate inputs: rclpy's executor, or nodes/draining.py's bursts."""
 LEVEL_TOPICS: tuple[str, ...] = ("primitives", "compositions", "behaviors")
+
+
+QOS_DEPTH_HELP = "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
+SPIN_HELP = (
+    "executor (rclpy's executor and message objects) or draining (bursts taken through rclpy's "
+    "private wait-set API, wrench decoded from CDR; executor where that API is absent)"
+)
 
 
 @dataclass(frozen=True)
@@ -80,10 +89,9 @@ class SegmenterConfig:
         "every word final within finality_bound_s of its end)",
     )
     stream_config_file: str = _f("", "optional YAML file overriding config/stream.yaml")
-    qos_depth: int = _f(
-        10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
-    )
+    qos_depth: int = _f(10000, QOS_DEPTH_HELP)
     qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
+    spin: Spin = _f("executor", SPIN_HELP)
     pose_topics: tuple[str, ...] = _f(
         (),
         "geometry_msgs/PoseStamped of each arm's sensor in the world, in `arms` order, for "
@@ -110,10 +118,9 @@ class ClassifierConfig:
     belief_topic: str = _f("rcbht/belief", "rcbht_interfaces/Belief: probabilities and window")
     end_phases: tuple[str, ...] = _f(("done",), "event names that end the task")
     expected_profile: str = _f("", "taxonomy profile the model must be trained with ('' = any)")
-    qos_depth: int = _f(
-        10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
-    )
+    qos_depth: int = _f(10000, QOS_DEPTH_HELP)
     qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
+    spin: Spin = _f("executor", SPIN_HELP)
     teach_enabled: bool = _f(
         False,
         "learn labelled windows (service ~/teach, topic teach_topic) into the Mondrian model; "
@@ -167,10 +174,9 @@ class VerifierConfig:
     publish_rate_hz: float = _f(
         10.0, "the health topic is also republished at this rate (0: only on change)"
     )
-    qos_depth: int = _f(
-        10000, "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
-    )
+    qos_depth: int = _f(10000, QOS_DEPTH_HELP)
     qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
+    spin: Spin = _f("executor", SPIN_HELP)
 
 
 NodeConfig = TypeVar("NodeConfig", bound=SegmenterConfig | ClassifierConfig | VerifierConfig)

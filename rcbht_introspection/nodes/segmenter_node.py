@@ -9,24 +9,20 @@ runs in the session; this node only subscribes the sensor poses and serves `~/ta
 
 from __future__ import annotations
 
-import struct
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from functools import partial
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_msgs.srv import SelfTest
-from geometry_msgs.msg import PoseStamped, WrenchStamped
+from geometry_msgs.msg import PoseStamped
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.publisher import Publisher
-from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
-from std_msgs.msg import String
 
-from rcbht_introspection.io.bags import decode_wrench_sample
 from rcbht_introspection.live.gravity import rotation_from_quaternion
 from rcbht_introspection.live.health import (
     OK,
@@ -44,16 +40,9 @@ from rcbht_introspection.live.segmenter import (
     SegmenterSession,
     arm_stream_factory,
 )
-from rcbht_introspection.nodes.common import (
-    ManagedNode,
-    intake_publishers,
-    phase_qos,
-    qos_profile,
-    run,
-    subscribe_intake,
-)
-from rcbht_introspection.nodes.conversions import phase_msg, words_msg, wrench_sample
-from rcbht_introspection.nodes.draining import DrainedGroup, take, take_bursts
+from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
+from rcbht_introspection.nodes.conversions import phase_msg, words_msg
+from rcbht_introspection.nodes.intake import Intake
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import SegmenterConfig, word_topics
 from rcbht_introspection.task import load_task_file
@@ -115,16 +104,13 @@ class SegmenterNode(ManagedNode):
             PhaseMsg, cfg.applied_phase_topic, phase_qos(cfg.qos_reliability), event_callbacks=quiet
         )
         self.cpu_at_start = time.process_time()
-        self.wrench_subs: list[tuple[str, Subscription]] = []
-        self.phase_sub: Subscription | None = None
+        self.inputs = None
 
     def activate(self) -> None:
         cfg = self.cfg
-        # the inputs are taken by drain() (draining.spin_draining), not by executor callbacks
-        drained = DrainedGroup()
-        self.wrench_subs, self.phase_sub = subscribe_intake(
-            self, cfg.arms, cfg.wrench_topics, cfg.phase_topic, self.sample, self.on_phase,
-            self.qos, drained,
+        self.inputs = Intake(
+            self, (cfg.arms, cfg.wrench_topics, cfg.phase_topic), self.sample, self.on_phase,
+            self.qos, self.draining,
         )  # fmt: skip
         # the latest pose is what counts: depth 1, served by the executor (at least every 20 ms)
         self.pose_subs = [
@@ -144,15 +130,12 @@ class SegmenterNode(ManagedNode):
         )
 
     def deactivate(self) -> None:
-        for _, sub in self.wrench_subs:
-            self.destroy_subscription(sub)
-        if self.phase_sub is not None:
-            self.destroy_subscription(self.phase_sub)
-        self.phase_sub = None
+        if self.inputs is not None:
+            self.inputs.destroy()
+        self.inputs = None
         for pose_sub in self.pose_subs:
             self.destroy_subscription(pose_sub)
         self.destroy_timer(self.flush_timer)
-        self.wrench_subs = []
         self.pose_subs = []
         self.log_statistics()
 
@@ -161,34 +144,9 @@ class SegmenterNode(ManagedNode):
             self.destroy_publisher(pub)
         self.word_pubs = {}
 
-    def take_phases(self) -> None:
-        """Handle /task_phase events already delivered, before the next wrench sample.
-
-        The executor serves ready subscriptions in a fixed order, so an event published just
-        before a sample could otherwise be handled after it (one sample late).
-        """
-        if self.phase_sub is None:
-            return
-        while (taken := take(self.phase_sub)) is not None:
-            self.on_phase(*taken)
-
-    def drain(self) -> None:
-        """Handle every event and sample already delivered (arms in turn), in order.
-
-        rclpy's per-wake-up cost dominates at 1 kHz; taking a burst at once keeps the node
-        ahead of two 1 kHz arms. Bounded, so the flush timer still runs.
-        """
-        self.take_phases()
-        take_bursts(self.wrench_subs, self.sample)
-
-    def sample(self, arm: str, raw: bytes, info: dict[str, int]) -> None:
+    def sample(self, arm: str, stamp: int, wrench: Sequence[float], source_ns: int | None) -> None:
         self.last_sample = time.monotonic()
-        self.take_phases()
-        try:
-            stamp, wrench = decode_wrench_sample(raw)
-        except (ValueError, struct.error):
-            stamp, wrench = wrench_sample(deserialize_message(raw, WrenchStamped))
-        out = self.session.push(arm, stamp, wrench, info.get("source_timestamp") or None)
+        out = self.session.push(arm, stamp, wrench, source_ns)
         if out.batches or out.phases:
             self.publish(out)
         if out.rejected:
@@ -240,8 +198,8 @@ class SegmenterNode(ManagedNode):
         ]
         return response
 
-    def on_phase(self, msg: String, info: dict[str, int]) -> None:
-        out = self.session.phase(msg.data, info.get("source_timestamp") or None)
+    def on_phase(self, name: str, source_ns: int | None) -> None:
+        out = self.session.phase(name, source_ns)
         if out.unknown_phase is not None:
             self.get_logger().warning(
                 f"ignored unknown /task_phase name {out.unknown_phase!r} (known: sub-task names "
@@ -353,7 +311,7 @@ class SegmenterNode(ManagedNode):
             "poses ignored": self.bad_poses,
         }
         out.append(events_health("segmenter_node", events, self.event_watch))
-        matched = intake_publishers(self.wrench_subs, self.phase_sub)
+        matched = self.inputs.publishers() if self.inputs is not None else 0
         out.append(outputs_health(self.word_pubs.values(), self.phase_pub, matched))
         return out
 

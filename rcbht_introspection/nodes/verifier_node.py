@@ -10,20 +10,16 @@ when it changes and at `publish_rate_hz`, latched (a late subscriber gets the cu
 from __future__ import annotations
 
 import math
-import struct
 import sys
 import time
+from collections.abc import Sequence
 
-from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.msg import Belief as BeliefMsg
 from rcbht_interfaces.msg import Verdict as VerdictMsg
 from rclpy.qos import DurabilityPolicy
-from rclpy.serialization import deserialize_message
-from rclpy.subscription import Subscription
 from std_msgs.msg import String
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.io.bags import decode_wrench_sample
 from rcbht_introspection.live.health import (
     ERROR,
     OK,
@@ -33,15 +29,9 @@ from rcbht_introspection.live.health import (
     LatencyWindow,
     file_sha256,
 )
-from rcbht_introspection.nodes.common import (
-    ManagedNode,
-    intake_publishers,
-    qos_profile,
-    run,
-    subscribe_intake,
-)
-from rcbht_introspection.nodes.conversions import belief_from_msg, to_time, wrench_sample
-from rcbht_introspection.nodes.draining import DrainedGroup, take, take_bursts
+from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run
+from rcbht_introspection.nodes.conversions import belief_from_msg, to_time
+from rcbht_introspection.nodes.intake import Intake
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import VerifierConfig
 from rcbht_introspection.task import load_task_file
@@ -127,8 +117,7 @@ class VerifierNode(ManagedNode):
                 max_hold_s=cfg.event_max_hold_s,
             )
         self.subtask = ""
-        self.wrench_subs: list[tuple[str, Subscription]] = []
-        self.phase_sub: Subscription | None = None
+        self.inputs = None
         self.published_health = ""
         self.last_sample = time.monotonic()
         self.qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
@@ -139,11 +128,10 @@ class VerifierNode(ManagedNode):
 
     def activate(self) -> None:
         cfg = self.cfg
-        drained = DrainedGroup()
         if self.stream is not None:
-            self.wrench_subs, self.phase_sub = subscribe_intake(
-                self, cfg.arms, cfg.wrench_topics, cfg.phase_topic, self.sample, self.on_phase,
-                self.qos, drained,
+            self.inputs = Intake(
+                self, (cfg.arms, cfg.wrench_topics, cfg.phase_topic), self.sample, self.on_phase,
+                self.qos, self.draining,
             )  # fmt: skip
         self.belief_sub = self.create_subscription(
             BeliefMsg, cfg.belief_topic, self.on_belief, self.qos
@@ -162,16 +150,13 @@ class VerifierNode(ManagedNode):
         )
 
     def deactivate(self) -> None:
-        for _, sub in self.wrench_subs:
-            self.destroy_subscription(sub)
-        if self.phase_sub is not None:
-            self.destroy_subscription(self.phase_sub)
+        if self.inputs is not None:
+            self.inputs.destroy()
+        self.inputs = None
         self.destroy_subscription(self.belief_sub)
         self.destroy_timer(self.flush_timer)
         if self.health_timer is not None:
             self.destroy_timer(self.health_timer)
-        self.wrench_subs = []
-        self.phase_sub = None
         s = self.stream
         counts = (
             {a: (c.accepted, c.rejected_total) for a, c in s.segmenter.counts.items()} if s else {}
@@ -186,28 +171,11 @@ class VerifierNode(ManagedNode):
         self.destroy_publisher(self.health_pub)
 
     # --- input ---------------------------------------------------------------------------------
-    def take_phases(self) -> None:
-        """Handle /task_phase events already delivered, before the next wrench sample."""
-        if self.phase_sub is None:
-            return
-        while (taken := take(self.phase_sub)) is not None:
-            self.on_phase(*taken)
-
-    def drain(self) -> None:
-        """Handle every event and sample already delivered (arms in turn), in order."""
-        self.take_phases()
-        take_bursts(self.wrench_subs, self.sample)
-
-    def sample(self, arm: str, raw: bytes, info: dict[str, int]) -> None:
+    def sample(self, arm: str, stamp: int, wrench: Sequence[float], source_ns: int | None) -> None:
         assert self.stream is not None  # subscribed only with a model
         self.last_sample = time.monotonic()
-        self.take_phases()
-        try:
-            stamp, wrench = decode_wrench_sample(raw)
-        except (ValueError, struct.error):
-            stamp, wrench = wrench_sample(deserialize_message(raw, WrenchStamped))
         t0 = time.perf_counter()
-        out = self.stream.push(arm, stamp, wrench, info.get("source_timestamp") or None)
+        out = self.stream.push(arm, stamp, wrench, source_ns)
         self.publish(out, t0)
         if out.rejected:
             self.get_logger().warning(
@@ -215,9 +183,9 @@ class VerifierNode(ManagedNode):
                 throttle_duration_sec=1.0,
             )
 
-    def on_phase(self, msg: String, info: dict[str, int]) -> None:
+    def on_phase(self, name: str, source_ns: int | None) -> None:
         assert self.stream is not None
-        out = self.stream.phase(msg.data, info.get("source_timestamp") or None)
+        out = self.stream.phase(name, source_ns)
         if out.unknown_phase is not None:
             self.get_logger().warning(f"ignored unknown /task_phase name {out.unknown_phase!r}")
         self.publish(out)
@@ -286,7 +254,7 @@ class VerifierNode(ManagedNode):
             ("sample to verdict p50 ms", f"{p50:.3f}"),
             ("sample to verdict p99 ms", f"{p99:.3f}"),
             ("verdict subscribers matched", str(self.verdict_pub.get_subscription_count())),
-            ("intake publishers matched", str(intake_publishers(self.wrench_subs, self.phase_sub))),
+            ("intake publishers matched", str(self.inputs.publishers() if self.inputs else 0)),
             *((k, str(v)) for k, v in counts.items()),
         )
         level = WARN if moved else OK

@@ -49,6 +49,7 @@ from rcbht_introspection.nodes.common import RosSession, qos_profile
 from rcbht_introspection.nodes.params import (
     ClassifierConfig,
     SegmenterConfig,
+    Spin,
     VerifierConfig,
     load_node_config,
 )
@@ -96,6 +97,8 @@ class ReplayEvalOptions:
     taxonomy_config_file: str = ""
     """A file of taxonomy profiles, e.g. from `rcbht calibrate` (empty: config/rcbht.yaml)."""
     stream_profile: StreamProfile = "reference"
+    spin: Spin = "executor"
+    """The nodes' `spin` parameter: rclpy's executor, or the draining spin."""
     state: TaskStateConfig | None = None
     """classifier_node's `state.*` parameters (None: those of config/classifier.yaml)."""
     startup_timeout: float = 60.0
@@ -139,9 +142,11 @@ def _params(
             "taxonomy_profile": options.profile,
             "taxonomy_config_file": options.taxonomy_config_file,
             "stream_profile": options.stream_profile,
+            "spin": options.spin,
         },
     )
     values: dict[str, Any] = {
+        "spin": options.spin,
         "model_file": model_file,
         "mode": options.mode,
         "arms": list(arms),
@@ -160,7 +165,7 @@ def _params(
 
 
 def verifier_params(
-    work: Path, arms: tuple[str, ...], verifier: Path
+    work: Path, arms: tuple[str, ...], verifier: Path, spin: Spin = "executor"
 ) -> tuple[VerifierConfig, Path]:
     """verifier_node's configuration for `arms` and its parameter file in `work`."""
     cfg = VerifierConfig(
@@ -172,6 +177,7 @@ def verifier_params(
         "verifier_file": cfg.verifier_file,
         "arms": list(arms),
         "wrench_topics": list(cfg.wrench_topics),
+        "spin": spin,
     }
     return cfg, write_params(work / "verifier.yaml", VerifierConfig, values)
 
@@ -269,7 +275,7 @@ def _start_nodes(
     procs.append(NodeProcess("classifier_node", ws.cls_params, env, work / "classifier_node.log"))
     if options.verifier_file is None:
         return None
-    ver_cfg, ver_params = verifier_params(work, arms, options.verifier_file)
+    ver_cfg, ver_params = verifier_params(work, arms, options.verifier_file, options.spin)
     procs.append(NodeProcess("verifier_node", ver_params, env, work / "verifier_node.log"))
     return ver_cfg
 
