@@ -16,7 +16,17 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Generic, TypeVar
 
-from rcbht_introspection.sim.config import ForceLoopConfig
+from rcbht_introspection.sim.arm_config import ForceLoopConfig
+
+
+@dataclass(frozen=True)
+class ArmPlan:
+    """The per-trial draws of a controller's set-points: where the tool starts; a task's plan
+    adds its speeds, forces and times after it (built positionally, `start` comes first)."""
+
+    start: tuple[float, float, float]
+    """Initial tool point x, y, z (m) in the believed frame of the fixed part (the male part's
+    bottom centre above the housing, the peg tip above the hole)."""
 
 
 @dataclass
@@ -49,7 +59,8 @@ StateT = TypeVar("StateT", bound=PhaseState)
 
 class ArmController(Generic[ConfigT, StateT]):
     """Hybrid force/position controller of the servo arm: one `update` per control tick returns
-    the six servo targets; a task's controller gives its phase steps (`phase_steps`)."""
+    the six servo targets; a task's controller gives its sub-tasks' steps (`subtask_steps`) and
+    its back-off (`backoff_motion`)."""
 
     subtasks: tuple[str, ...] = ()
     """The task's sub-tasks: switching to one records its start time."""
@@ -75,8 +86,20 @@ class ArmController(Generic[ConfigT, StateT]):
         self.steps: dict[str, PhaseStep] = self.phase_steps()
 
     def phase_steps(self) -> dict[str, PhaseStep]:
-        """Each phase's step (a phase without one, such as the end phase, does nothing)."""
-        return {}
+        """Each phase's step: the sub-tasks' (`subtask_steps`, in `subtasks` order) and the
+        back-off after an abort (`backoff_motion`); a phase without one (the end phase) idles."""
+        steps = dict(zip(self.subtasks, self.subtask_steps(), strict=True))
+        steps["backoff"] = lambda tick: self._back_off(tick, *self.backoff_motion())
+        return steps
+
+    def subtask_steps(self) -> tuple[PhaseStep, ...]:
+        """The step of each sub-task, in `subtasks` order; the task's controller gives them."""
+        return ()
+
+    def backoff_motion(self) -> tuple[float, float]:
+        """Speed (m/s) and duration (s) of the back-off after an abort; the task's controller
+        gives them (read when the back-off runs, so they may come from the plan)."""
+        raise NotImplementedError
 
     def update(self, t: float, dt: float, fx: float, fy: float, fz: float, z: float) -> list[float]:
         """Advance one tick given the tool-frame forces (compression fz > 0) and the tool height."""
@@ -137,6 +160,12 @@ class ArmController(Generic[ConfigT, StateT]):
         u = self.target
         for i in (0, 1):
             u[i] += self.cfg.lateral_compliance * self.lateral[i] * dt
+
+    def _seated(self, tick: Tick, seat_z: float, force_set: float) -> bool:
+        """Whether the part sits where it should: the tool within seat_tolerance of the believed
+        seat height `seat_z`, the force back to seat_fraction of the set-point `force_set`."""
+        cfg = self.cfg
+        return tick.z < seat_z + cfg.seat_tolerance and tick.force > cfg.seat_fraction * force_set
 
     def _back_off(self, tick: Tick, speed: float, duration: float) -> None:
         """Move up at `speed`; the trial ends `duration` after the phase began."""

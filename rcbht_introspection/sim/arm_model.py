@@ -10,9 +10,12 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from rcbht_introspection.sim.config import ArmPhysicsConfig
+from rcbht_introspection.sim.arm_config import ArmPhysicsConfig
 
 ARM_JOINTS: tuple[str, ...] = ("x", "y", "z", "yaw", "pitch", "roll")
+SIDES: tuple[int, ...] = (0, 90, 180, 270)
+"""Yaw (degrees) of the four sides of a square opening (the snap housing's, the hole's walls);
+each side is modelled in a frame facing +x, then turned by its yaw."""
 _JOINT_AXES: dict[str, str] = {
     "x": "1 0 0", "y": "0 1 0", "z": "0 0 1", "yaw": "0 0 1", "pitch": "0 1 0", "roll": "1 0 0",
 }  # fmt: skip

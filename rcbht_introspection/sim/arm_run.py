@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.sim.arm_config import Range
 from rcbht_introspection.sim.arm_control import ArmController
 from rcbht_introspection.sim.arm_model import ARM_JOINTS
 from rcbht_introspection.sim.sensor import resample
@@ -28,9 +29,26 @@ StepObserver = Callable[[float], None]
 Result = TypeVar("Result")
 
 
-def uniform(rng: np.random.Generator, r: tuple[float, float]) -> float:
+def uniform(rng: np.random.Generator, r: Range) -> float:
     """One uniform draw in the range `r` (a config range)."""
     return float(rng.uniform(r[0], r[1]))
+
+
+def draw_set_points(
+    rng: np.random.Generator, config: object, names: tuple[str, ...], **ranges: Range
+) -> dict[str, float]:
+    """A plan's set-points, one uniform draw per name in the order of `names` (which fixes the
+    trial's draws): from the range passed under that name, else from the config's range of the
+    same name, as each plan field is named after the config range it is drawn from."""
+    return {
+        name: uniform(rng, ranges[name] if name in ranges else getattr(config, name))
+        for name in names
+    }
+
+
+def draw_seed(rng: np.random.Generator) -> int:
+    """A seed, from the trial's draws, for a generator of its own (the force loop's ripple)."""
+    return int(rng.integers(0, 2**31))
 
 
 def redraw_until(

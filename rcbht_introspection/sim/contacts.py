@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import mujoco
 
+from rcbht_introspection.sim.arm_model import SIDES
 from rcbht_introspection.sim.config import GeometryConfig
-from rcbht_introspection.sim.model import SIDES
 
 Feature = tuple[str, int]
 """(region, side): region is top, chamfer, face, beam, hook or floor; side 0-3 is the housing

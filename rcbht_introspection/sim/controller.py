@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from rcbht_introspection.sim.arm_control import ArmController, PhaseState, PhaseStep, Tick
+from rcbht_introspection.sim.arm_control import ArmController, ArmPlan, PhaseState, PhaseStep, Tick
 from rcbht_introspection.sim.config import ControllerConfig, SimConfig
 from rcbht_introspection.task import HIRO_TASK
 
@@ -21,11 +21,10 @@ PHASES: tuple[str, ...] = ("approach", "rotation", "insertion", "mating", "backo
 
 
 @dataclass(frozen=True)
-class ControlPlan:
-    """The per-trial draws of the controller's set-points (speeds, forces, times, start pose)."""
+class ControlPlan(ArmPlan):
+    """The per-trial draws of the controller's set-points (ArmPlan: the start pose; speeds,
+    forces, times)."""
 
-    start: tuple[float, float, float]
-    """Initial tool centre point (male bottom centre) x, y, z in the believed housing frame."""
     tilt: float
     approach_speed: float
     rotation_speed: float
@@ -77,17 +76,13 @@ class SnapController(ArmController[ControllerConfig, ControllerState]):
         self.seat_floor = -self.cfg.insertion_stroke
         """Lowest believed tool height the insertion may reach before it counts as done."""
 
-    def phase_steps(self) -> dict[str, PhaseStep]:
-        """The four sub-tasks' steps and the back-off after an abort."""
-        return {
-            "approach": self._approach,
-            "rotation": self._rotation,
-            "insertion": self._insertion,
-            "mating": self._mating,
-            "backoff": lambda tick: self._back_off(
-                tick, self.cfg.backoff_speed, self.cfg.abort_time
-            ),
-        }
+    def subtask_steps(self) -> tuple[PhaseStep, ...]:
+        """approach, rotation, insertion, mating."""
+        return (self._approach, self._rotation, self._insertion, self._mating)
+
+    def backoff_motion(self) -> tuple[float, float]:
+        """After an aborted insertion: up at the config's back-off speed for its abort time."""
+        return self.cfg.backoff_speed, self.cfg.abort_time
 
     def _record(self, t: float, force: float, z: float) -> None:
         """Append the tick to the trace when one is kept: time, force, set-point, height, targets."""
@@ -150,12 +145,11 @@ class SnapController(ArmController[ControllerConfig, ControllerState]):
 
     def _watch_seat(self, tick: Tick) -> None:
         """Seated: after the snap, the force is back near the hold force at the believed seat."""
-        cfg, st = self.cfg, self.state
+        st = self.state
         if (
             st.snap_time is not None
             and st.seat_time is None
-            and tick.force > cfg.seat_fraction * self.plan.hold_force
-            and tick.z < cfg.seat_tolerance
+            and self._seated(tick, 0.0, self.plan.hold_force)
         ):
             st.seat_time = tick.t
             self.force_set = self.plan.hold_force

@@ -17,6 +17,7 @@ import mujoco
 import numpy as np
 
 from rcbht_introspection.sim.arm_model import (
+    SIDES,
     arm_actuators_xml,
     arm_hand_xml,
     contact_class_xml,
@@ -25,9 +26,6 @@ from rcbht_introspection.sim.arm_model import (
     prism_vertices,
 )
 from rcbht_introspection.sim.config import GeometryConfig, SimConfig
-
-SIDES: tuple[int, ...] = (0, 90, 180, 270)
-"""Yaw (degrees) of the four housing sides; each side is modelled in a frame facing +x."""
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rcbht_introspection.config_files import config_path, load_config
-from rcbht_introspection.sim.config import (
+from rcbht_introspection.sim.arm_config import (
     ArmPhysicsConfig,
     ForceLoopConfig,
     Range,
@@ -75,12 +75,9 @@ class PegControllerConfig(ForceLoopConfig):
     insert_speed: Range = (0.005, 0.012)
     """Speed limit (m/s) of the insertion's descent (the admittance loop's limit)."""
     insert_timeout: float = 8.0
-    seat_tolerance: float = 0.002
-    """Seated when the tip is within this height (m) of the believed hole floor ..."""
-    seat_fraction: float = 0.7
-    """... and the force is back to this fraction of the insertion set-point."""
     seat_settle: Range = (0.2, 0.5)
-    """Time (s) pressed on the floor before the gripper opens."""
+    """Time (s) pressed on the floor, once seated (ForceLoopConfig: near the floor, the force back
+    to a fraction of the insertion set-point), before the gripper opens."""
     release_pause: Range = (0.2, 0.8)
     """Time (s) the open gripper stays before it moves away."""
     retreat_speed: Range = (0.01, 0.02)

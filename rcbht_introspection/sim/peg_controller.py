@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from rcbht_introspection.sim.arm_control import ArmController, PhaseState, PhaseStep, Tick
+from rcbht_introspection.sim.arm_control import ArmController, ArmPlan, PhaseState, PhaseStep, Tick
 from rcbht_introspection.sim.peg_config import PegConfig, PegControllerConfig
 from rcbht_introspection.task import Task
 
@@ -21,11 +21,10 @@ PEG_TASK = Task(("reach", "search", "insert", "release"), ("done",), "peg-in-hol
 
 
 @dataclass(frozen=True)
-class PegPlan:
-    """The per-trial draws of the controller's set-points (speeds, forces, times, start pose)."""
+class PegPlan(ArmPlan):
+    """The per-trial draws of the controller's set-points (ArmPlan: the start pose; speeds,
+    forces, times)."""
 
-    start: tuple[float, float, float]
-    """Initial peg tip x, y, z in the believed hole frame."""
     reach_speed: float
     search_force: float
     search_speed: float
@@ -70,17 +69,13 @@ class PegController(ArmController[PegControllerConfig, PegState]):
         self.gripping = True
         self.centre = (plan.start[0], plan.start[1])
 
-    def phase_steps(self) -> dict[str, PhaseStep]:
-        """The four sub-tasks' steps and the back-off after an abort."""
-        return {
-            "reach": self._reach,
-            "search": self._search,
-            "insert": self._insert,
-            "release": self._release,
-            "backoff": lambda tick: self._back_off(
-                tick, self.plan.retreat_speed, self.plan.retreat_time
-            ),
-        }
+    def subtask_steps(self) -> tuple[PhaseStep, ...]:
+        """reach, search, insert, release."""
+        return (self._reach, self._search, self._insert, self._release)
+
+    def backoff_motion(self) -> tuple[float, float]:
+        """After an abort: away as after a release, at the plan's retreat speed and time."""
+        return self.plan.retreat_speed, self.plan.retreat_time
 
     def _reach(self, tick: Tick) -> None:
         """Guarded move down; on contact, remember the surface and the spiral's centre."""
@@ -111,11 +106,7 @@ class PegController(ArmController[PegControllerConfig, PegState]):
         self._yield_laterally(tick.dt)  # yield to the walls' push
         self._admit(tick.dt, tick.force, plan.insert_force, plan.insert_speed)
         floor = st.contact_z - self.depth
-        if (
-            st.seat_time is None
-            and tick.z < floor + cfg.seat_tolerance
-            and tick.force > cfg.seat_fraction * plan.insert_force
-        ):
+        if st.seat_time is None and self._seated(tick, floor, plan.insert_force):
             st.seat_time = t
         if st.seat_time is not None and t - st.seat_time > plan.seat_settle:
             self.gripping = False

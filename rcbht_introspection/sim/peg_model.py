@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import mujoco
 
+from rcbht_introspection.sim import arm_model
 from rcbht_introspection.sim.arm_model import (
     arm_actuators_xml,
     arm_hand_xml,
@@ -25,8 +26,8 @@ from rcbht_introspection.sim.peg_config import PegConfig
 
 GRIP = "grip"
 """Name of the weld equality that is the gripper's hold on the peg."""
-WALL_YAWS: tuple[int, ...] = (0, 90, 180, 270)
-"""Yaw (degrees) of the hole's four walls; each wall is modelled in a frame facing +x."""
+WALL_YAWS = arm_model.SIDES
+"""Yaw (degrees) of the hole's four walls: the sides of a square opening, as the snap housing's."""
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,20 @@ from rcbht_introspection.sim.sensor import SensorDraw, decimation, draw_sensor, 
 
 BOUND_SLACK = 1.0
 """Time (s) added to the sum of the phases' bounds (each may overrun its bound by a step)."""
+PLAN_DRAWS: tuple[str, ...] = (
+    "reach_speed",
+    "search_force",
+    "search_speed",
+    "spiral_angle",
+    "insert_force",
+    "insert_speed",
+    "seat_settle",
+    "release_pause",
+    "retreat_speed",
+    "retreat_time",
+)
+"""The plan's set-points drawn, in order, from the controller config's ranges of the same names
+(the spiral's start direction from a whole turn)."""
 
 
 def draw_peg_trial(
@@ -43,20 +57,8 @@ def draw_peg_trial(
         friction_scale=uniform(rng, var.friction_scale),
         start_pose=start,
     )
-    plan = PegPlan(
-        start=start,
-        reach_speed=uniform(rng, cc.reach_speed),
-        search_force=uniform(rng, cc.search_force),
-        search_speed=uniform(rng, cc.search_speed),
-        spiral_angle=float(rng.uniform(0.0, 2 * math.pi)),
-        insert_force=uniform(rng, cc.insert_force),
-        insert_speed=uniform(rng, cc.insert_speed),
-        seat_settle=uniform(rng, cc.seat_settle),
-        release_pause=uniform(rng, cc.release_pause),
-        retreat_speed=uniform(rng, cc.retreat_speed),
-        retreat_time=uniform(rng, cc.retreat_time),
-        ripple_seed=int(rng.integers(0, 2**31)),
-    )
+    set_points = arm_run.draw_set_points(rng, cc, PLAN_DRAWS, spiral_angle=(0.0, 2 * math.pi))
+    plan = PegPlan(start=start, **set_points, ripple_seed=arm_run.draw_seed(rng))
     sensor = draw_sensor(config.sensor, rng, var.bias_force, var.bias_torque, var.noise_scale)
     return physics, plan, sensor
 

@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from scipy.signal import lfilter
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.sim.config import Range, SensorConfig
+from rcbht_introspection.sim.arm_config import Range, SensorConfig
 
 
 @dataclass(frozen=True)

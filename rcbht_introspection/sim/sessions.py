@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import SESSION_RECORD
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.sim.config import SensorConfig
+from rcbht_introspection.sim.arm_config import SensorConfig
 
 
 @dataclass(frozen=True)

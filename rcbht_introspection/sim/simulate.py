@@ -18,8 +18,9 @@ from numpy.typing import NDArray
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim import arm_run
+from rcbht_introspection.sim.arm_config import SensorConfig
 from rcbht_introspection.sim.arm_run import Wrench, uniform
-from rcbht_introspection.sim.config import FailureType, SensorConfig, SimConfig
+from rcbht_introspection.sim.config import FailureType, SimConfig
 from rcbht_introspection.sim.controller import (
     ControllerState,
     ControlPlan,
@@ -46,6 +47,16 @@ from rcbht_introspection.sim.sensor import SensorDraw, decimation, draw_sensor, 
 
 MAX_DURATION = 80.0
 """Upper bound (s) on one trial; the controller's own time-outs end every trial well before."""
+PLAN_DRAWS: tuple[str, ...] = (
+    "approach_speed",
+    "rotation_speed",
+    "rotation_force",
+    "insertion_force_rate",
+    "hold_force",
+    "hold_time",
+    "retract_speed",
+)
+"""The plan's set-points drawn from the controller config's ranges of the same names, in order."""
 
 
 Observer = Callable[[float, str, mujoco.MjModel, mujoco.MjData], None]
@@ -106,21 +117,14 @@ def draw_trial(
         start_pose=(start_x, 0.0, start_z),
         part_offset=(deviation.x, deviation.y, deviation.yaw),
     )
+    set_points = arm_run.draw_set_points(rng, cc, PLAN_DRAWS)
+    lateral = (uniform(rng, cc.retract_lateral), uniform(rng, cc.retract_lateral))
     plan = ControlPlan(
         start=(start_x, 0.0, start_z),
         tilt=tilt,
-        approach_speed=uniform(rng, cc.approach_speed),
-        rotation_speed=uniform(rng, cc.rotation_speed),
-        rotation_force=uniform(rng, cc.rotation_force),
-        insertion_force_rate=uniform(rng, cc.insertion_force_rate),
-        hold_force=uniform(rng, cc.hold_force),
-        hold_time=uniform(rng, cc.hold_time),
-        retract_speed=uniform(rng, cc.retract_speed),
-        retract_lateral=(
-            uniform(rng, cc.retract_lateral),
-            uniform(rng, cc.retract_lateral),
-        ),
-        ripple_seed=int(rng.integers(0, 2**31)),
+        **set_points,
+        retract_lateral=lateral,
+        ripple_seed=arm_run.draw_seed(rng),
     )
     sensor = draw_sensor(config.sensor, rng, var.bias_force, var.bias_torque, var.noise_scale)
     twin = replace(
