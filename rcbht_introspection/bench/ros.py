@@ -37,7 +37,7 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.live import live_training
 from rcbht_introspection.learn.model_file import save_model
-from rcbht_introspection.nodes.params import Spin
+from rcbht_introspection.nodes.spin import Spin
 from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
 from rcbht_introspection.verify.config import load_verify_config
 from rcbht_introspection.verify.labels import SUCCESS, TrialLabel

@@ -11,7 +11,7 @@ from typing import get_args
 from rcbht_introspection.commands.options import add_state_options, state_from_args
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
-from rcbht_introspection.nodes.params import Spin
+from rcbht_introspection.nodes.spin import Spin
 from rcbht_introspection.taxonomy import StreamProfile
 
 

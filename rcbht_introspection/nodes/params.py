@@ -26,20 +26,15 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.intake import IntakeConfig, check_intake
 from rcbht_introspection.live.state import TaskStateConfig, check_task_state
+from rcbht_introspection.nodes.spin import SPIN_HELP, Spin
 from rcbht_introspection.taxonomy import StreamProfile
 
 Reliability = Literal["reliable", "best_effort"]
 """QoS reliability of every subscription and publisher of a node."""
-Spin = Literal["executor", "draining"]
-"""How a node takes its high-rate inputs: rclpy's executor, or nodes/draining.py's bursts."""
 LEVEL_TOPICS: tuple[str, ...] = ("primitives", "compositions", "behaviors")
 
 
 QOS_DEPTH_HELP = "history depth of every subscription and publisher (10 s of a 1 kHz sensor)"
-SPIN_HELP = (
-    "executor (rclpy's executor and message objects) or draining (bursts taken through rclpy's "
-    "private wait-set API, wrench decoded from CDR; executor where that API is absent)"
-)
 
 
 @dataclass(frozen=True)

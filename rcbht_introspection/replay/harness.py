@@ -49,11 +49,11 @@ from rcbht_introspection.nodes.common import RosSession, qos_profile
 from rcbht_introspection.nodes.params import (
     ClassifierConfig,
     SegmenterConfig,
-    Spin,
     VerifierConfig,
     load_node_config,
 )
 from rcbht_introspection.nodes.player import BagPlayer
+from rcbht_introspection.nodes.spin import Spin
 from rcbht_introspection.nodes.teach_client import call_teach, teach_client, teach_request
 from rcbht_introspection.replay.observer import DiagnosticWatch, Observer, VerdictObserver
 from rcbht_introspection.replay.scoring import (
