@@ -84,6 +84,21 @@ def test_a_complete_batch_of_one_arm_does_not_drop_the_other_arm_s_batch_in_flig
     assert belief.n_words == 3
 
 
+def test_a_straggler_of_a_passed_batch_counts_and_blocks_nothing() -> None:
+    """A batch's message that its topic delivers after a later batch of the arm completed (a
+    burst boundary between topics): its words count and the end of the stream is classified."""
+    session = _session()
+    session.receive([_phase("approach", 0.0)])
+    first = _words(Level.PRIMITIVE, [1], 1.0, batch_size=2)
+    later = _words(Level.PRIMITIVE, [3], 1.1, batch_size=1)
+    assert len(session.receive([first, later]).beliefs) == 1
+    straggler = _words(Level.COMPOSITION, [2], 1.0, batch_size=2)
+    [(belief, _)] = session.receive([straggler]).beliefs
+    assert belief.n_words == 3 and session.open == {}
+    end = _words(Level.BEHAVIOR, [4], 1.2, batch_size=1, end=True)
+    assert len(session.receive([end]).beliefs) == 1
+
+
 def test_a_watermark_moves_numbering_on_but_is_no_evidence() -> None:
     session = _session()
     step = session.receive([_words(Level.BEHAVIOR, [], 1.0, batch_size=0, seq_end=7)])

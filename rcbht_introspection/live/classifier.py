@@ -101,6 +101,8 @@ class ClassifierSession:
         self.stream: StreamKey | None = None
         self.open: dict[tuple[str, int], tuple[int, int]] = {}
         """(arm, sample stamp) -> (messages received, batch size) of batches not yet complete."""
+        self.passed: dict[str, int] = {}
+        """Per arm, the stamp of its latest complete batch: earlier batches are done with."""
         self.trigger_ns: int | None = None
         """Earliest sample behind evidence not yet classified (the conservative latency)."""
         self._stale = 0
@@ -163,15 +165,21 @@ class ClassifierSession:
             return
         if item.end_of_stream:
             self.tracker.end_of_stream(item.arm, item.level)
-        key = (item.arm, item.stamp_ns)
-        count, _ = self.open.get(key, (0, item.batch_size))
+        arm, stamp = item.arm, item.stamp_ns
+        if stamp <= self.passed.get(arm, -1):
+            # a straggler of a batch this arm has passed (its topic delivered it after a later
+            # batch's messages): its words count, it opens nothing
+            self._trigger(stamp)
+            return
+        count, _ = self.open.get((arm, stamp), (0, item.batch_size))
         if count + 1 < item.batch_size:
-            self.open[key] = (count + 1, item.batch_size)
-        else:  # complete: a batch of this arm still open was published before it, so its
-            # missing messages never will arrive (lost, or joined late); the other arm's topics
-            # are not ordered with this one's
-            self.open = {k: v for k, v in self.open.items() if k[0] != item.arm}
-        self._trigger(item.stamp_ns)
+            self.open[(arm, stamp)] = (count + 1, item.batch_size)
+        else:  # complete: this arm's batches still open from before it will not complete
+            # (lost, joined late, or their stragglers come later); the other arm's topics are
+            # not ordered with this one's
+            self.passed[arm] = stamp
+            self.open = {k: v for k, v in self.open.items() if k[0] != arm or k[1] > stamp}
+        self._trigger(stamp)
 
     def _phase(self, item: PhaseInput, step: Step) -> None:
         identity = (item.name, item.time)
@@ -197,7 +205,7 @@ class ClassifierSession:
         self.tracker.reset()
         self.state.new_stream()
         self.stream = key
-        self.open, self.trigger_ns = {}, None
+        self.open, self.passed, self.trigger_ns = {}, {}, None
         for event in self.history.stream_started(key):  # its events the latched topic replayed
             self._apply(event, step)
 
