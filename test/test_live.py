@@ -183,6 +183,29 @@ def test_an_event_is_published_between_its_samples_words_and_the_next_ones() -> 
     )
 
 
+def test_a_batch_after_its_streams_end_keeps_an_unsigned_seq_end() -> None:
+    """A second end-of-stream batch of an ended stream (seen once in a soak beside a busy loop)
+    carries the stream's highest number, never a negative one (Words.seq_end is uint64: -1 made
+    rclpy's publish fail and the segmenter exit), and the ended stream gets no idle watermarks."""
+    from rcbht_introspection.live.join import Watermarks
+    from rcbht_introspection.live.publication import WordsOut, publication
+    from rcbht_introspection.live.segmenter import Output, WordBatch
+
+    word = Word("Fz", Level.PRIMITIVE, "cons", 0.0, 9e-9, arm="R", seq=3)
+    marks = Watermarks(idle_s=0.0)
+    publication(
+        Output([WordBatch("R", [word], ORIGIN_NS + 9, ORIGIN_NS, 0, end_of_stream=True)], []), marks
+    )
+    late = publication(
+        Output([WordBatch("R", [], ORIGIN_NS + 9, ORIGIN_NS, 0, end_of_stream=True)], []),
+        marks,
+        1.0,
+    )
+    tops = [x.message.seq_end for x in late if isinstance(x, WordsOut)]
+    assert tops and all(t == 3 for t in tops)
+    assert marks.due(2.0) == []
+
+
 def test_late_event_is_placed_at_the_sample_before_it() -> None:
     from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
 

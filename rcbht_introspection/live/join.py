@@ -166,6 +166,8 @@ class Watermarks:
         """Per arm, (stream id, highest number released)."""
         self.marked: dict[tuple[str, Level], tuple[int, int, float]] = {}
         """Per (arm, level), (stream id, seq_end last published, when)."""
+        self.ended_stream: dict[str, int] = {}
+        """Per arm, the stream whose end-of-stream messages went out: nothing more to mark."""
 
     def batch(self, arm: str, stream_id: int, words: Iterable[Word]) -> int:
         """The arm's highest number once this batch is out (its messages' seq_end)."""
@@ -181,13 +183,16 @@ class Watermarks:
         self.marked[(arm, level)] = (stream_id, seq_end, now)
 
     def ended(self, arm: str, stream_id: int) -> None:
-        """The arm's stream ended (its end-of-stream messages say all): nothing more to mark."""
-        self.highest[arm] = (stream_id, -1)
+        """The arm's stream ended (its end-of-stream messages say all): nothing more to mark. Its
+        highest number stays: a sample of that stream delivered after its end still gets a batch."""
+        self.ended_stream[arm] = stream_id
 
     def due(self, now: float) -> list[tuple[str, int, Level, int]]:
         """(arm, stream id, level, seq_end) of the empty messages to publish now."""
         out = []
         for arm, (stream_id, top) in self.highest.items():
+            if self.ended_stream.get(arm) == stream_id:
+                continue
             for level in LEVELS:
                 stream, seq_end, when = self.marked.get((arm, level), (stream_id, 0, -math.inf))
                 if stream != stream_id:
