@@ -206,6 +206,27 @@ def test_a_batch_after_its_streams_end_keeps_an_unsigned_seq_end() -> None:
     assert marks.due(2.0) == []
 
 
+def test_an_arm_ends_a_stream_once_while_the_other_arm_lags() -> None:
+    """Two end events (two short trials) reach the session while one arm's samples lag: the
+    leading arm applies the first end and waits for the stream to change; the second end belongs
+    to the next stream, so no arm gets two end-of-stream batches in one stream."""
+    from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
+
+    session = SegmenterSession(("L", "R"), arm_stream_factory())
+    base = 1_700_000_000 * 10**9
+    batches = []
+    for i in range(10):
+        for k, arm in enumerate(("L", "R")):
+            out = session.push(arm, base + i * 5_000_000, [float(i)] * 6, source_ns=10 * i + k)
+            batches += out.batches
+    batches += session.phase("done", source_ns=95).batches
+    batches += session.phase("done", source_ns=145).batches
+    for i in range(10, 20):  # R lags: only L's samples arrive
+        batches += session.push("L", base + i * 5_000_000, [float(i)] * 6, source_ns=10 * i).batches
+    ends = [(b.arm, b.stream_id) for b in batches if b.end_of_stream]
+    assert ends.count(("L", 0)) == 1, ends
+
+
 def test_late_event_is_placed_at_the_sample_before_it() -> None:
     from rcbht_introspection.live.segmenter import SegmenterSession, arm_stream_factory
 

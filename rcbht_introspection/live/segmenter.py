@@ -384,6 +384,8 @@ class SegmenterSession(Generic[S]):
                 if only is None or arm == only:
                     self._apply(p, arm, out)
             if p.waiting:
+                if p.end:
+                    break  # later events belong to the next stream, whichever arm reached the end
                 continue  # still due on another arm; this arm may go on with later events
             self.pending.remove(p)
             out.phases.append(
