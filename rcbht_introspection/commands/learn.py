@@ -165,7 +165,7 @@ def _add_live_scoring_options(ev: argparse.ArgumentParser) -> None:
 
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--classifier", choices=CLASSIFIERS, default="svm")
-    parser.add_argument("--encoding", choices=ENCODINGS, default="compact")
+    parser.add_argument("--encoding", choices=ENCODINGS, default="words-wrench")
     parser.add_argument(
         "--words",
         choices=WORD_SOURCES,
@@ -305,7 +305,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
                 f"--{option.replace('_', '-')} belongs to --protocol prequential", field=option
             )
     args.classifier = args.classifier or "svm"
-    args.encoding = args.encoding or "compact"
+    args.encoding = args.encoding or "words-wrench"
     args.permutations = args.permutations or 20
     taxonomy = taxonomy_from_args(args)
     n_estimators = 100 if args.n_estimators is None else args.n_estimators

@@ -45,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("--held-out", type=int, required=True, help="last N trials (sorted) replayed")
     p.add_argument("--model", type=Path, default=None, help="replay this model instead of training")
     p.add_argument("--classifier", choices=CLASSIFIERS, default="svm")
-    p.add_argument("--encoding", choices=ENCODINGS, default="compact")
+    p.add_argument("--encoding", choices=ENCODINGS, default="words-wrench")
     p.add_argument("--words", choices=WORD_SOURCES, default="auto")
     p.add_argument("--mode", choices=(*MODES, "both"), default="both")
     p.add_argument("--window-s", type=float, default=2.0)

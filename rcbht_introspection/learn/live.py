@@ -24,7 +24,7 @@ from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.sensor_checks import RepeatedPolicy
 from rcbht_introspection.learn.data import read_any_trial, task_of_trials
-from rcbht_introspection.learn.models import train_model
+from rcbht_introspection.learn.models import RUNNING_PREFIXES, train_model, with_prefixes
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.taxonomy import StreamProfile
@@ -94,6 +94,7 @@ def live_samples(streamed: StreamedTrial, config: LiveAugmentConfig) -> list[Sub
     at the stream time of the newest evidence it has.
     """
     released = streamed.released()
+    wrench = streamed.wrench_tracks()
     step_times = [s.t for s in streamed.steps]
     out = []
     for subtask, start, end in streamed.subtask_windows():
@@ -101,12 +102,12 @@ def live_samples(streamed: StreamedTrial, config: LiveAugmentConfig) -> list[Sub
             i = bisect_right(step_times, t) - 1
             now = max(start, step_times[i]) if i >= 0 else start
             words = words_until(released, now, streamed.name)
-            sample = window_sample(words, start, now, subtask=subtask, trial=streamed.name)
+            sample = window_sample(words, start, now, subtask, streamed.name, wrench=wrench)
             if sample_word_count(sample):
                 out.append(sample)
             if config.window_s > 0:
                 lo = max(0.0, now - config.window_s)
-                sample = window_sample(words, lo, now, subtask=subtask, trial=streamed.name)
+                sample = window_sample(words, lo, now, subtask, streamed.name, wrench=wrench)
                 if sample_word_count(sample):
                     out.append(sample)
     return out
@@ -173,9 +174,15 @@ def train_live_model(
     used = taxonomy or default_config()
     train_kwargs.setdefault("taxonomy_profile", used.profile)
     train_kwargs.setdefault("taxonomy_sha256", taxonomy_digest(used))
-    model = train_model(samples, **train_kwargs)
-    if config is not None:
-        model.live = train_model([*samples, *live], **train_kwargs)
+    if config is None:
+        model = train_model(samples, **train_kwargs)
+    else:  # the live head also reads the encoding's running prefixes (learn/models.py)
+        prefixes = train_kwargs.pop("running_prefixes", None)
+        if prefixes is None:
+            prefixes = RUNNING_PREFIXES.get(train_kwargs.get("encoding", "words-wrench"), ())
+        model = train_model(samples, running_prefixes=(), **train_kwargs)
+        head = [*with_prefixes(samples, prefixes), *live]
+        model.live = train_model(head, running_prefixes=(), **train_kwargs)
     model.training = training_header(config, len(live) if config is not None else 0, taxonomy)
     return model
 

@@ -15,9 +15,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import EncodingName
 from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.grammar.encoding.cache import SampleCache
-from rcbht_introspection.grammar.encoding.compact import CompactEncoding
-from rcbht_introspection.grammar.encoding.paper import PaperEncoding
-from rcbht_introspection.grammar.encoding.registry import make_encoding
+from rcbht_introspection.grammar.encoding.registry import AnyEncoding, make_encoding
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.learn import CLASSIFIERS, ClassifierKind
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
@@ -30,7 +28,7 @@ class SubtaskModel:
     """A fitted encoding + classifier mapping sub-task samples to sub-task probabilities."""
 
     classifier: str
-    encoder: PaperEncoding | CompactEncoding
+    encoder: AnyEncoding
     estimator: Any
     taxonomy_profile: str = "reference"
     random_state: int = 0
@@ -87,10 +85,15 @@ class SubtaskModel:
         return self
 
 
+RUNNING_PREFIXES: dict[str, tuple[float, ...]] = {"words-wrench": (0.1, 0.25, 0.5, 0.75)}
+"""Per encoding, the prefixes its running head is trained on beside whole sub-tasks (none: no
+running head from train_model; rcbht train may still add a live head, learn/live.py)."""
+
+
 def train_model(
     samples: Sequence[SubtaskSample],
     classifier: ClassifierKind = "svm",
-    encoding: EncodingName = "compact",
+    encoding: EncodingName = "words-wrench",
     random_state: int = 0,
     taxonomy_profile: str = "reference",
     n_estimators: int = 100,
@@ -100,11 +103,15 @@ def train_model(
     taxonomy_sha256: str = "",
     max_nodes: int | None = None,
     max_points: int | None = None,
+    running_prefixes: Sequence[float] | None = None,
 ) -> SubtaskModel:
     """Fit the encoding and the classifier on `samples` (training data only).
 
     `augment_prefixes` (e.g. (0.25, 0.5, 0.75)) also trains on those first fractions of every
     sub-task, so a live classifier is not surprised by a sub-task that has only just begun.
+    `running_prefixes` (None: RUNNING_PREFIXES of the encoding) trains a second head for running
+    windows (`model.live`) on the whole sub-tasks and these prefixes of each; the model itself,
+    which gives final verdicts, stays on whole sub-tasks.
     `cache`: a SampleCache shared by models trained on the same samples (else the encoding's own).
     `max_nodes`, `max_points`: the Mondrian forest's memory budget (None: unbounded).
     """
@@ -113,6 +120,19 @@ def train_model(
     if not samples:
         raise InputError("no training samples")
     task = task or task_of_samples(samples)
+    if running_prefixes is None:
+        running_prefixes = RUNNING_PREFIXES.get(encoding, ())
+    if running_prefixes:
+        model = train_model(
+            samples, classifier, encoding, random_state, taxonomy_profile, n_estimators,
+            augment_prefixes, cache, task, taxonomy_sha256, max_nodes, max_points, (),
+        )  # fmt: skip
+        model.live = train_model(
+            samples, classifier, encoding, random_state, taxonomy_profile, n_estimators,
+            tuple(augment_prefixes) + tuple(running_prefixes), cache, task, taxonomy_sha256,
+            max_nodes, max_points, (),
+        )  # fmt: skip
+        return model
     samples = with_prefixes(samples, augment_prefixes)
     encoder = make_encoding(encoding, cache).fit(samples)
     X = encoder.transform(samples)
@@ -161,4 +181,4 @@ def task_of_samples(samples: Sequence[SubtaskSample]) -> Task:
     return task_of_names(per_trial.values())
 
 
-__all__ = ["SubtaskModel", "task_of_samples", "train_model", "with_prefixes"]
+__all__ = ["RUNNING_PREFIXES", "SubtaskModel", "task_of_samples", "train_model", "with_prefixes"]
