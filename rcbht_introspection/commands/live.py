@@ -44,7 +44,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("inputs", nargs="+", type=Path, metavar="TRIAL_OR_DATASET_DIR")
     p.add_argument("--held-out", type=int, required=True, help="last N trials (sorted) replayed")
     p.add_argument("--model", type=Path, default=None, help="replay this model instead of training")
-    p.add_argument("--classifier", choices=CLASSIFIERS, default="svm")
+    p.add_argument("--classifier", choices=CLASSIFIERS, default="svm-forest")
     p.add_argument("--encoding", choices=ENCODINGS, default="words-wrench")
     p.add_argument("--words", choices=WORD_SOURCES, default="auto")
     p.add_argument("--mode", choices=(*MODES, "both"), default="both")

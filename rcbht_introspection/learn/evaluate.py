@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -49,7 +49,7 @@ if TYPE_CHECKING:
 
 VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
 """The paper's held-out trial counts by data-set size (REAL 36/10, SIM 30/8, two-arm 14/6)."""
-START_TRIALS: dict[str, int] = {"svm": 1, "svm-tuned": 1, "mondrian": 3}
+START_TRIALS: dict[str, int] = {"svm-forest": 1, "svm": 1, "svm-tuned": 1, "mondrian": 3}
 PREFIX_FRACTIONS: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75)
 NEAR_EMPTY_SECONDS = 0.05
 """Sub-tasks shorter than this (REAL S-22..S-46 rotation: 5 ms) are dropped in the variant."""
@@ -59,7 +59,7 @@ NEAR_EMPTY_SECONDS = 0.05
 class Protocol:
     """Settings of one evaluation run."""
 
-    classifier: ClassifierKind = "svm"
+    classifier: ClassifierKind = "svm-forest"
     encoding: EncodingName = "words-wrench"
     permutations: int = 20
     n_validation: int | None = None
@@ -554,3 +554,53 @@ def trial_kfold_accuracy(dataset: Path, folds: int = 4) -> dict[str, object]:
         "accuracy": correct / total,
         "duration_accuracy": by_duration / total,
     }
+
+
+def evaluate_transfer(
+    train: Sequence[TrialSamples],
+    test: Sequence[TrialSamples],
+    protocol: Protocol = Protocol(),
+    seeds: int = 5,
+) -> dict[str, Any]:
+    """One set of recordings scored by a model of another (another day, another session).
+
+    The model (its running head for the prefixes) is trained on every sub-task of `train` and
+    scored on every sub-task of `test`, whole and at PREFIX_FRACTIONS, beside the duration-only
+    model and, with `protocol.peers`, MiniRocket trained on the same trials; each of `seeds`
+    seeds refits the seeded parts (the SVM is deterministic, MiniRocket's kernels are not)."""
+    task = task_of_trials([*train, *test])
+    train_samples = [s for t in train for s in t.samples]
+    test_samples = [s for t in test for s in t.samples]
+    if not train_samples or not test_samples:
+        raise InputError("--train and the evaluated inputs both need sub-task samples")
+    plan = _Plan(task, list(train), [], len(test), len(train), [len(train)], [len(train)])
+    run = _Run(protocol, plan, {}, None)
+    if run.peer is not None:
+        run.peer.raws.update(_raws(test, protocol.repeated))
+    tally = run.tally = _Tally.empty(plan, seeds)
+    for seed in range(seeds):
+        model = run.train(train_samples, seed, running=True)
+        tally.curve[seed, 0] = _accuracy(model.predict_samples(test_samples), test_samples)
+        duration = _duration_model(train_samples, protocol.seed + seed)
+        tally.base_curve[seed, 0] = _accuracy(
+            duration.predict(_log_duration(test_samples)), test_samples
+        )
+        run.final_split(model, test_samples)
+        run.prefix_split(model, duration, test_samples)
+        if run.peer is not None:
+            run.peer_step(run.peer, seed, len(train), train_samples, test_samples)
+    result = _curve_result(plan, replace(protocol, permutations=seeds), tally)
+    result.update(protocol="transfer", n_test_trials=len(test), accuracy=result["trial_splits"])
+    for key in ("n_validation_trials", "steady_state_accuracy", "steady_state_steps", "curve"):
+        result.pop(key)
+    if run.peer is not None:
+        _add_peer_result(result, plan, tally)
+        result["minirocket_baseline"].pop("curve")
+    return result
+
+
+def _raws(trials: Sequence[TrialSamples], repeated: RepeatedPolicy | None) -> Any:
+    """The raw wrench of `trials` for MiniRocket (peers/subtask_baseline.raw_wrench), by name."""
+    from rcbht_introspection.peers.subtask_baseline import raw_wrench
+
+    return {name: raw_wrench(trial) for name, trial in _read_trials(trials, repeated).items()}

@@ -20,6 +20,7 @@ from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.learn import CLASSIFIERS, ClassifierKind
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 from rcbht_introspection.learn.svm import fit_svm, make_svm, svm_predict_proba, tune_svm
+from rcbht_introspection.learn.vote import SvmForestClassifier
 from rcbht_introspection.task import HIRO_TASK, Task, task_of_names
 
 
@@ -92,7 +93,7 @@ running head from train_model; rcbht train may still add a live head, learn/live
 
 def train_model(
     samples: Sequence[SubtaskSample],
-    classifier: ClassifierKind = "svm",
+    classifier: ClassifierKind = "svm-forest",
     encoding: EncodingName = "words-wrench",
     random_state: int = 0,
     taxonomy_profile: str = "reference",
@@ -137,22 +138,8 @@ def train_model(
     encoder = make_encoding(encoding, cache).fit(samples)
     X = encoder.transform(samples)
     y = [s.subtask for s in samples]
-    if classifier in ("svm", "svm-tuned"):
-        if len(set(y)) < 2:
-            raise InputError("the SVM needs samples of at least two sub-tasks")
-        svm = make_svm(random_state)
-        if classifier == "svm-tuned":
-            svm.set_params(**tune_svm(X, y, [s.trial for s in samples], random_state))
-        estimator: Any = fit_svm(svm, X, y)
-    else:
-        classes = sorted(set(task.subtasks) | set(y))
-        estimator = MondrianForestClassifier(
-            n_estimators=n_estimators,
-            random_state=random_state,
-            max_nodes=max_nodes,
-            max_points=max_points,
-        )
-        estimator.partial_fit(X, y, classes=classes)
+    budget = (n_estimators, max_nodes, max_points)
+    estimator = _fit_classifier(classifier, X, y, samples, task, random_state, budget)
     return SubtaskModel(
         classifier,
         encoder,
@@ -162,6 +149,38 @@ def train_model(
         task=task,
         taxonomy_sha256=taxonomy_sha256,
     )
+
+
+def _fit_classifier(
+    classifier: ClassifierKind,
+    X: np.ndarray,
+    y: list[str],
+    samples: Sequence[SubtaskSample],
+    task: Task,
+    random_state: int,
+    budget: tuple[int, int | None, int | None],
+) -> Any:
+    """The fitted classifier of kind `classifier` on the encoded samples; `budget`: trees,
+    nodes and points of the Mondrian forest (trees also of the vote's forest)."""
+    n_estimators, max_nodes, max_points = budget
+    if classifier != "mondrian" and len(set(y)) < 2:
+        raise InputError("the SVM needs samples of at least two sub-tasks")
+    if classifier == "svm-forest":
+        return SvmForestClassifier(n_estimators, random_state).fit(X, y)
+    if classifier in ("svm", "svm-tuned"):
+        svm = make_svm(random_state)
+        if classifier == "svm-tuned":
+            svm.set_params(**tune_svm(X, y, [s.trial for s in samples], random_state))
+        return fit_svm(svm, X, y)
+    classes = sorted(set(task.subtasks) | set(y))
+    estimator = MondrianForestClassifier(
+        n_estimators=n_estimators,
+        random_state=random_state,
+        max_nodes=max_nodes,
+        max_points=max_points,
+    )
+    estimator.partial_fit(X, y, classes=classes)
+    return estimator
 
 
 def with_prefixes(

@@ -4,7 +4,8 @@ the wrench since the window began relative to its level at that start.
 Relative to the start, a constant sensor bias and a load held through the window cancel; the
 absolute mean values of the words (compact's `mean_value`) are left out for the same reason.
 Per arm and axis: the last, mean, minimum, maximum and spread of the block means
-(summaries/blocks.py) ending in the window, each minus the block before the window.
+(summaries/blocks.py) ending in the window and the means of its quarters, each minus the block
+before the window.
 """
 
 from __future__ import annotations
@@ -23,8 +24,9 @@ from rcbht_introspection.grammar.encoding.compact import CompactEncoding
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.taxonomy.words import AXES
 
-STATS = ("last", "mean", "min", "max", "std")
-"""Statistics of each axis's relative block means over the window."""
+STATS = ("last", "mean", "min", "max", "std", "q1", "q2", "q3", "q4")
+"""Statistics of each axis's relative block means over the window: q1..q4 are the means of its
+four quarters (in blocks), the shape of the departure."""
 
 
 def wrench_feature_names(arms: Sequence[str]) -> list[str]:
@@ -48,6 +50,10 @@ def wrench_features(sample: SubtaskSample, arms: Sequence[str]) -> NDArray[np.fl
         out[row, :, 2] = rel.min(axis=0)
         out[row, :, 3] = rel.max(axis=0)
         out[row, :, 4] = rel.std(axis=0)
+        quarter = (np.arange(len(rel)) * 4) // len(rel)
+        for q in range(4):
+            part = rel[quarter == q]
+            out[row, :, 5 + q] = part.mean(axis=0) if len(part) else rel[-1]
     flat: NDArray[np.float64] = out.reshape(-1)
     return flat
 
