@@ -34,8 +34,9 @@ SVM_TRUSTED_TYPES: tuple[str, ...] = (
 """The only types a stored SVM pipeline may contain (checked before skops builds anything)."""
 FOREST_PREFIX = "forest__"
 """Array-name prefix of the vote's packed forest (learn/forest.py) in a model file."""
-LIVE_PREFIX = "live__"
-"""Array-name prefix of the live head's arrays in a model file."""
+HEADS = ("live", "window")
+"""The optional heads for running windows (SubtaskModel.live, .window): each stored under its
+name in the header and with the array-name prefix 'NAME__'."""
 
 
 def save_model(model: SubtaskModel, path: Path | str, compress: bool = True) -> Path:
@@ -46,9 +47,10 @@ def save_model(model: SubtaskModel, path: Path | str, compress: bool = True) -> 
     `compress=False`: the teach file, rewritten at every teach and read by the live node."""
     path = Path(path)
     header, arrays = _model_parts(model)
-    if model.live is not None:
-        header["live"], live_arrays = _model_parts(model.live)
-        arrays.update({LIVE_PREFIX + k: v for k, v in live_arrays.items()})
+    for name, head in zip(HEADS, (model.live, model.window), strict=True):
+        if head is not None:
+            header[name], head_arrays = _model_parts(head)
+            arrays.update({f"{name}__{k}": v for k, v in head_arrays.items()})
     write_safe_npz(path, header, arrays, compress)
     return path
 
@@ -85,11 +87,13 @@ def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskM
     """Read a model file; a corrupt, tampered, foreign or wrong-version file is a one-line InputError."""
     path = Path(path)
     header, arrays = read_checked(path, "model", FORMAT, FORMAT_VERSION, "rcbht train")
-    main = {k: v for k, v in arrays.items() if not k.startswith(LIVE_PREFIX)}
+    prefixes = tuple(f"{name}__" for name in HEADS)
+    main = {k: v for k, v in arrays.items() if not k.startswith(prefixes)}
     model = _model_from_parts(header, main, path, expect_encoding)
-    if isinstance(header.get("live"), dict):
-        live = {k[len(LIVE_PREFIX) :]: v for k, v in arrays.items() if k.startswith(LIVE_PREFIX)}
-        model.live = _model_from_parts(header["live"], live, path, expect_encoding)
+    for name in HEADS:
+        if isinstance(header.get(name), dict):
+            own = {k[len(name) + 2 :]: v for k, v in arrays.items() if k.startswith(f"{name}__")}
+            setattr(model, name, _model_from_parts(header[name], own, path, expect_encoding))
     return model
 
 

@@ -40,15 +40,22 @@ class SubtaskModel:
     live: SubtaskModel | None = None
     """Optional head for running (unfinished) windows, trained with live-like windows
     (learn/live.py); final verdicts on finished sub-tasks always use this model itself."""
+    window: SubtaskModel | None = None
+    """Optional head for window-mode windows [t - window_s, t] (learn/live.py)."""
     taxonomy_sha256: str = ""
     """taxonomy.config.taxonomy_digest of the profile its words came from ('' in older files)."""
     takes_axis_memo: ClassVar[bool] = True
     """Its predict calls take `memo=` (an AxisMemo): the belief tracker passes the one it owns
     for its running windows (other models it is given need not)."""
 
-    def head(self, final: bool) -> SubtaskModel:
-        """The model for a finished sub-task (final) or a running window (the live head if any)."""
-        return self if final or self.live is None else self.live
+    def head(self, final: bool, mode: str = "boundary") -> SubtaskModel:
+        """The model for a finished sub-task (final) or a running window: in window mode the
+        window head if any, else the live head if any."""
+        if final:
+            return self
+        if mode == "window" and self.window is not None:
+            return self.window
+        return self if self.live is None else self.live
 
     @property
     def encoding(self) -> str:

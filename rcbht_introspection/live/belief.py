@@ -269,7 +269,9 @@ class BeliefTracker:
             return belief(UNKNOWN, (0.0,) * len(self.classes))
         # a running window goes to the model's live head when it has one (learn/live.py); the
         # optional members (head, memo) are looked up, so the model is duck-typed from here
-        model: Any = self.model.head(final) if hasattr(self.model, "head") else self.model
+        model: Any = (
+            self.model.head(final, self.mode) if hasattr(self.model, "head") else self.model
+        )
         memo = {"memo": self._axis_memo} if getattr(model, "takes_axis_memo", False) else {}
         try:
             proba = np.asarray(model.predict_proba_samples([sample], **memo))[0]
