@@ -3,7 +3,8 @@
 One update = what classifier_node does per wrench sample with words (live/classifier.py): add
 the words, apply the events, take final verdicts, classify the running window. Measured on a
 REAL HIRO trial streamed through the segmenter session, with the model `rcbht train` writes by
-default for REAL trials 1-40 (SVM/compact with its live head; the ROS benchmark's model), in
+default for REAL trials 1-40 (words + wrench with its live and window heads; the ROS
+benchmark's model), in
 boundary and window mode.
 """
 
@@ -72,7 +73,8 @@ def run(out_dir: Path) -> dict[str, Any]:
     streamed = [stream_trial(read_trial(HIRO / REAL / name), factory) for name in TEST_TRIALS]
     out: dict[str, Any] = {
         "trials": list(TEST_TRIALS),
-        "model": "svm/compact with live head (rcbht train default), REAL 1-40",
+        "model": f"{model.classifier}/{model.encoding} with its heads (rcbht train default), "
+        "REAL 1-40",
     }
     for mode in MODES:
         times: list[float] = []

@@ -119,12 +119,12 @@ def _shared_set(hiro: Path) -> tuple[list[Path], list[Path], str]:
 
 
 def _train_model(args: argparse.Namespace, train: list[Path], out: Path) -> Path:
-    """Step 2: the sub-task model (SVM, with live windows) trained and saved in `out`."""
+    """Step 2: the sub-task model (words + wrench, with live windows) trained and saved in `out`."""
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.live import live_training
     from rcbht_introspection.learn.model_file import save_model
 
-    _step(f"2. train an SVM on {len(train)} trials (plus live windows: config/live.yaml)")
+    _step(f"2. train a words + wrench model on {len(train)} trials (plus live windows)")
     trials = load_trials(train, words="auto")
     model, n_live = live_training(
         trials, classifier="svm-forest", encoding="words-wrench", random_state=args.seed
