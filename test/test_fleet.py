@@ -1,0 +1,62 @@
+"""Every offline command of many inputs on joblib workers and on a Dask cluster: `--jobs 2` (and
+`--scheduler` on a loopback LocalCluster) writes what `--jobs 1` writes; the option's errors are
+one line (rcbht_introspection/fleet.py)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from conftest import SIM_SUCCESS
+
+from rcbht_introspection.cli import main
+
+
+def tree(root: Path) -> dict[str, bytes]:
+    """Every file under `root` by its relative path, with its bytes."""
+    return {
+        str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()
+    }
+
+
+@pytest.fixture(scope="module")
+def cluster() -> Iterator[str]:
+    """A dask.distributed LocalCluster on loopback only: its scheduler's address."""
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(
+        n_workers=2,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address=None,
+    ) as local:
+        yield local.scheduler_address
+
+
+def test_sim_writes_the_same_set_whatever_the_workers(tmp_path: Path, cluster: str) -> None:
+    args = ["sim", "--trials", "3", "--seed", "4", "--sessions", "2", "--progress", "off"]
+    outs = {}
+    for name, extra in (("one", []), ("two", ["--jobs", "2"]), ("dask", ["--scheduler", cluster])):
+        outs[name] = tmp_path / name
+        assert main([*args, "--out", str(outs[name]), *extra]) == 0
+    one = tree(outs["one"])
+    assert len([k for k in one if k.endswith("meta.json")]) == 4  # 3 trials + sim_meta.json
+    assert tree(outs["two"]) == one
+    assert tree(outs["dask"]) == one
+
+
+@pytest.mark.parametrize("jobs", ["0", "-2"])
+def test_a_bad_job_count_is_one_line(
+    jobs: str, sim_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["label", str(sim_data / SIM_SUCCESS), "--out", str(tmp_path), "--jobs", jobs]) == 2
+    assert f"--jobs: must be a positive count or -1 (one per core), not {jobs}" in (
+        capsys.readouterr().err
+    )
+
+
+def _json(path: Path) -> object:
+    return json.loads(path.read_text())
