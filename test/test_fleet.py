@@ -60,3 +60,31 @@ def test_a_bad_job_count_is_one_line(
 
 def _json(path: Path) -> object:
     return json.loads(path.read_text())
+
+
+TIMINGS = ("fit_seconds", "predict_ms")
+"""Measured times of the evaluation JSON: the only figures that differ between two runs."""
+
+
+def _untimed(value: object) -> object:
+    """A JSON value without its measured times."""
+    if isinstance(value, dict):
+        return {k: _untimed(v) for k, v in value.items() if k not in TIMINGS}
+    if isinstance(value, list):
+        return [_untimed(v) for v in value]
+    return value
+
+
+def test_evaluate_gives_the_same_curve_whatever_the_workers(
+    sim_data: Path, tmp_path: Path, cluster: str
+) -> None:
+    args = ["evaluate", str(sim_data / SIM_SUCCESS), "--permutations", "3", "--no-progress"]
+    args += ["--validation-trials", "2", "--no-peers", "--json"]
+    runs = {}
+    for name, extra in (("one", []), ("two", ["--jobs", "2"]), ("dask", ["--scheduler", cluster])):
+        assert main([*args, str(tmp_path / f"{name}.json"), *extra]) == 0
+        runs[name] = _untimed(_json(tmp_path / f"{name}.json"))
+    one = runs["one"]
+    assert isinstance(one, dict) and len(one["curve"]) >= 2 and one["trial_splits"]["n"] == 3
+    assert runs["two"] == one
+    assert runs["dask"] == one

@@ -15,6 +15,9 @@ about a second a fit).
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import functools
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -27,6 +30,7 @@ from numpy.typing import NDArray
 from sklearn.ensemble import RandomForestClassifier
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.fleet import parallel_map
 from rcbht_introspection.grammar import EncodingName
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
@@ -381,12 +385,58 @@ def _count_near_empty(complete: Sequence[TrialSamples], protocol: Protocol) -> i
     return sum(s.duration < protocol.near_empty_seconds for t in complete for s in t.samples)
 
 
+def _one_permutation(run: _Run, perm: int) -> _Tally:
+    """Permutation `perm` of a copy of `run` (on a worker) into an empty tally of its own."""
+    run.tally = _Tally.empty(run.plan, run.protocol.permutations)
+    run.permutation(perm)
+    return run.tally
+
+
+def _merge_tally(into: _Tally, part: _Tally, perm: int) -> None:
+    """Add permutation `perm`'s tally: its row of every curve, its counts, its list entries
+    (merged in permutation order, the lists are those of one process running them in turn)."""
+    for f in dataclasses.fields(_Tally):
+        mine, theirs = getattr(into, f.name), getattr(part, f.name)
+        if isinstance(mine, np.ndarray) and mine.dtype.kind == "f":
+            mine[perm] = theirs[perm]  # curves: (permutation, step)
+        elif isinstance(mine, np.ndarray):
+            mine += theirs  # counts
+        elif isinstance(mine, list):
+            mine.extend(theirs)
+        else:  # per prefix fraction: lists
+            for key, values in theirs.items():
+                mine[key].extend(values)
+
+
+def _run_permutations(run: _Run, jobs: int) -> None:
+    """Every permutation of the protocol into run.tally: in turn (`jobs` 1), else one per joblib
+    task (fleet.parallel_map); each is seeded by its index, never by its worker."""
+    if jobs == 1:
+        for perm in range(run.protocol.permutations):
+            run.permutation(perm)
+        return
+    progress, steps = run.progress, len(run.plan.steps)
+    shipped = copy.copy(run)
+    shipped.progress = None  # a progress bar stays in this process: ticked per permutation
+    parts = parallel_map(
+        functools.partial(_one_permutation, shipped),
+        range(run.protocol.permutations),
+        jobs,
+        (lambda _: progress(steps)) if progress is not None else None,
+    )
+    for perm, part in enumerate(parts):
+        _merge_tally(run.tally, part, perm)
+
+
 def evaluate(
     trials: Sequence[TrialSamples],
     protocol: Protocol = Protocol(),
     progress: Callable[[int], None] | None = None,
+    jobs: int = 1,
 ) -> dict[str, Any]:
-    """Run the protocol; returns the JSON-ready result (keys documented in docs/learning.md)."""
+    """Run the protocol; returns the JSON-ready result (keys documented in docs/learning.md).
+    `jobs`: joblib workers for the permutations (fleet.py; the result is the same whatever N,
+    but for the measured fit and prediction times)."""
     plan = _plan(trials, protocol)
     live = (
         _live_windows(plan.complete, protocol.taxonomy, protocol.repeated, protocol.live_config)
@@ -394,8 +444,7 @@ def evaluate(
         else {}
     )
     run = _Run(protocol, plan, live, progress)
-    for perm in range(protocol.permutations):
-        run.permutation(perm)
+    _run_permutations(run, jobs)
     result = _curve_result(plan, protocol, run.tally)
     if live:
         result["live_augment"] = protocol.live_augment
