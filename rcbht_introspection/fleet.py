@@ -119,12 +119,12 @@ class Failed:
     reason: str
 
 
-def attempt(func: Callable[[T], R], item: T, name: str) -> R | Failed:
-    """func(item), or Failed(name, the one-line reason) when it raises an InputError."""
+def attempt(func: Callable[[T], R], item: T) -> R | Failed:
+    """func(item), or Failed(str(item), the one-line reason) when it raises an InputError."""
     try:
         return func(item)
     except InputError as exc:
-        return Failed(name, str(exc))
+        return Failed(str(item), str(exc))
 
 
 @dataclass
@@ -139,30 +139,32 @@ class BadInputs:
         self.failed.append(failed)
 
     def keep(self, outcomes: Sequence[R | Failed]) -> list[R]:
-        """The results among `outcomes`; each Failed is recorded and warned of on stderr."""
+        """The results among `outcomes` (each Failed is recorded)."""
         self.total += len(outcomes)
         kept: list[R] = []
         for outcome in outcomes:
             if isinstance(outcome, Failed):
                 self.add(outcome)
-                print(
-                    f"rcbht {self.command}: bad input: {outcome.input}: {outcome.reason}",
-                    file=sys.stderr,
-                )
             else:
                 kept.append(outcome)
         return kept
 
-    def summary(self) -> str | None:
-        """One line naming the bad inputs (None: there was none)."""
+    def lines(self) -> list[str]:
+        """One stderr line per bad input, then one summary line (none: no bad input)."""
         if not self.failed:
-            return None
+            return []
+        each = [
+            f"rcbht {self.command}: left out: "
+            + (f.reason if f.input in f.reason else f"{f.input}: {f.reason}")
+            for f in self.failed
+        ]
         names = ", ".join(f.input for f in self.failed[:3])
         more = f" and {len(self.failed) - 3} more" if len(self.failed) > 3 else ""
-        return (
+        return [
+            *each,
             f"rcbht {self.command}: {len(self.failed)} of {self.total} inputs bad, left out "
-            f"({names}{more}); --strict makes the exit code {STRICT_EXIT}"
-        )
+            f"({names}{more}); --strict makes the exit code {STRICT_EXIT}",
+        ]
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON's `bad_inputs` record."""
@@ -172,16 +174,20 @@ class BadInputs:
             "inputs": [{"input": f.input, "reason": f.reason} for f in self.failed],
         }
 
-    def finish(self, done: int, strict: bool) -> int:
-        """Print the summary line and return the exit code: 0 when `done` > 0 (something was
-        written) and no bad input under `strict`; else 2 (nothing done is a one-line error)."""
-        line = self.summary()
-        if line is not None:
+    def check_some(self) -> None:
+        """An InputError when every input was bad: the one input's own error, or for several,
+        each named on stderr and one line that none could be used."""
+        if not self.failed or len(self.failed) < self.total:
+            return
+        if self.total == 1:
+            raise InputError(self.failed[0].reason)
+        for line in self.lines()[:-1]:
             print(line, file=sys.stderr)
-        if done == 0:
-            first = (
-                f"; first: {self.failed[0].input}: {self.failed[0].reason}" if self.failed else ""
-            )
-            print(f"rcbht {self.command}: error: nothing done{first}", file=sys.stderr)
-            return STRICT_EXIT
+        raise InputError(f"none of the {self.total} inputs could be used (each named above)")
+
+    def finish(self, strict: bool) -> int:
+        """Print the lines naming the bad inputs; the exit code: 0, or 2 when there was a bad
+        input and `strict` (call check_some first: nothing done is an error)."""
+        for line in self.lines():
+            print(line, file=sys.stderr)
         return STRICT_EXIT if strict and self.failed else 0

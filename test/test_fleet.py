@@ -88,3 +88,31 @@ def test_evaluate_gives_the_same_curve_whatever_the_workers(
     assert isinstance(one, dict) and len(one["curve"]) >= 2 and one["trial_splits"]["n"] == 3
     assert runs["two"] == one
     assert runs["dask"] == one
+
+
+def _set_with_a_bad_trial(sim_data: Path, root: Path) -> Path:
+    """Three simulated trial folders and, sorted first among them, one with a malformed table."""
+    import shutil
+
+    for folder in sorted((sim_data / SIM_SUCCESS).iterdir())[:3]:
+        shutil.copytree(folder, root / folder.name)
+    (root / "A-BAD").mkdir()
+    (root / "A-BAD" / "R_Torques.dat").write_text("0.0 1 2 3\nnot a number\n")
+    return root
+
+
+def test_label_writes_the_same_words_and_leaves_a_bad_trial_out(
+    sim_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = _set_with_a_bad_trial(sim_data, tmp_path / "set")
+    for name, extra in (("one", []), ("two", ["--jobs", "2"])):
+        assert main(["label", str(data), "--out", str(tmp_path / name), *extra]) == 0
+        out, err = capsys.readouterr()
+        assert "labelled 3 trial(s)" in out
+        assert "rcbht label: left out: " in err and "A-BAD" in err
+        assert "rcbht label: 1 of 4 inputs bad, left out (" in err
+    one = tree(tmp_path / "one")
+    assert len({k.split("/")[0] for k in one}) == 3
+    assert tree(tmp_path / "two") == one
+    assert main(["label", str(data), "--out", str(tmp_path / "strict"), "--strict"]) == 2
+    assert tree(tmp_path / "strict") == one  # the good ones are written all the same
