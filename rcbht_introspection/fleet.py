@@ -53,6 +53,17 @@ def add_parallel_options(parser: argparse.ArgumentParser, units: str = "trials")
     )
 
 
+def add_strict_inputs(parser: argparse.ArgumentParser, what: str = "input") -> None:
+    """Add `--strict` to a command of many inputs: a bad one makes the exit code 2 (the others
+    are processed all the same)."""
+    parser.add_argument(
+        "--strict",
+        action="store_true",
+        help=f"exit code {STRICT_EXIT} when any {what} is bad (the others are still processed; "
+        "docs/your-robot.md, 'Bad input: counted, named and the run goes on')",
+    )
+
+
 def jobs_from_args(args: argparse.Namespace) -> int:
     """The joblib worker count the options ask for (-1 with a scheduler: all its workers)."""
     jobs: int = args.jobs

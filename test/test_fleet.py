@@ -116,3 +116,52 @@ def test_label_writes_the_same_words_and_leaves_a_bad_trial_out(
     assert tree(tmp_path / "two") == one
     assert main(["label", str(data), "--out", str(tmp_path / "strict"), "--strict"]) == 2
     assert tree(tmp_path / "strict") == one  # the good ones are written all the same
+
+
+def _frozen_and_good_bags(root: Path) -> list[Path]:
+    """A ROS 1 bag whose sensor froze (every message repeats the first wrench sample, stamp and
+    values: no phase keeps a sample), then three good ones (test_bag_import's recordings)."""
+    from test_bag_import import recording, write_tagged_ros1
+
+    root.mkdir()
+    frozen = recording(9)
+    frozen.stamps = [frozen.stamps[0]] * len(frozen.stamps)
+    frozen.wrench[:] = frozen.wrench[0]
+    bags = [write_tagged_ros1(root / "a_frozen.bag", frozen)]
+    return bags + [write_tagged_ros1(root / f"run{s}.bag", recording(s)) for s in (1, 2, 3)]
+
+
+def test_bag_import_of_a_frozen_bag_first_imports_the_good_ones(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from conftest import IN_CI, require
+    from ros_support import have
+    from test_bag_import import PHASE_MAP
+
+    require(have("rosbags") or IN_CI, "rosbags not installed")
+    bags = [str(b) for b in _frozen_and_good_bags(tmp_path / "in")]
+    args = ["bag", "import", *bags, "--wrench", "/tag_multimodal.wrench_stamped", "--phase"]
+    args += ["/tag_multimodal.tag", "--phase-map", PHASE_MAP]
+    outs = {}
+    for name, extra in (("one", []), ("two", ["--jobs", "2"])):
+        outs[name] = tmp_path / name
+        report = tmp_path / f"{name}.json"
+        assert main([*args, "--out", str(outs[name]), "--json", str(report), *extra]) == 0
+        out, err = capsys.readouterr()
+        assert "imported 3 of 4 bag(s)" in out
+        left = [line for line in err.splitlines() if "left out: " in line]
+        assert len(left) == 1 and bags[0] in left[0] and left[0].endswith("no phase has samples")
+        assert "1 of 4 inputs bad, left out (" in err
+        bad = _json(report)
+        assert isinstance(bad, dict) and bad["bad_inputs"]["count"] == 1
+        assert bad["bad_inputs"]["inputs"][0]["input"] == bags[0]
+    assert sorted(tree(outs["one"])) == ["run1.mcap", "run2.mcap", "run3.mcap"]
+    assert tree(outs["two"]) == tree(outs["one"])
+    assert main([*args, "--out", str(tmp_path / "strict"), "--strict"]) == 2
+    assert len(tree(tmp_path / "strict")) == 3  # written all the same
+    capsys.readouterr()
+    assert (
+        main(["bag", "import", bags[0], *args[2 + len(bags) :], "--out", str(tmp_path / "none")])
+        == 2
+    )
+    assert capsys.readouterr().err.count("\n") == 1  # nothing done: one line, as ever
