@@ -165,3 +165,23 @@ def test_bag_import_of_a_frozen_bag_first_imports_the_good_ones(
         == 2
     )
     assert capsys.readouterr().err.count("\n") == 1  # nothing done: one line, as ever
+
+
+def test_calibrate_measures_the_same_profile_and_names_a_bad_trial(
+    sim_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = _set_with_a_bad_trial(sim_data, tmp_path / "set")
+    written = {}
+    for name, extra in (("one", []), ("two", ["--jobs", "2"])):
+        out, report = tmp_path / name / "robot.yaml", tmp_path / name / "report.json"
+        args = ["calibrate", str(data), "--out", str(out), "--report", str(report)]
+        assert main([*args, *extra]) == 0
+        assert "A-BAD" in capsys.readouterr().err
+        result = _json(report)
+        assert isinstance(result, dict) and result["bad_inputs"]["count"] == 1
+        assert len(result["inputs"]) == 3
+        del result["out"]  # the only difference: where each run wrote
+        written[name] = {"profile": out.read_bytes(), "report": result}
+    assert written["two"] == written["one"]
+    strict = ["calibrate", str(data), "--out", str(tmp_path / "s.yaml"), "--strict"]
+    assert main(strict) == 2 and (tmp_path / "s.yaml").is_file()
