@@ -185,3 +185,22 @@ def test_calibrate_measures_the_same_profile_and_names_a_bad_trial(
     assert written["two"] == written["one"]
     strict = ["calibrate", str(data), "--out", str(tmp_path / "s.yaml"), "--strict"]
     assert main(strict) == 2 and (tmp_path / "s.yaml").is_file()
+
+
+def test_audit_reports_the_same_whatever_the_workers(
+    sim_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    data = _set_with_a_bad_trial(sim_data, tmp_path / "set")
+    printed, reports = {}, {}
+    for name, extra in (("one", []), ("two", ["--jobs", "2"])):
+        report = tmp_path / f"{name}.json"
+        args = ["audit", str(data), "--permutations", "199", "--json", str(report)]
+        assert main([*args, *extra]) == 0
+        printed[name] = capsys.readouterr().out.replace(str(report), "OUT")
+        reports[name] = _json(report)
+    assert "3 trial(s), 1 unreadable" in printed["one"]
+    assert printed["two"] == printed["one"]
+    assert reports["two"] == reports["one"]
+    one = reports["one"]
+    assert isinstance(one, dict) and one["bad_inputs"]["count"] == 1
+    assert main(["audit", str(data), "--permutations", "199", "--strict"]) == 2
