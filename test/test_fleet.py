@@ -204,3 +204,23 @@ def test_audit_reports_the_same_whatever_the_workers(
     one = reports["one"]
     assert isinstance(one, dict) and one["bad_inputs"]["count"] == 1
     assert main(["audit", str(data), "--permutations", "199", "--strict"]) == 2
+
+
+def test_a_warm_sample_cache_stays_warm_on_a_worker(sim_data: Path) -> None:
+    """The curve's permutations ship one encoding cache to the workers: unpickled with its
+    samples, it answers from what it holds instead of encoding again."""
+    import pickle
+
+    from rcbht_introspection.grammar.encoding.cache import SampleCache
+    from rcbht_introspection.learn.data import load_trials
+
+    sample = load_trials([sim_data / SIM_SUCCESS])[0].samples[0]
+    cache = SampleCache()
+    assert cache.get(sample, "key", lambda: 42) == 42
+    copied_cache, copied_sample = pickle.loads(pickle.dumps((cache, sample)))
+    assert copied_sample is not sample
+
+    def encode_again() -> int:
+        raise AssertionError("encoded again")
+
+    assert copied_cache.get(copied_sample, "key", encode_again) == 42

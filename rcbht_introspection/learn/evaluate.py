@@ -233,6 +233,8 @@ class _Run:
         self.tally = _Tally.empty(plan, protocol.permutations)
         self.n_near_empty = _count_near_empty(plan.complete, protocol)
         self.peer: SubtaskWrench | None = None
+        self.steps: frozenset[int] | None = None
+        """The curve steps (indices) a permutation runs; None: all."""
         if protocol.peers:
             from rcbht_introspection.peers.subtask_baseline import SubtaskWrench
 
@@ -262,6 +264,8 @@ class _Run:
         val_samples = [s for t in validation for s in t.samples]
         val_kept = [s for s in val_samples if not self.near_empty(s)]
         for j, k in enumerate(plan.steps):
+            if self.steps is not None and j not in self.steps:
+                continue  # another worker's share of this permutation (_run_permutations)
             train_samples = [s for t in training[:k] for s in t.samples]
             began = time.perf_counter()
             model = self.train(train_samples, perm)
@@ -385,20 +389,30 @@ def _count_near_empty(complete: Sequence[TrialSamples], protocol: Protocol) -> i
     return sum(s.duration < protocol.near_empty_seconds for t in complete for s in t.samples)
 
 
-def _one_permutation(run: _Run, perm: int) -> _Tally:
-    """Permutation `perm` of a copy of `run` (on a worker) into an empty tally of its own."""
+STEP_SHARES = 2
+"""A permutation runs on this many workers, each taking every STEP_SHARES-th curve step (so each
+share holds small and large training sets alike): with few permutations, workers stay busy."""
+
+
+def _one_share(run: _Run, unit: tuple[int, int]) -> _Tally:
+    """Share `unit` = (permutation, share) of a copy of `run` (on a worker), in a tally of its
+    own: the steps j with j % STEP_SHARES == share."""
+    perm, share = unit
     run.tally = _Tally.empty(run.plan, run.protocol.permutations)
+    run.steps = frozenset(range(share, len(run.plan.steps), STEP_SHARES))
     run.permutation(perm)
     return run.tally
 
 
-def _merge_tally(into: _Tally, part: _Tally, perm: int) -> None:
-    """Add permutation `perm`'s tally: its row of every curve, its counts, its list entries
-    (merged in permutation order, the lists are those of one process running them in turn)."""
+def _merge_tally(into: _Tally, part: _Tally) -> None:
+    """Add one share's tally: the curve cells it ran, its counts, its list entries (merged in
+    permutation and share order, the lists are those of one process running them in turn:
+    only a permutation's last step adds to them)."""
     for f in dataclasses.fields(_Tally):
         mine, theirs = getattr(into, f.name), getattr(part, f.name)
         if isinstance(mine, np.ndarray) and mine.dtype.kind == "f":
-            mine[perm] = theirs[perm]  # curves: (permutation, step)
+            ran = ~np.isnan(theirs)  # curves: (permutation, step), NaN where not run
+            mine[ran] = theirs[ran]
         elif isinstance(mine, np.ndarray):
             mine += theirs  # counts
         elif isinstance(mine, list):
@@ -409,23 +423,29 @@ def _merge_tally(into: _Tally, part: _Tally, perm: int) -> None:
 
 
 def _run_permutations(run: _Run, jobs: int) -> None:
-    """Every permutation of the protocol into run.tally: in turn (`jobs` 1), else one per joblib
-    task (fleet.parallel_map); each is seeded by its index, never by its worker."""
+    """Every permutation of the protocol into run.tally: in turn (`jobs` 1), else in shares of
+    their steps on joblib workers (fleet.parallel_map); each step is seeded by its permutation,
+    never by its worker, and the last step of a permutation (the only one adding to the lists)
+    falls in one share, so the tally is the one of running them in turn."""
     if jobs == 1:
         for perm in range(run.protocol.permutations):
             run.permutation(perm)
         return
-    progress, steps = run.progress, len(run.plan.steps)
+    everything = [s for t in run.plan.complete for s in t.samples]
+    run.train(everything, 0)  # fills run.cache with every sample's encoding: shipped warm
+    progress = run.progress
     shipped = copy.copy(run)
-    shipped.progress = None  # a progress bar stays in this process: ticked per permutation
+    shipped.progress = None  # a progress bar stays in this process
+    units = [(p, share) for p in range(run.protocol.permutations) for share in range(STEP_SHARES)]
+    ticks = iter([len(range(share, len(run.plan.steps), STEP_SHARES)) for _, share in units])
     parts = parallel_map(
-        functools.partial(_one_permutation, shipped),
-        range(run.protocol.permutations),
+        functools.partial(_one_share, shipped),
+        units,
         jobs,
-        (lambda _: progress(steps)) if progress is not None else None,
+        (lambda _: progress(next(ticks))) if progress is not None else None,
     )
-    for perm, part in enumerate(parts):
-        _merge_tally(run.tally, part, perm)
+    for part in parts:
+        _merge_tally(run.tally, part)
 
 
 def evaluate(
