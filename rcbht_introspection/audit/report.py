@@ -18,6 +18,7 @@ from rcbht_introspection.audit.facts import TrialFacts, trial_facts
 from rcbht_introspection.audit.findings import ACTIONS, Finding
 from rcbht_introspection.audit.sensor import sensor_findings
 from rcbht_introspection.audit.sessions import (
+    GAP_SIGMAS,
     Sessions,
     analyse_sessions,
     session_findings,
@@ -72,10 +73,10 @@ def audit_facts(
         settings, period_s=float(np.median(periods)) if periods else settings.period_s
     )
     durations = analyse_durations(facts, task, settings)
-    sessions = analyse_sessions(facts, settings)
+    sessions = analyse_sessions(facts)
     findings = [
         *duration_findings(durations, facts, settings),
-        *session_findings(sessions, settings),
+        *session_findings(sessions),
         *sensor_findings(facts, list(unreadable)),
     ]
     findings.sort(key=lambda f: KINDS.index(f.kind))
@@ -193,13 +194,12 @@ def whole_set_lines(report: AuditReport) -> list[str]:
     """The test of every whole sequence, significant or not (how far from a change each is)."""
     tested = [(r.subtask, r.whole) for r in report.durations if r.whole is not None]
     durations = ", ".join(f"{name} z {w.statistic:.2f} p {w.p_adjusted:.2g}" for name, w in tested)
-    whole = report.sessions.whole
-    level = f"z {whole.statistic:.2f} p {whole.p_value:.2g}" if whole else "too few trials"
+    sizes = "+".join(str(len(g)) for g in report.sessions.groups)
     return [
         f"changepoint test of all trials, durations (Bonferroni x{len(tested)}): "
         + (durations or "too few trials"),
-        f"changepoint test of all trials, free-motion level: {level}; "
-        f"sessions: {len(report.sessions.changes) + 1}",
+        f"sessions by free-motion level (gaps beyond {GAP_SIGMAS:g} sigma): "
+        f"{len(report.sessions.groups)} ({sizes} trials)",
     ]
 
 
