@@ -25,6 +25,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.fleet import (
     BadInputs,
     add_parallel_options,
+    add_strict_inputs,
     attempt,
     backend,
     jobs_from_args,
@@ -53,7 +54,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     add_taxonomy_options(p)
     p.add_argument("--engine", choices=ENGINES, default="batch")
     add_repeated_stamps(p)
-    add_strict(p, "; and any bad trial folder makes the exit code 2")
+    add_strict_inputs(
+        p, "trial folder (a state time after its last sample or out of order makes it one)"
+    )
     add_parallel_options(p)
     p.set_defaults(func=run_label)
 
