@@ -100,6 +100,7 @@ def test_a_set_without_a_change_reports_none() -> None:
         assert report.of_kind("convention_change") == []
         assert report.of_kind("duration_shift") == []
         assert report.of_kind("session") == []
+        assert report.of_kind("session_change") == []
 
 
 def test_a_frozen_sensor_is_named_with_its_trial_and_length() -> None:
@@ -136,6 +137,24 @@ def test_a_session_at_another_level_is_found_whatever_the_order() -> None:
         assert report.of_kind("convention_change") == []
         sessions = report_dict(report)["sessions"]["sessions"]
         assert [s["count"] for s in sessions] == [11, 9]
+
+
+def test_a_small_level_shift_in_input_order_is_a_change_within_the_session() -> None:
+    """Fz 0.05 N higher from the tenth trial on (five standard errors of a level): no group of
+    its own, but a change in input order, found where it is."""
+    rng = np.random.default_rng(5)
+    trials = [
+        synthetic_trial(f"trial-{i + 1:02d}", rng, level=(0, 0, 0.05 if i >= 9 else 0.0, 0, 0, 0))
+        for i in range(20)
+    ]
+    report = audit_trials(trials, FAST, TASK)
+    assert report.of_kind("session") == []
+    found = report.of_kind("session_change")
+    assert len(found) == 1 and found[0].between == ("trial-09", "trial-10")
+    top = found[0].detail["channels"][0]
+    assert top["channel"] == "R.Fz"
+    assert top["after"] - top["before"] == pytest.approx(0.05, abs=0.01)
+    assert report_dict(report)["sessions"]["changes"][0]["between"] == ["trial-09", "trial-10"]
 
 
 def test_sessions_split_at_a_gap_far_beyond_the_spread_only() -> None:

@@ -16,6 +16,9 @@ ACTIONS: dict[str, str] = {
     "or zero the sensor before each session; if the sensor or its mounting changed, run "
     "`rcbht calibrate` on this session; evaluate grouped by session (train on some, test on "
     "the others)",
+    "session_change": "split by session at this trial (evaluate across sessions), or tare each "
+    "trial at its free-motion level (segmenter intake tare_at_start); recalibrate if the sensor "
+    "changed",
     "frozen_sensor": "check the sensor and its driver; cut the frozen stretch or leave the trial "
     "out (a frozen stretch reads as contact-free and drags a calibration's noise floor to 0)",
     "dropped_stamps": "none if they are re-sent samples (same values); otherwise the stamps are "

@@ -73,10 +73,10 @@ def audit_facts(
         settings, period_s=float(np.median(periods)) if periods else settings.period_s
     )
     durations = analyse_durations(facts, task, settings)
-    sessions = analyse_sessions(facts)
+    sessions = analyse_sessions(facts, settings)
     findings = [
         *duration_findings(durations, facts, settings),
-        *session_findings(sessions),
+        *session_findings(sessions, settings),
         *sensor_findings(facts, list(unreadable)),
     ]
     findings.sort(key=lambda f: KINDS.index(f.kind))
@@ -194,12 +194,16 @@ def whole_set_lines(report: AuditReport) -> list[str]:
     """The test of every whole sequence, significant or not (how far from a change each is)."""
     tested = [(r.subtask, r.whole) for r in report.durations if r.whole is not None]
     durations = ", ".join(f"{name} z {w.statistic:.2f} p {w.p_adjusted:.2g}" for name, w in tested)
-    sizes = "+".join(str(len(g)) for g in report.sessions.groups)
+    sessions = report.sessions
+    sizes = "+".join(str(len(g)) for g in sessions.groups)
+    whole = sessions.whole
+    level = f"z {whole.statistic:.2f} p {whole.p_value:.2g}" if whole else "too few trials"
     return [
         f"changepoint test of all trials, durations (Bonferroni x{len(tested)}): "
         + (durations or "too few trials"),
         f"sessions by free-motion level (gaps beyond {GAP_SIGMAS:g} sigma): "
-        f"{len(report.sessions.groups)} ({sizes} trials)",
+        f"{len(sessions.groups)} ({sizes} trials); changepoint test of the largest in input "
+        f"order: {level}; level changes within sessions: {len(sessions.changes)}",
     ]
 
 

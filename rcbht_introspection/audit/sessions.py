@@ -8,7 +8,8 @@ GAP_SIGMAS apart in units of the spread of the levels on the two sides (their po
 sigma, at least the standard error of one trial's level): a step far beyond the trial-to-trial
 spread of a session. Trials share a session when they share a group on every channel; the order
 of the inputs does not matter. The largest session is the reference; every other one is a
-finding that names its trials and its level against the reference's.
+finding that names its trials and its level against the reference's. Within each session,
+smaller shifts in input order are audit/level_changes.py's.
 """
 
 from __future__ import annotations
@@ -18,9 +19,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rcbht_introspection.audit.changepoint import robust_sigma
+from rcbht_introspection.audit.changepoint import WholeTest, robust_sigma
 from rcbht_introspection.audit.facts import TrialFacts
 from rcbht_introspection.audit.findings import Finding, sigmas
+from rcbht_introspection.audit.level_changes import LevelChange, change_findings, changes_within
+from rcbht_introspection.audit.settings import AuditSettings
 from rcbht_introspection.io.trial import AXES
 
 GAP_SIGMAS = 6.0
@@ -44,6 +47,10 @@ class Sessions:
     """Per channel, the median standard error of one trial's level (the sensor's noise)."""
     groups: list[list[int]] = field(default_factory=list)
     """Trial indices of each session, in input order; the largest session first."""
+    changes: list[LevelChange] = field(default_factory=list)
+    """Shifts of the level within a session, in input order (audit/level_changes.py)."""
+    whole: WholeTest | None = None
+    """The changepoint test of the largest session's levels in input order (None: too few)."""
 
     def level(self, group: list[int]) -> np.ndarray:
         """The median level of each channel over the trials of `group`."""
@@ -92,8 +99,9 @@ def channel_groups(values: np.ndarray, floor: float) -> list[list[int]]:
     return done
 
 
-def analyse_sessions(facts: list[TrialFacts]) -> Sessions:
-    """The sessions of the trials' free-motion levels (the same whatever their order)."""
+def analyse_sessions(facts: list[TrialFacts], settings: AuditSettings) -> Sessions:
+    """The sessions of the trials' free-motion levels (the same whatever their order), and the
+    changes of the level within each in input order."""
     channels, levels, floor = level_matrix(facts)
     result = Sessions([f.name for f in facts], channels, levels, floor)
     key: list[list[int]] = [[] for _ in facts]
@@ -108,6 +116,12 @@ def analyse_sessions(facts: list[TrialFacts]) -> Sessions:
     # the largest first; ties by their trials' names, so the input order does not matter
     groups.sort(key=lambda g: (-len(g), sorted(result.trials[i] for i in g)))
     result.groups = groups if channels else [list(range(len(facts)))]
+    for n, group in enumerate(result.groups):
+        names = [result.trials[i] for i in group]
+        found, whole = changes_within(names, levels[group], channels, floor, settings)
+        result.changes.extend(found)
+        if n == 0:
+            result.whole = whole
     return result
 
 
@@ -133,8 +147,9 @@ def _shifts(sessions: Sessions, group: list[int]) -> list[dict[str, float | str]
     return sorted(rows, key=lambda r: -abs(float(r["shift_sigmas"])))
 
 
-def session_findings(sessions: Sessions) -> list[Finding]:
-    """One finding per session besides the reference (the largest): its trials and level."""
+def session_findings(sessions: Sessions, settings: AuditSettings) -> list[Finding]:
+    """One finding per session besides the reference (the largest): its trials and level; and
+    one per change of the level within a session."""
     found = []
     ref = sessions.groups[0] if sessions.groups else []
     for group in sessions.groups[1:]:
@@ -158,14 +173,24 @@ def session_findings(sessions: Sessions) -> list[Finding]:
         }
         detail = {"trials": names, "reference_trials": len(ref), "channels": rows}
         found.append(Finding("session", message, tuple(names), (), None, strength, detail))
-    return found
+    return found + change_findings(sessions.changes, settings)
 
 
 def sessions_dict(sessions: Sessions) -> dict[str, object]:
     """The JSON of the sessions: channels, the rule, each session's trials and median level."""
+    whole = sessions.whole
     return {
         "channels": sessions.channels,
         "gap_sigmas": GAP_SIGMAS,
+        "test": {"z": whole.statistic, "p": whole.p_value} if whole else None,
+        "changes": [
+            {
+                "between": [lc.trials[lc.change.split - 1], lc.trials[lc.change.split]],
+                "z": lc.change.statistic,
+                "p": lc.change.p_value,
+            }
+            for lc in sessions.changes
+        ],
         "sessions": [
             {
                 "trials": [sessions.trials[i] for i in group],

@@ -75,6 +75,8 @@ def _levels_panel(ax: Axes, report: dict[str, Any], index: dict[str, int]) -> No
         if finding["kind"] == "session":  # the trials of a session besides the largest
             for name in finding["trials"]:
                 ax.axvline(index[name], color=SESSION_COLOR, linewidth=1.5, alpha=0.5)
+        elif finding["kind"] == "session_change":  # a shift within a session, in input order
+            ax.axvline(index[finding["between"][1]] - 0.5, color=SESSION_COLOR, linewidth=1.5)
     ax.set_ylabel("free-motion level\n(robust units)", fontsize=8)
     ax.grid(alpha=0.3)
 
