@@ -19,6 +19,7 @@ import copy
 import dataclasses
 import functools
 import math
+import pickle
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -394,9 +395,12 @@ STEP_SHARES = 2
 share holds small and large training sets alike): with few permutations, workers stay busy."""
 
 
-def _one_share(run: _Run, unit: tuple[int, int]) -> _Tally:
-    """Share `unit` = (permutation, share) of a copy of `run` (on a worker), in a tally of its
-    own: the steps j with j % STEP_SHARES == share."""
+def _one_share(shipped: NDArray[np.uint8], unit: tuple[int, int]) -> _Tally:
+    """Share `unit` = (permutation, share) of the pickled run `shipped` on a worker, in a tally
+    of its own: the steps j with j % STEP_SHARES == share. The bytes are a NumPy array, which
+    joblib hands to its local workers as one memory-mapped file instead of pickling them again
+    for every share; each share unpickles its own copy (a run is not reused across shares)."""
+    run: _Run = pickle.loads(shipped.tobytes())
     perm, share = unit
     run.tally = _Tally.empty(run.plan, run.protocol.permutations)
     run.steps = frozenset(range(share, len(run.plan.steps), STEP_SHARES))
@@ -436,10 +440,12 @@ def _run_permutations(run: _Run, jobs: int) -> None:
     progress = run.progress
     shipped = copy.copy(run)
     shipped.progress = None  # a progress bar stays in this process
+    data = pickle.dumps(shipped, protocol=pickle.HIGHEST_PROTOCOL)
+    payload = np.frombuffer(data, dtype=np.uint8)
     units = [(p, share) for p in range(run.protocol.permutations) for share in range(STEP_SHARES)]
     ticks = iter([len(range(share, len(run.plan.steps), STEP_SHARES)) for _, share in units])
     parts = parallel_map(
-        functools.partial(_one_share, shipped),
+        functools.partial(_one_share, payload),
         units,
         jobs,
         (lambda _: progress(next(ticks))) if progress is not None else None,
