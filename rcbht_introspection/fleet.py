@@ -1,9 +1,9 @@
 """Many inputs at once: the `--jobs` / `--scheduler` options of the offline commands, the
 joblib backend they select, an ordered parallel map, and the rule for bad inputs among many.
 
-Parallel runs (docs/your-robot.md, "Many recordings: --jobs, --scheduler"): `--jobs N` runs the
-independent units of a command (trials, bags, permutations) on N joblib workers (loky processes
-on this machine); `--scheduler ADDRESS` runs them on a dask.distributed cluster through joblib's
+Parallel runs (docs/your-robot.md, "Many recordings: --jobs and --scheduler"): `--jobs N` runs
+the independent units of a command (trials, bags, permutations) on N joblib workers (loky
+processes on this machine); `--scheduler ADDRESS` runs them on a dask.distributed cluster through joblib's
 Dask backend (the `fleet` extra). Every unit is seeded by its own index, never by its worker,
 and results are gathered in input order: the output is the same whatever N.
 
