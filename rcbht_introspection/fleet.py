@@ -7,7 +7,7 @@ processes on this machine); `--scheduler ADDRESS` runs them on a dask.distribute
 Dask backend (the `fleet` extra). Every unit is seeded by its own index, never by its worker,
 and results are gathered in input order: the output is the same whatever N.
 
-Bad inputs (docs/your-robot.md, "Bad input: counted, named and the run goes on"): a command of
+Bad inputs (docs/your-robot.md, "Bad input: counted, named, and the run goes on"): a command of
 many inputs processes the others, names each bad one with its one-line reason (stderr and its
 JSON's `bad_inputs`), and exits 0 when something was done, 2 with `--strict` or when nothing
 could be done.
@@ -60,7 +60,7 @@ def add_strict_inputs(parser: argparse.ArgumentParser, what: str = "input") -> N
         "--strict",
         action="store_true",
         help=f"exit code {STRICT_EXIT} when any {what} is bad (the others are still processed; "
-        "docs/your-robot.md, 'Bad input: counted, named and the run goes on')",
+        "docs/your-robot.md, 'Bad input: counted, named, and the run goes on')",
     )
 
 
