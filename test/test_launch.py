@@ -391,7 +391,7 @@ OPTIONAL_EXTRAS = {"peers", "sim", "plots"}
 the MuJoCo simulator and the plots; a robot that runs the nodes needs none of them."""
 OPTIONAL_IMPORTS = {"dask", "tqdm"}
 """Modules of an optional pip extra imported where a command option asks for them (fleet:
-verify-eval --scheduler) or with a fallback (progress: plain lines without tqdm)."""
+--scheduler, rcbht_introspection/fleet.py) or with a fallback (progress: plain lines without tqdm)."""
 
 
 def test_package_xml_lists_every_run_dependency() -> None:

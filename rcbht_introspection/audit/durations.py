@@ -9,7 +9,8 @@ between them moved, so the same motion carries one label before and the other af
 one sub-task alone is a *duration shift* (a new procedure or speed, or a label moved against the
 start or end of the trial). Outliers are judged within the parts the changes leave: a robust z
 of the log duration (median, robust sigma at least the resolution's), two-sided normal p-value,
-Bonferroni over every duration tested.
+Bonferroni over every duration tested; and the difference must matter: at least OUTLIER_MIN_S
+seconds and OUTLIER_MIN_FRACTION of the part's median.
 """
 
 from __future__ import annotations
@@ -28,6 +29,13 @@ from rcbht_introspection.task import Task
 
 OUTLIER_MIN_TRIALS = 5
 """Fewest trials of a part for outliers to be judged in it."""
+OUTLIER_MIN_S = 0.5
+"""An outlying duration differs from its part's median by at least this many seconds: less is
+within where a person labelling or a state machine publishing puts a boundary, whatever the
+sub-task, and too little for a sub-task's words to differ."""
+OUTLIER_MIN_FRACTION = 0.25
+"""... and by at least this share of that median: a quarter more or less of a sub-task changes
+what its words count; a scripted robot's spread, tiny in sigmas, is not that."""
 
 
 @dataclass(frozen=True)
@@ -148,7 +156,9 @@ def mark_outliers(results: list[SubtaskDurations], settings: AuditSettings) -> N
             seg = x[part.start : part.stop]
             z = (seg - np.median(seg)) / part.sigma_log
             p = np.minimum(1.0, 2.0 * norm.sf(np.abs(z)) * tested)
-            for i in np.flatnonzero(p <= settings.alpha):
+            off = np.abs(np.asarray(r.seconds[part.start : part.stop]) - part.median_s)
+            matters = (off >= OUTLIER_MIN_S) & (off >= OUTLIER_MIN_FRACTION * part.median_s)
+            for i in np.flatnonzero((p <= settings.alpha) & matters):
                 r.outliers.append((part.start + int(i), float(z[i]), float(p[i])))
 
 

@@ -12,8 +12,13 @@ ACTIONS: dict[str, str] = {
     "the set (train and evaluate each part, or across parts)",
     "duration_outlier": "look at these trials (a retry, a pause, a state published early or "
     "late): relabel them or leave them out",
-    "session_change": "split by session (evaluate across sessions), or tare each trial at its "
-    "free-motion level (segmenter intake tare_at_start); recalibrate if the sensor changed",
+    "session": "tare: subtract each trial's free-motion level (segmenter intake tare_at_start) "
+    "or zero the sensor before each session; if the sensor or its mounting changed, run "
+    "`rcbht calibrate` on this session; evaluate grouped by session (train on some, test on "
+    "the others)",
+    "session_change": "split by session at this trial (evaluate across sessions), or tare each "
+    "trial at its free-motion level (segmenter intake tare_at_start); recalibrate if the sensor "
+    "changed",
     "frozen_sensor": "check the sensor and its driver; cut the frozen stretch or leave the trial "
     "out (a frozen stretch reads as contact-free and drags a calibration's noise floor to 0)",
     "dropped_stamps": "none if they are re-sent samples (same values); otherwise the stamps are "

@@ -4,6 +4,7 @@ write the report (text and JSON, docs/audit.md)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +18,7 @@ from rcbht_introspection.audit.facts import TrialFacts, trial_facts
 from rcbht_introspection.audit.findings import ACTIONS, Finding
 from rcbht_introspection.audit.sensor import sensor_findings
 from rcbht_introspection.audit.sessions import (
+    GAP_SIGMAS,
     Sessions,
     analyse_sessions,
     session_findings,
@@ -24,6 +26,7 @@ from rcbht_introspection.audit.sessions import (
 )
 from rcbht_introspection.audit.settings import AuditSettings, check_settings
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.fleet import Failed, attempt, parallel_map
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.task import Task, task_of_names
 
@@ -98,32 +101,36 @@ def audit_trials(
     return audit_facts(facts, task, settings)
 
 
-def audit_paths(inputs: Sequence[Path | str], settings: AuditSettings | None = None) -> AuditReport:
+def _read_facts(settings: AuditSettings, path: Path) -> tuple[TrialFacts, Task]:
+    """One input read and reduced to its facts, with its task (on any worker)."""
+    from rcbht_introspection.learn.data import read_any_trial, task_of_bag
+    from rcbht_introspection.task import task_of_folder
+
+    trial = read_any_trial(path, settings.repeated)
+    task = task_of_bag(trial) if path.is_file() else task_of_folder(path)
+    facts = trial_facts(
+        trial, path, task, settings.frozen_samples, settings.frozen_s, settings.classifier
+    )
+    return facts, task
+
+
+def audit_paths(
+    inputs: Sequence[Path | str], settings: AuditSettings | None = None, jobs: int = 1
+) -> AuditReport:
     """The audit of trial folders, dataset folders and trial bags, in the order the other
-    commands take them (learn/data.find_inputs: each folder sorted by name). A trial that cannot
+    commands take them (learn/data.find_inputs: each folder sorted by name), read on `jobs`
+    joblib workers (fleet.parallel_map; the report is the same whatever N). A trial that cannot
     be read is counted (finding 'unreadable') and the others are audited; none readable is an
     InputError."""
-    from rcbht_introspection.learn.data import find_inputs, read_any_trial, task_of_bag
-    from rcbht_introspection.task import task_of_folder
+    from rcbht_introspection.learn.data import find_inputs
 
     settings = settings or AuditSettings()
     check_settings(settings)
-    facts: list[TrialFacts] = []
-    tasks: list[Task] = []
-    unreadable: list[tuple[str, str]] = []
-    for path in find_inputs(inputs):
-        try:
-            trial = read_any_trial(path, settings.repeated)
-            task = task_of_bag(trial) if path.is_file() else task_of_folder(path)
-        except InputError as exc:
-            unreadable.append((str(path), str(exc)))
-            continue
-        facts.append(
-            trial_facts(
-                trial, path, task, settings.frozen_samples, settings.frozen_s, settings.classifier
-            )
-        )
-        tasks.append(task)
+    read = functools.partial(attempt, functools.partial(_read_facts, settings))
+    outcomes = parallel_map(read, find_inputs(inputs), jobs)
+    unreadable = [(o.input, o.reason) for o in outcomes if isinstance(o, Failed)]
+    done = [o for o in outcomes if not isinstance(o, Failed)]
+    facts, tasks = [f for f, _ in done], [t for _, t in done]
     if not facts:
         first = unreadable[0][1] if unreadable else "no trials"
         raise InputError(f"no trial could be read ({len(unreadable)} tried); first: {first}")
@@ -174,6 +181,11 @@ def report_dict(report: AuditReport) -> dict[str, Any]:
         "sessions": sessions_dict(report.sessions),
         "findings": [f.to_dict() for f in report.findings],
         "notes": notes(report),
+        "bad_inputs": {
+            "count": len(report.unreadable),
+            "of": len(report.facts) + len(report.unreadable),
+            "inputs": [{"input": i, "reason": r} for i, r in report.unreadable],
+        },
         "summary": counts,
     }
 
@@ -182,13 +194,16 @@ def whole_set_lines(report: AuditReport) -> list[str]:
     """The test of every whole sequence, significant or not (how far from a change each is)."""
     tested = [(r.subtask, r.whole) for r in report.durations if r.whole is not None]
     durations = ", ".join(f"{name} z {w.statistic:.2f} p {w.p_adjusted:.2g}" for name, w in tested)
-    whole = report.sessions.whole
+    sessions = report.sessions
+    sizes = "+".join(str(len(g)) for g in sessions.groups)
+    whole = sessions.whole
     level = f"z {whole.statistic:.2f} p {whole.p_value:.2g}" if whole else "too few trials"
     return [
         f"changepoint test of all trials, durations (Bonferroni x{len(tested)}): "
         + (durations or "too few trials"),
-        f"changepoint test of all trials, free-motion level: {level}; "
-        f"sessions: {len(report.sessions.changes) + 1}",
+        f"sessions by free-motion level (gaps beyond {GAP_SIGMAS:g} sigma): "
+        f"{len(sessions.groups)} ({sizes} trials); changepoint test of the largest in input "
+        f"order: {level}; level changes within sessions: {len(sessions.changes)}",
     ]
 
 

@@ -1,56 +1,61 @@
-"""Sessions: jumps of the free-motion wrench level between trials.
+"""Sessions: groups of trials recorded at one free-motion wrench level, whatever their order.
 
 Each trial's level is the mean of every axis of every arm over its first FREE_MOTION_S seconds
 (audit/facts.py), before the tool touches anything. A sensor re-biased, re-mounted or warmed up,
-or another recording day, moves that level for every trial after it. The levels in trial order
-are scanned as one multichannel sequence (audit/changepoint.py: the largest standardised rank
-sum over splits and channels, so no Bonferroni over channels is needed), and each significant
-split gives the shift of every channel in robust sigmas of the trial-to-trial spread (at least
-the standard error of one trial's level).
+or another recording day, moves that level for every trial of its session. The levels of each
+channel are sorted and split, largest gap first, wherever two consecutive levels are more than
+GAP_SIGMAS apart in units of the spread of the levels on the two sides (their pooled robust
+sigma, at least the standard error of one trial's level): a step far beyond the trial-to-trial
+spread of a session. Trials share a session when they share a group on every channel; the order
+of the inputs does not matter. The largest session is the reference; every other one is a
+finding that names its trials and its level against the reference's. Within each session,
+smaller shifts in input order are audit/level_changes.py's.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from rcbht_introspection.audit.changepoint import Change, WholeTest, find_changes, robust_sigma
+from rcbht_introspection.audit.changepoint import WholeTest, robust_sigma
 from rcbht_introspection.audit.facts import TrialFacts
 from rcbht_introspection.audit.findings import Finding, sigmas
+from rcbht_introspection.audit.level_changes import LevelChange, change_findings, changes_within
 from rcbht_introspection.audit.settings import AuditSettings
 from rcbht_introspection.io.trial import AXES
 
+GAP_SIGMAS = 6.0
+"""A gap between consecutive sorted levels of a channel splits sessions when it is more than this
+many pooled robust sigmas of the levels on its two sides (a normal sample of any realistic size
+has no gap of even 3 sigmas between its middle values)."""
 SHOWN_CHANNELS = 3
 """Channels named in a session finding's message (all are in its detail)."""
-SESSION_SEED = 7919
-"""Seed offset of the session test (the sub-tasks use their index)."""
-
-
-@dataclass(frozen=True)
-class ChannelShift:
-    channel: str
-    before: float
-    after: float
-    sigma: float
-
-    @property
-    def shift_sigmas(self) -> float:
-        return (self.after - self.before) / self.sigma
+SHOWN_TRIALS = 8
+"""Trials named in a session finding's message (all are in its trials)."""
 
 
 @dataclass
 class Sessions:
-    """The level of every trial, the changes between sessions and the sessions they leave."""
+    """The level of every trial and the sessions they fall into (the reference first)."""
 
     trials: list[str]
     channels: list[str]
     levels: np.ndarray
-    changes: list[tuple[Change, list[ChannelShift]]] = field(default_factory=list)
+    floor: np.ndarray
+    """Per channel, the median standard error of one trial's level (the sensor's noise)."""
+    groups: list[list[int]] = field(default_factory=list)
+    """Trial indices of each session, in input order; the largest session first."""
+    changes: list[LevelChange] = field(default_factory=list)
+    """Shifts of the level within a session, in input order (audit/level_changes.py)."""
     whole: WholeTest | None = None
-    """The test of all the trials' levels (None: too few trials)."""
+    """The changepoint test of the largest session's levels in input order (None: too few)."""
+
+    def level(self, group: list[int]) -> np.ndarray:
+        """The median level of each channel over the trials of `group`."""
+        median: np.ndarray = np.median(self.levels[group], axis=0)
+        return median
 
 
 def level_matrix(facts: list[TrialFacts]) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -67,102 +72,131 @@ def level_matrix(facts: list[TrialFacts]) -> tuple[list[str], np.ndarray, np.nda
     return channels, levels.reshape(len(facts), len(channels)), floor
 
 
-def channel_shifts(
-    levels: np.ndarray, channels: list[str], floor: np.ndarray, change: Change
-) -> list[ChannelShift]:
-    """Every channel's shift at `change`, largest in sigmas first."""
-    a, b = levels[change.start : change.split], levels[change.split : change.stop]
-    shifts = []
-    for j, name in enumerate(channels):
-        na, nb = len(a), len(b)
-        pooled = math.sqrt(
-            (na * robust_sigma(a[:, j]) ** 2 + nb * robust_sigma(b[:, j]) ** 2) / (na + nb)
-        )
-        sigma = max(pooled, float(floor[j]), 1e-12)
-        shifts.append(
-            ChannelShift(name, float(np.median(a[:, j])), float(np.median(b[:, j])), sigma)
-        )
-    return sorted(shifts, key=lambda s: -abs(s.shift_sigmas))
+def pooled_sigma(a: np.ndarray, b: np.ndarray, floor: float) -> float:
+    """The pooled robust sigma of two groups of levels, at least `floor` (and above 0)."""
+    pooled = math.sqrt(
+        (len(a) * robust_sigma(a) ** 2 + len(b) * robust_sigma(b) ** 2) / (len(a) + len(b))
+    )
+    return max(pooled, floor, 1e-12)
+
+
+def channel_groups(values: np.ndarray, floor: float) -> list[list[int]]:
+    """Indices of `values` split where consecutive sorted values are more than GAP_SIGMAS
+    pooled sigmas apart (pooled_sigma of the two sides), largest gap first, recursively."""
+    todo = [[int(i) for i in np.argsort(values, kind="stable")]]
+    done: list[list[int]] = []
+    while todo:
+        group = todo.pop()
+        v = values[group]
+        if len(group) < 2:
+            done.append(group)
+            continue
+        k = int(np.argmax(np.diff(v))) + 1
+        if v[k] - v[k - 1] > GAP_SIGMAS * pooled_sigma(v[:k], v[k:], floor):
+            todo.extend([group[:k], group[k:]])
+        else:
+            done.append(group)
+    return done
 
 
 def analyse_sessions(facts: list[TrialFacts], settings: AuditSettings) -> Sessions:
-    """Session changes of the trials' free-motion levels."""
+    """The sessions of the trials' free-motion levels (the same whatever their order), and the
+    changes of the level within each in input order."""
     channels, levels, floor = level_matrix(facts)
-    result = Sessions([f.name for f in facts], channels, levels)
-    if not channels:
-        return result
-    segmentation = find_changes(
-        levels,
-        settings.alpha,
-        settings.permutations,
-        [settings.seed, SESSION_SEED],
-        1,
-        settings.min_segment,
-    )
-    result.whole = segmentation.whole
-    result.changes = [(c, channel_shifts(levels, channels, floor, c)) for c in segmentation.changes]
+    result = Sessions([f.name for f in facts], channels, levels, floor)
+    key: list[list[int]] = [[] for _ in facts]
+    for j in range(len(channels)):
+        for g, group in enumerate(channel_groups(levels[:, j], float(floor[j]))):
+            for i in group:
+                key[i].append(g)
+    by_key: dict[tuple[int, ...], list[int]] = {}
+    for i, k in enumerate(key):
+        by_key.setdefault(tuple(k), []).append(i)
+    groups = list(by_key.values())
+    # the largest first; ties by their trials' names, so the input order does not matter
+    groups.sort(key=lambda g: (-len(g), sorted(result.trials[i] for i in g)))
+    result.groups = groups if channels else [list(range(len(facts)))]
+    for n, group in enumerate(result.groups):
+        names = [result.trials[i] for i in group]
+        found, whole = changes_within(names, levels[group], channels, floor, settings)
+        result.changes.extend(found)
+        if n == 0:
+            result.whole = whole
     return result
 
 
+def _shifts(sessions: Sessions, group: list[int]) -> list[dict[str, float | str]]:
+    """Every channel of `group` against the reference session, largest in sigmas first."""
+    ref = sessions.groups[0]
+    mine, theirs = sessions.level(group), sessions.level(ref)
+    rows: list[dict[str, float | str]] = []
+    for j, name in enumerate(sessions.channels):
+        a, b = sessions.levels[ref, j], sessions.levels[group, j]
+        sigma = pooled_sigma(a, b, float(sessions.floor[j]))
+        shift = float(mine[j] - theirs[j])
+        rows.append(
+            {
+                "channel": name,
+                "level": float(mine[j]),
+                "reference": float(theirs[j]),
+                "shift": shift,
+                "sigma": sigma,
+                "shift_sigmas": round(shift / sigma, 2),
+            }
+        )
+    return sorted(rows, key=lambda r: -abs(float(r["shift_sigmas"])))
+
+
 def session_findings(sessions: Sessions, settings: AuditSettings) -> list[Finding]:
-    """One finding per change of session."""
+    """One finding per session besides the reference (the largest): its trials and level; and
+    one per change of the level within a session."""
     found = []
-    for change, shifts in sessions.changes:
-        before, after = sessions.trials[change.split - 1], sessions.trials[change.split]
+    ref = sessions.groups[0] if sessions.groups else []
+    for group in sessions.groups[1:]:
+        names = [sessions.trials[i] for i in group]
+        rows = _shifts(sessions, group)
         top = ", ".join(
-            f"{s.channel} {s.after - s.before:+.3g} ({sigmas(s.shift_sigmas)})"
-            for s in shifts[:SHOWN_CHANNELS]
+            f"{r['channel']} {float(r['level']):.3g} against {float(r['reference']):.3g} "
+            f"({sigmas(float(r['shift_sigmas']))})"
+            for r in rows[:SHOWN_CHANNELS]
         )
         message = (
-            f"free-motion wrench level jumps between {before} and {after}: {top}; z "
-            f"{change.statistic:.2f}, p {change.p_value:.2g} ({settings.permutations} permutations)"
+            f"{len(names)} trial(s) recorded at another free-motion wrench level than the "
+            f"{len(ref)} of the largest session: {', '.join(names[:SHOWN_TRIALS])}"
+            f"{f' and {len(names) - SHOWN_TRIALS} more' if len(names) > SHOWN_TRIALS else ''}; {top}"
         )
         strength = {
-            "statistic": "rank changepoint z over every channel (largest standardised "
-            "Mann-Whitney sum over splits and channels)",
-            "z": round(change.statistic, 4),
-            "p": change.p_value,
-            "permutations": settings.permutations,
-            "alpha": settings.alpha,
-            "largest_shift_sigmas": round(shifts[0].shift_sigmas, 2),
+            "statistic": "gap between sorted free-motion levels in pooled robust sigmas of the "
+            f"two sides (a new session beyond {GAP_SIGMAS:g})",
+            "gap_sigmas": GAP_SIGMAS,
+            "largest_shift_sigmas": rows[0]["shift_sigmas"],
         }
-        detail = {
-            "before": [sessions.trials[change.start], before],
-            "after": [after, sessions.trials[change.stop - 1]],
-            "channels": [
-                {
-                    "channel": s.channel,
-                    "before": s.before,
-                    "after": s.after,
-                    "sigma": s.sigma,
-                    "shift_sigmas": round(s.shift_sigmas, 2),
-                }
-                for s in shifts
-            ],
-        }
-        found.append(
-            Finding(
-                "session_change", message, (before, after), (), (before, after), strength, detail
-            )
-        )
-    return found
+        detail = {"trials": names, "reference_trials": len(ref), "channels": rows}
+        found.append(Finding("session", message, tuple(names), (), None, strength, detail))
+    return found + change_findings(sessions.changes, settings)
 
 
 def sessions_dict(sessions: Sessions) -> dict[str, object]:
-    """The JSON of the sessions: channels, each session's trials and median level."""
-    bounds = [0, *(c.split for c, _ in sessions.changes), len(sessions.trials)]
-    parts = []
-    for a, b in itertools.pairwise(bounds):
-        if b > a:
-            median = np.median(sessions.levels[a:b], axis=0) if sessions.channels else []
-            parts.append(
-                {
-                    "first": sessions.trials[a],
-                    "last": sessions.trials[b - 1],
-                    "trials": b - a,
-                    "level": [float(v) for v in median],
-                }
-            )
+    """The JSON of the sessions: channels, the rule, each session's trials and median level."""
     whole = sessions.whole
-    test = {"z": whole.statistic, "p": whole.p_value} if whole else None
-    return {"channels": sessions.channels, "test": test, "sessions": parts}
+    return {
+        "channels": sessions.channels,
+        "gap_sigmas": GAP_SIGMAS,
+        "test": {"z": whole.statistic, "p": whole.p_value} if whole else None,
+        "changes": [
+            {
+                "between": [lc.trials[lc.change.split - 1], lc.trials[lc.change.split]],
+                "z": lc.change.statistic,
+                "p": lc.change.p_value,
+            }
+            for lc in sessions.changes
+        ],
+        "sessions": [
+            {
+                "trials": [sessions.trials[i] for i in group],
+                "count": len(group),
+                "level": [float(v) for v in sessions.level(group)] if sessions.channels else [],
+            }
+            for group in sessions.groups
+        ],
+    }

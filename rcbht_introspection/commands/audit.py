@@ -2,7 +2,8 @@
 
 Prints one block per finding (what, where, how strong, what to do) and the number of labelling
 convention changes; `--json` writes the whole report, `--plot` its figure. Findings are not
-errors: the exit code is 0 whenever the audit ran.
+errors: the exit code is 0 whenever the audit ran; a trial that cannot be read is a finding
+('unreadable', in the JSON's bad_inputs too) and, with --strict, exit code 2.
 """
 
 from __future__ import annotations
@@ -12,6 +13,13 @@ import json
 from pathlib import Path
 
 from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy
+from rcbht_introspection.fleet import (
+    STRICT_EXIT,
+    add_parallel_options,
+    add_strict_inputs,
+    backend,
+    jobs_from_args,
+)
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -48,6 +56,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="skip the classifier check beside each change of the durations",
     )
     add_repeated_stamps(p)
+    add_strict_inputs(p, "trial that cannot be read")
+    add_parallel_options(p, "trials' reading")
     p.set_defaults(func=run_audit, repeated_stamps="reject")
 
 
@@ -61,7 +71,9 @@ def run_audit(args: argparse.Namespace) -> int:
         classifier=not args.no_classifier,
         repeated=repeated_policy(args),
     )
-    report = audit_paths(args.inputs, settings)
+    jobs = jobs_from_args(args)
+    with backend(args.scheduler):
+        report = audit_paths(args.inputs, settings, jobs)
     for line in report_text(report):
         print(line)
     if args.json is not None or args.plot is not None:
@@ -74,4 +86,4 @@ def run_audit(args: argparse.Namespace) -> int:
             from rcbht_introspection.plots.audit import plot_audit
 
             print(f"wrote {plot_audit(data, args.plot)}")
-    return 0
+    return STRICT_EXIT if args.strict and report.unreadable else 0

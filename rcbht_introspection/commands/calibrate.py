@@ -9,14 +9,26 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from rcbht_introspection.commands.sensor import add_repeated_stamps, repeated_policy, warn
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.fleet import (
+    BadInputs,
+    add_parallel_options,
+    add_strict_inputs,
+    attempt,
+    backend,
+    jobs_from_args,
+    parallel_map,
+)
 
 if TYPE_CHECKING:
+    from rcbht_introspection.io.sensor_checks import RepeatedPolicy
+    from rcbht_introspection.io.trial import Trial
     from rcbht_introspection.taxonomy.calibration import Calibration, Comparison
 
 
@@ -34,25 +46,31 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("--name", default=None, help="profile name (default: the --out file's stem)")
     p.add_argument("--report", type=Path, default=None, metavar="FILE.json")
     add_repeated_stamps(p)
+    add_strict_inputs(p, "trial")
+    add_parallel_options(p, "trials' reading")
     p.set_defaults(func=run_calibrate)
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
-    from rcbht_introspection.io.sensor_checks import trial_findings
-    from rcbht_introspection.learn.data import find_inputs, read_any_trial
-    from rcbht_introspection.live.intake import load_intake_config
+    from rcbht_introspection.learn.data import find_inputs
     from rcbht_introspection.taxonomy.calibration import calibrate_profile, compare_profiles
     from rcbht_introspection.taxonomy.config import default_config, write_taxonomy_config
 
     name = args.name or args.out.stem
     if not name:
         raise InputError("empty profile name", field="--name")
-    paths = find_inputs(args.inputs)
-    trials = [read_any_trial(p, repeated_policy(args)) for p in paths]
-    checks = load_intake_config()
-    for path, trial in zip(paths, trials, strict=True):
+    jobs = jobs_from_args(args)
+    found = find_inputs(args.inputs)
+    bad = BadInputs("calibrate")
+    with backend(args.scheduler):
+        read = functools.partial(_read_checked, repeated_policy(args))
+        checked = bad.keep(parallel_map(functools.partial(attempt, read), found, jobs))
+    bad.check_some()
+    paths = [path for path, _, _ in checked]
+    trials = [trial for _, trial, _ in checked]
+    for path, _, findings in checked:
         # a frozen stretch drags the measured noise floor towards 0: the user must know
-        warn("calibrate", path.name, trial_findings(trial, checks.frozen_samples, checks.frozen_s))
+        warn("calibrate", path.name, findings)
     if not any(len(t.time) > 1 for t in trials):
         raise InputError("no input has two samples or more", ", ".join(map(str, args.inputs)))
     calibration = calibrate_profile(trials, name)
@@ -71,10 +89,22 @@ def run_calibrate(args: argparse.Namespace) -> int:
     print(f"wrote profile {name!r} to {args.out}")
     if args.report is not None:
         report = report_dict(calibration, comparison, [str(p) for p in paths], args.out)
+        report["bad_inputs"] = bad.to_dict()
         args.report.parent.mkdir(parents=True, exist_ok=True)
         args.report.write_text(json.dumps(report, indent=2))
         print(f"wrote {args.report}")
-    return 0
+    return bad.finish(args.strict)
+
+
+def _read_checked(policy: RepeatedPolicy | None, path: Path) -> tuple[Path, Trial, tuple[str, ...]]:
+    """One input read (on any worker), with its frozen-sensor findings."""
+    from rcbht_introspection.io.sensor_checks import trial_findings
+    from rcbht_introspection.learn.data import read_any_trial
+    from rcbht_introspection.live.intake import load_intake_config
+
+    trial = read_any_trial(path, policy)
+    checks = load_intake_config()
+    return path, trial, tuple(trial_findings(trial, checks.frozen_samples, checks.frozen_s))
 
 
 def table(calibration: Calibration, comparison: Comparison) -> str:

@@ -19,6 +19,7 @@ from rcbht_introspection.commands.sensor import (
     warn,
 )
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.fleet import add_parallel_options, backend, jobs_from_args
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
 from rcbht_introspection.taxonomy import StreamProfile
@@ -122,6 +123,7 @@ def _register_evaluate(subparsers: argparse._SubParsersAction[argparse.ArgumentP
     ev.add_argument("--json", type=Path, default=None, metavar="OUT")
     ev.add_argument("--plot", type=Path, default=None, metavar="OUT.png")
     ev.add_argument("--no-progress", action="store_true")
+    add_parallel_options(ev, "permutations (curve)")
     ev.set_defaults(func=run_evaluate)
 
 
@@ -327,13 +329,15 @@ def run_evaluate(args: argparse.Namespace) -> int:
     if args.trials is not None:
         trials = trials[: args.trials]
     protocol = _curve_protocol(args, taxonomy, n_estimators, budget)
-    result = _with_progress(
-        args,
-        total_steps(trials, protocol),
-        f"{args.classifier}/{args.encoding}",
-        "step",
-        lambda progress: evaluate(trials, protocol, progress=progress),
-    )
+    jobs = jobs_from_args(args)
+    with backend(args.scheduler):
+        result = _with_progress(
+            args,
+            total_steps(trials, protocol),
+            f"{args.classifier}/{args.encoding}",
+            "step",
+            lambda progress: evaluate(trials, protocol, progress=progress, jobs=jobs),
+        )
     result["datasets"] = [str(p) for p in args.inputs]
     result["input"] = read
     result["words"] = args.words
@@ -530,6 +534,7 @@ def _refuse_curve_options(args: argparse.Namespace) -> None:
         "--plot": args.plot is not None,
         "--no-variant": args.no_variant,
         "--no-peers": args.no_peers,
+        "--jobs/--scheduler": args.jobs != 1 or args.scheduler is not None,
     }
     for option, given in refused.items():
         if given:

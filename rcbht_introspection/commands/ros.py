@@ -3,16 +3,30 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import time
 from pathlib import Path
-from typing import get_args
+from typing import TYPE_CHECKING, get_args
 
 from rcbht_introspection.commands.options import add_state_options, state_from_args
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.fleet import (
+    BadInputs,
+    Failed,
+    add_parallel_options,
+    add_strict_inputs,
+    attempt,
+    backend,
+    jobs_from_args,
+    parallel_map,
+)
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.nodes.spin import Spin
 from rcbht_introspection.taxonomy import StreamProfile
+
+if TYPE_CHECKING:
+    from rcbht_introspection.io.bag_import import PlannedImport
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -222,6 +236,15 @@ def _register_import(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -
     p.add_argument(
         "--task", type=Path, default=None, metavar="TASK_YAML", help="the task of the trials"
     )
+    p.add_argument(
+        "--json",
+        type=Path,
+        default=None,
+        metavar="OUT",
+        help="write each import's report and the bad bags (bad_inputs) as JSON",
+    )
+    add_strict_inputs(p, "bag")
+    add_parallel_options(p, "bags")
     p.set_defaults(func=cmd_import)
 
 
@@ -293,8 +316,7 @@ def cmd_from_hiro(args: argparse.Namespace) -> int:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
-    from rcbht_introspection.commands.sensor import warn
-    from rcbht_introspection.io.bag_import import ImportOptions, import_bags, parse_wrench_specs
+    from rcbht_introspection.io.bag_import import ImportOptions, parse_wrench_specs, plan_imports
     from rcbht_introspection.io.bags import END_PHASE
     from rcbht_introspection.io.phase_events import parse_phase_map
     from rcbht_introspection.live.intake import load_intake_config
@@ -318,10 +340,33 @@ def cmd_import(args: argparse.Namespace) -> int:
         task=task,
         frozen=(checks.frozen_samples, checks.frozen_s),  # the thresholds train warns with
     )
-    for bag, out, report in import_bags(args.bags, args.out, options, f".{args.format}"):
-        print(f"{bag} -> {out}: {report.summary()}", flush=True)
-        warn("bag import", out.name, report.findings)
-    return 0
+    return _run_imports(args, plan_imports(args.bags, args.out, options, f".{args.format}"))
+
+
+def _run_imports(args: argparse.Namespace, planned: list[PlannedImport]) -> int:
+    """Import every planned bag (on --jobs workers); a bag that cannot be imported is named and
+    counted and the others are written (fleet.BadInputs: the exit code, --json's bad_inputs)."""
+    from rcbht_introspection.commands.sensor import warn
+    from rcbht_introspection.io.bag_import import PlannedImport
+
+    jobs = jobs_from_args(args)
+    with backend(args.scheduler):
+        outcomes = parallel_map(functools.partial(attempt, PlannedImport.run), planned, jobs)
+    bad = BadInputs("bag import")
+    reports: list[dict[str, object]] = []
+    for plan, outcome in zip(planned, outcomes, strict=True):
+        if not isinstance(outcome, Failed):
+            print(f"{plan.bag} -> {plan.out}: {outcome.summary()}", flush=True)
+            warn("bag import", plan.out.name, outcome.findings)
+            reports.append({"bag": str(plan.bag), "out": str(plan.out), **outcome.to_dict()})
+    bad.keep(outcomes)
+    if args.json is not None:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        record = {"imported": reports, "bad_inputs": bad.to_dict()}
+        args.json.write_text(json.dumps(record, indent=1) + "\n")
+    bad.check_some()
+    print(f"imported {len(reports)} of {len(planned)} bag(s) into {args.out}")
+    return bad.finish(args.strict)
 
 
 def cmd_info(args: argparse.Namespace) -> int:

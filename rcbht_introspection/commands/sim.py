@@ -9,6 +9,7 @@ from pathlib import Path
 
 from rcbht_introspection.commands.progress import progress_bar
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.fleet import add_parallel_options, backend, jobs_from_args
 
 TASK_CHOICES: tuple[str, ...] = ("snap-assembly", "peg-in-hole")
 """sim.tasks.SIM_TASKS, spelled out so that `rcbht --help` does not import MuJoCo."""
@@ -66,6 +67,7 @@ def _register_sim(subparsers: argparse._SubParsersAction[argparse.ArgumentParser
         "200 Hz snap-assembly as HIRO, 100 Hz peg-in-hole)",
     )
     _add_output_options(p)
+    add_parallel_options(p)
     p.set_defaults(func=run_sim)
 
 
@@ -119,20 +121,23 @@ def run_sim(args: argparse.Namespace) -> int:
         args.progress == "auto" and args.trials > 4 and sys.stderr.isatty()
     )
     bar = progress_bar(args.trials, "simulating", "trial") if progress else None
+    jobs = jobs_from_args(args)
     start = time.perf_counter()
-    written = write_dataset(
-        args.out,
-        args.trials,
-        scenario=args.scenario,
-        seed=args.seed,
-        failures=args.failures,
-        rate_hz=args.rate,
-        fmt=args.fmt,
-        progress=bar.update if bar is not None else None,
-        config=config,
-        task=args.task,
-        sessions=args.sessions,
-    )
+    with backend(args.scheduler):
+        written = write_dataset(
+            args.out,
+            args.trials,
+            scenario=args.scenario,
+            seed=args.seed,
+            failures=args.failures,
+            rate_hz=args.rate,
+            fmt=args.fmt,
+            progress=bar.update if bar is not None else None,
+            config=config,
+            task=args.task,
+            sessions=args.sessions,
+            jobs=jobs,
+        )
     elapsed = time.perf_counter() - start
     if bar is not None:
         bar.close()

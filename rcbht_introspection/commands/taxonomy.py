@@ -7,7 +7,9 @@
 from __future__ import annotations
 
 import argparse
+import functools
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -20,9 +22,19 @@ from rcbht_introspection.commands.sensor import (
     warn,
 )
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.fleet import (
+    BadInputs,
+    add_parallel_options,
+    add_strict_inputs,
+    attempt,
+    backend,
+    jobs_from_args,
+    parallel_map,
+)
 from rcbht_introspection.taxonomy.words import Level
 
 if TYPE_CHECKING:
+    from rcbht_introspection.io.sensor_checks import RepeatedPolicy
     from rcbht_introspection.io.trial import Trial
     from rcbht_introspection.taxonomy.config import TaxonomyConfig
     from rcbht_introspection.taxonomy.words import TrialWords
@@ -42,7 +54,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     add_taxonomy_options(p)
     p.add_argument("--engine", choices=ENGINES, default="batch")
     add_repeated_stamps(p)
-    add_strict(p)
+    add_strict_inputs(
+        p, "trial folder (a state time after its last sample or out of order makes it one)"
+    )
+    add_parallel_options(p)
     p.set_defaults(func=run_label)
 
     p = subparsers.add_parser(
@@ -98,26 +113,64 @@ def checked_reader(
     return read
 
 
-def run_label(args: argparse.Namespace) -> int:
-    from rcbht_introspection.io.hiro import find_trials
+@dataclass(frozen=True)
+class _Labelled:
+    """What labelling one trial folder leaves for the summary: its sensor findings and the
+    state times dropped from it."""
+
+    folder: Path
+    trial: str
+    findings: tuple[str, ...]
+    dropped: int
+
+
+def _label_one(
+    label: Callable[[Trial], TrialWords],
+    read: tuple[RepeatedPolicy | None, bool, int, float],
+    fmt: str,
+    out: Path,
+    folder: Path,
+) -> _Labelled:
+    """Read one trial folder (`read`: repeated-stamp policy, strict, frozen-sensor thresholds),
+    label it and write its words (on any worker)."""
+    from rcbht_introspection.io.hiro import dropped_state_times, read_trial
     from rcbht_introspection.io.rcbht_format import write_trial_words
+    from rcbht_introspection.io.sensor_checks import trial_findings
     from rcbht_introspection.io.words_jsonl import write_jsonl
 
+    policy, strict, frozen_samples, frozen_s = read
+    trial = read_trial(folder, policy, strict)
+    words = label(trial)
+    if fmt == "rcbht":
+        write_trial_words(words, out / folder.name)
+    else:
+        write_jsonl(words, out / folder.name / "words.jsonl")
+    findings = tuple(trial_findings(trial, frozen_samples, frozen_s))
+    return _Labelled(folder, trial.name, findings, dropped_state_times(trial))
+
+
+def run_label(args: argparse.Namespace) -> int:
+    from rcbht_introspection.io.hiro import find_trials
+    from rcbht_introspection.live.intake import load_intake_config
+
     label = labeller(args.engine, taxonomy_or_default(args))
-    dropped: dict[str, int] = {}
-    read = checked_reader("label", args, dropped)
+    jobs = jobs_from_args(args)
     trials = find_trials(args.trials)
     if not trials:
         raise InputError("no trial folders found", path=args.trials[0])
-    for folder in trials:
-        words = label(read(folder))
-        if args.format == "rcbht":
-            write_trial_words(words, args.out / folder.name)
-        else:
-            write_jsonl(words, args.out / folder.name / "words.jsonl")
-    report_dropped("label", dropped)
-    print(f"labelled {len(trials)} trial(s) into {args.out}")
-    return 0
+    checks = load_intake_config()
+    read = (repeated_policy(args), args.strict, checks.frozen_samples, checks.frozen_s)
+    one = functools.partial(_label_one, label, read, args.format, args.out)
+    with backend(args.scheduler):
+        outcomes = parallel_map(functools.partial(attempt, one), trials, jobs)
+    bad = BadInputs("label")
+    done = bad.keep(outcomes)
+    bad.check_some()
+    for d in done:
+        warn("label", d.folder.name, d.findings)
+    report_dropped("label", {d.trial: d.dropped for d in done})
+    print(f"labelled {len(done)} trial(s) into {args.out}")
+    return bad.finish(args.strict)
 
 
 # --------------------------------------------------------------------------- conformance

@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from rcbht_introspection.commands.sensor import add_strict, report_dropped
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.fleet import add_parallel_options, backend, jobs_from_args
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -54,21 +53,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         action="store_true",
         help="leave out the anchors' methods (hmm, minirocket: the peers extra)",
     )
-    ev.add_argument(
-        "--jobs",
-        type=int,
-        default=1,
-        metavar="N",
-        help="joblib workers (loky processes) for the trials' features and the folds; -1: one "
-        "per core (the results are the same whatever N)",
-    )
-    ev.add_argument(
-        "--scheduler",
-        default=None,
-        metavar="ADDRESS",
-        help="run the folds on a dask.distributed scheduler (e.g. tcp://10.0.0.5:8786) through "
-        "joblib's Dask backend (the fleet extra); --jobs is then the cluster's",
-    )
+    add_parallel_options(ev, "trials' features and the folds")
     ev.set_defaults(func=cmd_verify_eval)
 
 
@@ -179,8 +164,9 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     if n_nominal < 3:
         raise InputError("need at least 3 successful trials to train and calibrate on")
     contradictions = _contradictions(args.model, trials, config) if args.model else None
+    jobs = jobs_from_args(args)
     try:
-        with _backend(args.scheduler):
+        with backend(args.scheduler):
             runs = verify_runs(
                 trials,
                 labels,
@@ -192,7 +178,7 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
                 train_labels=train_labels,
                 contradictions=contradictions,
                 peers=not args.no_peers,
-                jobs=-1 if args.scheduler else args.jobs,
+                jobs=jobs,
             )
     except ValueError as exc:  # e.g. successes without sub-task events to calibrate on
         raise InputError(str(exc)) from None
@@ -206,28 +192,6 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     if args.plots:
         _plots(args.plots, trials, labels, runs["verifier"])
     return 0
-
-
-@contextlib.contextmanager
-def _backend(scheduler: str | None) -> Iterator[None]:
-    """joblib's Dask backend on the scheduler at `scheduler` (None: joblib's default, loky)."""
-    if scheduler is None:
-        yield
-        return
-    try:
-        from dask.distributed import Client
-    except ImportError:
-        raise InputError(
-            "--scheduler needs Dask: pip install 'rcbht_introspection[fleet]'"
-        ) from None
-    from joblib import parallel_config
-
-    try:
-        client = Client(scheduler, timeout=30)  # type: ignore[no-untyped-call]
-    except OSError as exc:
-        raise InputError(f"--scheduler {scheduler}: {exc}") from None
-    with client, parallel_config(backend="dask"):
-        yield
 
 
 def _contradictions(model_file: Path, trials: list[Any], config: Any) -> dict[str, Any]:

@@ -434,12 +434,28 @@ def import_bag(path: Path | str, out: Path | str, options: ImportOptions) -> Imp
     return report
 
 
-def import_bags(
-    paths: Sequence[Path | str], out_dir: Path | str, options: ImportOptions, suffix: str = ".mcap"
-) -> Iterator[tuple[Path, Path, ImportReport]]:
-    """Import each bag to `out_dir/<name><suffix>`, yielding (input, output, report) as it goes.
+@dataclass(frozen=True)
+class PlannedImport:
+    """One bag of an import: its input, its output and its options (its own phase CSV)."""
 
-    A phase CSV folder holds `<name>.csv` for each bag; a CSV file serves a single bag only."""
+    bag: Path
+    out: Path
+    options: ImportOptions
+
+    def run(self) -> ImportReport:
+        """Import it (import_bag; on any worker)."""
+        return import_bag(self.bag, self.out, self.options)
+
+    def __str__(self) -> str:
+        return str(self.bag)
+
+
+def plan_imports(
+    paths: Sequence[Path | str], out_dir: Path | str, options: ImportOptions, suffix: str = ".mcap"
+) -> list[PlannedImport]:
+    """Each bag to `out_dir/<name><suffix>`, checked before any bag is read: one output each
+    (names unique), none existing. A phase CSV folder holds `<name>.csv` for each bag; a CSV file
+    serves a single bag only."""
     inputs = [Path(p) for p in paths]
     names = [import_name(p) for p in inputs]
     for i, name in enumerate(names):
@@ -455,10 +471,21 @@ def import_bags(
     for out in outs:  # before any bag is read: a long import should not fail at its end
         if out.exists():
             raise InputError("exists already, not overwriting", out)
-    for path, name, out in zip(inputs, names, outs, strict=True):
-        own = (
+    return [
+        PlannedImport(
+            path,
+            out,
             options
             if csv is None or not csv.is_dir()
-            else replace(options, phase_csv=csv / f"{name}.csv")
+            else replace(options, phase_csv=csv / f"{name}.csv"),
         )
-        yield path, out, import_bag(path, out, own)
+        for path, name, out in zip(inputs, names, outs, strict=True)
+    ]
+
+
+def import_bags(
+    paths: Sequence[Path | str], out_dir: Path | str, options: ImportOptions, suffix: str = ".mcap"
+) -> Iterator[tuple[Path, Path, ImportReport]]:
+    """Import each bag (plan_imports) in turn, yielding (input, output, report) as it goes."""
+    for planned in plan_imports(paths, out_dir, options, suffix):
+        yield planned.bag, planned.out, planned.run()

@@ -15,7 +15,11 @@ about a second a fit).
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import functools
 import math
+import pickle
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -27,6 +31,7 @@ from numpy.typing import NDArray
 from sklearn.ensemble import RandomForestClassifier
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.fleet import parallel_map
 from rcbht_introspection.grammar import EncodingName
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
@@ -231,6 +236,8 @@ class _Run:
         self.tally = _Tally.empty(plan, protocol.permutations)
         self.n_near_empty = _count_near_empty(plan.complete, protocol)
         self.peer: SubtaskWrench | None = None
+        self.steps: frozenset[int] | None = None
+        """The curve steps (indices) a permutation runs; None: all."""
         if protocol.peers:
             from rcbht_introspection.peers.subtask_baseline import SubtaskWrench
 
@@ -264,6 +271,8 @@ class _Run:
         val_samples = [s for t in validation for s in t.samples]
         val_kept = [s for s in val_samples if not self.near_empty(s)]
         for j, k in enumerate(plan.steps):
+            if self.steps is not None and j not in self.steps:
+                continue  # another worker's share of this permutation (_run_permutations)
             train_samples = [s for t in training[:k] for s in t.samples]
             began = time.perf_counter()
             model = self.train(train_samples, perm, running=k == plan.n_train)
@@ -390,12 +399,79 @@ def _count_near_empty(complete: Sequence[TrialSamples], protocol: Protocol) -> i
     return sum(s.duration < protocol.near_empty_seconds for t in complete for s in t.samples)
 
 
+STEP_SHARES = 2
+"""A permutation runs on this many workers, each taking every STEP_SHARES-th curve step (so each
+share holds small and large training sets alike): with few permutations, workers stay busy."""
+
+
+def _one_share(shipped: NDArray[np.uint8], unit: tuple[int, int]) -> _Tally:
+    """Share `unit` = (permutation, share) of the pickled run `shipped` on a worker, in a tally
+    of its own: the steps j with j % STEP_SHARES == share. The bytes are a NumPy array, which
+    joblib hands to its local workers as one memory-mapped file instead of pickling them again
+    for every share; each share unpickles its own copy (a run is not reused across shares)."""
+    run: _Run = pickle.loads(shipped.tobytes())
+    perm, share = unit
+    run.tally = _Tally.empty(run.plan, run.protocol.permutations)
+    run.steps = frozenset(range(share, len(run.plan.steps), STEP_SHARES))
+    run.permutation(perm)
+    return run.tally
+
+
+def _merge_tally(into: _Tally, part: _Tally) -> None:
+    """Add one share's tally: the curve cells it ran, its counts, its list entries (merged in
+    permutation and share order, the lists are those of one process running them in turn:
+    only a permutation's last step adds to them)."""
+    for f in dataclasses.fields(_Tally):
+        mine, theirs = getattr(into, f.name), getattr(part, f.name)
+        if isinstance(mine, np.ndarray) and mine.dtype.kind == "f":
+            ran = ~np.isnan(theirs)  # curves: (permutation, step), NaN where not run
+            mine[ran] = theirs[ran]
+        elif isinstance(mine, np.ndarray):
+            mine += theirs  # counts
+        elif isinstance(mine, list):
+            mine.extend(theirs)
+        else:  # per prefix fraction: lists
+            for key, values in theirs.items():
+                mine[key].extend(values)
+
+
+def _run_permutations(run: _Run, jobs: int) -> None:
+    """Every permutation of the protocol into run.tally: in turn (`jobs` 1), else in shares of
+    their steps on joblib workers (fleet.parallel_map); each step is seeded by its permutation,
+    never by its worker, and the last step of a permutation (the only one adding to the lists)
+    falls in one share, so the tally is the one of running them in turn."""
+    if jobs == 1:
+        for perm in range(run.protocol.permutations):
+            run.permutation(perm)
+        return
+    everything = [s for t in run.plan.complete for s in t.samples]
+    run.train(everything, 0)  # fills run.cache with every sample's encoding: shipped warm
+    progress = run.progress
+    shipped = copy.copy(run)
+    shipped.progress = None  # a progress bar stays in this process
+    data = pickle.dumps(shipped, protocol=pickle.HIGHEST_PROTOCOL)
+    payload = np.frombuffer(data, dtype=np.uint8)
+    units = [(p, share) for p in range(run.protocol.permutations) for share in range(STEP_SHARES)]
+    ticks = iter([len(range(share, len(run.plan.steps), STEP_SHARES)) for _, share in units])
+    parts = parallel_map(
+        functools.partial(_one_share, payload),
+        units,
+        jobs,
+        (lambda _: progress(next(ticks))) if progress is not None else None,
+    )
+    for part in parts:
+        _merge_tally(run.tally, part)
+
+
 def evaluate(
     trials: Sequence[TrialSamples],
     protocol: Protocol = Protocol(),
     progress: Callable[[int], None] | None = None,
+    jobs: int = 1,
 ) -> dict[str, Any]:
-    """Run the protocol; returns the JSON-ready result (keys documented in docs/learning.md)."""
+    """Run the protocol; returns the JSON-ready result (keys documented in docs/learning.md).
+    `jobs`: joblib workers for the permutations (fleet.py; the result is the same whatever N,
+    but for the measured fit and prediction times)."""
     plan = _plan(trials, protocol)
     live = (
         _live_windows(plan.complete, protocol.taxonomy, protocol.repeated, protocol.live_config)
@@ -403,8 +479,7 @@ def evaluate(
         else {}
     )
     run = _Run(protocol, plan, live, progress)
-    for perm in range(protocol.permutations):
-        run.permutation(perm)
+    _run_permutations(run, jobs)
     result = _curve_result(plan, protocol, run.tally)
     if live:
         result["live_augment"] = protocol.live_augment

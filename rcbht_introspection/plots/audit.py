@@ -72,7 +72,10 @@ def _levels_panel(ax: Axes, report: dict[str, Any], index: dict[str, int]) -> No
             ax.plot(scaled[:, j], linewidth=0.8, label=name)
         ax.legend(fontsize=6, ncol=6, loc="upper left")
     for finding in report["findings"]:
-        if finding["kind"] == "session_change":
+        if finding["kind"] == "session":  # the trials of a session besides the largest
+            for name in finding["trials"]:
+                ax.axvline(index[name], color=SESSION_COLOR, linewidth=1.5, alpha=0.5)
+        elif finding["kind"] == "session_change":  # a shift within a session, in input order
             ax.axvline(index[finding["between"][1]] - 0.5, color=SESSION_COLOR, linewidth=1.5)
     ax.set_ylabel("free-motion level\n(robust units)", fontsize=8)
     ax.grid(alpha=0.3)

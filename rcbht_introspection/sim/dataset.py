@@ -8,24 +8,28 @@ when its task is not the snap assembly (bags carry the task in their trial info)
 
 from __future__ import annotations
 
+import functools
 import json
 import shutil
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, get_args
 
 from rcbht_introspection.errors import InputError
+from rcbht_introspection.fleet import parallel_map
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import write_trial
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim.config import FailureType, SimConfig
 from rcbht_introspection.sim.failures import failure_classes
 from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
-from rcbht_introspection.sim.sessions import draw_sessions, in_session, session_of
+from rcbht_introspection.sim.sessions import SessionSensor, draw_sessions, in_session, session_of
 from rcbht_introspection.sim.tasks import (
     SimTask,
     SimTaskName,
     TaskConfig,
+    TrialSimulator,
     check_request,
     get_sim_task,
     trial_simulator,
@@ -117,6 +121,32 @@ def _write_trial(trial: Trial, out: Path, name: str, fmt: DatasetFormat, sim_tas
     return path
 
 
+@dataclass(frozen=True)
+class _Unit:
+    """One trial of a set to simulate: its index, seed, failure and session (None: no sessions)."""
+
+    index: int
+    seed: int
+    failure: FailureType | None
+    session: SessionSensor | None
+
+
+def _simulate_one(
+    simulate: TrialSimulator,
+    out: Path,
+    fmt: DatasetFormat,
+    sim_task: SimTask,
+    scenario: ScenarioName,
+    unit: _Unit,
+) -> tuple[Path, dict[str, object]]:
+    """Simulate and write one trial (on any worker); its path and its sim_meta.json entry."""
+    name = trial_name(scenario, unit.index, unit.failure, sim_task.label)
+    trial = simulate(unit.seed, unit.failure, name)
+    if unit.session is not None:
+        trial = in_session(trial, unit.session)
+    return _write_trial(trial, out, name, fmt, sim_task), _index_entry(name, trial)
+
+
 def _index_entry(name: str, trial: Trial) -> dict[str, object]:
     """A trial's entry in sim_meta.json: name, outcome, switch times, end and its metadata."""
     return {
@@ -141,11 +171,13 @@ def write_dataset(
     config: TaskConfig | None = None,
     task: SimTaskName = "snap-assembly",
     sessions: int = 1,
+    jobs: int = 1,
 ) -> list[Path]:
     """Simulate `n_trials` trials of `task` into `out_dir`; returns the written trial folders (or
     bag files). `rate_hz` None is the task's sensor rate (config sensor.rate_hz); `sessions` > 1
     splits the trials into recording sessions with a sensor bias and drift each (sim/sessions.py);
-    `progress` is called with 1 after each trial."""
+    `progress` is called with 1 after each trial. `jobs`: joblib workers (fleet.parallel_map);
+    each trial has its own seed, so the set is the same whatever the count."""
     sim_task = get_sim_task(task)
     _check_set(fmt, n_trials, scenario, sim_task, failures)
     config = config or sim_task.load_config(None)
@@ -157,17 +189,14 @@ def write_dataset(
     out.mkdir(parents=True, exist_ok=True)
     types = failure_classes(config.failures) if isinstance(config, SimConfig) else ()
     plan = trial_plan(n_trials, seed, failures, types)
-    written: list[Path] = []
-    index: list[dict[str, object]] = []
-    for i, (trial_seed, failure) in enumerate(plan):
-        name = trial_name(scenario, i, failure, sim_task.label)
-        trial = simulate(trial_seed, failure, name)
-        if days:
-            trial = in_session(trial, days[session_of(i, n_trials, sessions)])
-        written.append(_write_trial(trial, out, name, fmt, sim_task))
-        index.append(_index_entry(name, trial))
-        if progress is not None:
-            progress(1)
+    units = [
+        _Unit(i, trial_seed, failure, days[session_of(i, n_trials, sessions)] if days else None)
+        for i, (trial_seed, failure) in enumerate(plan)
+    ]
+    one = functools.partial(_simulate_one, simulate, out, fmt, sim_task, scenario)
+    done = parallel_map(one, units, jobs, progress)
+    written = [path for path, _ in done]
+    index = [entry for _, entry in done]
     meta: dict[str, object] = {"task": sim_task.name, "scenario": scenario, "seed": seed}
     meta.update({"rate_hz": rate, "format": fmt, "trials": index})
     (out / "sim_meta.json").write_text(json.dumps(meta, indent=1) + "\n")

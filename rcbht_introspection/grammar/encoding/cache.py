@@ -43,6 +43,12 @@ class SampleCache:
         self.size += 1
         return value
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickled (on a joblib worker, with the samples it holds): keyed by the samples' new
+        identities, so the copy of a warm cache is warm."""
+        self.__dict__.update(state)
+        self.entries = {id(sample): (sample, results) for sample, results in self.entries.values()}
+
     def forget(self, sample: SubtaskSample) -> None:
         """Drop every result of `sample` (it will not be encoded again)."""
         hit = self.entries.pop(id(sample), None)
