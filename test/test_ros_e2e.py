@@ -59,7 +59,7 @@ def test_replay_eval_of_held_out_trials(hiro_data: Path, model: Path, tmp_path: 
         assert b["published_wrench"] > 5000 and b["node_words"] == b["offline_words"] > 0
 
 
-@pytest.mark.parametrize("spin", ["executor", "draining"])
+@pytest.mark.parametrize("spin", ["events", "executor", "draining"])
 def test_two_arm_replay_matches_offline(
     hiro_data: Path, model: Path, tmp_path: Path, spin: Spin
 ) -> None:

@@ -138,14 +138,17 @@ def _scenario_bags(work: Path, name: str, arms: int, sources: list[Trial]) -> li
 
 
 SCENARIOS: tuple[tuple[str, int, bool, Spin], ...] = (
-    ("one_arm_1kHz", 1, False, "executor"),
-    ("two_arm_2x1kHz", 2, False, "executor"),
-    ("one_arm_1kHz_verifier", 1, True, "executor"),
+    ("one_arm_1kHz", 1, False, "events"),
+    ("two_arm_2x1kHz", 2, False, "events"),
+    ("one_arm_1kHz_verifier", 1, True, "events"),
+    ("one_arm_1kHz_executor", 1, False, "executor"),
+    ("two_arm_2x1kHz_executor", 2, False, "executor"),
+    ("one_arm_1kHz_verifier_executor", 1, True, "executor"),
     ("one_arm_1kHz_draining", 1, False, "draining"),
     ("two_arm_2x1kHz_draining", 2, False, "draining"),
 )
-"""(name, arms, with verifier_node, the nodes' spin): the default spin, then the draining one
-on the same bags."""
+"""(name, arms, with verifier_node, the nodes' spin): the default spin (EventsExecutor), then
+rclpy's SingleThreadedExecutor and the draining spin on the same bags."""
 
 
 def run(out_dir: Path) -> dict[str, Any]:

@@ -11,7 +11,7 @@ from typing import get_args
 from rcbht_introspection.commands.options import add_state_options, state_from_args
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
-from rcbht_introspection.nodes.spin import Spin
+from rcbht_introspection.nodes.spin import DEFAULT_SPIN, Spin
 from rcbht_introspection.taxonomy import StreamProfile
 
 
@@ -125,8 +125,9 @@ def _add_segmenter_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--spin",
         choices=get_args(Spin),
-        default="executor",
-        help="the nodes' spin: rclpy's executor, or draining (bursts through rclpy's private API)",
+        default=DEFAULT_SPIN,
+        help="the nodes' spin: events (rclpy's EventsExecutor), executor (its "
+        "SingleThreadedExecutor), or draining (bursts through rclpy's private API)",
     )
 
 

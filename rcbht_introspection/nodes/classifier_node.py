@@ -144,19 +144,17 @@ class ClassifierNode(ManagedNode):
         self.word_subs = [
             (
                 arm,
-                self.create_subscription(
+                self.subscribe(
                     WordsMsg, topic, partial(self.on_words, arm), self.qos,
                     callback_group=drained,
                 ),
             )
             for (arm, _), topic in word_topics(cfg.words_namespace, cfg.arms).items()
         ]  # fmt: skip
-        self.phase_sub = self.create_subscription(
+        self.phase_sub = self.subscribe(
             PhaseMsg,
             cfg.phase_topic,
-            # on_phase takes (msg, MessageInfo), which rclpy passes to two-argument callbacks;
-            # its annotation of `callback` names only the one-argument form
-            self.on_phase,  # type: ignore[arg-type]
+            self.on_phase,
             phase_qos(cfg.qos_reliability),
             callback_group=drained,
         )
@@ -263,13 +261,12 @@ class ClassifierNode(ManagedNode):
         for level, line in self.teaching.notes():
             {"info": log.info, "warning": log.warning}.get(level, log.error)(line)
 
-    def on_words(self, arm: str, msg: WordsMsg, info: dict[str, int]) -> None:
-        """One Words message (the executor path): handed over with its burst, at settled()."""
-        self.burst.append((info.get("source_timestamp", 0), words_input(arm, msg)))
+    def on_words(self, arm: str, msg: WordsMsg, published: int | None) -> None:
+        """One Words message: handed over with its burst, at settled()."""
+        self.burst.append((published or 0, words_input(arm, msg)))
 
-    def on_phase(self, msg: PhaseMsg, info: dict[str, int]) -> None:
-        """One Phase message (the executor path): handed over with its burst, at settled()."""
-        published = info.get("source_timestamp")
+    def on_phase(self, msg: PhaseMsg, published: int | None) -> None:
+        """One Phase message: handed over with its burst, at settled()."""
         self.burst.append((published or 0, phase_input(msg, published)))
 
     def settled(self) -> None:

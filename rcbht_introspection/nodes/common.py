@@ -8,18 +8,20 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
+from functools import partial
 from typing import Any, Protocol
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor, SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
 from rcbht_introspection.errors import InputError
@@ -43,6 +45,7 @@ from rcbht_introspection.nodes.params import (
     defaults,
     descriptions,
 )
+from rcbht_introspection.nodes.spin import Spin
 
 
 def qos_profile(depth: int, reliability: Reliability) -> QoSProfile:
@@ -106,6 +109,19 @@ DIAGNOSTICS_PERIOD_S = 1.0
 """How often a node publishes its status on /diagnostics."""
 
 
+def source_ns(info: Any) -> int | None:
+    """The DDS source timestamp of rclpy's MessageInfo (None when the middleware has none)."""
+    return (info.get("source_timestamp") if info else None) or None
+
+
+def _with_info(handler: Callable[[Any, int | None], None], msg: Any, info: Any) -> None:
+    handler(msg, source_ns(info))
+
+
+def _without_info(handler: Callable[[Any, int | None], None], msg: Any) -> None:
+    handler(msg, None)
+
+
 class ManagedNode(LifecycleNode):
     """A lifecycle node of ours: configure reads and validates the parameters of `config_class`.
 
@@ -132,6 +148,9 @@ class ManagedNode(LifecycleNode):
         self.autostart = bool(autostart.value)
         self.state_label = "unconfigured"
         self.config_error = ""
+        self.events = False
+        """Spun by rclpy's EventsExecutor (run() decides at start-up): callbacks get the
+        message alone, no MessageInfo (rclpy 7.1.6's EventsExecutor cannot pass it)."""
         self.draining = False
         """Whether the high-rate inputs are drained (parameter `spin`, read at configure)."""
         self.inputs: Intake | None = None
@@ -171,6 +190,20 @@ class ManagedNode(LifecycleNode):
         subscriptions (the robot's intake, in order)."""
         if self.inputs is not None:
             self.inputs.drain()
+
+    def subscribe(
+        self,
+        msg_type: Any,
+        topic: str,
+        handler: Callable[[Any, int | None], None],
+        qos: QoSProfile,
+        **kwargs: Any,
+    ) -> Subscription:
+        """A subscription whose `handler(msg, source_ns)` gets the DDS source timestamp, or None
+        under the EventsExecutor (which calls a subscription's callback with the message only)."""
+        wrap = _without_info if self.events else _with_info
+        callback: Callable[..., None] = partial(wrap, handler)
+        return self.create_subscription(msg_type, topic, callback, qos, **kwargs)
 
     def get_logger(self) -> NodeLogger:
         """The node's logger: rclpy's Node.get_logger, seen through the typed NodeLogger."""
@@ -219,7 +252,7 @@ class ManagedNode(LifecycleNode):
 
     def _configure(self) -> None:
         cfg = read_config(self, self.config_class)
-        self.draining = cfg.spin == "draining"
+        self.draining = cfg.spin == "draining" and not self.events
         if self.draining and (why := unavailable()) is not None:
             self.draining = False
             self.get_logger().warning(f"spin: draining unavailable ({why}): rclpy's executor spins")
@@ -303,8 +336,9 @@ def run(
     try:
         node = node_factory()
         node.stop = stop
-        executor = SingleThreadedExecutor()
+        executor, node.events = make_executor(node.get_parameter("spin").value)
         executor.add_node(node)
+        node.get_logger().info(f"spun by rclpy's {type(executor).__name__}")
         if node.autostart and not stop.requested:
             configured = node.trigger_configure() == TransitionCallbackReturn.SUCCESS  # type: ignore[no-untyped-call]
             if configured:
@@ -331,13 +365,29 @@ def run(
     return 0
 
 
+def make_executor(spin: Spin | str) -> tuple[Executor, bool]:
+    """The process's executor for the parameter `spin` (read at start-up) and whether it is
+    rclpy's EventsExecutor: that one for `events` where rclpy has it, else SingleThreadedExecutor."""
+    if spin == "events":
+        try:
+            from rclpy.experimental.events_executor import EventsExecutor
+        except ImportError:  # pragma: no cover - an rclpy without the experimental executor
+            return SingleThreadedExecutor(), False
+        return EventsExecutor(), True
+    return SingleThreadedExecutor(), False
+
+
 BURST_CALLBACKS = 10_000
 """Most callbacks the executor path runs before the node is told its burst is complete."""
 
 
-def spin(executor: SingleThreadedExecutor, node: ManagedNode, stop: StopSignal) -> None:
-    """Spin `node` until `stop`: rclpy's executor, or the draining spin while the node's
-    configuration asks for it (the parameter `spin` takes effect at each configure)."""
+def spin(executor: Executor, node: ManagedNode, stop: StopSignal) -> None:
+    """Spin `node` until `stop`: the EventsExecutor, rclpy's SingleThreadedExecutor, or the
+    draining spin while the node's configuration asks for it (`spin` takes effect at configure
+    between the last two)."""
+    if node.events:
+        spin_events(executor, node, stop)
+        return
     while executor.context.ok() and not stop.requested:
         if node.draining:
             spin_draining(executor, node, stop, keep=lambda: node.draining)
@@ -345,7 +395,15 @@ def spin(executor: SingleThreadedExecutor, node: ManagedNode, stop: StopSignal) 
             spin_bursts(executor, node, stop)
 
 
-def spin_bursts(executor: SingleThreadedExecutor, node: ManagedNode, stop: StopSignal) -> None:
+def spin_events(executor: Executor, node: ManagedNode, stop: StopSignal) -> None:
+    """rclpy's EventsExecutor: run the next event (a message, a timer, a service request) and
+    tell the node (`settled`); a bounded wait, so a stop request is seen within HOUSEKEEPING_S."""
+    while executor.context.ok() and not stop.requested:
+        executor.spin_once(timeout_sec=HOUSEKEEPING_S)
+        node.settled()
+
+
+def spin_bursts(executor: Executor, node: ManagedNode, stop: StopSignal) -> None:
     """rclpy's executor, a burst at a time: wait for a callback, run every callback whose
     message is delivered by then, and tell the node (`settled`) before waiting again."""
     while executor.context.ok() and not stop.requested and not node.draining:

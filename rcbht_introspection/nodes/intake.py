@@ -1,8 +1,9 @@
 """The robot's intake of a node (segmenter_node, verifier_node): wrench per arm and /task_phase.
 
-Both nodes take samples and events the same way: by rclpy's executor (callbacks with message
-objects, the default) or drained in bursts (`spin: draining`, nodes/draining.py: raw CDR decoded
-directly, and the events already delivered handled before each sample).
+Both nodes take samples and events the same way: by an rclpy executor (callbacks with message
+objects; the EventsExecutor by default) or drained in bursts (`spin: draining`,
+nodes/draining.py: raw CDR decoded directly, and the events already delivered handled before
+each sample).
 """
 
 from __future__ import annotations
@@ -33,6 +34,10 @@ _Item = tuple[int | None, str, str | tuple[int, Sequence[float]]]
 """(source timestamp, arm ('' for an event), event name or (stamp ns, wrench))."""
 
 
+Subscribe = Callable[..., Subscription]
+"""ManagedNode.subscribe: (type, topic, handler(msg, source ns or None), qos, **kwargs)."""
+
+
 def _source(info: Any) -> int | None:
     """The DDS source timestamp of rclpy's MessageInfo (None when the middleware has none)."""
     return (info.get("source_timestamp") if info else None) or None
@@ -45,6 +50,7 @@ class Intake:
     def __init__(
         self,
         node: Node,
+        subscribe: Subscribe,
         topics: tuple[Sequence[str], Sequence[str], str],
         on_sample: OnSample,
         on_phase: OnPhase,
@@ -61,39 +67,32 @@ class Intake:
         self.wrench: list[tuple[str, Subscription]] = [
             (
                 arm,
-                node.create_subscription(
+                subscribe(
                     WrenchStamped, topic, partial(self._sample, arm), qos, raw=draining,
                     callback_group=group,
                 ),
             )
             for arm, topic in zip(arms, wrench_topics, strict=True)
         ]  # fmt: skip
-        # rclpy passes (msg, MessageInfo) to a two-argument callback
-        self.phase = node.create_subscription(
-            String,
-            phase_topic,
-            self._phase,  # type: ignore[arg-type]  # rclpy's annotation names the one-argument form
-            qos,
-            callback_group=group,
-        )
+        self.phase = subscribe(String, phase_topic, self._phase, qos, callback_group=group)
 
-    def _phase(self, msg: String, info: Any) -> None:
-        item: _Item = (_source(info), "", msg.data)
+    def _phase(self, msg: String, source: int | None) -> None:
+        item: _Item = (source, "", msg.data)
         if self.draining:
             self._dispatch(item)
         else:
             self.burst.append(item)
 
-    def _sample(self, arm: str, msg: bytes | WrenchStamped, info: Any) -> None:
+    def _sample(self, arm: str, msg: bytes | WrenchStamped, source: int | None) -> None:
         if isinstance(msg, bytes):
             self.take_phases()  # an event published before this sample is handled before it
             try:
                 stamp, wrench = decode_wrench_sample(msg)
             except (ValueError, struct.error):
                 stamp, wrench = wrench_sample(deserialize_message(msg, WrenchStamped))
-            self.on_sample(arm, stamp, wrench, _source(info))
+            self.on_sample(arm, stamp, wrench, source)
         else:
-            self.burst.append((_source(info), arm, wrench_sample(msg)))
+            self.burst.append((source, arm, wrench_sample(msg)))
 
     def _dispatch(self, item: _Item) -> None:
         source, arm, payload = item
@@ -115,7 +114,7 @@ class Intake:
     def take_phases(self) -> None:
         """Drained: handle the /task_phase events already delivered (before the next sample)."""
         while (taken := take(self.phase)) is not None:
-            self._phase(*taken)
+            self._phase(taken[0], _source(taken[1]))
 
     def drain(self) -> None:
         """Drained: every event and sample already delivered (arms in turn), in order.
@@ -124,7 +123,7 @@ class Intake:
         ahead of two 1 kHz arms. Bounded, so the node's timers still run.
         """
         self.take_phases()
-        take_bursts(self.wrench, self._sample)
+        take_bursts(self.wrench, lambda arm, msg, info: self._sample(arm, msg, _source(info)))
 
     def publishers(self) -> int:
         """Fewest publishers matched on any intake topic. A harness waits for >= 1 before it

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from typing import Literal
 
-Spin = Literal["executor", "draining"]
-"""How a node takes its high-rate inputs: rclpy's executor, or nodes/draining.py's bursts."""
+Spin = Literal["events", "executor", "draining"]
+"""How a node is spun: rclpy's EventsExecutor, its SingleThreadedExecutor, or nodes/draining.py."""
+DEFAULT_SPIN: Spin = "events"
 SPIN_HELP = (
-    "executor (rclpy's executor and message objects) or draining (bursts taken through rclpy's "
-    "private wait-set API, wrench decoded from CDR; executor where that API is absent)"
+    "events (rclpy.experimental.EventsExecutor; executor where rclpy has none), executor "
+    "(rclpy's SingleThreadedExecutor) or draining (bursts taken through rclpy's private "
+    "wait-set API, wrench decoded from CDR; executor where that API is absent); read at start-up"
 )

@@ -130,7 +130,7 @@ class VerifierNode(ManagedNode):
         cfg = self.cfg
         if self.stream is not None:
             self.inputs = Intake(
-                self, (cfg.arms, cfg.wrench_topics, cfg.phase_topic), self.sample, self.on_phase,
+                self, self.subscribe, (cfg.arms, cfg.wrench_topics, cfg.phase_topic), self.sample, self.on_phase,
                 self.qos, self.draining,
             )  # fmt: skip
         self.belief_sub = self.create_subscription(
