@@ -126,8 +126,8 @@ def _add_segmenter_options(p: argparse.ArgumentParser) -> None:
         "--spin",
         choices=get_args(Spin),
         default=DEFAULT_SPIN,
-        help="the nodes' spin: events (rclpy's EventsExecutor), executor (its "
-        "SingleThreadedExecutor), or draining (bursts through rclpy's private API)",
+        help="the nodes' spin: events (rclpy's EventsExecutor) or executor (its "
+        "SingleThreadedExecutor)",
     )
 
 

@@ -109,9 +109,12 @@ class SegmenterNode(ManagedNode):
     def activate(self) -> None:
         cfg = self.cfg
         self.inputs = Intake(
-            self, self.subscribe, (cfg.arms, cfg.wrench_topics, cfg.phase_topic), self.sample, self.on_phase,
-            self.qos, self.draining,
-        )  # fmt: skip
+            self,
+            self.subscribe,
+            (cfg.arms, cfg.wrench_topics, cfg.phase_topic),
+            (self.sample, self.on_phase),
+            self.qos,
+        )
         # the latest pose is what counts: depth 1, served by the executor (at least every 20 ms)
         self.pose_subs = [
             self.create_subscription(

@@ -130,9 +130,12 @@ class VerifierNode(ManagedNode):
         cfg = self.cfg
         if self.stream is not None:
             self.inputs = Intake(
-                self, self.subscribe, (cfg.arms, cfg.wrench_topics, cfg.phase_topic), self.sample, self.on_phase,
-                self.qos, self.draining,
-            )  # fmt: skip
+                self,
+                self.subscribe,
+                (cfg.arms, cfg.wrench_topics, cfg.phase_topic),
+                (self.sample, self.on_phase),
+                self.qos,
+            )
         self.belief_sub = self.create_subscription(
             BeliefMsg, cfg.belief_topic, self.on_belief, self.qos
         )

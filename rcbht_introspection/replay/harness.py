@@ -98,8 +98,7 @@ class ReplayEvalOptions:
     """A file of taxonomy profiles, e.g. from `rcbht calibrate` (empty: config/rcbht.yaml)."""
     stream_profile: StreamProfile = "reference"
     spin: Spin = DEFAULT_SPIN
-    """The nodes' `spin` parameter: the EventsExecutor, rclpy's SingleThreadedExecutor, or the
-    draining spin."""
+    """The nodes' `spin` parameter: rclpy's EventsExecutor or its SingleThreadedExecutor."""
     state: TaskStateConfig | None = None
     """classifier_node's `state.*` parameters (None: those of config/classifier.yaml)."""
     startup_timeout: float = 60.0
