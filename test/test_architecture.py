@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "rcbht_introspection"
-CORE = ("taxonomy", "grammar", "learn", "live", "sim", "io", "audit")
+CORE = ("taxonomy", "summaries", "grammar", "learn", "live", "sim", "io", "audit")
 """Subpackages of the pure core (NumPy, SciPy, scikit-learn, MuJoCo; io/ also reads bags with the
 pure-Python rosbags)."""
 ROS_AND_PLOTTING = frozenset(

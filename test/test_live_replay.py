@@ -30,6 +30,7 @@ from rcbht_introspection.live.belief import Belief, BeliefTracker
 from rcbht_introspection.live.classifier import ClassifierSession
 from rcbht_introspection.live.replay import node_inputs, node_stream, replay_beliefs, stream_trial
 from rcbht_introspection.live.state import StateFilter
+from rcbht_introspection.summaries.blocks import WrenchBlock, trial_tracks
 from rcbht_introspection.taxonomy.words import LEVELS
 
 TEST_TRIAL = "20121127-HIROSA-S-45"
@@ -95,9 +96,13 @@ def test_replay_state_equals_a_fresh_tracker_fed_everything_released_by_t(case: 
     assert rep.time_accuracy == pytest.approx(offline.time_accuracy(trial, rep.changes))
     assert len(rep.changes) <= len(rep.belief_changes)
     duration = float(trial.time[-1]) - t0
+    track = trial_tracks(trial)["R"]  # the wrench blocks, computed apart from the segmenter
+    ends, means = track.ends[: len(track)], track.means[: len(track)]
+    blocks = [WrenchBlock(float(e), 1, tuple(m)) for e, m in zip(ends, means, strict=True)]
     for t in np.linspace(0.3, duration - 0.3, 9):
         step_t = max(s.t for s in case["streamed"].steps if s.t <= t)
         tracker = BeliefTracker(model, "boundary")
+        tracker.add_wrench("R", [b for b in blocks if b.end <= step_t])
         tracker.add_words("R", [w for when, w in released if when <= step_t], step_t)
         phase_times = {
             n: max(float(x) - t0 for x in trial.time if float(x) - t0 <= e - t0 + 1e-12)
@@ -208,6 +213,10 @@ def test_live_augment_round_trips_through_the_model_file(trials: dict, tmp_path:
     assert header["stream_profile"] == load_live_config().stream_profile
     assert header["n_samples"] > 12 and header["step_s"] == 0.5
     assert main(["train", *inputs, "--out", str(out), "--no-live-augment"]) == 0
+    # words + wrench: the running head still reads prefixes of the sub-tasks (learn/models.py)
+    assert load_model(out).training == {"live_augment": None} and load_model(out).live is not None
+    compact = ["--encoding", "compact", "--no-live-augment"]
+    assert main(["train", *inputs, "--out", str(out), *compact]) == 0
     assert load_model(out).training == {"live_augment": None} and load_model(out).live is None
     # the header is covered by the checksum and survives a save/load cycle unchanged
     samples = [s for t in load_trials(inputs) for s in t.samples]

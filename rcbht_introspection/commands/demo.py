@@ -127,7 +127,7 @@ def _train_model(args: argparse.Namespace, train: list[Path], out: Path) -> Path
     _step(f"2. train an SVM on {len(train)} trials (plus live windows: config/live.yaml)")
     trials = load_trials(train, words="auto")
     model, n_live = live_training(
-        trials, classifier="svm", encoding="compact", random_state=args.seed
+        trials, classifier="svm-forest", encoding="words-wrench", random_state=args.seed
     )
     model_path = save_model(model, out / "model.rcbht")
     n_samples = sum(len(t.samples) for t in trials)

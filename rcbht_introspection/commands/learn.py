@@ -92,6 +92,16 @@ def _register_evaluate(subparsers: argparse._SubParsersAction[argparse.ArgumentP
         default=None,
         help="held-out trials (default: 10 of 46, 8 of 38, 6 of 20, else ~22%%)",
     )
+    ev.add_argument(
+        "--train",
+        nargs="+",
+        type=Path,
+        default=None,
+        metavar="TRAIN",
+        help="score a model of these recordings (another day, session or robot) on the inputs, "
+        "whole and at the prefixes, beside MiniRocket and duration only; --permutations seeds "
+        "(default 5)",
+    )
     ev.add_argument("--trials", type=int, default=None, help="use only the first N trials")
     ev.add_argument("--seed", type=int, default=0)
     ev.add_argument(
@@ -164,8 +174,8 @@ def _add_live_scoring_options(ev: argparse.ArgumentParser) -> None:
 
 
 def _common(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--classifier", choices=CLASSIFIERS, default="svm")
-    parser.add_argument("--encoding", choices=ENCODINGS, default="compact")
+    parser.add_argument("--classifier", choices=CLASSIFIERS, default="svm-forest")
+    parser.add_argument("--encoding", choices=ENCODINGS, default="words-wrench")
     parser.add_argument(
         "--words",
         choices=WORD_SOURCES,
@@ -304,8 +314,10 @@ def run_evaluate(args: argparse.Namespace) -> int:
             raise InputError(
                 f"--{option.replace('_', '-')} belongs to --protocol prequential", field=option
             )
-    args.classifier = args.classifier or "svm"
-    args.encoding = args.encoding or "compact"
+    args.classifier = args.classifier or "svm-forest"
+    args.encoding = args.encoding or "words-wrench"
+    if args.train:
+        return run_transfer(args)
     args.permutations = args.permutations or 20
     taxonomy = taxonomy_from_args(args)
     n_estimators = 100 if args.n_estimators is None else args.n_estimators
@@ -330,6 +342,41 @@ def run_evaluate(args: argparse.Namespace) -> int:
         result["forest_budget"] = budget
     result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"
     _report_curve(args, _clean(result))
+    return 0
+
+
+def run_transfer(args: argparse.Namespace) -> int:
+    """`rcbht evaluate TEST --train TRAIN`: a model of one set of recordings on another."""
+    from rcbht_introspection.learn.evaluate import evaluate_transfer
+
+    taxonomy = taxonomy_from_args(args)
+    seeds = args.permutations = args.permutations or 5
+    n_estimators = 100 if args.n_estimators is None else args.n_estimators
+    budget = forest_budget(args, n_estimators)
+    test = load_checked(args, "evaluate", taxonomy)
+    train = load_checked(argparse.Namespace(**{**vars(args), "inputs": args.train}), "evaluate",
+                         taxonomy)  # fmt: skip
+    protocol = _curve_protocol(args, taxonomy, n_estimators, budget)
+    result = evaluate_transfer(train, test, protocol, seeds)
+    result.update(
+        datasets=[str(p) for p in args.inputs],
+        train=[str(p) for p in args.train],
+        input=input_record([*train, *test]),
+        words=args.words,
+        taxonomy_profile=taxonomy.profile if taxonomy else "reference",
+    )
+    result = _clean(result)
+    acc, peer = result["accuracy"], result.get("minirocket_baseline")
+    minirocket = f", minirocket {_show(peer['trial_splits']['mean'])}" if peer else ""
+    prefixes = ", ".join(f"{k} {_show(v['mean'])}" for k, v in result["prefix_accuracy"].items())
+    print(
+        f"{args.classifier}/{args.encoding} trained on {len(train)} trials, {len(test)} scored: "
+        f"whole {acc['mean']:.4f}{minirocket}, duration only "
+        f"{result['duration_baseline']['mean']:.4f}; prefixes {prefixes} ({seeds} seeds)"
+    )
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(result, indent=2))
     return 0
 
 

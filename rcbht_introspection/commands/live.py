@@ -44,8 +44,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("inputs", nargs="+", type=Path, metavar="TRIAL_OR_DATASET_DIR")
     p.add_argument("--held-out", type=int, required=True, help="last N trials (sorted) replayed")
     p.add_argument("--model", type=Path, default=None, help="replay this model instead of training")
-    p.add_argument("--classifier", choices=CLASSIFIERS, default="svm")
-    p.add_argument("--encoding", choices=ENCODINGS, default="compact")
+    p.add_argument("--classifier", choices=CLASSIFIERS, default="svm-forest")
+    p.add_argument("--encoding", choices=ENCODINGS, default="words-wrench")
     p.add_argument("--words", choices=WORD_SOURCES, default="auto")
     p.add_argument("--mode", choices=(*MODES, "both"), default="both")
     p.add_argument("--window-s", type=float, default=2.0)
@@ -112,7 +112,7 @@ def _live_eval_models(
     windows ("before" and "after") on the training trials."""
     from rcbht_introspection.grammar.encoding.cache import SampleCache
     from rcbht_introspection.learn.data import load_trials
-    from rcbht_introspection.learn.live import train_live_model, trial_live_samples
+    from rcbht_introspection.learn.live import train_live_model, trial_live_windows
     from rcbht_introspection.learn.model_file import load_model, profile_mismatch
     from rcbht_introspection.taxonomy.config import default_config
 
@@ -125,7 +125,9 @@ def _live_eval_models(
         return models
     trials = load_trials(train_paths, args.words, taxonomy)
     samples = [s for t in trials for s in t.samples]
-    live = [s for v in trial_live_samples(train_paths, config, factory).values() for s in v]
+    windows = trial_live_windows(train_paths, config, factory).values()
+    live = [s for boundary, _ in windows for s in boundary]
+    window = [s for _, in_window in windows for s in in_window]
     kw = dict(
         classifier=args.classifier,
         encoding=args.encoding,
@@ -133,8 +135,9 @@ def _live_eval_models(
         cache=SampleCache(),  # all models encode the same samples
     )
     models["before"] = train_live_model(samples, live, None, taxonomy, **kw)
-    models["after"] = train_live_model(samples, live, config, taxonomy, **kw)
-    print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{len(live)} live")
+    models["after"] = train_live_model(samples, live, config, taxonomy, window, **kw)
+    n_live = len(live) + len(window)
+    print(f"trained on {len(train_paths)} trials: {len(samples)} sub-tasks, +{n_live} live")
     return models
 
 

@@ -7,10 +7,11 @@ earlier sub-task and the rest is re-examined for the next one, as data_folder_pa
 from __future__ import annotations
 
 from bisect import bisect_left, bisect_right
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
 
 from rcbht_introspection.io.trial import SUBTASKS
+from rcbht_introspection.summaries.blocks import WrenchTrack
 from rcbht_introspection.taxonomy.words import TrialWords, Word
 
 
@@ -23,6 +24,9 @@ class SubtaskSample:
     start: float
     end: float
     words: TrialWords
+    wrench: Mapping[str, WrenchTrack] = field(default_factory=dict)
+    """Each arm's wrench block means (summaries/blocks.py); the sample reads those of
+    [start, end] and the block before it. Empty: words only."""
 
     @property
     def duration(self) -> float:
@@ -69,6 +73,7 @@ def split_words(
     state_times: Sequence[float],
     end_time: float,
     names: Sequence[str] = SUBTASKS,
+    wrench: Mapping[str, WrenchTrack] | None = None,
 ) -> list[SubtaskSample]:
     """One SubtaskSample per sub-task that has a start time; the last ends at `end_time`.
 
@@ -76,7 +81,8 @@ def split_words(
     after the first, then `end_time`): a word ending before a mark stays in the current
     sub-task, one ending at it closes the sub-task, one crossing it is cut in two. Words past
     `end_time` are clipped to it; `names` names the sub-task of each state time (state times
-    beyond it are ignored; a repeated name gives another sample of that sub-task).
+    beyond it are ignored; a repeated name gives another sample of that sub-task). `wrench`:
+    the trial's block means, shared by its samples.
     """
     starts = [float(t) for t in list(state_times)[: len(names)]]
     if not starts:
@@ -91,7 +97,7 @@ def split_words(
                     part.words.setdefault(arm, {}).setdefault(level, {}).setdefault(axis, [])
                 _deal_sequence(sequence, marks, parts)
     return [
-        SubtaskSample(words.name, names[i], starts[i], marks[i], parts[i])
+        SubtaskSample(words.name, names[i], starts[i], marks[i], parts[i], wrench or {})
         for i in range(len(starts))
     ]
 
@@ -103,6 +109,7 @@ def window_sample(
     subtask: str = "",
     trial: str | None = None,
     ordered: bool = False,
+    wrench: Mapping[str, WrenchTrack] | None = None,
 ) -> SubtaskSample:
     """The words overlapping [start, end], clipped to it (a live or prefix view of a sub-task).
 
@@ -110,6 +117,7 @@ def window_sample(
     keeps the words that contain its instant, so a 5 ms sub-task is never empty. `ordered`
     promises that every sequence's starts and ends are non-decreasing (a live word stream):
     then only the candidate range found by bisection is examined, with the same rule.
+    `wrench`: the stream's block means (the sample reads those of its window).
     """
     out = TrialWords(name=words.name)
     ordered = ordered and start <= end
@@ -126,7 +134,8 @@ def window_sample(
                     if word.end == start and word.start < start:
                         continue
                     target.append(_clip(word, start, end))
-    return SubtaskSample(words.name if trial is None else trial, subtask, start, end, out)
+    name = words.name if trial is None else trial
+    return SubtaskSample(name, subtask, start, end, out, wrench or {})
 
 
 def _ordered_window(sequence: list[Word], start: float, end: float, target: list[Word]) -> None:
@@ -163,5 +172,5 @@ def prefix_sample(sample: SubtaskSample, fraction: float) -> SubtaskSample:
     """The first `fraction` of a sub-task's time: what a live classifier has seen so far."""
     end = sample.start + fraction * sample.duration
     return window_sample(
-        sample.words, sample.start, end, subtask=sample.subtask, trial=sample.trial
+        sample.words, sample.start, end, sample.subtask, sample.trial, wrench=sample.wrench
     )

@@ -2,7 +2,7 @@
 
 from typing import Literal, get_args
 
-ClassifierKind = Literal["svm", "svm-tuned", "mondrian"]
+ClassifierKind = Literal["svm-forest", "svm", "svm-tuned", "mondrian"]
 """Classifier names; here (not in models.py) so the CLI lists them without importing scikit-learn."""
 CLASSIFIERS: tuple[str, ...] = get_args(ClassifierKind)
 WordSource = Literal["auto", "golden", "engine"]

@@ -22,6 +22,7 @@ from rcbht_introspection.io.sensor_checks import RepeatedPolicy, trial_findings
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn import WORD_SOURCES, WordSource
 from rcbht_introspection.live.intake import IntakeConfig
+from rcbht_introspection.summaries.blocks import trial_tracks
 from rcbht_introspection.task import HIRO_TASK, Task, task_of_folder, task_of_names
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, is_reference
@@ -132,9 +133,7 @@ def load_trial_samples(
             raise InputError("no golden/ label files in this trial", path)
         return _golden_samples(path, golden, strict)
     trial = read_trial(path, repeated, strict)
-    samples = split_words(
-        label_trial(trial, taxonomy, stream), trial.state_times, trial.end_time, trial.phase_names
-    )
+    samples = _split(trial, taxonomy, stream)
     found = tuple(trial_findings(trial, checks.frozen_samples, checks.frozen_s))
     task = task_of_folder(path)
     dropped = dropped_state_times(trial)
@@ -150,11 +149,18 @@ def _bag_samples(
 ) -> TrialSamples:
     """Samples of a trial bag, with engine words."""
     trial = bags.read_trial_bag(path, repeated=repeated)
-    samples = split_words(
-        label_trial(trial, taxonomy, stream), trial.state_times, trial.end_time, trial.phase_names
-    )
+    samples = _split(trial, taxonomy, stream)
     found = tuple(trial_findings(trial, checks.frozen_samples, checks.frozen_s))
     return TrialSamples(trial.name, path, "engine", samples, task_of_bag(trial), found, repeated)
+
+
+def _split(
+    trial: Trial, taxonomy: TaxonomyConfig | None, stream: StreamConfig | None
+) -> list[SubtaskSample]:
+    """The trial's sub-task samples: engine words and the wrench block means."""
+    words = label_trial(trial, taxonomy, stream)
+    tracks = trial_tracks(trial)
+    return split_words(words, trial.state_times, trial.end_time, trial.phase_names, tracks)
 
 
 def _golden_samples(path: Path, golden: list[tuple[str, Path]], strict: bool) -> TrialSamples:
@@ -167,7 +173,8 @@ def _golden_samples(path: Path, golden: list[tuple[str, Path]], strict: bool) ->
     states = trial_state_times(path, end, strict)
     task = task_of_folder(path)
     times, phases = states.named(task)
-    samples = split_words(trial_words, times, end, phases or task.subtasks)
+    tracks = trial_tracks(read_trial(path, strict=strict))
+    samples = split_words(trial_words, times, end, phases or task.subtasks, tracks)
     return TrialSamples(
         path.name, path, "golden", samples, task, dropped_state_times=len(states.dropped)
     )

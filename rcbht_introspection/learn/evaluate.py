@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -49,8 +49,8 @@ if TYPE_CHECKING:
 
 VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
 """The paper's held-out trial counts by data-set size (REAL 36/10, SIM 30/8, two-arm 14/6)."""
-START_TRIALS: dict[str, int] = {"svm": 1, "svm-tuned": 1, "mondrian": 3}
-PREFIX_FRACTIONS: tuple[float, ...] = (0.25, 0.5, 0.75)
+START_TRIALS: dict[str, int] = {"svm-forest": 1, "svm": 1, "svm-tuned": 1, "mondrian": 3}
+PREFIX_FRACTIONS: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75)
 NEAR_EMPTY_SECONDS = 0.05
 """Sub-tasks shorter than this (REAL S-22..S-46 rotation: 5 ms) are dropped in the variant."""
 
@@ -59,8 +59,8 @@ NEAR_EMPTY_SECONDS = 0.05
 class Protocol:
     """Settings of one evaluation run."""
 
-    classifier: ClassifierKind = "svm"
-    encoding: EncodingName = "compact"
+    classifier: ClassifierKind = "svm-forest"
+    encoding: EncodingName = "words-wrench"
     permutations: int = 20
     n_validation: int | None = None
     start_trials: int | None = None
@@ -238,14 +238,18 @@ class _Run:
         """A sub-task too short to carry words (dropped in the variant)."""
         return sample.duration < self.protocol.near_empty_seconds
 
-    def train(self, samples: Sequence[SubtaskSample], perm: int) -> SubtaskModel:
-        """A model of the protocol's classifier and encoding, seeded by the permutation."""
+    def train(
+        self, samples: Sequence[SubtaskSample], perm: int, running: bool = False
+    ) -> SubtaskModel:
+        """A model of the protocol's classifier and encoding, seeded by the permutation; with
+        `running`, also its running head (the one prefixes are scored on)."""
         p = self.protocol
         return train_model(
             samples, p.classifier, p.encoding,
             random_state=p.seed + perm, n_estimators=p.n_estimators,
             max_nodes=p.max_nodes, max_points=p.max_points,
             augment_prefixes=p.augment_prefixes, cache=self.cache, task=self.plan.task,
+            running_prefixes=None if running else (),
         )  # fmt: skip
 
     def permutation(self, perm: int) -> None:
@@ -260,7 +264,7 @@ class _Run:
         for j, k in enumerate(plan.steps):
             train_samples = [s for t in training[:k] for s in t.samples]
             began = time.perf_counter()
-            model = self.train(train_samples, perm)
+            model = self.train(train_samples, perm, running=k == plan.n_train)
             elapsed = time.perf_counter() - began
             tally.curve[perm, j] = _accuracy(model.predict_samples(val_samples), val_samples)
             duration = _duration_model(train_samples, seed)
@@ -353,12 +357,14 @@ class _Run:
         duration: RandomForestClassifier,
         val_samples: list[SubtaskSample],
     ) -> None:
-        """Accuracy on the first fractions of the validation sub-tasks (when prefixes are on)."""
+        """Accuracy on the first fractions of the validation sub-tasks (when prefixes are on),
+        by the head that classifies running windows (model.head(False))."""
         if not self.protocol.prefixes:
             return
+        head = model.head(False)
         for f in PREFIX_FRACTIONS:
             prefixes = [prefix_sample(s, f) for s in val_samples]
-            self.tally.prefix_acc[f].append(_accuracy(model.predict_samples(prefixes), prefixes))
+            self.tally.prefix_acc[f].append(_accuracy(head.predict_samples(prefixes), prefixes))
             self.tally.prefix_base[f].append(
                 _accuracy(duration.predict(_log_duration(prefixes)), prefixes)
             )
@@ -548,3 +554,53 @@ def trial_kfold_accuracy(dataset: Path, folds: int = 4) -> dict[str, object]:
         "accuracy": correct / total,
         "duration_accuracy": by_duration / total,
     }
+
+
+def evaluate_transfer(
+    train: Sequence[TrialSamples],
+    test: Sequence[TrialSamples],
+    protocol: Protocol = Protocol(),
+    seeds: int = 5,
+) -> dict[str, Any]:
+    """One set of recordings scored by a model of another (another day, another session).
+
+    The model (its running head for the prefixes) is trained on every sub-task of `train` and
+    scored on every sub-task of `test`, whole and at PREFIX_FRACTIONS, beside the duration-only
+    model and, with `protocol.peers`, MiniRocket trained on the same trials; each of `seeds`
+    seeds refits the seeded parts (the SVM is deterministic, MiniRocket's kernels are not)."""
+    task = task_of_trials([*train, *test])
+    train_samples = [s for t in train for s in t.samples]
+    test_samples = [s for t in test for s in t.samples]
+    if not train_samples or not test_samples:
+        raise InputError("--train and the evaluated inputs both need sub-task samples")
+    plan = _Plan(task, list(train), [], len(test), len(train), [len(train)], [len(train)])
+    run = _Run(protocol, plan, {}, None)
+    if run.peer is not None:
+        run.peer.raws.update(_raws(test, protocol.repeated))
+    tally = run.tally = _Tally.empty(plan, seeds)
+    for seed in range(seeds):
+        model = run.train(train_samples, seed, running=True)
+        tally.curve[seed, 0] = _accuracy(model.predict_samples(test_samples), test_samples)
+        duration = _duration_model(train_samples, protocol.seed + seed)
+        tally.base_curve[seed, 0] = _accuracy(
+            duration.predict(_log_duration(test_samples)), test_samples
+        )
+        run.final_split(model, test_samples)
+        run.prefix_split(model, duration, test_samples)
+        if run.peer is not None:
+            run.peer_step(run.peer, seed, len(train), train_samples, test_samples)
+    result = _curve_result(plan, replace(protocol, permutations=seeds), tally)
+    result.update(protocol="transfer", n_test_trials=len(test), accuracy=result["trial_splits"])
+    for key in ("n_validation_trials", "steady_state_accuracy", "steady_state_steps", "curve"):
+        result.pop(key)
+    if run.peer is not None:
+        _add_peer_result(result, plan, tally)
+        result["minirocket_baseline"].pop("curve")
+    return result
+
+
+def _raws(trials: Sequence[TrialSamples], repeated: RepeatedPolicy | None) -> Any:
+    """The raw wrench of `trials` for MiniRocket (peers/subtask_baseline.raw_wrench), by name."""
+    from rcbht_introspection.peers.subtask_baseline import raw_wrench
+
+    return {name: raw_wrench(trial) for name, trial in _read_trials(trials, repeated).items()}

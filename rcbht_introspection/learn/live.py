@@ -24,7 +24,7 @@ from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.sensor_checks import RepeatedPolicy
 from rcbht_introspection.learn.data import read_any_trial, task_of_trials
-from rcbht_introspection.learn.models import train_model
+from rcbht_introspection.learn.models import RUNNING_PREFIXES, train_model, with_prefixes
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.taxonomy import StreamProfile
@@ -42,11 +42,11 @@ class LiveAugmentConfig:
 
     enabled: bool = True
     """`rcbht train` adds live samples unless --no-live-augment."""
-    step_s: float = 0.5
+    step_s: float = 0.25
     """A sample every step_s seconds after the sub-task start."""
     fractions: tuple[float, ...] = (0.25, 0.5, 0.75)
     """And at these fractions of the sub-task (so short sub-tasks get samples too)."""
-    max_per_subtask: int = 20
+    max_per_subtask: int = 60
     """At most this many per sub-task (evenly spread), so long sub-tasks do not dominate."""
     window_s: float = 2.0
     """> 0: also the classifier's window mode: words of [t - window_s, t] final by t, labelled
@@ -87,29 +87,40 @@ def sample_times(start: float, end: float, config: LiveAugmentConfig) -> list[fl
     return [float(t) for t in times]
 
 
-def live_samples(streamed: StreamedTrial, config: LiveAugmentConfig) -> list[SubtaskSample]:
-    """Windows [start, t] of each sub-task with only the words released by t (empty ones skipped).
+def live_windows(
+    streamed: StreamedTrial, config: LiveAugmentConfig
+) -> tuple[list[SubtaskSample], list[SubtaskSample]]:
+    """(boundary-mode windows [start, t] of each sub-task, window-mode windows [t - window_s, t]
+    when window_s > 0), with only the words released by t (empty ones skipped).
 
     t is moved back to the last segmenter step at or before it: the classifier node's window ends
     at the stream time of the newest evidence it has.
     """
     released = streamed.released()
+    wrench = streamed.wrench_tracks()
     step_times = [s.t for s in streamed.steps]
-    out = []
+    boundary: list[SubtaskSample] = []
+    window: list[SubtaskSample] = []
     for subtask, start, end in streamed.subtask_windows():
         for t in sample_times(start, end, config):
             i = bisect_right(step_times, t) - 1
             now = max(start, step_times[i]) if i >= 0 else start
             words = words_until(released, now, streamed.name)
-            sample = window_sample(words, start, now, subtask=subtask, trial=streamed.name)
+            sample = window_sample(words, start, now, subtask, streamed.name, wrench=wrench)
             if sample_word_count(sample):
-                out.append(sample)
+                boundary.append(sample)
             if config.window_s > 0:
                 lo = max(0.0, now - config.window_s)
-                sample = window_sample(words, lo, now, subtask=subtask, trial=streamed.name)
+                sample = window_sample(words, lo, now, subtask, streamed.name, wrench=wrench)
                 if sample_word_count(sample):
-                    out.append(sample)
-    return out
+                    window.append(sample)
+    return boundary, window
+
+
+def live_samples(streamed: StreamedTrial, config: LiveAugmentConfig) -> list[SubtaskSample]:
+    """Both modes' live windows of `streamed` (live_windows), boundary mode's first."""
+    boundary, window = live_windows(streamed, config)
+    return boundary + window
 
 
 def sample_word_count(sample: SubtaskSample) -> int:
@@ -128,19 +139,30 @@ def stream_factory(config: LiveAugmentConfig, taxonomy: TaxonomyConfig | None = 
     )
 
 
+def trial_live_windows(
+    paths: Iterable[Path],
+    config: LiveAugmentConfig,
+    factory: Any | None = None,
+    repeated: RepeatedPolicy | None = None,
+) -> dict[str, tuple[list[SubtaskSample], list[SubtaskSample]]]:
+    """Both modes' live windows (live_windows) per trial path (trial folders or bags)."""
+    factory = factory or stream_factory(config)
+    out = {}
+    for path in paths:
+        trial = read_any_trial(Path(path), repeated)
+        out[str(path)] = live_windows(stream_trial(trial, factory), config)
+    return out
+
+
 def trial_live_samples(
     paths: Iterable[Path],
     config: LiveAugmentConfig,
     factory: Any | None = None,
     repeated: RepeatedPolicy | None = None,
 ) -> dict[str, list[SubtaskSample]]:
-    """Live samples per trial path (trial folders or bags)."""
-    factory = factory or stream_factory(config)
-    out = {}
-    for path in paths:
-        trial = read_any_trial(Path(path), repeated)
-        out[str(path)] = live_samples(stream_trial(trial, factory), config)
-    return out
+    """Live samples of both modes per trial path (trial folders or bags)."""
+    windows = trial_live_windows(paths, config, factory, repeated)
+    return {path: boundary + window for path, (boundary, window) in windows.items()}
 
 
 def training_header(
@@ -161,21 +183,33 @@ def train_live_model(
     live: Sequence[SubtaskSample],
     config: LiveAugmentConfig | None,
     taxonomy: TaxonomyConfig | None = None,
+    window: Sequence[SubtaskSample] = (),
     **train_kwargs: Any,
 ) -> SubtaskModel:
-    """Model on complete sub-tasks; with `config`, plus a live head on them and the live samples.
+    """Model on complete sub-tasks; with `config`, plus a live head on them and the live samples
+    and, given window-mode windows (`window`), a head of their own for window mode.
 
     Final verdicts (finished sub-tasks) keep the complete-sub-task model, so they and the
-    steady-state accuracy are unchanged; running windows go to the live head (model.head).
+    steady-state accuracy are unchanged; running windows go to the live head (model.head), or in
+    window mode to the window head. A window [t - window_s, t] starts anywhere in a sub-task, a
+    boundary window at its start: one head for both reads either worse (docs/results-live.md).
     """
 
     train_kwargs.setdefault("cache", SampleCache())  # both models encode `samples`
     used = taxonomy or default_config()
     train_kwargs.setdefault("taxonomy_profile", used.profile)
     train_kwargs.setdefault("taxonomy_sha256", taxonomy_digest(used))
-    model = train_model(samples, **train_kwargs)
-    if config is not None:
-        model.live = train_model([*samples, *live], **train_kwargs)
+    if config is None:
+        model = train_model(samples, **train_kwargs)
+    else:  # the live head also reads the encoding's running prefixes (learn/models.py)
+        prefixes = train_kwargs.pop("running_prefixes", None)
+        if prefixes is None:
+            prefixes = RUNNING_PREFIXES.get(train_kwargs.get("encoding", "words-wrench"), ())
+        model = train_model(samples, running_prefixes=(), **train_kwargs)
+        head = [*with_prefixes(samples, prefixes), *live]
+        model.live = train_model(head, running_prefixes=(), **train_kwargs)
+        if window:
+            model.window = train_model(window, running_prefixes=(), **train_kwargs)
     model.training = training_header(config, len(live) if config is not None else 0, taxonomy)
     return model
 
@@ -184,10 +218,12 @@ __all__ = [
     "LiveAugmentConfig",
     "live_samples",
     "live_training",
+    "live_windows",
     "load_live_config",
     "sample_times",
     "train_live_model",
     "trial_live_samples",
+    "trial_live_windows",
 ]
 
 
@@ -209,10 +245,13 @@ def live_training(
     samples = [s for t in trials for s in t.samples]
     train_kwargs.setdefault("task", task_of_trials(trials))
     live: list[SubtaskSample] = []
+    window: list[SubtaskSample] = []
     if use:
         factory = stream_factory(config, taxonomy)
         paths = [t.path for t in trials]
-        by_path = trial_live_samples(paths, config, factory, repeated=repeated)
-        live = [s for v in by_path.values() for s in v]
-    model = train_live_model(samples, live, config if use else None, taxonomy, **train_kwargs)
-    return model, len(live)
+        for boundary, windows in trial_live_windows(paths, config, factory, repeated).values():
+            live.extend(boundary)
+            window.extend(windows)
+    used = config if use else None
+    model = train_live_model(samples, live, used, taxonomy, window, **train_kwargs)
+    return model, len(live) + len(window)

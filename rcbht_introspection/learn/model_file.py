@@ -17,8 +17,10 @@ import skops.io as sio
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.registry import encoding_from_state
 from rcbht_introspection.io.safe_file import read_checked, write_safe_npz
+from rcbht_introspection.learn.forest import ForestHead
 from rcbht_introspection.learn.models import SubtaskModel
 from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
+from rcbht_introspection.learn.vote import SvmForestClassifier
 from rcbht_introspection.task import Task, task_of_names
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, taxonomy_digest
 
@@ -30,8 +32,11 @@ SVM_TRUSTED_TYPES: tuple[str, ...] = (
     "sklearn.svm._classes.SVC",
 )
 """The only types a stored SVM pipeline may contain (checked before skops builds anything)."""
-LIVE_PREFIX = "live__"
-"""Array-name prefix of the live head's arrays in a model file."""
+FOREST_PREFIX = "forest__"
+"""Array-name prefix of the vote's packed forest (learn/forest.py) in a model file."""
+HEADS = ("live", "window")
+"""The optional heads for running windows (SubtaskModel.live, .window): each stored under its
+name in the header and with the array-name prefix 'NAME__'."""
 
 
 def save_model(model: SubtaskModel, path: Path | str, compress: bool = True) -> Path:
@@ -42,9 +47,10 @@ def save_model(model: SubtaskModel, path: Path | str, compress: bool = True) -> 
     `compress=False`: the teach file, rewritten at every teach and read by the live node."""
     path = Path(path)
     header, arrays = _model_parts(model)
-    if model.live is not None:
-        header["live"], live_arrays = _model_parts(model.live)
-        arrays.update({LIVE_PREFIX + k: v for k, v in live_arrays.items()})
+    for name, head in zip(HEADS, (model.live, model.window), strict=True):
+        if head is not None:
+            header[name], head_arrays = _model_parts(head)
+            arrays.update({f"{name}__{k}": v for k, v in head_arrays.items()})
     write_safe_npz(path, header, arrays, compress)
     return path
 
@@ -66,6 +72,12 @@ def _model_parts(model: SubtaskModel) -> tuple[dict[str, Any], dict[str, np.ndar
         header["training"] = model.training
     if model.classifier in ("svm", "svm-tuned"):
         arrays = {"svm_skops": np.frombuffer(sio.dumps(model.estimator), dtype=np.uint8)}
+    elif model.classifier == "svm-forest":
+        vote = model.estimator
+        header["vote"] = vote.get_params()
+        arrays = {"svm_skops": np.frombuffer(sio.dumps(vote.svm_), dtype=np.uint8)}
+        arrays.update({FOREST_PREFIX + k: v for k, v in vote.forest_.arrays_.items()})
+        arrays[FOREST_PREFIX + "n_features"] = np.asarray(vote.forest_.n_features_in_)
     else:
         header["mondrian"], arrays = forest_arrays(model.estimator)
     return header, arrays
@@ -75,11 +87,13 @@ def load_model(path: Path | str, expect_encoding: str | None = None) -> SubtaskM
     """Read a model file; a corrupt, tampered, foreign or wrong-version file is a one-line InputError."""
     path = Path(path)
     header, arrays = read_checked(path, "model", FORMAT, FORMAT_VERSION, "rcbht train")
-    main = {k: v for k, v in arrays.items() if not k.startswith(LIVE_PREFIX)}
+    prefixes = tuple(f"{name}__" for name in HEADS)
+    main = {k: v for k, v in arrays.items() if not k.startswith(prefixes)}
     model = _model_from_parts(header, main, path, expect_encoding)
-    if isinstance(header.get("live"), dict):
-        live = {k[len(LIVE_PREFIX) :]: v for k, v in arrays.items() if k.startswith(LIVE_PREFIX)}
-        model.live = _model_from_parts(header["live"], live, path, expect_encoding)
+    for name in HEADS:
+        if isinstance(header.get(name), dict):
+            own = {k[len(name) + 2 :]: v for k, v in arrays.items() if k.startswith(f"{name}__")}
+            setattr(model, name, _model_from_parts(header[name], own, path, expect_encoding))
     return model
 
 
@@ -97,13 +111,9 @@ def _model_from_parts(
     classifier = header.get("classifier")
     try:
         if classifier in ("svm", "svm-tuned"):
-            data = arrays["svm_skops"].tobytes()
-            untrusted = [
-                t for t in sio.get_untrusted_types(data=data) if t not in SVM_TRUSTED_TYPES
-            ]
-            if untrusted:
-                raise InputError(f"SVM holds untrusted types {untrusted}", path, field="svm_skops")
-            estimator: Any = sio.loads(data, trusted=list(SVM_TRUSTED_TYPES))
+            estimator: Any = _svm(arrays, path)
+        elif classifier == "svm-forest":
+            estimator = _vote(header, arrays, path)
         elif classifier == "mondrian":
             estimator = forest_from_arrays(header["mondrian"], arrays)
         else:
@@ -126,6 +136,24 @@ def _model_from_parts(
         task=_task_of_header(header, path),
         taxonomy_sha256=str(header.get("taxonomy_sha256", "")),
     )
+
+
+def _svm(arrays: dict[str, np.ndarray], path: Path) -> Any:
+    """The stored SVM pipeline, built by skops only from the trusted types."""
+    data = arrays["svm_skops"].tobytes()
+    untrusted = [t for t in sio.get_untrusted_types(data=data) if t not in SVM_TRUSTED_TYPES]
+    if untrusted:
+        raise InputError(f"SVM holds untrusted types {untrusted}", path, field="svm_skops")
+    return sio.loads(data, trusted=list(SVM_TRUSTED_TYPES))
+
+
+def _vote(header: dict[str, Any], arrays: dict[str, np.ndarray], path: Path) -> SvmForestClassifier:
+    """The stored SVM + forest vote: the SVM as above, the forest from its packed arrays."""
+    params = {k: int(header["vote"][k]) for k in ("n_estimators", "random_state")}
+    packed = {k[len(FOREST_PREFIX) :]: v for k, v in arrays.items() if k.startswith(FOREST_PREFIX)}
+    forest_params = {"n_estimators": params["n_estimators"], "min_samples_leaf": 1}
+    forest = ForestHead.from_arrays(forest_params, header["classes"], packed)
+    return SvmForestClassifier.from_members(_svm(arrays, path), forest, params)
 
 
 def _task_of_header(header: dict[str, Any], path: Path) -> Task:

@@ -15,13 +15,12 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import EncodingName
 from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.grammar.encoding.cache import SampleCache
-from rcbht_introspection.grammar.encoding.compact import CompactEncoding
-from rcbht_introspection.grammar.encoding.paper import PaperEncoding
-from rcbht_introspection.grammar.encoding.registry import make_encoding
+from rcbht_introspection.grammar.encoding.registry import AnyEncoding, make_encoding
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.learn import CLASSIFIERS, ClassifierKind
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 from rcbht_introspection.learn.svm import fit_svm, make_svm, svm_predict_proba, tune_svm
+from rcbht_introspection.learn.vote import SvmForestClassifier
 from rcbht_introspection.task import HIRO_TASK, Task, task_of_names
 
 
@@ -30,7 +29,7 @@ class SubtaskModel:
     """A fitted encoding + classifier mapping sub-task samples to sub-task probabilities."""
 
     classifier: str
-    encoder: PaperEncoding | CompactEncoding
+    encoder: AnyEncoding
     estimator: Any
     taxonomy_profile: str = "reference"
     random_state: int = 0
@@ -41,15 +40,22 @@ class SubtaskModel:
     live: SubtaskModel | None = None
     """Optional head for running (unfinished) windows, trained with live-like windows
     (learn/live.py); final verdicts on finished sub-tasks always use this model itself."""
+    window: SubtaskModel | None = None
+    """Optional head for window-mode windows [t - window_s, t] (learn/live.py)."""
     taxonomy_sha256: str = ""
     """taxonomy.config.taxonomy_digest of the profile its words came from ('' in older files)."""
     takes_axis_memo: ClassVar[bool] = True
     """Its predict calls take `memo=` (an AxisMemo): the belief tracker passes the one it owns
     for its running windows (other models it is given need not)."""
 
-    def head(self, final: bool) -> SubtaskModel:
-        """The model for a finished sub-task (final) or a running window (the live head if any)."""
-        return self if final or self.live is None else self.live
+    def head(self, final: bool, mode: str = "boundary") -> SubtaskModel:
+        """The model for a finished sub-task (final) or a running window: in window mode the
+        window head if any, else the live head if any."""
+        if final:
+            return self
+        if mode == "window" and self.window is not None:
+            return self.window
+        return self if self.live is None else self.live
 
     @property
     def encoding(self) -> str:
@@ -87,10 +93,15 @@ class SubtaskModel:
         return self
 
 
+RUNNING_PREFIXES: dict[str, tuple[float, ...]] = {"words-wrench": (0.1, 0.25, 0.5, 0.75)}
+"""Per encoding, the prefixes its running head is trained on beside whole sub-tasks (none: no
+running head from train_model; rcbht train may still add a live head, learn/live.py)."""
+
+
 def train_model(
     samples: Sequence[SubtaskSample],
-    classifier: ClassifierKind = "svm",
-    encoding: EncodingName = "compact",
+    classifier: ClassifierKind = "svm-forest",
+    encoding: EncodingName = "words-wrench",
     random_state: int = 0,
     taxonomy_profile: str = "reference",
     n_estimators: int = 100,
@@ -100,11 +111,15 @@ def train_model(
     taxonomy_sha256: str = "",
     max_nodes: int | None = None,
     max_points: int | None = None,
+    running_prefixes: Sequence[float] | None = None,
 ) -> SubtaskModel:
     """Fit the encoding and the classifier on `samples` (training data only).
 
     `augment_prefixes` (e.g. (0.25, 0.5, 0.75)) also trains on those first fractions of every
     sub-task, so a live classifier is not surprised by a sub-task that has only just begun.
+    `running_prefixes` (None: RUNNING_PREFIXES of the encoding) trains a second head for running
+    windows (`model.live`) on the whole sub-tasks and these prefixes of each; the model itself,
+    which gives final verdicts, stays on whole sub-tasks.
     `cache`: a SampleCache shared by models trained on the same samples (else the encoding's own).
     `max_nodes`, `max_points`: the Mondrian forest's memory budget (None: unbounded).
     """
@@ -113,26 +128,25 @@ def train_model(
     if not samples:
         raise InputError("no training samples")
     task = task or task_of_samples(samples)
+    if running_prefixes is None:
+        running_prefixes = RUNNING_PREFIXES.get(encoding, ())
+    if running_prefixes:
+        model = train_model(
+            samples, classifier, encoding, random_state, taxonomy_profile, n_estimators,
+            augment_prefixes, cache, task, taxonomy_sha256, max_nodes, max_points, (),
+        )  # fmt: skip
+        model.live = train_model(
+            samples, classifier, encoding, random_state, taxonomy_profile, n_estimators,
+            tuple(augment_prefixes) + tuple(running_prefixes), cache, task, taxonomy_sha256,
+            max_nodes, max_points, (),
+        )  # fmt: skip
+        return model
     samples = with_prefixes(samples, augment_prefixes)
     encoder = make_encoding(encoding, cache).fit(samples)
     X = encoder.transform(samples)
     y = [s.subtask for s in samples]
-    if classifier in ("svm", "svm-tuned"):
-        if len(set(y)) < 2:
-            raise InputError("the SVM needs samples of at least two sub-tasks")
-        svm = make_svm(random_state)
-        if classifier == "svm-tuned":
-            svm.set_params(**tune_svm(X, y, [s.trial for s in samples], random_state))
-        estimator: Any = fit_svm(svm, X, y)
-    else:
-        classes = sorted(set(task.subtasks) | set(y))
-        estimator = MondrianForestClassifier(
-            n_estimators=n_estimators,
-            random_state=random_state,
-            max_nodes=max_nodes,
-            max_points=max_points,
-        )
-        estimator.partial_fit(X, y, classes=classes)
+    budget = (n_estimators, max_nodes, max_points)
+    estimator = _fit_classifier(classifier, X, y, samples, task, random_state, budget)
     return SubtaskModel(
         classifier,
         encoder,
@@ -142,6 +156,38 @@ def train_model(
         task=task,
         taxonomy_sha256=taxonomy_sha256,
     )
+
+
+def _fit_classifier(
+    classifier: ClassifierKind,
+    X: np.ndarray,
+    y: list[str],
+    samples: Sequence[SubtaskSample],
+    task: Task,
+    random_state: int,
+    budget: tuple[int, int | None, int | None],
+) -> Any:
+    """The fitted classifier of kind `classifier` on the encoded samples; `budget`: trees,
+    nodes and points of the Mondrian forest (trees also of the vote's forest)."""
+    n_estimators, max_nodes, max_points = budget
+    if classifier != "mondrian" and len(set(y)) < 2:
+        raise InputError("the SVM needs samples of at least two sub-tasks")
+    if classifier == "svm-forest":
+        return SvmForestClassifier(n_estimators, random_state).fit(X, y)
+    if classifier in ("svm", "svm-tuned"):
+        svm = make_svm(random_state)
+        if classifier == "svm-tuned":
+            svm.set_params(**tune_svm(X, y, [s.trial for s in samples], random_state))
+        return fit_svm(svm, X, y)
+    classes = sorted(set(task.subtasks) | set(y))
+    estimator = MondrianForestClassifier(
+        n_estimators=n_estimators,
+        random_state=random_state,
+        max_nodes=max_nodes,
+        max_points=max_points,
+    )
+    estimator.partial_fit(X, y, classes=classes)
+    return estimator
 
 
 def with_prefixes(
@@ -161,4 +207,4 @@ def task_of_samples(samples: Sequence[SubtaskSample]) -> Task:
     return task_of_names(per_trial.values())
 
 
-__all__ = ["SubtaskModel", "task_of_samples", "train_model", "with_prefixes"]
+__all__ = ["RUNNING_PREFIXES", "SubtaskModel", "task_of_samples", "train_model", "with_prefixes"]

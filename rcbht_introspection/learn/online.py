@@ -22,6 +22,7 @@ from rcbht_introspection.config_files import config_path, load_config
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS, EncodingName
 from rcbht_introspection.grammar.encoding.cache import SampleCache
+from rcbht_introspection.grammar.encoding.registry import with_cache
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.learn.models import (
     SubtaskModel,
@@ -276,13 +277,13 @@ class OnlineLearner:
         self._kept_live = []
         self._cache = SampleCache()
         if self._working is not None:
-            self._working.encoder = replace(self._working.encoder, cache=SampleCache())
+            self._working.encoder = with_cache(self._working.encoder, SampleCache())
 
     def _snapshot_of(self, working: SubtaskModel) -> SubtaskModel:
         """A model sharing the (from now on unchanged) forest, with encoders of its own cache."""
         return replace(
             working,
-            encoder=replace(working.encoder, cache=SampleCache()),
+            encoder=with_cache(working.encoder, SampleCache()),
             training=copy.deepcopy(working.training),
             live=None if working.live is None else self._snapshot_of(working.live),
         )
@@ -303,7 +304,7 @@ def _copy_model(model: SubtaskModel) -> SubtaskModel:
     return replace(
         model,
         estimator=copy.deepcopy(model.estimator),
-        encoder=replace(model.encoder, cache=SampleCache()),
+        encoder=with_cache(model.encoder, SampleCache()),
         training=copy.deepcopy(model.training),
         live=None if model.live is None else _copy_model(model.live),
     )

@@ -19,6 +19,7 @@ from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.live import MODES, BeliefMode
 from rcbht_introspection.live.join import WordLedger
+from rcbht_introspection.summaries.blocks import WrenchBlock, WrenchTrack
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
 
 UNKNOWN = "unknown"
@@ -116,6 +117,8 @@ class BeliefTracker:
     def reset(self) -> None:
         """Start a new stream: no words, no sub-task events."""
         self.words = TrialWords(name=self.trial)
+        self.wrench: dict[str, WrenchTrack] = {}
+        """Per arm, the wrench block means of the stream (summaries/blocks.py)."""
         self.arrivals: dict[tuple[str, Level, str], list[float]] = {}
         """Per word sequence, the stream time each kept word became final (for teaching live-like
         windows: what the classifier knew at a time t inside a sub-task)."""
@@ -185,6 +188,11 @@ class BeliefTracker:
         if self.mode == "window" and self._added > 2000:
             self._prune(self.now - max(self.window_s, self.history_s))
 
+    def add_wrench(self, arm: str, blocks: Sequence[WrenchBlock]) -> None:
+        """Add `arm`'s wrench blocks that closed since its previous ones (in time order)."""
+        if blocks:
+            self.wrench.setdefault(arm, WrenchTrack()).extend(blocks)
+
     def end_of_stream(self, arm: str, level: Level | None = None) -> None:
         """`arm`'s stream finished on `level` (None: on every level): its words there are final."""
         self.arms.add(arm)
@@ -243,7 +251,7 @@ class BeliefTracker:
             )
             return Belief(UNKNOWN, (), (), start, end, self.mode, phase, final, n)
         sample = window_sample(
-            self.words, start, end, subtask=phase, trial=self.trial, ordered=self._ordered
+            self.words, start, end, phase, self.trial, self._ordered, self.wrench
         )
         n = sum(
             len(seq)
@@ -261,7 +269,9 @@ class BeliefTracker:
             return belief(UNKNOWN, (0.0,) * len(self.classes))
         # a running window goes to the model's live head when it has one (learn/live.py); the
         # optional members (head, memo) are looked up, so the model is duck-typed from here
-        model: Any = self.model.head(final) if hasattr(self.model, "head") else self.model
+        model: Any = (
+            self.model.head(final, self.mode) if hasattr(self.model, "head") else self.model
+        )
         memo = {"memo": self._axis_memo} if getattr(model, "takes_axis_memo", False) else {}
         try:
             proba = np.asarray(model.predict_proba_samples([sample], **memo))[0]
@@ -363,6 +373,8 @@ class BeliefTracker:
         """Drop words that end before `before` (no later window can overlap them)."""
         before = min(before, self.pinned_from)
         self.kept_from = max(self.kept_from, before)
+        for track in self.wrench.values():
+            track.drop_before(before)
         for arm, per_level in self.words.words.items():
             for level, per_axis in per_level.items():
                 for axis, seq in per_axis.items():

@@ -22,6 +22,7 @@ from rcbht_introspection.live.belief import Belief, BeliefTracker
 from rcbht_introspection.live.join import LatchedEvents
 from rcbht_introspection.live.state import StateFilter
 from rcbht_introspection.live.teach import Teacher, TeachRequest, TeachStatus
+from rcbht_introspection.summaries.blocks import WrenchBlock
 from rcbht_introspection.taxonomy.words import Level, Word
 
 COUNTS = (
@@ -50,6 +51,8 @@ class WordsInput:
     """Messages of the batch (0: a watermark that only moves the level's numbering on)."""
     end_of_stream: bool
     seq_end: int
+    wrench: tuple[WrenchBlock, ...] = ()
+    """The arm's wrench blocks closed since its previous batch (on a batch's first message)."""
 
 
 @dataclass(frozen=True)
@@ -160,6 +163,7 @@ class ClassifierSession:
     # --- input ---------------------------------------------------------------------------
     def _words(self, item: WordsInput, step: Step) -> None:
         self._enter(item.stream, step)
+        self.tracker.add_wrench(item.arm, item.wrench)
         self.tracker.add_words(item.arm, item.words, item.now, item.level, item.seq_end)
         if item.batch_size == 0:  # only the level's word numbering moved on: no new evidence
             return

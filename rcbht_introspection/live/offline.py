@@ -16,6 +16,7 @@ import numpy as np
 from rcbht_introspection.grammar.split import split_words
 from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.summaries.blocks import trial_tracks
 from rcbht_introspection.taxonomy.words import TrialWords, Word
 
 if TYPE_CHECKING:
@@ -71,7 +72,11 @@ def offline_verdicts(
     """The model's verdict on each sub-task of the trial from the given words (spec 2.7 split)."""
 
     samples = split_words(
-        trial_words(trial.name, words), trial.state_times, trial.end_time, trial.phase_names
+        trial_words(trial.name, words),
+        trial.state_times,
+        trial.end_time,
+        trial.phase_names,
+        trial_tracks(trial),
     )
     if not samples:
         return []

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from rcbht_introspection.live.classifier import PhaseInput, WordsInput
 from rcbht_introspection.live.join import LevelMessage, Watermarks, batch_messages
 from rcbht_introspection.live.segmenter import Output, PhaseEvent, WordBatch
+from rcbht_introspection.summaries.blocks import WrenchBlock
 
 
 @dataclass(frozen=True)
@@ -26,6 +27,8 @@ class WordsOut:
     message: LevelMessage
     batch_size: int
     """Messages of the batch (Words.batch_size)."""
+    wrench: tuple[WrenchBlock, ...] = ()
+    """The batch's wrench blocks (Words.wrench), on its first message only."""
 
 
 def publication(out: Output, marks: Watermarks, now: float = 0.0) -> list[WordsOut | PhaseEvent]:
@@ -41,9 +44,9 @@ def publication(out: Output, marks: Watermarks, now: float = 0.0) -> list[WordsO
             items.append(phases.pop(0))
         top = marks.batch(batch.arm, batch.stream_id, batch.words)
         messages = batch_messages(batch.words, top, batch.end_of_stream)
-        for message in messages:
+        for i, message in enumerate(messages):
             marks.published(batch.arm, batch.stream_id, message.level, top, now)
-            items.append(WordsOut(batch, message, len(messages)))
+            items.append(WordsOut(batch, message, len(messages), batch.wrench if i == 0 else ()))
         if batch.end_of_stream:
             marks.ended(batch.arm, batch.stream_id)
     items.extend(phases)
@@ -71,6 +74,7 @@ def classifier_inputs(items: Iterable[WordsOut | PhaseEvent]) -> list[WordsInput
                 batch_size=item.batch_size,
                 end_of_stream=message.end_of_stream,
                 seq_end=message.seq_end,
+                wrench=item.wrench,
             )
         )
     return out

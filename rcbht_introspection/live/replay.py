@@ -34,6 +34,7 @@ from rcbht_introspection.live.publication import classifier_inputs, publication
 from rcbht_introspection.live.reliability import expected_calibration_error, top_label
 from rcbht_introspection.live.segmenter import Output, PhaseEvent, SegmenterSession, WordBatch
 from rcbht_introspection.live.state import StateFilter, TaskStateConfig
+from rcbht_introspection.summaries.blocks import WrenchTrack
 from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import TrialWords, Word
 
@@ -62,6 +63,14 @@ class StreamedTrial:
     def released(self) -> list[tuple[float, Word]]:
         """(release time, word) for every word, in release order."""
         return [(s.t, w) for s in self.steps for b in s.batches for w in b.words]
+
+    def wrench_tracks(self) -> dict[str, WrenchTrack]:
+        """Each arm's wrench blocks as the segmenter sent them with its words."""
+        tracks = {arm: WrenchTrack() for arm in self.arms}
+        for step in self.steps:
+            for batch in step.batches:
+                tracks[batch.arm].extend(batch.wrench)
+        return tracks
 
     def subtask_windows(self) -> list[tuple[str, float, float]]:
         """(sub-task, start, end) on the stream clock, as the classifier sees the events."""

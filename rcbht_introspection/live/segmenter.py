@@ -27,6 +27,7 @@ import numpy as np
 from rcbht_introspection.io.sensor_checks import FrozenWatch, spread_stamp
 from rcbht_introspection.live.gravity import compensate_gravity
 from rcbht_introspection.live.intake import IntakeConfig, Tare
+from rcbht_introspection.summaries.blocks import BlockMeans, WrenchBlock
 from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
 from rcbht_introspection.taxonomy.stream import ArmStream, load_stream_config
@@ -87,6 +88,8 @@ class WordBatch:
     origin_ns: int
     stream_id: int
     end_of_stream: bool = False
+    wrench: tuple[WrenchBlock, ...] = ()
+    """The arm's wrench blocks closed since its previous batch (summaries/blocks.py)."""
 
 
 @dataclass(frozen=True)
@@ -127,8 +130,10 @@ class _Pending:
 class _Arm(Generic[S]):
     """Per-arm stream state."""
 
-    def __init__(self, stream: S) -> None:
+    def __init__(self, stream: S, summaries: bool) -> None:
         self.stream = stream
+        self.blocks = BlockMeans() if summaries else None
+        """The wrench block means sent with the words (None: the session sends none)."""
         self.last_ns = 0
         self.last_wrench: Sequence[float] = ()
         """Values of the last sample taken at `last_ns` (accepted, or held to be spread)."""
@@ -157,8 +162,11 @@ class SegmenterSession(Generic[S]):
         hold_s: float = 0.2,
         max_hold_s: float = 10.0,
         intake: IntakeConfig | None = None,
+        summaries: bool = True,
     ) -> None:
         self.arms = tuple(arms)
+        self.summaries = summaries
+        """Send each arm's wrench block means with its word batches (the verifier's feed: no)."""
         self.intake = intake or IntakeConfig()
         self._gravity = self.intake.compensates_gravity
         self._watch_frozen = self.intake.frozen_samples > 0
@@ -183,7 +191,9 @@ class SegmenterSession(Generic[S]):
         self._new_stream()
 
     def _new_stream(self) -> None:
-        self.state: dict[str, _Arm[S]] = {arm: _Arm(self.stream_factory(arm)) for arm in self.arms}
+        self.state: dict[str, _Arm[S]] = {
+            arm: _Arm(self.stream_factory(arm), self.summaries) for arm in self.arms
+        }
         self.origin_ns: int | None = None
         self.stream_id += 1
         if self.intake.tare_at_start:
@@ -299,16 +309,29 @@ class SegmenterSession(Generic[S]):
             ).tolist()
         tare = self.tares[arm]
         if tare.offsets is None and not tare.measuring:  # Tare.idle, inlined (per sample)
-            words = st.stream.push(t, values)
+            words = self._push_tared(st, ((t, values),))
         else:
-            words = [w for at, v in tare.push(t, values) for w in st.stream.push(at, v)]
+            words = self._push_tared(st, tare.push(t, values))
         if words:
-            out.batches.append(WordBatch(arm, list(words), stamp_ns, origin_ns, self.stream_id))
+            blocks = tuple(st.blocks.take()) if st.blocks is not None else ()
+            out.batches.append(
+                WordBatch(arm, list(words), stamp_ns, origin_ns, self.stream_id, wrench=blocks)
+            )
         if first_of_stream:
             # events that came before any sample of the stream apply at its first sample
             self._apply_due(
                 out, lambda p: p.source_ns is None or source_ns is None or p.source_ns < source_ns
             )
+
+    @staticmethod
+    def _push_tared(st: _Arm[S], samples: Sequence[tuple[float, Sequence[float]]]) -> list[Word]:
+        """Feed samples the tare released to the arm's block means and stream; their words."""
+        words: list[Word] = []
+        for at, values in samples:
+            if st.blocks is not None:
+                st.blocks.push(at, values)
+            words.extend(st.stream.push(at, values))
+        return words
 
     # --- events ----------------------------------------------------------------------------
     def phase(self, name: str, source_ns: int | None = None) -> Output:
@@ -410,24 +433,27 @@ class SegmenterSession(Generic[S]):
             p.stamp_ns = at_ns or self.origin_ns
         if p.end:
             # samples still held (a tare being measured, a repeated stamp with none after it)
-            tared = self.tares[arm].release()
-            words = [w for at, v in tared for w in st.stream.push(at, v)]
+            words = self._push_tared(st, self.tares[arm].release())
             if st.held:
                 self.counts[arm].rejected["repeated_stamp"] += len(st.held)
                 st.held = []
             words += st.stream.finish()
             st.finished = True
+            wrench = tuple(st.blocks.take()) if st.blocks is not None else ()
             out.batches.append(
                 WordBatch(
-                    arm, list(words), st.last_ns, self.origin_ns, self.stream_id, end_of_stream=True
+                    arm, list(words), st.last_ns, self.origin_ns, self.stream_id, True, wrench
                 )
             )
         elif at_t is not None:
             # every sub-task start is marked (the stream reads rotation/mating starts by order)
             words = st.stream.mark_boundary(at_t, p.name)
             if words:
+                wrench = tuple(st.blocks.take()) if st.blocks is not None else ()
                 out.batches.append(
-                    WordBatch(arm, list(words), st.last_ns, self.origin_ns, self.stream_id)
+                    WordBatch(
+                        arm, list(words), st.last_ns, self.origin_ns, self.stream_id, False, wrench
+                    )
                 )
 
 

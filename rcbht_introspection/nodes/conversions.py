@@ -13,11 +13,13 @@ from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import Verdict as VerdictMsg
 from rcbht_interfaces.msg import Word as WordMsg
 from rcbht_interfaces.msg import Words as WordsMsg
+from rcbht_interfaces.msg import WrenchBlock as WrenchBlockMsg
 
 from rcbht_introspection.live.belief import Belief
 from rcbht_introspection.live.classifier import PhaseInput, WordsInput
 from rcbht_introspection.live.health import Health
 from rcbht_introspection.live.segmenter import PhaseEvent
+from rcbht_introspection.summaries.blocks import WrenchBlock
 from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
 from rcbht_introspection.verify.stream import StreamVerdict
 
@@ -87,6 +89,7 @@ def words_msg(
     rejected: int = 0,
     seq_end: int = 0,
     frame_id: str = "",
+    wrench: Sequence[WrenchBlock] = (),
 ) -> WordsMsg:
     """A batch of words of one arm and level that became final at the sample `stamp_ns`."""
     msg = WordsMsg(
@@ -100,6 +103,7 @@ def words_msg(
         samples_accepted=int(accepted),
         samples_rejected=int(rejected),
         seq_end=int(seq_end),
+        wrench=[WrenchBlockMsg(end=b.end, samples=b.samples, mean=b.mean) for b in wrench],
     )
     msg.header.stamp = to_time(stamp_ns)
     msg.header.frame_id = frame_id
@@ -125,6 +129,10 @@ def words_input(arm: str, msg: WordsMsg) -> WordsInput:
         batch_size=int(msg.batch_size),
         end_of_stream=bool(msg.end_of_stream),
         seq_end=int(msg.seq_end),
+        wrench=tuple(
+            WrenchBlock(float(b.end), int(b.samples), tuple(float(v) for v in b.mean))
+            for b in msg.wrench
+        ),
     )
 
 

@@ -277,6 +277,7 @@ class SegmenterNode(ManagedNode):
                     accepted=counts.accepted,
                     rejected=counts.rejected_total,
                     seq_end=message.seq_end,
+                    wrench=item.wrench,
                 )
             )
 

@@ -5,6 +5,9 @@ Each sub-task sample's window is its trial's wrench, every arm's six axes side b
 name order), at the sample times in [start, end]; a sub-task shorter than one sample period
 (REAL S-22..S-46: 5 ms) takes the one sample nearest its start. A prefix of a sub-task is the
 window of [start, start + fraction * duration], as grammar/split.prefix_sample cuts the words.
+Each window is taken relative to its first sample (a constant sensor bias and a held load cancel),
+and the classifier is trained on the whole windows and their prefixes (PREFIXES), as the words +
+wrench estimator is: the strongest stock reference for a sub-task that has only begun.
 MiniRocketClassifier (peers/minirocket.py) resamples every window to the same length.
 """
 
@@ -18,6 +21,8 @@ from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.peers.minirocket import MiniRocketClassifier
 
+PREFIXES: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75)
+"""Fractions of each training sub-task MiniRocket also learns from."""
 Raw = tuple[np.ndarray, np.ndarray]
 """(time (N,), wrench (N, 6 * arms)) of one trial."""
 
@@ -60,13 +65,19 @@ class SubtaskWrench:
         self.raws: dict[str, Raw] = {name: raw_wrench(t) for name, t in trials.items()}
 
     def windows(self, samples: Sequence[SubtaskSample], fraction: float = 1.0) -> list[np.ndarray]:
-        """The window of the first `fraction` of each sample's time."""
-        return [cut(self.raws[s.trial], s.start, s.start + fraction * s.duration) for s in samples]
+        """The window of the first `fraction` of each sample's time, minus its first sample."""
+        out = []
+        for s in samples:
+            window = cut(self.raws[s.trial], s.start, s.start + fraction * s.duration)
+            out.append(window - window[:1])
+        return out
 
     def fit(self, samples: Sequence[SubtaskSample], seed: int) -> MiniRocketClassifier:
-        """MiniRocket (random_state `seed`) trained on the samples' whole windows."""
+        """MiniRocket (random_state `seed`) trained on the samples' whole windows and prefixes."""
         model = MiniRocketClassifier(random_state=seed)
-        return model.fit(self.windows(samples), [s.subtask for s in samples])
+        windows = [w for f in (1.0, *PREFIXES) for w in self.windows(samples, f)]
+        labels = [s.subtask for _ in (1.0, *PREFIXES) for s in samples]
+        return model.fit(windows, labels)
 
     def accuracy(
         self, model: MiniRocketClassifier, samples: Sequence[SubtaskSample], fraction: float = 1.0

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 from sklearn.base import BaseEstimator
 
-from rcbht_introspection.verify.forest import ForestHead
+from rcbht_introspection.learn.forest import ForestHead
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
 
 FAILURE = "class"

@@ -15,10 +15,10 @@ import numpy as np
 from rcbht_introspection.config_files import from_mapping
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.safe_file import read_checked, write_safe_npz
+from rcbht_introspection.learn.forest import ARRAYS, ForestHead
 from rcbht_introspection.verify.characterise import FAILURE, Characteriser, Constant
 from rcbht_introspection.verify.config import VerifyConfig, check_verify_config
 from rcbht_introspection.verify.detector import Detector, SignalModels
-from rcbht_introspection.verify.forest import ARRAYS, ForestHead
 from rcbht_introspection.verify.labels import DIRECTION_AXES, DIRECTIONS
 from rcbht_introspection.verify.novelty import NeighbourModel, NominalLevel, TimingModel
 

@@ -141,7 +141,7 @@ class VerifierStream:
         self.pending: list[StreamVerdict] = []
         self._stream: _Stream | None = None
         self.segmenter: SegmenterSession[_ArmFeed] = SegmenterSession(
-            arms, self._feed, end_phases, subtasks, hold_s=hold_s, max_hold_s=max_hold_s
+            arms, self._feed, end_phases, subtasks, hold_s, max_hold_s, summaries=False
         )
         self.health = NO_MODEL
         """The latest verdict's health (kept after a stream ends, until the next one's first);

@@ -1,4 +1,4 @@
-"""Random forests for the characteriser's heads, as plain arrays.
+"""Random forests as plain arrays: the characteriser's heads and the sub-task vote's forest.
 
 scikit-learn's RandomForestClassifier learns the trees; they are then packed into flat node
 arrays, which a verifier file stores without pickling (loading executes no code) and which

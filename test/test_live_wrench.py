@@ -1,0 +1,128 @@
+"""The wrench summary beside the words: block means streamed == computed from the trial, the
+words + wrench features blind to a constant bias, and a running belief that reads only its own
+sub-task's evidence (on generated trials and the REAL HIRO ones)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from conftest import SOURCES, trial_folders
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from rcbht_introspection.grammar.encoding.wrench import wrench_features
+from rcbht_introspection.grammar.split import window_sample
+from rcbht_introspection.io.hiro import read_trial
+from rcbht_introspection.learn.data import load_samples
+from rcbht_introspection.learn.live import load_live_config, stream_factory
+from rcbht_introspection.learn.models import train_model
+from rcbht_introspection.live.belief import Belief, BeliefTracker
+from rcbht_introspection.live.classifier import ClassifierSession, PhaseInput, WordsInput
+from rcbht_introspection.live.replay import node_inputs, node_stream, stream_trial
+from rcbht_introspection.live.state import StateFilter
+from rcbht_introspection.summaries.blocks import BLOCK_S, BlockMeans, WrenchTrack, trial_tracks
+from rcbht_introspection.taxonomy.words import TrialWords
+
+
+@pytest.fixture(scope="module", params=SOURCES)
+def case(request: pytest.FixtureRequest) -> dict:
+    """A model of three trials (words + wrench, with its running head) and a held-out trial."""
+    hiro = ["20121127-HIROSA-S-01", "20121127-HIROSA-S-02", "20121127-HIROSA-S-30",
+            "20121127-HIROSA-S-41"]  # fmt: skip
+    *train, test = trial_folders(request, request.param, hiro, [0, 1, 2, 5])
+    model = train_model(load_samples(train, words="engine"))
+    return {"model": model, "trial": read_trial(test)}
+
+
+def test_streamed_blocks_equal_the_trials_blocks(case: dict) -> None:
+    """The blocks the segmenter sends with its words are the blocks training computes."""
+    trial = case["trial"]
+    streamed = stream_trial(trial, stream_factory(load_live_config()))
+    sent = streamed.wrench_tracks()["R"]
+    offline = trial_tracks(trial)["R"]
+    assert len(sent) == len(offline) > 0.9 * float(trial.time[-1]) / BLOCK_S
+    assert np.array_equal(sent.ends[: len(sent)], offline.ends[: len(offline)])
+    assert np.array_equal(sent.means[: len(sent)], offline.means[: len(offline)])
+    # every batch carries only blocks that ended at or before its sample (known at that time)
+    for step in streamed.steps:
+        assert all(b.end <= step.t + 1e-12 for batch in step.batches for b in batch.wrench)
+
+
+def test_a_block_closes_at_the_first_sample_past_it() -> None:
+    means = BlockMeans(period=0.05)
+    for t, fz in ((0.0, 1.0), (0.02, 3.0), (0.049, 5.0)):
+        means.push(t, (0, 0, fz, 0, 0, 0))
+    assert means.take() == []
+    means.push(0.05, (0, 0, 9.0, 0, 0, 0))
+    [block] = means.take()
+    assert (block.end, block.samples, block.mean[2]) == (0.05, 3, 3.0)
+    means.push(0.2, (0, 0, 0, 0, 0, 0))  # an empty block (0.1, 0.15] is skipped
+    assert [b.end for b in means.take()] == [0.1]
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    bias=st.lists(st.floats(-30, 30), min_size=6, max_size=6),
+    start=st.floats(0.0, 1.5),
+    length=st.floats(0.0, 1.5),
+)
+def test_wrench_features_ignore_a_constant_bias(
+    bias: list[float], start: float, length: float
+) -> None:
+    """Relative to the block before the window, a constant sensor offset cancels."""
+    rng = np.random.default_rng(7)
+    time = np.arange(0, 3.0, 0.004)
+    wrench = np.cumsum(rng.normal(size=(len(time), 6)), axis=0)
+
+    def features(values: np.ndarray) -> np.ndarray:
+        means = BlockMeans()
+        for t, row in zip(time.tolist(), values.tolist(), strict=True):
+            means.push(t, row)
+        sample = window_sample(
+            TrialWords("t"),
+            start,
+            start + length,
+            wrench={"R": WrenchTrack.of_blocks(means.take())},
+        )
+        return wrench_features(sample, ("R",))
+
+    plain, biased = features(wrench), features(wrench + np.asarray(bias))
+    assert np.allclose(plain, biased, atol=1e-9)
+
+
+def _running(beliefs: list[Belief], start: float) -> list[tuple[float, str, tuple[float, ...]]]:
+    """(window end, sub-task, probabilities) of the running beliefs whose window starts at
+    `start` (boundary mode: the sub-task that began there)."""
+    return [
+        (b.end, b.subtask, b.probabilities)
+        for b in beliefs
+        if not b.final and b.start == start and b.n_words
+    ]
+
+
+def test_boundary_belief_reads_only_its_own_subtask(case: dict) -> None:
+    """The running belief of a sub-task is the same whatever sub-task events came before it:
+    the earlier boundaries dropped, moved and renamed, the same words and wrench after it."""
+    model, trial = case["model"], case["trial"]
+    [streamed] = node_stream([trial], stream_factory(load_live_config()))
+    inputs = node_inputs(streamed)
+    phases = [x for x in inputs if isinstance(x, PhaseInput)]
+    third = phases[2]  # insertion: after two boundaries (approach, rotation)
+    names = model.task.subtasks
+    spliced: list[WordsInput | PhaseInput] = []
+    for item in inputs:
+        if isinstance(item, PhaseInput) and item.time < third.time:
+            if item is phases[0]:  # one boundary only before it, named after another sub-task
+                spliced.append(replace(item, name=names[-1]))
+            continue
+        spliced.append(item)
+
+    def beliefs(items: list[WordsInput | PhaseInput]) -> list[Belief]:
+        session = ClassifierSession(BeliefTracker(model), StateFilter())
+        return [b for item in items for b, _ in session.receive([item]).beliefs]
+
+    plain, other = _running(beliefs(inputs), third.time), _running(beliefs(spliced), third.time)
+    assert len(plain) > 5
+    assert other == plain
