@@ -20,6 +20,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.safe_file import read_safe_npz, write_safe_npz
 from rcbht_introspection.io.trial import Trial
+from rcbht_introspection.learn.forest import ForestHead, check_packed
 from rcbht_introspection.sim import load_sim_config, simulate_trial
 from rcbht_introspection.verify.characterise import (
     FAILURE,
@@ -39,7 +40,6 @@ from rcbht_introspection.verify.detector import (
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
 from rcbht_introspection.verify.evidence import EvidenceReader, Tick, named_at, namings, reader_of
 from rcbht_introspection.verify.features import kind_columns, lag_ticks, trial_features
-from rcbht_introspection.learn.forest import ForestHead, check_packed
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel, label_of, read_labels
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier, save_verifier
 from rcbht_introspection.verify.monitor import NOMINAL, Verdict, VerifierSession
