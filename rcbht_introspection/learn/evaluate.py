@@ -51,6 +51,8 @@ VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
 """The paper's held-out trial counts by data-set size (REAL 36/10, SIM 30/8, two-arm 14/6)."""
 START_TRIALS: dict[str, int] = {"svm-forest": 1, "svm": 1, "svm-tuned": 1, "mondrian": 3}
 PREFIX_FRACTIONS: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75)
+PEER_PREFIXES = PREFIX_FRACTIONS
+"""The prefixes MiniRocket's prefix columns are trained on beside whole sub-tasks."""
 NEAR_EMPTY_SECONDS = 0.05
 """Sub-tasks shorter than this (REAL S-22..S-46 rotation: 5 ms) are dropped in the variant."""
 
@@ -304,7 +306,7 @@ class _Run:
         val_samples: list[SubtaskSample],
     ) -> None:
         """MiniRocket at steady-state step `k` (seeded as the model); at the last step also
-        its trial split and its prefixes, as the model's."""
+        its trial split and, trained on prefixes too (as the running head), its prefixes."""
         model = peer.fit(train_samples, self.protocol.seed + perm)
         accuracy = peer.accuracy(model, val_samples)
         self.tally.peer_curve[perm, self.plan.tail_steps.index(k)] = accuracy
@@ -313,8 +315,9 @@ class _Run:
         self.tally.peer_final.append(accuracy)
         self.tally.peer_final_samples.append(len(val_samples))
         if self.protocol.prefixes:
+            running = peer.fit(train_samples, self.protocol.seed + perm, PEER_PREFIXES)
             for f in PREFIX_FRACTIONS:
-                self.tally.prefix_peer[f].append(peer.accuracy(model, val_samples, f))
+                self.tally.prefix_peer[f].append(peer.accuracy(running, val_samples, f))
 
     def final_split(self, model: SubtaskModel, val_samples: list[SubtaskSample]) -> None:
         """The full-training model as one trial split: accuracy, confusion, prediction time."""

@@ -5,9 +5,10 @@ Each sub-task sample's window is its trial's wrench, every arm's six axes side b
 name order), at the sample times in [start, end]; a sub-task shorter than one sample period
 (REAL S-22..S-46: 5 ms) takes the one sample nearest its start. A prefix of a sub-task is the
 window of [start, start + fraction * duration], as grammar/split.prefix_sample cuts the words.
-Each window is taken relative to its first sample (a constant sensor bias and a held load cancel),
-and the classifier is trained on the whole windows and their prefixes (PREFIXES), as the words +
-wrench estimator is: the strongest stock reference for a sub-task that has only begun.
+Each window is taken relative to its first sample (a constant sensor bias and a held load cancel).
+Whole sub-tasks are scored by a MiniRocket trained on whole windows, prefixes by one trained on
+the whole windows and their prefixes (PREFIXES), as the words + wrench estimator's running head
+is: each column gets the stronger reference.
 MiniRocketClassifier (peers/minirocket.py) resamples every window to the same length.
 """
 
@@ -72,11 +73,15 @@ class SubtaskWrench:
             out.append(window - window[:1])
         return out
 
-    def fit(self, samples: Sequence[SubtaskSample], seed: int) -> MiniRocketClassifier:
-        """MiniRocket (random_state `seed`) trained on the samples' whole windows and prefixes."""
+    def fit(
+        self, samples: Sequence[SubtaskSample], seed: int, prefixes: Sequence[float] = ()
+    ) -> MiniRocketClassifier:
+        """MiniRocket (random_state `seed`) trained on the samples' whole windows and, for the
+        prefix columns, also their first `prefixes` (PREFIXES)."""
         model = MiniRocketClassifier(random_state=seed)
-        windows = [w for f in (1.0, *PREFIXES) for w in self.windows(samples, f)]
-        labels = [s.subtask for _ in (1.0, *PREFIXES) for s in samples]
+        fractions = (1.0, *prefixes)
+        windows = [w for f in fractions for w in self.windows(samples, f)]
+        labels = [s.subtask for _ in fractions for s in samples]
         return model.fit(windows, labels)
 
     def accuracy(
