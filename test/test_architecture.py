@@ -134,6 +134,21 @@ def test_ros_free_modules_reach_no_ros_and_no_plotting(module: str) -> None:
         assert not forbidden, f"{start} imports {name}, which imports {sorted(forbidden)}"
 
 
+PRIVATE_ROS = ("rclpy.impl", "_rclpy", "rclpy._rclpy_pybind11")
+"""rclpy's private implementation: the nodes use its public API only."""
+CDR_DECODERS = ("decode_wrench", "decode_wrench_sample", "deserialize_message")
+"""Decoding messages by hand: the nodes take rclpy's message objects."""
+
+
+def test_the_nodes_use_rclpy_s_public_api_and_decode_no_cdr() -> None:
+    for name, path in _modules().items():
+        if name.startswith("rcbht_introspection.nodes."):
+            imported = _imports(path)
+            private = {m for m in imported if m.startswith(PRIVATE_ROS)}
+            decoders = {m for m in imported if m.rsplit(".", 1)[-1] in CDR_DECODERS}
+            assert not private | decoders, f"{path.name} imports {sorted(private | decoders)}"
+
+
 def test_the_cycle_finder_finds_a_cycle() -> None:
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 

@@ -25,7 +25,7 @@ def test_ros_benchmark_short(
     assert 0 <= floor["dropped"] < floor["published"] == floor["latency_ms"]["n"] + floor["dropped"]
     assert floor["latency_ms"]["p50"] > 0
     scenarios = [(n, a, spin) for n, a, v, spin in ros.SCENARIOS if not v]
-    assert {spin for _, _, spin in scenarios} == {"executor", "draining"}
+    assert {spin for _, _, spin in scenarios} == {"events", "executor"}
     for name, arms, spin in scenarios:
         r = result[name]
         assert r["arms"] == arms and r["spin"] == spin

@@ -130,6 +130,38 @@ def test_latched_events_of_an_earlier_stream_are_dropped_and_counted() -> None:
     assert session.counts["latched events of earlier streams dropped"] == 1
 
 
+def test_latched_events_without_publication_times_wait_for_the_first_live_message() -> None:
+    """Under the EventsExecutor events come without a DDS source timestamp: until a live message
+    arrives after the join they are history (the running stream's apply, others are dropped);
+    after it, an event of a new stream is live and starts that stream."""
+    session = _session()
+    session.rejoin(now_ns=500)
+    old = _phase("approach", 0.0, stream=STREAM)
+    running = _phase("approach", 0.0, stream=NEXT_STREAM)
+    session.receive([old, running])
+    assert session.tracker.segments == []
+    session.receive([_words(Level.PRIMITIVE, [1], 0.5, batch_size=1, stream=NEXT_STREAM)])
+    assert [s.phase for s in session.tracker.segments] == ["approach"]
+    assert session.counts["latched events of earlier streams dropped"] == 1
+    third = (NEXT_STREAM[0] + 60_000_000_000, 2)
+    session.receive([_phase("approach", 0.0, stream=third)])  # live: the next stream begins
+    assert session.stream == third
+
+
+def test_a_reactivated_session_applies_the_running_streams_untimed_history_once() -> None:
+    """Deactivate/activate (rejoin) with the same stream running: its replayed events are not
+    applied twice, an older stream's are dropped at the first live message."""
+    session = _session()
+    session.receive([_phase("approach", 0.0), _words(Level.PRIMITIVE, [1], 0.5, batch_size=1)])
+    session.rejoin(now_ns=500)
+    older = (ORIGIN - 60_000_000_000, 9)
+    session.receive([_phase("approach", 0.0), _phase("approach", 0.0, stream=older)])
+    session.receive([_phase("rotation", 1.0)])  # the running stream's: applied at once
+    session.receive([_words(Level.PRIMITIVE, [2], 1.5, batch_size=1)])
+    assert [s.phase for s in session.tracker.segments] == ["approach", "rotation"]
+    assert session.counts["latched events of earlier streams dropped"] == 1
+
+
 def test_lost_words_are_counted_and_blind_the_sub_task() -> None:
     session = _session()
     session.receive([_phase("approach", 0.0)])

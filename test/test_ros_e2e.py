@@ -59,12 +59,12 @@ def test_replay_eval_of_held_out_trials(hiro_data: Path, model: Path, tmp_path: 
         assert b["published_wrench"] > 5000 and b["node_words"] == b["offline_words"] > 0
 
 
-@pytest.mark.parametrize("spin", ["executor", "draining"])
+@pytest.mark.parametrize("spin", ["events", "executor"])
 def test_two_arm_replay_matches_offline(
     hiro_data: Path, model: Path, tmp_path: Path, spin: Spin
 ) -> None:
     """Two arms (/L/wrench, /R/wrench at 2 x 1 kHz): per-arm words, verdicts, beliefs and
-    /task_state as offline, whichever spin the nodes use (rclpy's executor, or draining)."""
+    /task_state as offline, whichever executor spins the nodes."""
     require_ros()
     from rcbht_introspection.bench.ros import two_arm_trial
     from rcbht_introspection.io.bags import write_trial_bag

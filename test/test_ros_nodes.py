@@ -44,6 +44,38 @@ def test_ament_index_finds_the_executables(monkeypatch: pytest.MonkeyPatch) -> N
     assert (Path(get_package_share_directory("rcbht_interfaces")) / "msg" / "Words.msg").is_file()
 
 
+@pytest.mark.parametrize("available", [True, False])
+def test_the_events_executor_by_default_and_the_fallback(
+    monkeypatch: pytest.MonkeyPatch, available: bool
+) -> None:
+    """`spin: events` gets rclpy's EventsExecutor, or the SingleThreadedExecutor where rclpy has
+    none (its module made unimportable here); `spin: executor` the SingleThreadedExecutor."""
+    require_ros()
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    from rcbht_introspection.nodes.common import make_executor
+
+    if not available:
+        monkeypatch.setitem(sys.modules, "rclpy.experimental.events_executor", None)
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        executor, events = make_executor("events", context)
+        assert events == available
+        assert isinstance(executor, SingleThreadedExecutor) != available
+        assert type(executor).__name__ == (
+            "EventsExecutor" if available else "SingleThreadedExecutor"
+        )
+        executor.shutdown()
+        fallback, events = make_executor("executor", context)
+        assert isinstance(fallback, SingleThreadedExecutor) and not events
+        fallback.shutdown()
+    finally:
+        rclpy.shutdown(context=context)
+
+
 def test_installed_executable_rejects_a_bad_parameter(tmp_path: Path) -> None:
     """Runs the installed lib/rcbht_introspection/classifier_node as `ros2 run` would."""
     require_ros()
@@ -203,10 +235,11 @@ def test_a_late_subscriber_still_gets_the_applied_sub_task_events(
         assert stop_process(proc, timeout=15) == 0, log.read_text()
 
 
-def test_a_draining_node_still_answers_parameter_requests(
-    tmp_path: Path, env: dict[str, str]
+@pytest.mark.parametrize("spin", ["events", "executor"])
+def test_a_busy_node_still_answers_parameter_requests(
+    tmp_path: Path, env: dict[str, str], spin: str
 ) -> None:
-    """spin_draining serves the parameter services through the executor between bursts."""
+    """Either executor serves the parameter services between the samples."""
     from geometry_msgs.msg import WrenchStamped
     from rclpy.parameter_client import AsyncParameterClient
 
@@ -214,7 +247,7 @@ def test_a_draining_node_still_answers_parameter_requests(
     from rcbht_introspection.nodes.params import SegmenterConfig, descriptions
 
     log = tmp_path / "segmenter.log"
-    proc = start_node("segmenter_node", {"event_hold_s": 0.3}, env, log)
+    proc = start_node("segmenter_node", {"event_hold_s": 0.3, "spin": spin}, env, log)
     try:
         with RosSession("probe", domain_id=int(env["ROS_DOMAIN_ID"])) as ros:
             client = AsyncParameterClient(ros.node, "segmenter_node")
@@ -223,7 +256,7 @@ def test_a_draining_node_still_answers_parameter_requests(
                 WrenchStamped, "/wrench", qos_profile(1000, "reliable")
             )
             assert wait_until(lambda: wrench.get_subscription_count() > 0), log.read_text()
-            for i in range(400):  # keep the node busy draining while the requests come
+            for i in range(400):  # keep the node busy while the requests come
                 wrench.publish(wrench_msg(1_700_000_000 * 10**9 + i * 1_000_000, math.sin(i / 20)))
                 if i % 100 == 50:
                     values = answer(lambda: client.get_parameters(["event_hold_s"]))

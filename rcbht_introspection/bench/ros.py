@@ -2,9 +2,9 @@
 
 Two scenarios through segmenter_node + classifier_node as separate processes (the replay-eval
 machinery): one arm at 1 kHz and two arms at 2 x 1 kHz, each for RCBHT_BENCH_ROS_SECONDS of
-playback (default 60), with the nodes' default spin (rclpy's executor) and again with
-`spin: draining` on the same bags (latency and each node's CPU per sample, so the optional spin
-is kept only while it pays); a third plays the one-arm bags with verifier_node beside them, giving
+playback (default 60), with the nodes' default spin (rclpy's EventsExecutor) and again with
+`spin: executor` (its SingleThreadedExecutor) on the same bags (latency and each node's CPU per
+sample); a third plays the one-arm bags with verifier_node beside them, giving
 sample -> verdict latency (the verifier's input is the wrench, not the words) beside word ->
 belief in the same run. The verifier is trained on other successful trials (detection only).
 A fourth plays the one-arm trials (at least three) to a classifier started without a model and
@@ -138,14 +138,15 @@ def _scenario_bags(work: Path, name: str, arms: int, sources: list[Trial]) -> li
 
 
 SCENARIOS: tuple[tuple[str, int, bool, Spin], ...] = (
-    ("one_arm_1kHz", 1, False, "executor"),
-    ("two_arm_2x1kHz", 2, False, "executor"),
-    ("one_arm_1kHz_verifier", 1, True, "executor"),
-    ("one_arm_1kHz_draining", 1, False, "draining"),
-    ("two_arm_2x1kHz_draining", 2, False, "draining"),
+    ("one_arm_1kHz", 1, False, "events"),
+    ("two_arm_2x1kHz", 2, False, "events"),
+    ("one_arm_1kHz_verifier", 1, True, "events"),
+    ("one_arm_1kHz_executor", 1, False, "executor"),
+    ("two_arm_2x1kHz_executor", 2, False, "executor"),
+    ("one_arm_1kHz_verifier_executor", 1, True, "executor"),
 )
-"""(name, arms, with verifier_node, the nodes' spin): the default spin, then the draining one
-on the same bags."""
+"""(name, arms, with verifier_node, the nodes' spin): the default spin (EventsExecutor), then
+rclpy's SingleThreadedExecutor on the same bags."""
 
 
 def run(out_dir: Path) -> dict[str, Any]:

@@ -22,7 +22,7 @@ from rcbht_introspection.fleet import (
     parallel_map,
 )
 from rcbht_introspection.live import BeliefMode
-from rcbht_introspection.nodes.spin import Spin
+from rcbht_introspection.nodes.spin import DEFAULT_SPIN, Spin
 from rcbht_introspection.taxonomy import StreamProfile
 
 if TYPE_CHECKING:
@@ -139,8 +139,9 @@ def _add_segmenter_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--spin",
         choices=get_args(Spin),
-        default="executor",
-        help="the nodes' spin: rclpy's executor, or draining (bursts through rclpy's private API)",
+        default=DEFAULT_SPIN,
+        help="the nodes' spin: events (rclpy's EventsExecutor) or executor (its "
+        "SingleThreadedExecutor)",
     )
 
 

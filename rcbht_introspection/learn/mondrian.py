@@ -831,20 +831,3 @@ class MondrianForestClassifier(ClassifierMixin, BaseEstimator):  # type: ignore[
     def n_nodes_(self) -> int:
         check_is_fitted(self, "classes_")
         return int(self._pool.size)
-
-    def tree_depths(self) -> np.ndarray:
-        """Depth of every tree (root = 0), for diagnostics."""
-        check_is_fitted(self, "classes_")
-        depth = np.zeros(self.n_estimators, dtype=int)
-        for tree, root in enumerate(self._roots):
-            stack, best = [(int(root), 0)], 0
-            while stack:
-                node, d = stack.pop()
-                best = max(best, d)
-                if self._pool.left[node] != NO_NODE:
-                    stack += [
-                        (int(self._pool.left[node]), d + 1),
-                        (int(self._pool.right[node]), d + 1),
-                    ]
-            depth[tree] = best
-        return depth

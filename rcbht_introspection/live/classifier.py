@@ -196,6 +196,9 @@ class ClassifierSession:
     def _enter(self, key: StreamKey, step: Step) -> None:
         """A live message of stream `key`: a new stream starts a new session (and its history)."""
         if key == self.stream:
+            if not self.history.live:  # the first live message since a rejoin
+                for event in self.history.stream_started(key):
+                    self._apply(event, step)
             return
         if self.stream is not None and self.tracker.arms:
             # the previous stream ended without all its end markers: issue what it has

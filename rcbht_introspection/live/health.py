@@ -11,11 +11,13 @@ import hashlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from rcbht_introspection.io.sensor_checks import FrozenWatch
 from rcbht_introspection.live.intake import Tare
+from rcbht_introspection.live.segmenter import SegmenterSession
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, Word
 
 OK, WARN, ERROR = 0, 1, 2
@@ -167,6 +169,47 @@ def sensor_values(
             ("tare offsets", offsets),
         ]
     return values
+
+
+def segmenter_health(
+    session: SegmenterSession[Any],
+    arms: Mapping[str, ArmHealth],
+    period_s: float,
+    *,
+    active: bool,
+    frozen_checks: bool,
+    gravity: bool,
+    bad_poses: int,
+    watch: CounterWatch,
+) -> list[Health]:
+    """segmenter_node's statuses: per arm intake (rate, accepted/rejected, gaps, finality
+    backlog, frozen sensor, tare, pose with gravity compensation), then the events."""
+    out = []
+    for arm, health in arms.items():
+        st, counts = session.state[arm], session.counts[arm]
+        pose = ("none yet" if session.rotations[arm] is None else "received") if gravity else ""
+        out.append(
+            health.report(
+                period_s,
+                counts.accepted,
+                counts.rejected,
+                vars(st.stream.counters),
+                st.last_t,
+                active,
+                session.frozen[arm] if frozen_checks else None,
+                session.tares[arm],
+                counts.respaced,
+                pose,
+            )
+        )
+    events = {
+        "unknown events": session.unknown_phases,
+        "late events": session.late_phases,
+        "pending events": len(session.pending),
+        "poses ignored": bad_poses,
+    }
+    out.append(events_health("segmenter_node", events, watch))
+    return out
 
 
 def events_health(node: str, counts: Mapping[str, int], watch: CounterWatch) -> Health:

@@ -102,6 +102,9 @@ class LatchedEvents(Generic[E]):
     An event published before `since_ns` (the subscription's creation) is history. History of
     the stream that live messages come from applies; history of other streams is dropped and
     counted; history that comes before any live message waits for the first live stream.
+    An event without a publication time (rclpy's EventsExecutor gives no DDS sample info) is
+    taken as history until the first live message after the (re)join, and as live after it:
+    the latched topic delivers its history at the match, before what is published later.
     """
 
     def __init__(self, since_ns: int = 0) -> None:
@@ -111,10 +114,13 @@ class LatchedEvents(Generic[E]):
         """(stream, event identity) already applied: a re-activated node gets them again."""
         self.stale = 0
         """Events of earlier streams that the latched topic replayed and that were dropped."""
+        self.live = True
+        """A live message arrived since the last rejoin (events without a time are live)."""
 
     def rejoin(self, since_ns: int) -> None:
         """The subscriptions were (re)created at `since_ns`: what was published before is history."""
         self.since_ns = since_ns
+        self.live = False
 
     def event(
         self,
@@ -132,10 +138,11 @@ class LatchedEvents(Generic[E]):
         key = (stream, event if identity is None else identity)
         if key in self.applied:
             return []
-        if not published_ns or published_ns >= self.since_ns or stream == current:
+        history = published_ns < self.since_ns if published_ns else not self.live
+        if not history or stream == current:
             self.applied.add(key)
             return [event]
-        if current is None:
+        if current is None or not published_ns:
             self.held.setdefault(stream, []).append(event)
             self.applied.add(key)  # it applies, if at all, through stream_started
         else:
@@ -143,7 +150,9 @@ class LatchedEvents(Generic[E]):
         return []
 
     def stream_started(self, stream: Hashable) -> list[E]:
-        """Live messages of `stream` arrive: its held history applies, the rest is dropped."""
+        """Live messages of `stream` arrive (a new stream, or the first live message since a
+        rejoin): its held history applies, the rest is dropped."""
+        self.live = True
         events = self.held.pop(stream, [])
         self.stale += sum(len(v) for v in self.held.values())
         self.held.clear()

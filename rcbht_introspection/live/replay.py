@@ -264,21 +264,6 @@ def commanded_phase(streamed: StreamedTrial, trial: Trial) -> tuple[float, int]:
     return offline.time_accuracy(trial, changes, initial=UNKNOWN), len(changes)
 
 
-def live_replay(
-    trial: Trial,
-    model: SampleClassifier | None,
-    stream_factory: Callable[[str], ArmStream],
-    mode: BeliefMode = "boundary",
-    window_s: float = 2.0,
-    state_config: TaskStateConfig | None = None,
-) -> LiveReplay:
-    """node_stream + replay_beliefs for one trial."""
-    streamed = node_stream([trial], stream_factory)
-    return replay_beliefs(
-        streamed, model, mode, window_s, trials=[trial], state_config=state_config
-    )[0]
-
-
 def replay_summary(replays: Sequence[LiveReplay], trials: Sequence[Trial]) -> dict[str, Any]:
     """Duration-weighted time_accuracy, state changes per sub-task boundary (each sub-task start,
     the stream's first included), sub-task accuracy of final verdicts and the expected calibration

@@ -208,11 +208,6 @@ class SegmenterSession(Generic[S]):
         """The latest orientation (3x3, sensor to world) of the arm's sensor."""
         self.rotations[arm] = rotation
 
-    def stream_time(self, stamp_ns: int) -> float:
-        """Seconds since the stream's time origin."""
-        assert self.origin_ns is not None
-        return (stamp_ns - self.origin_ns) / 1e9
-
     # --- samples ---------------------------------------------------------------------------
     def push(
         self, arm: str, stamp_ns: int, wrench: Sequence[float], source_ns: int | None = None
@@ -286,7 +281,7 @@ class SegmenterSession(Generic[S]):
         first_of_stream = origin_ns is None
         if origin_ns is None:
             origin_ns = self.origin_ns = stamp_ns
-        t = (stamp_ns - origin_ns) / 1e9  # stream_time, inlined on the per-sample path
+        t = (stamp_ns - origin_ns) / 1e9
         st.last_ns, st.last_t, st.last_wrench = stamp_ns, t, wrench
         if source_ns is not None and st.last_source is not None and source_ns > st.last_source:
             gap = source_ns - st.last_source

@@ -37,11 +37,11 @@ from rcbht_introspection.live.health import (
     classifier_health,
     file_sha256,
 )
+from rcbht_introspection.live.order import Arrivals
 from rcbht_introspection.live.state import StateFilter
 from rcbht_introspection.live.teach import TeachRequest, TeachStatus
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import belief_msg, phase_input, words_input
-from rcbht_introspection.nodes.draining import DrainedGroup, take
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import ClassifierConfig, word_topics
 
@@ -57,8 +57,8 @@ class ClassifierNode(ManagedNode):
         self.watch = CounterWatch()
         self.latency = LatencyWindow()
         self.teaching: Teaching | None = None
-        self.burst: list[tuple[int, WordsInput | PhaseInput]] = []
-        """Inputs the executor delivered since the last settled() (the executor path)."""
+        self.arrivals: Arrivals[WordsInput | PhaseInput] = Arrivals()
+        """Inputs the executor delivered since the last settled()."""
 
     def configure(self, cfg: ClassifierConfig) -> None:
         self.cfg = cfg
@@ -139,28 +139,13 @@ class ClassifierNode(ManagedNode):
         cfg = self.cfg
         # events the latched rcbht/phase replays were published before this moment
         self.session.rejoin(time.time_ns())
-        # `spin: draining`: the inputs are taken by drain(), not by executor callbacks
-        drained = DrainedGroup() if self.draining else None
         self.word_subs = [
-            (
-                arm,
-                self.create_subscription(
-                    WordsMsg, topic, partial(self.on_words, arm), self.qos,
-                    callback_group=drained,
-                ),
-            )
+            self.subscribe(WordsMsg, topic, partial(self.on_words, arm), self.qos)
             for (arm, _), topic in word_topics(cfg.words_namespace, cfg.arms).items()
-        ]  # fmt: skip
-        self.phase_sub = self.create_subscription(
-            PhaseMsg,
-            cfg.phase_topic,
-            # on_phase takes (msg, MessageInfo), which rclpy passes to two-argument callbacks;
-            # its annotation of `callback` names only the one-argument form
-            self.on_phase,  # type: ignore[arg-type]
-            phase_qos(cfg.qos_reliability),
-            callback_group=drained,
+        ]
+        self.phase_sub = self.subscribe(
+            PhaseMsg, cfg.phase_topic, self.on_phase, phase_qos(cfg.qos_reliability)
         )
-        # labels are rare: served by the executor between drains (never inside one)
         self.teach_srv = self.create_service(Teach, "~/teach", self.on_teach)
         self.teach_sub = self.create_subscription(
             TeachRequestMsg, cfg.teach_topic, self.on_teach_topic, qos_profile(100, "reliable")
@@ -177,7 +162,7 @@ class ClassifierNode(ManagedNode):
         )
 
     def deactivate(self) -> None:
-        for _, sub in self.word_subs:
+        for sub in self.word_subs:
             self.destroy_subscription(sub)
         self.destroy_subscription(self.phase_sub)
         self.destroy_subscription(self.teach_sub)
@@ -263,44 +248,21 @@ class ClassifierNode(ManagedNode):
         for level, line in self.teaching.notes():
             {"info": log.info, "warning": log.warning}.get(level, log.error)(line)
 
-    def on_words(self, arm: str, msg: WordsMsg, info: dict[str, int]) -> None:
-        """One Words message (the executor path): handed over with its burst, at settled()."""
-        self.burst.append((info.get("source_timestamp", 0), words_input(arm, msg)))
+    def on_words(self, arm: str, msg: WordsMsg, published: int | None) -> None:
+        """One Words message: handed over with what else arrived, at settled()."""
+        self.arrivals.add(published, words_input(arm, msg))
 
-    def on_phase(self, msg: PhaseMsg, info: dict[str, int]) -> None:
-        """One Phase message (the executor path): handed over with its burst, at settled()."""
-        published = info.get("source_timestamp")
-        self.burst.append((published or 0, phase_input(msg, published)))
+    def on_phase(self, msg: PhaseMsg, published: int | None) -> None:
+        """One Phase message: handed over with what else arrived, at settled()."""
+        self.arrivals.add(published, phase_input(msg, published))
 
     def settled(self) -> None:
-        """The executor ran every callback whose message was delivered: hand the burst over."""
-        burst, self.burst = self.burst, []
-        if burst:
-            self.hand_over(burst)
-
-    def drain(self) -> None:
-        """`spin: draining`: take every message already delivered and hand it over."""
-        taken: list[tuple[int, WordsInput | PhaseInput]] = []
-        for _ in range(10000):
-            before = len(taken)
-            for arm, sub in self.word_subs:
-                if (got := take(sub)) is not None:
-                    msg, info = got
-                    taken.append((info.get("source_timestamp", 0), words_input(arm, msg)))
-            if (got := take(self.phase_sub)) is not None:
-                msg, info = got
-                published = info.get("source_timestamp")
-                taken.append((published or 0, phase_input(msg, published)))
-            if len(taken) == before:
-                break
-        self.hand_over(taken)
-
-    def hand_over(self, burst: list[tuple[int, WordsInput | PhaseInput]]) -> None:
-        """Hand a burst to the session in publication order (DDS source timestamps of the one
-        segmenter): the session classifies where the inputs say, not once per burst, so
+        """The executor ran what was delivered: the inputs go to the session in publication
+        order (live/order.py), which classifies where they say, not once per burst, so
         /task_state does not depend on how DDS or the executor grouped them."""
-        burst.sort(key=lambda t: t[0])
-        self.publish_step(self.session.receive(item for _, item in burst))
+        items = self.arrivals.release()
+        if items:
+            self.publish_step(self.session.receive(item for _, item in items))
 
     def publish_step(self, step: Step) -> None:
         """Publish what the session produced (verdicts and beliefs, then each /task_state

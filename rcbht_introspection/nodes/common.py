@@ -8,29 +8,30 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
+from functools import partial
 from typing import Any, Protocol
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import (
+    Executor,
+    ShutdownException,
+    SingleThreadedExecutor,
+    TimeoutException,
+)
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live.health import ERROR, Health
 from rcbht_introspection.nodes.conversions import diagnostic_array
-from rcbht_introspection.nodes.draining import (
-    HOUSEKEEPING_S,
-    serve_ready,
-    spin_draining,
-    unavailable,
-)
 from rcbht_introspection.nodes.intake import Intake
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import (
@@ -43,6 +44,7 @@ from rcbht_introspection.nodes.params import (
     defaults,
     descriptions,
 )
+from rcbht_introspection.nodes.spin import Spin
 
 
 def qos_profile(depth: int, reliability: Reliability) -> QoSProfile:
@@ -106,6 +108,19 @@ DIAGNOSTICS_PERIOD_S = 1.0
 """How often a node publishes its status on /diagnostics."""
 
 
+def source_ns(info: Any) -> int | None:
+    """The DDS source timestamp of rclpy's MessageInfo (None when the middleware has none)."""
+    return (info.get("source_timestamp") if info else None) or None
+
+
+def _with_info(handler: Callable[[Any, int | None], None], msg: Any, info: Any) -> None:
+    handler(msg, source_ns(info))
+
+
+def _without_info(handler: Callable[[Any, int | None], None], msg: Any) -> None:
+    handler(msg, None)
+
+
 class ManagedNode(LifecycleNode):
     """A lifecycle node of ours: configure reads and validates the parameters of `config_class`.
 
@@ -132,8 +147,9 @@ class ManagedNode(LifecycleNode):
         self.autostart = bool(autostart.value)
         self.state_label = "unconfigured"
         self.config_error = ""
-        self.draining = False
-        """Whether the high-rate inputs are drained (parameter `spin`, read at configure)."""
+        self.events = False
+        """Spun by rclpy's EventsExecutor (run() decides at start-up): callbacks get the
+        message alone, no MessageInfo (rclpy 7.1.6's EventsExecutor cannot pass it)."""
         self.inputs: Intake | None = None
         """The wrench and /task_phase subscriptions while active (segmenter, verifier)."""
         self.stop: StopSignal | None = None
@@ -161,16 +177,24 @@ class ManagedNode(LifecycleNode):
         return []
 
     def settled(self) -> None:
-        """The executor ran every callback whose message was delivered (a burst is complete):
-        the robot's intake hands its burst over in publication order."""
+        """The executor ran what was delivered: the robot's intake hands it over in
+        publication order."""
         if self.inputs is not None:
             self.inputs.settled()
 
-    def drain(self) -> None:
-        """`spin: draining`: take and handle every message already delivered on the drained
-        subscriptions (the robot's intake, in order)."""
-        if self.inputs is not None:
-            self.inputs.drain()
+    def subscribe(
+        self,
+        msg_type: Any,
+        topic: str,
+        handler: Callable[[Any, int | None], None],
+        qos: QoSProfile,
+        **kwargs: Any,
+    ) -> Subscription:
+        """A subscription whose `handler(msg, source_ns)` gets the DDS source timestamp, or None
+        under the EventsExecutor (which calls a subscription's callback with the message only)."""
+        wrap = _without_info if self.events else _with_info
+        callback: Callable[..., None] = partial(wrap, handler)
+        return self.create_subscription(msg_type, topic, callback, qos, **kwargs)
 
     def get_logger(self) -> NodeLogger:
         """The node's logger: rclpy's Node.get_logger, seen through the typed NodeLogger."""
@@ -218,12 +242,7 @@ class ManagedNode(LifecycleNode):
         return self._transition("configure", self._configure, "inactive")
 
     def _configure(self) -> None:
-        cfg = read_config(self, self.config_class)
-        self.draining = cfg.spin == "draining"
-        if self.draining and (why := unavailable()) is not None:
-            self.draining = False
-            self.get_logger().warning(f"spin: draining unavailable ({why}): rclpy's executor spins")
-        self.configure(cfg)
+        self.configure(read_config(self, self.config_class))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         result = self._transition("activate", self.activate, "active")
@@ -303,8 +322,9 @@ def run(
     try:
         node = node_factory()
         node.stop = stop
-        executor = SingleThreadedExecutor()
+        executor, node.events = make_executor(node.get_parameter("spin").value)
         executor.add_node(node)
+        node.get_logger().info(f"spun by rclpy's {type(executor).__name__}")
         if node.autostart and not stop.requested:
             configured = node.trigger_configure() == TransitionCallbackReturn.SUCCESS  # type: ignore[no-untyped-call]
             if configured:
@@ -331,27 +351,49 @@ def run(
     return 0
 
 
+def make_executor(spin: Spin | str, context: Context | None = None) -> tuple[Executor, bool]:
+    """The process's executor for the parameter `spin` (read at start-up) and whether it is
+    rclpy's EventsExecutor: that one for `events` where rclpy has it, else SingleThreadedExecutor."""
+    if spin == "events":
+        try:
+            from rclpy.experimental.events_executor import EventsExecutor
+        except ImportError:  # an rclpy without the experimental executor
+            return SingleThreadedExecutor(context=context), False
+        return EventsExecutor(context=context), True
+    return SingleThreadedExecutor(context=context), False
+
+
+SPIN_WAIT_S = 0.02
+"""Longest wait of the spin for work: a stop request is seen within it."""
 BURST_CALLBACKS = 10_000
-"""Most callbacks the executor path runs before the node is told its burst is complete."""
+"""Most callbacks the SingleThreadedExecutor runs before the node is told its burst is done."""
 
 
-def spin(executor: SingleThreadedExecutor, node: ManagedNode, stop: StopSignal) -> None:
-    """Spin `node` until `stop`: rclpy's executor, or the draining spin while the node's
-    configuration asks for it (the parameter `spin` takes effect at each configure)."""
+def spin(executor: Executor, node: ManagedNode, stop: StopSignal) -> None:
+    """Spin `node` until `stop`. The EventsExecutor runs one event (a message, a timer, a
+    service request) per spin_once; rclpy's SingleThreadedExecutor waits for a callback, then
+    runs every callback whose message is delivered by then. After each, the node is told
+    (`settled`): it hands what arrived to its session in publication order."""
     while executor.context.ok() and not stop.requested:
-        if node.draining:
-            spin_draining(executor, node, stop, keep=lambda: node.draining)
-        else:
-            spin_bursts(executor, node, stop)
-
-
-def spin_bursts(executor: SingleThreadedExecutor, node: ManagedNode, stop: StopSignal) -> None:
-    """rclpy's executor, a burst at a time: wait for a callback, run every callback whose
-    message is delivered by then, and tell the node (`settled`) before waiting again."""
-    while executor.context.ok() and not stop.requested and not node.draining:
-        executor.spin_once(timeout_sec=HOUSEKEEPING_S)
-        serve_ready(executor, BURST_CALLBACKS)
+        executor.spin_once(timeout_sec=SPIN_WAIT_S)
+        if not node.events:
+            serve_ready(executor, BURST_CALLBACKS)
         node.settled()
+
+
+def serve_ready(executor: Executor, limit: int) -> int:
+    """Run up to `limit` callbacks the executor finds ready now, without blocking; how many ran
+    (one wake-up's worth at most: a message per subscription)."""
+    for done in range(limit):
+        try:
+            handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0)
+        except (TimeoutException, ShutdownException):
+            return done
+        handler()
+        error = handler.exception()  # type: ignore[no-untyped-call]  # rclpy's Task is untyped
+        if error is not None:
+            raise error
+    return limit
 
 
 SETTLE_CALLBACKS = 10_000

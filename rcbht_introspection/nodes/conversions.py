@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 from builtin_interfaces.msg import Time
@@ -9,6 +10,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.msg import Belief as BeliefMsg
 from rcbht_interfaces.msg import Phase as PhaseMsg
+from rcbht_interfaces.msg import Verdict as VerdictMsg
 from rcbht_interfaces.msg import Word as WordMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from rcbht_interfaces.msg import WrenchBlock as WrenchBlockMsg
@@ -19,6 +21,7 @@ from rcbht_introspection.live.health import Health
 from rcbht_introspection.live.segmenter import PhaseEvent
 from rcbht_introspection.summaries.blocks import WrenchBlock
 from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
+from rcbht_introspection.verify.stream import StreamVerdict
 
 LEVEL_CODES: dict[Level, int] = {level: i for i, level in enumerate(LEVELS)}
 _NS = 1_000_000_000
@@ -203,4 +206,35 @@ def diagnostic_array(statuses: Sequence[Health], stamp: Time) -> DiagnosticArray
         )
         for h in statuses
     ]
+    return msg
+
+
+def verdict_msg(sv: StreamVerdict, subtask: str) -> VerdictMsg:
+    """StreamVerdict -> rcbht_interfaces/Verdict (signal scores raw, beside their thresholds)."""
+    v = sv.verdict
+    thresholds = list(v.thresholds.values())
+    nan = math.nan
+    msg = VerdictMsg(
+        time_origin=to_time(sv.origin_ns),
+        stream_id=sv.stream_id,
+        time=float(v.time),
+        phase=v.phase,
+        subtask=subtask,
+        score=float(v.score),
+        signals=list(v.signals),
+        signal_scores=[float(s) * t for s, t in zip(v.signals.values(), thresholds, strict=True)],
+        signal_thresholds=list(thresholds),
+        alarm=v.alarm,
+        alarm_time=nan if v.alarm_time is None else float(v.alarm_time),
+        onset=nan if v.onset is None else float(v.onset),
+        failure_class=v.failure_class,
+        classes=list(v.class_probabilities),
+        probabilities=[float(p) for p in v.class_probabilities.values()],
+        direction_axes=list(v.directions),
+        directions=list(v.directions.values()),
+        evidence_start=float(sv.evidence_start),
+        evidence_end=float(v.time),
+        health=v.health,
+    )
+    msg.header.stamp = to_time(sv.stamp_ns)
     return msg

@@ -1,41 +1,33 @@
 """The robot's intake of a node (segmenter_node, verifier_node): wrench per arm and /task_phase.
 
-Both nodes take samples and events the same way: by rclpy's executor (callbacks with message
-objects, the default) or drained in bursts (`spin: draining`, nodes/draining.py: raw CDR decoded
-directly, and the events already delivered handled before each sample).
+Both nodes take samples and events the same way: each message goes to `live/order.Arrivals`
+with its DDS source timestamp (None under the EventsExecutor), and at each `settled()` the
+node's session gets them in publication order.
 """
 
 from __future__ import annotations
 
-import struct
 from collections.abc import Callable, Sequence
 from functools import partial
-from typing import Any
 
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
-from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from std_msgs.msg import String
 
-from rcbht_introspection.io.bags import decode_wrench_sample
+from rcbht_introspection.live.order import Arrivals
 from rcbht_introspection.nodes.conversions import wrench_sample
-from rcbht_introspection.nodes.draining import DrainedGroup, take, take_bursts
 
 OnSample = Callable[[str, int, Sequence[float], int | None], None]
 """(arm, stamp ns, six wrench values, DDS source timestamp ns or None)."""
 OnPhase = Callable[[str, int | None], None]
 """(event name, DDS source timestamp ns or None)."""
+Subscribe = Callable[..., Subscription]
+"""ManagedNode.subscribe: (type, topic, handler(msg, source ns or None), qos)."""
 
-
-_Item = tuple[int | None, str, str | tuple[int, Sequence[float]]]
-"""(source timestamp, arm ('' for an event), event name or (stamp ns, wrench))."""
-
-
-def _source(info: Any) -> int | None:
-    """The DDS source timestamp of rclpy's MessageInfo (None when the middleware has none)."""
-    return (info.get("source_timestamp") if info else None) or None
+_Item = tuple[str, str | tuple[int, Sequence[float]]]
+"""(arm ('' for an event), event name or (stamp ns, wrench))."""
 
 
 class Intake:
@@ -45,86 +37,34 @@ class Intake:
     def __init__(
         self,
         node: Node,
+        subscribe: Subscribe,
         topics: tuple[Sequence[str], Sequence[str], str],
-        on_sample: OnSample,
-        on_phase: OnPhase,
+        handlers: tuple[OnSample, OnPhase],
         qos: QoSProfile,
-        draining: bool,
     ) -> None:
         arms, wrench_topics, phase_topic = topics
-        self.node, self.on_sample, self.on_phase = node, on_sample, on_phase
-        self.draining = draining
-        self.burst: list[_Item] = []
-        """The executor path: what the callbacks delivered since the last settled()."""
-        # drained subscriptions are taken by drain(), not by executor callbacks
-        group = DrainedGroup() if draining else None
+        self.node = node
+        self.on_sample, self.on_phase = handlers
+        self.arrivals: Arrivals[_Item] = Arrivals()
         self.wrench: list[tuple[str, Subscription]] = [
-            (
-                arm,
-                node.create_subscription(
-                    WrenchStamped, topic, partial(self._sample, arm), qos, raw=draining,
-                    callback_group=group,
-                ),
-            )
+            (arm, subscribe(WrenchStamped, topic, partial(self._sample, arm), qos))
             for arm, topic in zip(arms, wrench_topics, strict=True)
-        ]  # fmt: skip
-        # rclpy passes (msg, MessageInfo) to a two-argument callback
-        self.phase = node.create_subscription(
-            String,
-            phase_topic,
-            self._phase,  # type: ignore[arg-type]  # rclpy's annotation names the one-argument form
-            qos,
-            callback_group=group,
-        )
+        ]
+        self.phase = subscribe(String, phase_topic, self._phase, qos)
 
-    def _phase(self, msg: String, info: Any) -> None:
-        item: _Item = (_source(info), "", msg.data)
-        if self.draining:
-            self._dispatch(item)
-        else:
-            self.burst.append(item)
+    def _phase(self, msg: String, source: int | None) -> None:
+        self.arrivals.add(source, ("", msg.data))
 
-    def _sample(self, arm: str, msg: bytes | WrenchStamped, info: Any) -> None:
-        if isinstance(msg, bytes):
-            self.take_phases()  # an event published before this sample is handled before it
-            try:
-                stamp, wrench = decode_wrench_sample(msg)
-            except (ValueError, struct.error):
-                stamp, wrench = wrench_sample(deserialize_message(msg, WrenchStamped))
-            self.on_sample(arm, stamp, wrench, _source(info))
-        else:
-            self.burst.append((_source(info), arm, wrench_sample(msg)))
-
-    def _dispatch(self, item: _Item) -> None:
-        source, arm, payload = item
-        if isinstance(payload, str):
-            self.on_phase(payload, source)
-        else:
-            self.on_sample(arm, payload[0], payload[1], source)
+    def _sample(self, arm: str, msg: WrenchStamped, source: int | None) -> None:
+        self.arrivals.add(source, (arm, wrench_sample(msg)))
 
     def settled(self) -> None:
-        """The executor path: the burst's events and samples, in publication order (DDS source
-        timestamps; arrival order without them), so an event is handled before the samples
-        published after it, as `take_phases` does when drained."""
-        burst, self.burst = self.burst, []
-        if all(source is not None for source, _, _ in burst):
-            burst.sort(key=lambda item: item[0] or 0)  # stable: each topic keeps its order
-        for item in burst:
-            self._dispatch(item)
-
-    def take_phases(self) -> None:
-        """Drained: handle the /task_phase events already delivered (before the next sample)."""
-        while (taken := take(self.phase)) is not None:
-            self._phase(*taken)
-
-    def drain(self) -> None:
-        """Drained: every event and sample already delivered (arms in turn), in order.
-
-        rclpy's per-wake-up cost dominates at 1 kHz; taking a burst at once keeps the node
-        ahead of two 1 kHz arms. Bounded, so the node's timers still run.
-        """
-        self.take_phases()
-        take_bursts(self.wrench, self._sample)
+        """The executor ran what was delivered: the events and samples, in publication order."""
+        for source, (arm, payload) in self.arrivals.release():
+            if isinstance(payload, str):
+                self.on_phase(payload, source)
+            else:
+                self.on_sample(arm, payload[0], payload[1], source)
 
     def publishers(self) -> int:
         """Fewest publishers matched on any intake topic. A harness waits for >= 1 before it

@@ -26,7 +26,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.intake import IntakeConfig, check_intake
 from rcbht_introspection.live.state import TaskStateConfig, check_task_state
-from rcbht_introspection.nodes.spin import SPIN_HELP, Spin
+from rcbht_introspection.nodes.spin import DEFAULT_SPIN, SPIN_HELP, Spin
 from rcbht_introspection.taxonomy import StreamProfile
 
 Reliability = Literal["reliable", "best_effort"]
@@ -86,7 +86,7 @@ class SegmenterConfig:
     stream_config_file: str = _f("", "optional YAML file overriding config/stream.yaml")
     qos_depth: int = _f(10000, QOS_DEPTH_HELP)
     qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
-    spin: Spin = _f("executor", SPIN_HELP)
+    spin: Spin = _f(DEFAULT_SPIN, SPIN_HELP)
     pose_topics: tuple[str, ...] = _f(
         (),
         "geometry_msgs/PoseStamped of each arm's sensor in the world, in `arms` order, for "
@@ -115,7 +115,7 @@ class ClassifierConfig:
     expected_profile: str = _f("", "taxonomy profile the model must be trained with ('' = any)")
     qos_depth: int = _f(10000, QOS_DEPTH_HELP)
     qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
-    spin: Spin = _f("executor", SPIN_HELP)
+    spin: Spin = _f(DEFAULT_SPIN, SPIN_HELP)
     teach_enabled: bool = _f(
         False,
         "learn labelled windows (service ~/teach, topic teach_topic) into the Mondrian model; "
@@ -171,7 +171,7 @@ class VerifierConfig:
     )
     qos_depth: int = _f(10000, QOS_DEPTH_HELP)
     qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
-    spin: Spin = _f("executor", SPIN_HELP)
+    spin: Spin = _f(DEFAULT_SPIN, SPIN_HELP)
 
 
 NodeConfig = TypeVar("NodeConfig", bound=SegmenterConfig | ClassifierConfig | VerifierConfig)

@@ -30,7 +30,7 @@ from rcbht_introspection.live.health import (
     ArmHealth,
     CounterWatch,
     Health,
-    events_health,
+    segmenter_health,
 )
 from rcbht_introspection.live.join import Watermarks
 from rcbht_introspection.live.publication import publication
@@ -109,9 +109,12 @@ class SegmenterNode(ManagedNode):
     def activate(self) -> None:
         cfg = self.cfg
         self.inputs = Intake(
-            self, (cfg.arms, cfg.wrench_topics, cfg.phase_topic), self.sample, self.on_phase,
-            self.qos, self.draining,
-        )  # fmt: skip
+            self,
+            self.subscribe,
+            (cfg.arms, cfg.wrench_topics, cfg.phase_topic),
+            (self.sample, self.on_phase),
+            self.qos,
+        )
         # the latest pose is what counts: depth 1, served by the executor (at least every 20 ms)
         self.pose_subs = [
             self.create_subscription(
@@ -168,12 +171,6 @@ class SegmenterNode(ManagedNode):
             )
             return
         self.session.pose(arm, rotation)  # subscribed only while active: the session exists
-
-    def pose_state(self, arm: str) -> str:
-        """For /diagnostics: whether the arm's gravity compensation has a pose ('' without one)."""
-        if not self.cfg.intake.compensates_gravity:
-            return ""
-        return "none yet" if self.session.rotations[arm] is None else "received"
 
     def on_tare(self, request: SelfTest.Request, response: SelfTest.Response) -> SelfTest.Response:
         """~/tare: measure each arm's tare over its next intake.tare_window_s seconds."""
@@ -285,33 +282,17 @@ class SegmenterNode(ManagedNode):
             )
 
     def health(self, period_s: float) -> list[Health]:
-        """Per arm intake (rate, accepted/rejected, gaps, finality backlog), then the events."""
-        out = []
-        for arm, health in self.arm_health.items():
-            st = self.session.state[arm]
-            counts = self.session.counts[arm]
-            intake = vars(st.stream.counters)
-            out.append(
-                health.report(
-                    period_s,
-                    counts.accepted,
-                    counts.rejected,
-                    intake,
-                    st.last_t,
-                    self.state_label == "active",
-                    self.session.frozen[arm] if self.cfg.intake.frozen_samples else None,
-                    self.session.tares[arm],
-                    counts.respaced,
-                    self.pose_state(arm),
-                )
-            )
-        events = {
-            "unknown events": self.session.unknown_phases,
-            "late events": self.session.late_phases,
-            "pending events": len(self.session.pending),
-            "poses ignored": self.bad_poses,
-        }
-        out.append(events_health("segmenter_node", events, self.event_watch))
+        """Per arm intake, the events (live/health.py), then the outputs' matched peers."""
+        out = segmenter_health(
+            self.session,
+            self.arm_health,
+            period_s,
+            active=self.state_label == "active",
+            frozen_checks=bool(self.cfg.intake.frozen_samples),
+            gravity=self.cfg.intake.compensates_gravity,
+            bad_poses=self.bad_poses,
+            watch=self.event_watch,
+        )
         matched = self.inputs.publishers() if self.inputs is not None else 0
         out.append(outputs_health(self.word_pubs.values(), self.phase_pub, matched))
         return out

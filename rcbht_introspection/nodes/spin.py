@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from typing import Literal
 
-Spin = Literal["executor", "draining"]
-"""How a node takes its high-rate inputs: rclpy's executor, or nodes/draining.py's bursts."""
+Spin = Literal["events", "executor"]
+"""Which rclpy executor spins a node process: the EventsExecutor or the SingleThreadedExecutor."""
+DEFAULT_SPIN: Spin = "events"
 SPIN_HELP = (
-    "executor (rclpy's executor and message objects) or draining (bursts taken through rclpy's "
-    "private wait-set API, wrench decoded from CDR; executor where that API is absent)"
+    "events (rclpy.experimental.EventsExecutor; executor where rclpy has none) or executor "
+    "(rclpy's SingleThreadedExecutor); read at start-up"
 )

@@ -9,7 +9,6 @@ when it changes and at `publish_rate_hz`, latched (a late subscriber gets the cu
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from collections.abc import Sequence
@@ -19,73 +18,25 @@ from rcbht_interfaces.msg import Verdict as VerdictMsg
 from rclpy.qos import DurabilityPolicy
 from std_msgs.msg import String
 
-from rcbht_introspection.errors import InputError
 from rcbht_introspection.live.health import (
-    ERROR,
-    OK,
-    WARN,
     CounterWatch,
     Health,
     LatencyWindow,
     file_sha256,
 )
 from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run
-from rcbht_introspection.nodes.conversions import belief_from_msg, to_time
+from rcbht_introspection.nodes.conversions import belief_from_msg, verdict_msg
 from rcbht_introspection.nodes.intake import Intake
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import VerifierConfig
 from rcbht_introspection.task import load_task_file
-from rcbht_introspection.verify.model_file import VerifierModel, load_verifier
+from rcbht_introspection.verify.model_file import load_usable_verifier
 from rcbht_introspection.verify.stream import (
     NO_MODEL,
-    StreamVerdict,
     VerifierOutput,
     VerifierStream,
+    verifier_health,
 )
-
-
-def verdict_msg(sv: StreamVerdict, subtask: str) -> VerdictMsg:
-    """StreamVerdict -> rcbht_interfaces/Verdict (signal scores raw, beside their thresholds)."""
-    v = sv.verdict
-    thresholds = list(v.thresholds.values())
-    nan = math.nan
-    msg = VerdictMsg(
-        time_origin=to_time(sv.origin_ns),
-        stream_id=sv.stream_id,
-        time=float(v.time),
-        phase=v.phase,
-        subtask=subtask,
-        score=float(v.score),
-        signals=list(v.signals),
-        signal_scores=[float(s) * t for s, t in zip(v.signals.values(), thresholds, strict=True)],
-        signal_thresholds=list(thresholds),
-        alarm=v.alarm,
-        alarm_time=nan if v.alarm_time is None else float(v.alarm_time),
-        onset=nan if v.onset is None else float(v.onset),
-        failure_class=v.failure_class,
-        classes=list(v.class_probabilities),
-        probabilities=[float(p) for p in v.class_probabilities.values()],
-        direction_axes=list(v.directions),
-        directions=list(v.directions.values()),
-        evidence_start=float(sv.evidence_start),
-        evidence_end=float(v.time),
-        health=v.health,
-    )
-    msg.header.stamp = to_time(sv.stamp_ns)
-    return msg
-
-
-def load_usable(cfg: VerifierConfig) -> tuple[VerifierModel | None, str]:
-    """The verifier model of `cfg`, or None and why it cannot be used."""
-    if not cfg.verifier_file:
-        return None, "verifier_file not set"
-    try:
-        model = load_verifier(cfg.verifier_file)
-    except InputError as exc:
-        return None, str(exc)
-    if set(model.arms) != set(cfg.arms):
-        return None, f"the model's arms {list(model.arms)} are not the node's {list(cfg.arms)}"
-    return model, ""
 
 
 class VerifierNode(ManagedNode):
@@ -98,7 +49,7 @@ class VerifierNode(ManagedNode):
 
     def configure(self, cfg: VerifierConfig) -> None:
         self.cfg = cfg
-        model, self.model_problem = load_usable(cfg)
+        model, self.model_problem = load_usable_verifier(cfg.verifier_file, cfg.arms)
         self.model_sha256 = file_sha256(cfg.verifier_file)
         self.stream: VerifierStream | None = None
         if model is None:
@@ -130,9 +81,12 @@ class VerifierNode(ManagedNode):
         cfg = self.cfg
         if self.stream is not None:
             self.inputs = Intake(
-                self, (cfg.arms, cfg.wrench_topics, cfg.phase_topic), self.sample, self.on_phase,
-                self.qos, self.draining,
-            )  # fmt: skip
+                self,
+                self.subscribe,
+                (cfg.arms, cfg.wrench_topics, cfg.phase_topic),
+                (self.sample, self.on_phase),
+                self.qos,
+            )
         self.belief_sub = self.create_subscription(
             BeliefMsg, cfg.belief_topic, self.on_belief, self.qos
         )
@@ -233,33 +187,18 @@ class VerifierNode(ManagedNode):
 
     def health(self, period_s: float) -> list[Health]:
         """Model, verdict latency of the period, rejected samples and events, current health."""
-        s = self.stream
-        name = "verifier_node"
-        if s is None:
-            return [Health(f"{name}: model", ERROR, f"no usable verifier: {self.model_problem}")]
-        n, p50, p99 = self.latency.take()
-        counts = {
-            **{f"rejected samples {a}": c.rejected_total for a, c in s.segmenter.counts.items()},
-            "unknown events": s.segmenter.unknown_phases,
-            "late events": s.segmenter.late_phases,
-        }
-        moved = self.watch.moved(counts)
-        values = (
-            ("verifier file", self.cfg.verifier_file),
-            ("verifier sha256", self.model_sha256),
-            ("health", s.health),
-            ("verdicts", str(s.verdicts)),
-            ("alarms", str(s.alarms)),
-            ("verdict batches in period", str(n)),
-            ("sample to verdict p50 ms", f"{p50:.3f}"),
-            ("sample to verdict p99 ms", f"{p99:.3f}"),
-            ("verdict subscribers matched", str(self.verdict_pub.get_subscription_count())),
-            ("intake publishers matched", str(self.inputs.publishers() if self.inputs else 0)),
-            *((k, str(v)) for k, v in counts.items()),
+        matched = (
+            self.verdict_pub.get_subscription_count(),
+            self.inputs.publishers() if self.inputs else 0,
         )
-        level = WARN if moved else OK
-        message = f"health {s.health}" + (f"; moved: {moved}" if moved else "")
-        return [Health(f"{name}: verifier", level, message, values)]
+        return verifier_health(
+            self.stream,
+            self.model_problem,
+            (self.cfg.verifier_file, self.model_sha256),
+            self.latency,
+            self.watch,
+            matched,
+        )
 
 
 def main(args: list[str] | None = None, stop: StopSignal | None = None) -> int:

@@ -53,7 +53,7 @@ from rcbht_introspection.nodes.params import (
     load_node_config,
 )
 from rcbht_introspection.nodes.player import BagPlayer
-from rcbht_introspection.nodes.spin import Spin
+from rcbht_introspection.nodes.spin import DEFAULT_SPIN, Spin
 from rcbht_introspection.nodes.teach_client import call_teach, teach_client, teach_request
 from rcbht_introspection.replay.observer import DiagnosticWatch, Observer, VerdictObserver
 from rcbht_introspection.replay.scoring import (
@@ -97,8 +97,8 @@ class ReplayEvalOptions:
     taxonomy_config_file: str = ""
     """A file of taxonomy profiles, e.g. from `rcbht calibrate` (empty: config/rcbht.yaml)."""
     stream_profile: StreamProfile = "reference"
-    spin: Spin = "executor"
-    """The nodes' `spin` parameter: rclpy's executor, or the draining spin."""
+    spin: Spin = DEFAULT_SPIN
+    """The nodes' `spin` parameter: rclpy's EventsExecutor or its SingleThreadedExecutor."""
     state: TaskStateConfig | None = None
     """classifier_node's `state.*` parameters (None: those of config/classifier.yaml)."""
     startup_timeout: float = 60.0
@@ -165,7 +165,7 @@ def _params(
 
 
 def verifier_params(
-    work: Path, arms: tuple[str, ...], verifier: Path, spin: Spin = "executor"
+    work: Path, arms: tuple[str, ...], verifier: Path, spin: Spin = DEFAULT_SPIN
 ) -> tuple[VerifierConfig, Path]:
     """verifier_node's configuration for `arms` and its parameter file in `work`."""
     cfg = VerifierConfig(

@@ -281,11 +281,3 @@ def refinement_cycle(config: TaxonomyConfig) -> list[Op]:
 def compose_behaviors(mcs: list[Row], config: TaxonomyConfig) -> list[Row]:
     """llbehComposition's scan on a whole axis (before refinement)."""
     return run_ops([ComposeBehaviors(config)], mcs)
-
-
-def refine_behaviors(llbs: list[Row], config: TaxonomyConfig) -> list[Row]:
-    """Refinement.m run behavior_refinement_cycles times on a whole axis."""
-    ops: list[Op] = []
-    for _ in range(config.behavior_refinement_cycles):
-        ops.extend(refinement_cycle(config))
-    return run_ops(ops, [list(b) for b in llbs])

@@ -8,7 +8,7 @@ these passes apply them in the original order. One cleanUp call's steps share a 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from rcbht_introspection.taxonomy import compositions as mc
@@ -22,7 +22,6 @@ from rcbht_introspection.taxonomy.ops import (
     StreamContext,
     label_in,
     run_ops,
-    whole_context,
 )
 
 
@@ -471,14 +470,3 @@ def composition_cycle(ctx: StreamContext) -> list[Op]:
 def compose(prims: list[Row], config: TaxonomyConfig) -> list[Row]:
     """CompoundMotionComposition's scan on a whole axis (before filtering)."""
     return run_ops([Compose(config)], prims)
-
-
-def clean_compositions(
-    mcs: list[Row], state_times: Sequence[float], end_time: float, config: TaxonomyConfig
-) -> list[Row]:
-    """cleanUp.m run composition_cleanup_cycles times on a whole axis."""
-    ctx = whole_context(config, state_times, end_time)
-    ops: list[Op] = []
-    for _ in range(config.composition_cleanup_cycles):
-        ops.extend(composition_cycle(ctx))
-    return run_ops(ops, [list(m) for m in mcs])

@@ -6,7 +6,6 @@ files, including its [bug]-tagged behaviours (spec 2.1-2.5); other profiles may 
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 from dataclasses import dataclass
@@ -152,11 +151,6 @@ def taxonomy_digest(config: TaxonomyConfig) -> str:
 def is_reference(config: TaxonomyConfig) -> bool:
     """True when `config` has the reference profile's values (the golden files' words)."""
     return taxonomy_digest(config) == taxonomy_digest(default_config())
-
-
-def config_fields() -> tuple[str, ...]:
-    """Names of every TaxonomyConfig field (for docs and tests)."""
-    return tuple(f.name for f in dataclasses.fields(TaxonomyConfig))
 
 
 _DEFAULT: TaxonomyConfig | None = None

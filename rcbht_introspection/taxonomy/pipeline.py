@@ -122,10 +122,3 @@ class AxisPipeline:
     def retained(self) -> int:
         """Rows held back by both chains (for the bounded-memory check)."""
         return self.compositions.retained() + self.behaviors.retained()
-
-    def run_whole(self, prims: list[Row]) -> tuple[list[Row], list[Row]]:
-        """A whole axis at once (the batch engine): the same operators, one after the other."""
-        if not self.ctx.config.final_segment:
-            prims = prims[:-1]
-        mcs = self.compositions.run_all(prims)
-        return mcs, self.behaviors.run_all([list(m) for m in mcs])

@@ -9,7 +9,7 @@ import math
 
 from rcbht_introspection.taxonomy import primitives as pr
 from rcbht_introspection.taxonomy.config import TaxonomyConfig
-from rcbht_introspection.taxonomy.ops import Op, PairPass, Row, run_ops
+from rcbht_introspection.taxonomy.ops import Op, PairPass, Row
 
 
 class RepeatedPrimitives(Op):
@@ -76,8 +76,3 @@ def primitive_durations_pass(config: TaxonomyConfig) -> PairPass:
         can_start=lambda row: row[pr.LABEL] not in (pr.PIMP, pr.NIMP),
         end=pr.FINISH,
     )
-
-
-def clean_primitives(prims: list[Row], config: TaxonomyConfig) -> list[Row]:
-    """primitivesCleanUp.m on a whole axis."""
-    return run_ops([RepeatedPrimitives(), primitive_durations_pass(config)], prims)

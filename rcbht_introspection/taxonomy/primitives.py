@@ -447,11 +447,6 @@ def segment_arrays(time: np.ndarray, wrench: np.ndarray, config: TaxonomyConfig)
     return seg
 
 
-def label_segments(segments: list[list[float]], thresholds: Sequence[float]) -> list[Primitive]:
-    """Attach gradient labels: [avg, max, min, start, finish, gradient] -> 7-field primitives."""
-    return [[*s, classify_gradient(s[GRAD], thresholds)] for s in segments]
-
-
 # --------------------------------------------------------------------------- clean-up
 
 
@@ -510,22 +505,6 @@ def gradient_spectrum(pimp: float, pconst: float) -> tuple[float, ...]:
     delta = (pimp - pconst) / 3
     pos = (pimp, pimp - delta, pimp - 2 * delta, pconst)
     return (*pos, -pos[3], -pos[2], -pos[1], -pos[0])
-
-
-def calibrate(limits: dict[str, tuple[float, float]]) -> dict[str, tuple[float, ...]]:
-    """Per-axis spectra from per-axis (pimp, pConst): Fx own; Fy, Fz (Fz pimp, Fx pConst); M* from My."""
-    fx, fz, my = limits["Fx"], limits["Fz"], limits["My"]
-    return {
-        "Fx": gradient_spectrum(fx[0], fx[1]),
-        "Fy": gradient_spectrum(fz[0], fx[1]),
-        "Fz": gradient_spectrum(fz[0], fx[1]),
-        "Mx": gradient_spectrum(my[0], my[1]),
-        "My": gradient_spectrum(my[0], my[1]),
-        "Mz": gradient_spectrum(my[0], my[1]),
-    }
-
-
-PRIMITIVE_NAMES = PRIMITIVE_LABELS
 
 
 def primitive_word(p: Primitive, axis: str, arm: str, seq: int = 0) -> Word:

@@ -201,7 +201,6 @@ class ArmStream:
         self._period: float | None = None
         self._dt_lo = math.nan  # in-rate interval bounds once the period is known
         self._dt_hi = math.nan
-        self._rate_run = 0
         # moment-axis labels: thresholds per axis once known, else the segments wait
         given = self.stream_config.moment_domains or {}
         self._thresholds: list[tuple[float, ...] | None] = []

@@ -29,7 +29,6 @@ from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.features import PER_ARM, TrialFeatures, kind_columns
 from rcbht_introspection.verify.novelty import NeighbourModel, NominalLevel, TimingModel
 
-SIGNALS = ("wrench", "timing", "wrench_global", "hmm")
 SCALE_QUANTILE = 0.75
 """Each (signal, sub-task) is first scaled by this quantile of its held-out maxima."""
 SIGNAL_FLOOR = {"wrench": 0.1, "wrench_global": 0.1, "timing": 0.5, "hmm": 0.1}

@@ -5,6 +5,7 @@ loading executes no code)."""
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -177,3 +178,16 @@ def load_verifier(path: Path | str) -> VerifierModel:
     except (KeyError, TypeError, ValueError, IndexError, OverflowError, AttributeError) as exc:
         raise InputError(f"inconsistent verifier content: {exc}", path) from None
     return VerifierModel(tuple(header["arms"]), detector, ch, dict(header.get("trained_on") or {}))
+
+
+def load_usable_verifier(path: str, arms: Sequence[str]) -> tuple[VerifierModel | None, str]:
+    """The verifier model at `path` for a node of `arms`, or None and why it cannot be used."""
+    if not path:
+        return None, "verifier_file not set"
+    try:
+        model = load_verifier(path)
+    except InputError as exc:
+        return None, str(exc)
+    if set(model.arms) != set(arms):
+        return None, f"the model's arms {list(model.arms)} are not the node's {list(arms)}"
+    return model, ""

@@ -23,6 +23,7 @@ import numpy as np
 from rcbht_introspection.io.bags import END_PHASE, trial_phase_events
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live.belief import Belief
+from rcbht_introspection.live.health import ERROR, OK, WARN, CounterWatch, Health, LatencyWindow
 from rcbht_introspection.live.segmenter import SegmenterSession
 from rcbht_introspection.taxonomy.words import Word
 from rcbht_introspection.verify.mismatch import Contradiction, contradiction_of
@@ -239,3 +240,42 @@ def sample_steps(trial: Trial) -> Iterator[tuple[int, float, list[tuple[float, s
             due.append(events[k])
             k += 1
         yield i, float(t), due
+
+
+def verifier_health(
+    stream: VerifierStream | None,
+    model_problem: str,
+    model: tuple[str, str],
+    latency: LatencyWindow,
+    watch: CounterWatch,
+    matched: tuple[int, int],
+) -> list[Health]:
+    """verifier_node's status: `model` (file, SHA-256), the sample-to-verdict latency of the
+    period, rejected samples and events, the current health; `matched`: (verdict subscribers,
+    intake publishers). ERROR without a usable verifier."""
+    name = "verifier_node"
+    if stream is None:
+        return [Health(f"{name}: model", ERROR, f"no usable verifier: {model_problem}")]
+    n, p50, p99 = latency.take()
+    counts = {
+        **{f"rejected samples {a}": c.rejected_total for a, c in stream.segmenter.counts.items()},
+        "unknown events": stream.segmenter.unknown_phases,
+        "late events": stream.segmenter.late_phases,
+    }
+    moved = watch.moved(counts)
+    values = (
+        ("verifier file", model[0]),
+        ("verifier sha256", model[1]),
+        ("health", stream.health),
+        ("verdicts", str(stream.verdicts)),
+        ("alarms", str(stream.alarms)),
+        ("verdict batches in period", str(n)),
+        ("sample to verdict p50 ms", f"{p50:.3f}"),
+        ("sample to verdict p99 ms", f"{p99:.3f}"),
+        ("verdict subscribers matched", str(matched[0])),
+        ("intake publishers matched", str(matched[1])),
+        *((k, str(v)) for k, v in counts.items()),
+    )
+    level = WARN if moved else OK
+    message = f"health {stream.health}" + (f"; moved: {moved}" if moved else "")
+    return [Health(f"{name}: verifier", level, message, values)]
