@@ -211,7 +211,7 @@ def test_live_augment_round_trips_through_the_model_file(trials: dict, tmp_path:
     assert loaded.live is not None and loaded.live.classes_ == loaded.classes_
     header = loaded.training["live_augment"]
     assert header["stream_profile"] == load_live_config().stream_profile
-    assert header["n_samples"] > 12 and header["step_s"] == 0.5
+    assert header["n_samples"] > 12 and header["step_s"] == load_live_config().step_s
     assert main(["train", *inputs, "--out", str(out), "--no-live-augment"]) == 0
     # words + wrench: the running head still reads prefixes of the sub-tasks (learn/models.py)
     assert load_model(out).training == {"live_augment": None} and load_model(out).live is not None

@@ -4,14 +4,17 @@ sub-task's evidence (on generated trials and the REAL HIRO ones)."""
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SOURCES, trial_folders
+from conftest import SOURCES, generated_trials, trial_folders
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from rcbht_introspection.cli import main
 from rcbht_introspection.grammar.encoding.wrench import wrench_features
 from rcbht_introspection.grammar.split import window_sample
 from rcbht_introspection.io.hiro import read_trial
@@ -22,7 +25,13 @@ from rcbht_introspection.live.belief import Belief, BeliefTracker
 from rcbht_introspection.live.classifier import ClassifierSession, PhaseInput, WordsInput
 from rcbht_introspection.live.replay import node_inputs, node_stream, stream_trial
 from rcbht_introspection.live.state import StateFilter
-from rcbht_introspection.summaries.blocks import BLOCK_S, BlockMeans, WrenchTrack, trial_tracks
+from rcbht_introspection.summaries.blocks import (
+    BLOCK_S,
+    BlockMeans,
+    WrenchBlock,
+    WrenchTrack,
+    trial_tracks,
+)
 from rcbht_introspection.taxonomy.words import TrialWords
 
 
@@ -126,3 +135,41 @@ def test_boundary_belief_reads_only_its_own_subtask(case: dict) -> None:
     plain, other = _running(beliefs(inputs), third.time), _running(beliefs(spliced), third.time)
     assert len(plain) > 5
     assert other == plain
+
+
+def test_blocks_of_a_straggling_message_are_put_in_place() -> None:
+    """A batch's first message on another topic may arrive after a later batch's blocks."""
+
+    def block(end: float) -> WrenchBlock:
+        return WrenchBlock(end, 1, (end, 0, 0, 0, 0, 0))
+
+    track = WrenchTrack()
+    track.extend([block(0.1), block(0.15)])
+    track.extend([block(0.05)])
+    assert track.ends[: len(track)].tolist() == [0.05, 0.1, 0.15]
+    assert track.means[: len(track), 0].tolist() == [0.05, 0.1, 0.15]
+    early = track.until(0.1)
+    track.extend([block(0.2)])
+    track.drop_before(0.16)
+    assert early.ends[: len(early)].tolist() == [0.05, 0.1]  # a copy: later changes stay out
+
+
+def test_evaluate_train_scores_another_set_beside_minirocket(
+    request: pytest.FixtureRequest, tmp_path: Path
+) -> None:
+    """`rcbht evaluate TEST --train TRAIN`: whole and prefix accuracy beside MiniRocket and
+    duration, also when both sets hold a trial of the same name."""
+    trials = generated_trials(request)
+    out = tmp_path / "transfer.json"
+    args = ["evaluate", *map(str, trials[5:7]), "--train", *map(str, trials[:5]),
+            "--permutations", "2", "--json", str(out), "--no-progress"]  # fmt: skip
+    assert main(args) == 0
+    result = json.loads(out.read_text())
+    assert result["protocol"] == "transfer" and result["n_test_trials"] == 2
+    assert result["accuracy"]["n"] == 2 and 0.25 < result["accuracy"]["mean"] <= 1
+    assert set(result["prefix_accuracy"]) == {"10%", "25%", "50%", "75%"}
+    assert all(0 <= v["minirocket_baseline"] <= 1 for v in result["prefix_accuracy"].values())
+    assert 0 < result["minirocket_baseline"]["trial_splits"]["mean"] <= 1
+    same = ["evaluate", str(trials[0]), "--train", *map(str, trials[:3]), "--permutations", "1",
+            "--json", str(out), "--no-progress"]  # fmt: skip
+    assert main(same) == 0 and json.loads(out.read_text())["n_test_trials"] == 1

@@ -93,16 +93,7 @@ def _register_evaluate(subparsers: argparse._SubParsersAction[argparse.ArgumentP
         default=None,
         help="held-out trials (default: 10 of 46, 8 of 38, 6 of 20, else ~22%%)",
     )
-    ev.add_argument(
-        "--train",
-        nargs="+",
-        type=Path,
-        default=None,
-        metavar="TRAIN",
-        help="score a model of these recordings (another day, session or robot) on the inputs, "
-        "whole and at the prefixes, beside MiniRocket and duration only; --permutations seeds "
-        "(default 5)",
-    )
+    _add_transfer_option(ev)
     ev.add_argument("--trials", type=int, default=None, help="use only the first N trials")
     ev.add_argument("--seed", type=int, default=0)
     ev.add_argument(
@@ -125,6 +116,20 @@ def _register_evaluate(subparsers: argparse._SubParsersAction[argparse.ArgumentP
     ev.add_argument("--no-progress", action="store_true")
     add_parallel_options(ev, "permutations (curve)")
     ev.set_defaults(func=run_evaluate)
+
+
+def _add_transfer_option(ev: argparse.ArgumentParser) -> None:
+    """`--train TRAIN ...`: a model of other recordings scored on the inputs (run_transfer)."""
+    ev.add_argument(
+        "--train",
+        nargs="+",
+        type=Path,
+        default=None,
+        metavar="TRAIN",
+        help="score a model of these recordings (another day, session or robot) on the inputs, "
+        "whole and at the prefixes, beside MiniRocket and duration only; --permutations seeds "
+        "(default 5)",
+    )
 
 
 def _add_prequential_options(ev: argparse.ArgumentParser) -> None:

@@ -647,6 +647,7 @@ def evaluate_transfer(
     model and, with `protocol.peers`, MiniRocket trained on the same trials; each of `seeds`
     seeds refits the seeded parts (the SVM is deterministic, MiniRocket's kernels are not)."""
     task = task_of_trials([*train, *test])
+    test = [_renamed(t, " (test)") for t in test]  # another day may reuse TRAIN's trial names
     train_samples = [s for t in train for s in t.samples]
     test_samples = [s for t in test for s in t.samples]
     if not train_samples or not test_samples:
@@ -675,6 +676,12 @@ def evaluate_transfer(
         _add_peer_result(result, plan, tally)
         result["minirocket_baseline"].pop("curve")
     return result
+
+
+def _renamed(trial: TrialSamples, suffix: str) -> TrialSamples:
+    """The trial with `suffix` on its samples' trial name (their wrench is looked up by it)."""
+    samples = [replace(s, trial=s.trial + suffix) for s in trial.samples]
+    return replace(trial, samples=samples)
 
 
 def _raws(trials: Sequence[TrialSamples], repeated: RepeatedPolicy | None) -> Any:

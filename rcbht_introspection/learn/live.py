@@ -97,8 +97,8 @@ def live_windows(
     at the stream time of the newest evidence it has.
     """
     released = streamed.released()
-    wrench = streamed.wrench_tracks()
     step_times = [s.t for s in streamed.steps]
+    delivered = streamed.delivered_blocks()
     boundary: list[SubtaskSample] = []
     window: list[SubtaskSample] = []
     for subtask, start, end in streamed.subtask_windows():
@@ -106,6 +106,7 @@ def live_windows(
             i = bisect_right(step_times, t) - 1
             now = max(start, step_times[i]) if i >= 0 else start
             words = words_until(released, now, streamed.name)
+            wrench = delivered(i)  # the blocks the classifier has at that step
             sample = window_sample(words, start, now, subtask, streamed.name, wrench=wrench)
             if sample_word_count(sample):
                 boundary.append(sample)
@@ -254,4 +255,6 @@ def live_training(
             window.extend(windows)
     used = config if use else None
     model = train_live_model(samples, live, used, taxonomy, window, **train_kwargs)
+    if used is not None:
+        model.training = training_header(used, len(live) + len(window), taxonomy)
     return model, len(live) + len(window)

@@ -16,7 +16,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from rcbht_introspection.config_files import config_path, load_config
 from rcbht_introspection.errors import InputError
@@ -228,7 +228,7 @@ class OnlineLearner:
         their prefixes and the live-like windows)."""
         kept = [*self._kept, *samples]
         kept_live = [*self._kept_live, *live]
-        encoding: EncodingName = "paper" if self.config.encoding == "paper" else "compact"
+        encoding = cast(EncodingName, self.config.encoding)  # checked against ENCODINGS
         self._working = train_model(
             [*self._taught_samples(kept), *kept_live],
             "mondrian",
@@ -286,6 +286,7 @@ class OnlineLearner:
             encoder=with_cache(working.encoder, SampleCache()),
             training=copy.deepcopy(working.training),
             live=None if working.live is None else self._snapshot_of(working.live),
+            window=None,  # a taught model's window mode reads its taught live head
         )
 
 
@@ -307,6 +308,7 @@ def _copy_model(model: SubtaskModel) -> SubtaskModel:
         encoder=with_cache(model.encoder, SampleCache()),
         training=copy.deepcopy(model.training),
         live=None if model.live is None else _copy_model(model.live),
+        window=None,  # not taught: window mode reads the taught live head
     )
 
 

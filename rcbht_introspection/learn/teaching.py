@@ -281,8 +281,9 @@ class Teaching:
 
     def _take_words(self, job: _Job, tracker: BeliefTracker) -> str:
         """Cut the job's sample from the tracker's words and queue it; a refusal line or ''."""
+        wrench = {arm: track.until(job.end) for arm, track in tracker.wrench.items()}
         sample = window_sample(
-            tracker.words, job.start, job.end, subtask=job.request.label, trial=tracker.trial
+            tracker.words, job.start, job.end, job.request.label, tracker.trial, wrench=wrench
         )
         if not sample_word_count(sample):
             with self._lock:
@@ -305,8 +306,9 @@ class Teaching:
         out = []
         for t in sample_times(job.start, job.end, self.live_windows):
             words = tracker.words_final_by(t, job.start)
+            wrench = {arm: track.until(t) for arm, track in tracker.wrench.items()}
             sample = window_sample(
-                words, job.start, t, subtask=job.request.label, trial=tracker.trial
+                words, job.start, t, job.request.label, tracker.trial, wrench=wrench
             )
             if sample_word_count(sample):
                 out.append(sample)

@@ -274,7 +274,7 @@ class BeliefTracker:
         )
         memo = {"memo": self._axis_memo} if getattr(model, "takes_axis_memo", False) else {}
         try:
-            proba = np.asarray(model.predict_proba_samples([sample], **memo))[0]
+            proba = self._in_class_order(model, model.predict_proba_samples([sample], **memo))
             if final:
                 # a verdict is the model's own prediction (as offline evaluation uses it), which
                 # for a probabilistic SVM need not be the arg-max of its probabilities
@@ -285,6 +285,19 @@ class BeliefTracker:
             self.last_error = f"{type(exc).__name__}: {exc}"
             return belief(UNKNOWN, (0.0,) * len(self.classes))
         return belief(verdict, tuple(float(p) for p in proba))
+
+    def _in_class_order(self, head: Any, proba: Any) -> np.ndarray:
+        """A head's probabilities of one window in the model's class order (a head trained on
+        windows that lacked a sub-task has no column for it: 0)."""
+        row: np.ndarray = np.asarray(proba)[0]
+        names = [str(c) for c in getattr(head, "classes_", self.classes)]
+        if names == list(self.classes):
+            return row
+        out = np.zeros(len(self.classes))
+        for name, p in zip(names, row, strict=True):
+            if name in self.classes:
+                out[self.classes.index(name)] = p
+        return out
 
     def window(self) -> tuple[float, float, str]:
         """(start, end, phase) of the current window."""

@@ -72,6 +72,24 @@ class StreamedTrial:
                 tracks[batch.arm].extend(batch.wrench)
         return tracks
 
+    def delivered_blocks(self) -> Callable[[int], dict[str, WrenchTrack]]:
+        """`step index -> each arm's blocks sent with the batches up to that step` (what the
+        classifier has then: blocks ride on word batches, so they may lag the stream a little)."""
+        tracks = self.wrench_tracks()
+        last: list[dict[str, float]] = []
+        known = dict.fromkeys(self.arms, -np.inf)
+        for step in self.steps:
+            for batch in step.batches:
+                if batch.wrench:
+                    known[batch.arm] = max(known[batch.arm], batch.wrench[-1].end)
+            last.append(dict(known))
+
+        def at(i: int) -> dict[str, WrenchTrack]:
+            ends = last[i] if 0 <= i < len(last) else dict.fromkeys(self.arms, -np.inf)
+            return {arm: track.until(ends[arm]) for arm, track in tracks.items()}
+
+        return at
+
     def subtask_windows(self) -> list[tuple[str, float, float]]:
         """(sub-task, start, end) on the stream clock, as the classifier sees the events."""
         events = [p for s in self.steps for p in s.phases]

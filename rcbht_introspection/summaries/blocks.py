@@ -83,9 +83,12 @@ class WrenchTrack:
         return self._size
 
     def extend(self, blocks: Sequence[WrenchBlock]) -> None:
-        """Append blocks (ends increasing); arrays grow by doubling, views of old ones stay valid."""
+        """Add blocks; arrays grow by doubling, views of old ones stay valid. Blocks come in time
+        order, except from a straggling message (a batch's first message on another topic than
+        the last one's): those are put in place, so the ends stay sorted."""
         if not blocks:
             return
+        late = self._size and blocks[0].end <= self.ends[self._size - 1]
         need = self._size + len(blocks)
         if need > len(self.ends):
             capacity = max(need, 2 * len(self.ends), 64)
@@ -97,6 +100,9 @@ class WrenchTrack:
             self.ends[i] = block.end
             self.means[i] = block.mean
         self._size = need
+        if late:
+            order = np.argsort(self.ends[:need], kind="stable")
+            self.ends[:need], self.means[:need] = self.ends[order], self.means[order]
 
     def drop_before(self, t: float) -> None:
         """Forget blocks that no window starting at or after `t` reads (its baseline is kept)."""
@@ -117,6 +123,14 @@ class WrenchTrack:
         base = self.means[lo - 1] if lo > 0 else self.means[0]
         return base, self.means[lo:hi]
 
+    def until(self, t: float) -> WrenchTrack:
+        """A copy holding the blocks ending at or before `t` (what a window ending at `t` reads;
+        later growth or pruning of this track does not reach it)."""
+        n = bisect_right(self.ends[: self._size], t)
+        out = WrenchTrack()
+        out.ends, out.means, out._size = self.ends[:n].copy(), self.means[:n].copy(), n
+        return out
+
     @classmethod
     def of_blocks(cls, blocks: Sequence[WrenchBlock]) -> WrenchTrack:
         track = cls()
@@ -127,9 +141,11 @@ class WrenchTrack:
 def trial_tracks(trial: Trial, period: float = BLOCK_S) -> Mapping[str, WrenchTrack]:
     """Each arm's track of a recorded trial, computed by the live class (BlockMeans)."""
     out: dict[str, WrenchTrack] = {}
-    # stream time as the segmenter computes it from the stamps of a trial bag (live/replay.py)
+    # stream time as the segmenter computes it from the stamps of a trial bag (live/replay.py),
+    # back on the trial's clock (its words and state times) when that does not start at 0
     ns = np.rint(np.asarray(trial.time, dtype=float) * 1e9).astype(np.int64)
-    times = ((ns - ns[0]) / 1e9).tolist() if len(ns) else []
+    start = float(trial.time[0]) if len(ns) else 0.0
+    times = ((ns - ns[0]) / 1e9 + start).tolist() if len(ns) else []
     for arm, wrench in trial.wrench.items():
         means = BlockMeans(period)
         for t, row in zip(times, np.asarray(wrench, dtype=float).tolist(), strict=True):
