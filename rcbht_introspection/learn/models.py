@@ -58,6 +58,11 @@ class SubtaskModel:
         return self if self.live is None else self.live
 
     @property
+    def reads_wrench(self) -> bool:
+        """Its features hold the wrench summary (a running window needs blocks of its own)."""
+        return self.encoder.name == "words-wrench"
+
+    @property
     def encoding(self) -> str:
         """Name of the encoding ('paper' or 'compact')."""
         return self.encoder.name

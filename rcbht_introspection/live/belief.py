@@ -272,6 +272,9 @@ class BeliefTracker:
         model: Any = (
             self.model.head(final, self.mode) if hasattr(self.model, "head") else self.model
         )
+        wrench = getattr(model, "reads_wrench", False)
+        if not final and wrench and not self._wrench_evidence(start, end):
+            return belief(UNKNOWN, (0.0,) * len(self.classes))  # no wrench of its own yet
         memo = {"memo": self._axis_memo} if getattr(model, "takes_axis_memo", False) else {}
         try:
             proba = self._in_class_order(model, model.predict_proba_samples([sample], **memo))
@@ -285,6 +288,11 @@ class BeliefTracker:
             self.last_error = f"{type(exc).__name__}: {exc}"
             return belief(UNKNOWN, (0.0,) * len(self.classes))
         return belief(verdict, tuple(float(p) for p in proba))
+
+    def _wrench_evidence(self, start: float, end: float) -> bool:
+        """Some arm has a wrench block in the window beside its baseline (the first 50-100 ms
+        of a window read only words and a zero departure: no evidence, the state stays)."""
+        return any(track.evidence(start, end) for track in self.wrench.values())
 
     def _in_class_order(self, head: Any, proba: Any) -> np.ndarray:
         """A head's probabilities of one window in the model's class order (a head trained on

@@ -123,6 +123,13 @@ class WrenchTrack:
         base = self.means[lo - 1] if lo > 0 else self.means[0]
         return base, self.means[lo:hi]
 
+    def evidence(self, start: float, end: float) -> int:
+        """Blocks of (start, end] beside the baseline `window` compares them with: 0 while the
+        window has no wrench of its own yet (its only block is its baseline)."""
+        ends = self.ends[: self._size]
+        lo, hi = bisect_right(ends, start), bisect_right(ends, end)
+        return max(0, hi - max(lo, 1))
+
     def until(self, t: float) -> WrenchTrack:
         """A copy holding the blocks ending at or before `t` (what a window ending at `t` reads;
         later growth or pruning of this track does not reach it)."""
