@@ -383,10 +383,15 @@ def run_transfer(args: argparse.Namespace) -> int:
         f"whole {acc['mean']:.4f}{minirocket}, duration only "
         f"{result['duration_baseline']['mean']:.4f}; prefixes {prefixes} ({seeds} seeds)"
     )
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2))
+    _write_json(args.json, result)
     return 0
+
+
+def _write_json(path: Path | None, result: dict[str, Any]) -> None:
+    """The command's JSON result at `path` (--json), folders made as needed; None: none."""
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(result, indent=2))
 
 
 def _curve_protocol(
@@ -446,9 +451,7 @@ def _report_curve(args: argparse.Namespace, result: dict[str, Any]) -> None:
     if "live_accuracy" in result:
         live = result["live_accuracy"]
         print(f"live windows of the validation trials: {live['mean']:.4f} +- {live['std']:.4f}")
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2))
+    _write_json(args.json, result)
     if args.plot:
         from rcbht_introspection.plots.learning_curve import plot_learning_curve
 
@@ -506,9 +509,7 @@ def run_prequential(args: argparse.Namespace) -> int:
         f"{result['held_out_trials'][-1]}), {result['orders']} teaching orders, "
         f"{result['seconds']:.1f} s"
     )
-    if args.json:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(result, indent=2))
+    _write_json(args.json, result)
     return 0
 
 
