@@ -60,6 +60,15 @@ class ClassifierNode(ManagedNode):
         self.arrivals: Arrivals[WordsInput | PhaseInput] = Arrivals()
         """Inputs the executor delivered since the last settled()."""
 
+    def spin_kind(self) -> str:
+        """The `spin` parameter, except with teaching on: then rclpy's SingleThreadedExecutor.
+        Under the EventsExecutor the ~/teach service went unanswered for 20 s beside a busy
+        machine (test_ros_teach's cold start, once in three CI runs)."""
+        spin = super().spin_kind()
+        if spin == "events" and self.get_parameter("teach_enabled").value:
+            return "executor"
+        return spin
+
     def configure(self, cfg: ClassifierConfig) -> None:
         self.cfg = cfg
         # a teaching node continues from the model it saved (teach_file), else model_file

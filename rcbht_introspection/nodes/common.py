@@ -160,6 +160,11 @@ class ManagedNode(LifecycleNode):
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
 
     # --- what a node implements -------------------------------------------------------------
+
+    def spin_kind(self) -> str:
+        """The executor to spin this node with: its `spin` parameter (read at start-up)."""
+        return str(self.get_parameter("spin").value)
+
     def configure(self, cfg: Any) -> None:
         """Build the state and the publishers from a validated config."""
 
@@ -322,7 +327,7 @@ def run(
     try:
         node = node_factory()
         node.stop = stop
-        executor, node.events = make_executor(node.get_parameter("spin").value)
+        executor, node.events = make_executor(node.spin_kind())
         executor.add_node(node)
         node.get_logger().info(f"spun by rclpy's {type(executor).__name__}")
         if node.autostart and not stop.requested:
