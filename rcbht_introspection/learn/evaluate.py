@@ -19,7 +19,6 @@ import copy
 import dataclasses
 import functools
 import math
-import pickle
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -399,28 +398,49 @@ def _count_near_empty(complete: Sequence[TrialSamples], protocol: Protocol) -> i
     return sum(s.duration < protocol.near_empty_seconds for t in complete for s in t.samples)
 
 
-STEP_SHARES = 2
-"""A permutation runs on this many workers, each taking every STEP_SHARES-th curve step (so each
-share holds small and large training sets alike): with few permutations, workers stay busy."""
+LAST_STEP_WEIGHT = 3
+"""Scheduling estimate only (the results never depend on it): the last step of a permutation
+(running heads, trial split, prefixes, live windows) costs about this many ordinary steps."""
+
+Hand = dict[int, frozenset[int]]
+"""One worker's units: permutation -> the indices of the curve steps it runs of it."""
 
 
-def _one_share(shipped: NDArray[np.uint8], unit: tuple[int, int]) -> _Tally:
-    """Share `unit` = (permutation, share) of the pickled run `shipped` on a worker, in a tally
-    of its own: the steps j with j % STEP_SHARES == share. The bytes are a NumPy array, which
-    joblib hands to its local workers as one memory-mapped file instead of pickling them again
-    for every share; each share unpickles its own copy (a run is not reused across shares)."""
-    run: _Run = pickle.loads(shipped.tobytes())
-    perm, share = unit
-    run.tally = _Tally.empty(run.plan, run.protocol.permutations)
-    run.steps = frozenset(range(share, len(run.plan.steps), STEP_SHARES))
-    run.permutation(perm)
-    return run.tally
+def _hand(run: _Run, hand: Hand) -> list[tuple[int, _Tally]]:
+    """The hand's steps on one worker's copy of the run, a tally per permutation. The run's
+    sample cache is kept throughout, as `--jobs 1` keeps it from permutation to permutation."""
+    tallies = []
+    for perm, steps in hand.items():
+        run.tally = _Tally.empty(run.plan, run.protocol.permutations)
+        run.steps = steps
+        run.permutation(perm)
+        tallies.append((perm, run.tally))
+    return tallies
+
+
+def _deal(run: _Run, workers: int) -> list[Hand]:
+    """Every (permutation, step) dealt to at most `workers` hands, the costliest first to the
+    least loaded hand; a step's estimated cost is its training set size (LAST_STEP_WEIGHT times
+    that for a permutation's last step)."""
+    steps, last = run.plan.steps, len(run.plan.steps) - 1
+    units = sorted(
+        ((k * (LAST_STEP_WEIGHT if j == last else 1), p, j)
+         for p in range(run.protocol.permutations) for j, k in enumerate(steps)),
+        reverse=True,
+    )  # fmt: skip
+    n = max(1, min(workers, len(units)))
+    load, hands = [0] * n, [dict[int, set[int]]() for _ in range(n)]
+    for cost, p, j in units:
+        i = load.index(min(load))
+        load[i] += cost
+        hands[i].setdefault(p, set()).add(j)
+    return [{p: frozenset(h[p]) for p in sorted(h)} for h in hands]
 
 
 def _merge_tally(into: _Tally, part: _Tally) -> None:
-    """Add one share's tally: the curve cells it ran, its counts, its list entries (merged in
-    permutation and share order, the lists are those of one process running them in turn:
-    only a permutation's last step adds to them)."""
+    """Add one worker's tally of one permutation: the curve cells it ran, its counts, its list
+    entries (merged in permutation order, the lists are those of one process running them in
+    turn: only a permutation's last step adds to them)."""
     for f in dataclasses.fields(_Tally):
         mine, theirs = getattr(into, f.name), getattr(part, f.name)
         if isinstance(mine, np.ndarray) and mine.dtype.kind == "f":
@@ -436,31 +456,30 @@ def _merge_tally(into: _Tally, part: _Tally) -> None:
 
 
 def _run_permutations(run: _Run, jobs: int) -> None:
-    """Every permutation of the protocol into run.tally: in turn (`jobs` 1), else in shares of
-    their steps on joblib workers (fleet.parallel_map); each step is seeded by its permutation,
-    never by its worker, and the last step of a permutation (the only one adding to the lists)
-    falls in one share, so the tally is the one of running them in turn."""
+    """Every permutation of the protocol into run.tally: in turn (`jobs` 1), else their steps
+    dealt to the joblib workers, one hand and one copy of the run per worker
+    (fleet.parallel_map); each step is seeded by its permutation, never by its worker, only a
+    permutation's last step adds to the tally's lists, and the tallies are merged in permutation
+    order: the tally of running them in turn."""
     if jobs == 1:
         for perm in range(run.protocol.permutations):
             run.permutation(perm)
         return
-    everything = [s for t in run.plan.complete for s in t.samples]
-    run.train(everything, 0)  # fills run.cache with every sample's encoding: shipped warm
+    from joblib import effective_n_jobs
+
     progress = run.progress
     shipped = copy.copy(run)
     shipped.progress = None  # a progress bar stays in this process
-    data = pickle.dumps(shipped, protocol=pickle.HIGHEST_PROTOCOL)
-    payload = np.frombuffer(data, dtype=np.uint8)
-    units = [(p, share) for p in range(run.protocol.permutations) for share in range(STEP_SHARES)]
-    ticks = iter([len(range(share, len(run.plan.steps), STEP_SHARES)) for _, share in units])
+    hands = _deal(run, effective_n_jobs(jobs))
+    ticks = iter([sum(map(len, hand.values())) for hand in hands])
     parts = parallel_map(
-        functools.partial(_one_share, payload),
-        units,
+        functools.partial(_hand, shipped),
+        hands,
         jobs,
         (lambda _: progress(next(ticks))) if progress is not None else None,
     )
-    for part in parts:
-        _merge_tally(run.tally, part)
+    for _, tally in sorted((pair for part in parts for pair in part), key=lambda pair: pair[0]):
+        _merge_tally(run.tally, tally)
 
 
 def evaluate(
