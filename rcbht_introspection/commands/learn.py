@@ -4,6 +4,7 @@ protocol)."""
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
@@ -19,7 +20,14 @@ from rcbht_introspection.commands.sensor import (
     warn,
 )
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.fleet import add_parallel_options, backend, jobs_from_args
+from rcbht_introspection.fleet import (
+    BadInputs,
+    add_parallel_options,
+    attempt,
+    backend,
+    jobs_from_args,
+    parallel_map,
+)
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
 from rcbht_introspection.taxonomy import StreamProfile
@@ -241,21 +249,39 @@ def forest_budget(args: argparse.Namespace, n_estimators: int = 100) -> dict[str
 
 
 def load_checked(
-    args: argparse.Namespace, command: str, taxonomy: TaxonomyConfig | None
+    args: argparse.Namespace,
+    command: str,
+    taxonomy: TaxonomyConfig | None,
+    bad: BadInputs | None = None,
 ) -> list[TrialSamples]:
     """The trials of `args.inputs` (engine words labelled by `taxonomy`) read with
     `--repeated-stamps` and `--strict`; their sensor findings printed as warnings (frozen-sensor
     thresholds from config/segmenter.yaml's intake section), and the state times dropped from
-    them summarised (commands/sensor.report_dropped)."""
-    from rcbht_introspection.learn.data import load_trials
+    them summarised (commands/sensor.report_dropped). A trial that cannot be read is counted in
+    `bad` and left out (fleet.BadInputs; none readable: an error); under --strict it stops the run."""
+    from rcbht_introspection.learn.data import find_inputs, load_trial_samples
     from rcbht_introspection.live.intake import load_intake_config
     from rcbht_introspection.taxonomy.stream import load_stream_config
 
-    policy = repeated_policy(args)
+    if args.words not in WORD_SOURCES:
+        raise InputError(f"unknown word source {args.words!r} (known: {', '.join(WORD_SOURCES)})")
     stream = load_stream_config(args.stream_profile)
-    trials = load_trials(
-        args.inputs, args.words, taxonomy, policy, load_intake_config(), stream, args.strict
-    )
+    read = functools.partial(
+        load_trial_samples, words=args.words, taxonomy=taxonomy, repeated=repeated_policy(args),
+        checks=load_intake_config(), stream=stream, strict=args.strict,
+    )  # fmt: skip
+    found = find_inputs(args.inputs)
+    here = BadInputs(command)
+    jobs = jobs_from_args(args) if hasattr(args, "jobs") else 1
+    with backend(getattr(args, "scheduler", None)):
+        outcomes = parallel_map(
+            read if args.strict else functools.partial(attempt, read), found, jobs
+        )
+    trials = here.keep(outcomes)
+    here.check_some()
+    if bad is not None:
+        bad.total += here.total
+        bad.failed.extend(here.failed)
     for trial in trials:
         warn(command, trial.trial, trial.findings)
     report_dropped(command, dropped_counts(trials))
@@ -280,7 +306,8 @@ def run_train(args: argparse.Namespace) -> int:
 
     taxonomy = taxonomy_from_args(args)
     budget = forest_budget(args)
-    trials = load_checked(args, "train", taxonomy)
+    bad = BadInputs("train")
+    trials = load_checked(args, "train", taxonomy, bad)
     samples = [s for t in trials for s in t.samples]
     model, n_live = live_training(
         trials, args.live_augment, args.live_config, taxonomy, repeated_policy(args),
@@ -295,7 +322,7 @@ def run_train(args: argparse.Namespace) -> int:
         f"classes {model.classes_}, task {list(model.task.subtasks)}, "
         f"taxonomy profile {model.taxonomy_profile!r} ({model.taxonomy_sha256[:12]})"
     )
-    return 0
+    return bad.finish(args.strict)
 
 
 def _clean(value: Any) -> Any:
@@ -329,7 +356,8 @@ def run_evaluate(args: argparse.Namespace) -> int:
     taxonomy = taxonomy_from_args(args)
     n_estimators = 100 if args.n_estimators is None else args.n_estimators
     budget = forest_budget(args, n_estimators)
-    trials = load_checked(args, "evaluate", taxonomy)
+    bad = BadInputs("evaluate")
+    trials = load_checked(args, "evaluate", taxonomy, bad)
     read = input_record(trials)
     if args.trials is not None:
         trials = trials[: args.trials]
@@ -345,13 +373,14 @@ def run_evaluate(args: argparse.Namespace) -> int:
         )
     result["datasets"] = [str(p) for p in args.inputs]
     result["input"] = read
+    result["bad_inputs"] = bad.to_dict()
     result["words"] = args.words
     result["stream_profile"] = args.stream_profile
     if args.classifier == "mondrian":
         result["forest_budget"] = budget
     result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"
     _report_curve(args, _clean(result))
-    return 0
+    return bad.finish(args.strict)
 
 
 def run_transfer(args: argparse.Namespace) -> int:
@@ -362,15 +391,17 @@ def run_transfer(args: argparse.Namespace) -> int:
     seeds = args.permutations = args.permutations or 5
     n_estimators = 100 if args.n_estimators is None else args.n_estimators
     budget = forest_budget(args, n_estimators)
-    test = load_checked(args, "evaluate", taxonomy)
+    bad = BadInputs("evaluate")
+    test = load_checked(args, "evaluate", taxonomy, bad)
     train = load_checked(argparse.Namespace(**{**vars(args), "inputs": args.train}), "evaluate",
-                         taxonomy)  # fmt: skip
+                         taxonomy, bad)  # fmt: skip
     protocol = _curve_protocol(args, taxonomy, n_estimators, budget)
     result = evaluate_transfer(train, test, protocol, seeds)
     result.update(
         datasets=[str(p) for p in args.inputs],
         train=[str(p) for p in args.train],
         input=input_record([*train, *test]),
+        bad_inputs=bad.to_dict(),
         words=args.words,
         taxonomy_profile=taxonomy.profile if taxonomy else "reference",
     )
@@ -384,7 +415,7 @@ def run_transfer(args: argparse.Namespace) -> int:
         f"{result['duration_baseline']['mean']:.4f}; prefixes {prefixes} ({seeds} seeds)"
     )
     _write_json(args.json, result)
-    return 0
+    return bad.finish(args.strict)
 
 
 def _write_json(path: Path | None, result: dict[str, Any]) -> None:
@@ -479,7 +510,8 @@ def run_prequential(args: argparse.Namespace) -> int:
         raise InputError("--permutations must be at least 0", field="--permutations")
     teach = _teach_settings(args)
     taxonomy = taxonomy_from_args(args)
-    trials = load_checked(args, "evaluate", taxonomy)
+    bad = BadInputs("evaluate")
+    trials = load_checked(args, "evaluate", taxonomy, bad)
     read = input_record(trials)
     if args.trials is not None:
         trials = trials[: args.trials]
@@ -495,6 +527,7 @@ def run_prequential(args: argparse.Namespace) -> int:
     )
     result["datasets"] = [str(p) for p in args.inputs]
     result["input"] = read
+    result["bad_inputs"] = bad.to_dict()
     result["words"] = args.words
     result["taxonomy_profile"] = taxonomy.profile if taxonomy else "reference"
     result = _clean(result)
@@ -510,7 +543,7 @@ def run_prequential(args: argparse.Namespace) -> int:
         f"{result['seconds']:.1f} s"
     )
     _write_json(args.json, result)
-    return 0
+    return bad.finish(args.strict)
 
 
 def _teach_settings(args: argparse.Namespace) -> Any:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import sys
 from pathlib import Path
@@ -10,7 +11,14 @@ from typing import Any
 
 from rcbht_introspection.commands.sensor import add_strict, report_dropped
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.fleet import add_parallel_options, backend, jobs_from_args
+from rcbht_introspection.fleet import (
+    BadInputs,
+    Failed,
+    add_parallel_options,
+    attempt,
+    backend,
+    jobs_from_args,
+)
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -64,15 +72,23 @@ def _common(p: argparse.ArgumentParser) -> None:
     add_strict(p, ", or a labels row for a trial not given")
 
 
-def _load(paths: list[str], strict: bool = False) -> list[Any]:
+def _load(paths: list[str], bad: BadInputs, strict: bool = False) -> list[Any]:
     """The trials of `paths`: unique names (a name twice is an error naming both paths), one arm
-    set; state times after the data or out of order dropped (`strict`: an error)."""
+    set; state times after the data or out of order dropped (`strict`: an error); a trial that
+    cannot be read counted in `bad` and left out (`strict`: an error)."""
     from rcbht_introspection.learn.data import find_inputs, read_any_trial
 
     found = find_inputs(paths)
-    trials = [read_any_trial(p, strict=strict) for p in found]
+    read = functools.partial(read_any_trial, strict=strict)
+    here = BadInputs(bad.command)
+    outcomes = [read(p) if strict else attempt(read, p) for p in found]
+    pairs = [(p, t) for p, t in zip(found, outcomes, strict=True) if not isinstance(t, Failed)]
+    trials = here.keep(outcomes)
+    here.check_some()
+    bad.total += here.total
+    bad.failed.extend(here.failed)
     first: dict[str, Path] = {}
-    for path, trial in zip(found, trials, strict=True):
+    for path, trial in pairs:
         if trial.name in first:
             raise InputError(
                 f"two trials are named {trial.name!r}: {first[trial.name]} and {path}", path
@@ -129,7 +145,8 @@ def cmd_verify_train(args: argparse.Namespace) -> int:
     from rcbht_introspection.verify.model_file import save_verifier
     from rcbht_introspection.verify.train import train_verifier
 
-    trials = _load(args.data, args.strict)
+    bad = BadInputs("verify-train")
+    trials = _load(args.data, bad, args.strict)
     (labels,), not_given = _labels(args.labels, trials, strict=args.strict, command="verify-train")
     read = _input_record("verify-train", trials, [], not_given)
     if sum(not lb.failed for lb in labels.values()) < 2:
@@ -139,9 +156,10 @@ def cmd_verify_train(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise InputError(str(exc)) from None
     model.trained_on["input"] = read  # stored in the verifier file's header too
+    model.trained_on["bad_inputs"] = bad.to_dict()
     save_verifier(model, args.out)
     print(f"{args.out}: {json.dumps(model.trained_on)}")
-    return 0
+    return bad.finish(args.strict)
 
 
 def cmd_verify_eval(args: argparse.Namespace) -> int:
@@ -149,8 +167,9 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     from rcbht_introspection.verify.evaluate import summarise, verify_runs
 
     config = load_verify_config(args.config)
-    trials = _load(args.data, args.strict)
-    train = _load(args.train, args.strict) if args.train else []
+    bad = BadInputs("verify-eval")
+    trials = _load(args.data, bad, args.strict)
+    train = _load(args.train, bad, args.strict) if args.train else []
     (labels, train_labels), not_given = _labels(
         args.labels, trials, train, strict=args.strict, command="verify-eval"
     )
@@ -185,13 +204,14 @@ def cmd_verify_eval(args: argparse.Namespace) -> int:
     protocol = "transfer" if train else ("leave-one-trial-out" if folds is None else str(folds))
     summary, records = summarise(runs, config, protocol)
     summary["input"] = read
+    summary["bad_inputs"] = bad.to_dict()
     _print(summary)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps({**summary, "records": records}, indent=2))
     if args.plots:
         _plots(args.plots, trials, labels, runs["verifier"])
-    return 0
+    return bad.finish(args.strict)
 
 
 def _contradictions(model_file: Path, trials: list[Any], config: Any) -> dict[str, Any]:
