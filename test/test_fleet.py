@@ -224,3 +224,79 @@ def test_a_warm_sample_cache_stays_warm_on_a_worker(sim_data: Path) -> None:
         raise AssertionError("encoded again")
 
     assert copied_cache.get(copied_sample, "key", encode_again) == 42
+
+
+def test_train_evaluate_and_verify_leave_an_unreadable_trial_out(
+    sim_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The fitting commands read every trial first: a bad one is named and counted in their JSON,
+    the others are used; under --strict it stops the run with exit code 2."""
+    import shutil
+
+    data = _set_with_a_bad_trial(sim_data, tmp_path / "set")
+    for folder in sorted(p for p in (sim_data / SIM_SUCCESS).iterdir() if p.is_dir())[3:]:
+        shutil.copytree(folder, data / folder.name)
+    model = tmp_path / "m.rcbht"
+    train = ["train", str(data), "--out", str(model), "--no-live-augment"]
+    assert main(train) == 0 and model.is_file()
+    out, err = capsys.readouterr()
+    assert "from 8 trials" in out and "rcbht train: 1 of 9 inputs bad, left out (" in err
+    assert main([*train, "--strict"]) == 2
+    assert capsys.readouterr().err.count("\n") == 1  # the bad trial's own one-line error
+    curve = tmp_path / "curve.json"
+    evaluate = ["evaluate", str(data), "--permutations", "1", "--no-peers", "--json", str(curve)]
+    assert main(evaluate) == 0
+    result = _json(curve)
+    assert isinstance(result, dict) and result["n_trials"] == 8
+    assert (
+        result["bad_inputs"]["count"] == 1 and "A-BAD" in result["bad_inputs"]["inputs"][0]["input"]
+    )
+    assert "A-BAD" in capsys.readouterr().err
+    verifier = tmp_path / "v.rcbht"
+    assert main(["verify-train", str(data), "--out", str(verifier)]) == 0
+    assert verifier.is_file() and "verify-train: 1 of 9 inputs bad" in capsys.readouterr().err
+
+
+def test_verify_eval_train_set_with_failures_fits_the_peers(tmp_path: Path) -> None:
+    """With failures in --train, the anchors' classifiers are fitted on them (their trials are
+    keyed train:<name>, not by their names) and name the test set's failures."""
+    import shutil
+
+    from rcbht_introspection.sim.dataset import write_dataset
+
+    folders = write_dataset(tmp_path / "sim", 10, seed=3, failures=True)
+    for i, folder in enumerate(folders):
+        shutil.copytree(folder, tmp_path / ("train" if i < 7 else "test") / folder.name)
+    out = tmp_path / "eval.json"
+    args = ["verify-eval", str(tmp_path / "test"), "--train", str(tmp_path / "train")]
+    assert main([*args, "--json", str(out)]) == 0
+    result = _json(out)
+    assert isinstance(result, dict)
+    named = {
+        r["method"]: r["class_given_onset"]
+        for r in result["records"]
+        if r["outcome"] != "success" and r["method"] in ("hmm", "minirocket")
+    }
+    assert set(named) == {"hmm", "minirocket"} and all(named.values())
+
+
+def test_the_curve_steps_are_dealt_once_each_and_evenly() -> None:
+    """Every (permutation, step) lands in exactly one worker's hand; the hands' estimated
+    costs differ by at most the costliest unit (the greedy rule's bound)."""
+    from types import SimpleNamespace
+
+    from rcbht_introspection.learn.evaluate import LAST_STEP_WEIGHT, _deal
+
+    steps = list(range(1, 37))
+    for permutations, workers in ((5, 2), (3, 4), (1, 8), (20, 3)):
+        run = SimpleNamespace(
+            plan=SimpleNamespace(steps=steps), protocol=SimpleNamespace(permutations=permutations)
+        )
+        hands = _deal(run, workers)  # type: ignore[arg-type]
+        dealt = [(p, j) for hand in hands for p, js in hand.items() for j in js]
+        assert sorted(dealt) == [(p, j) for p in range(permutations) for j in range(36)]
+        cost = [
+            sum(steps[j] * (LAST_STEP_WEIGHT if j == 35 else 1) for js in h.values() for j in js)
+            for h in hands
+        ]
+        assert max(cost) - min(cost) <= 36 * LAST_STEP_WEIGHT

@@ -153,14 +153,20 @@ def _peer_window(raw: Raw, start: float, until: float) -> np.ndarray:
     return w[sel]
 
 
-def _fit_peers(fold: Fold, raws: Mapping[str, Raw], peers: Sequence[str]) -> None:
-    """The anchors' classifiers `peers` on the training failures' windows [onset - lead, end]."""
+def _fit_peers(
+    fold: Fold, failed: Sequence[str], raws: Mapping[str, Raw], peers: Sequence[str]
+) -> None:
+    """The anchors' classifiers `peers` on the training failures' windows [onset - lead, end]
+    (`failed`: the keys of fold.failures, in its order; a --train trial's key is not its name)."""
     from rcbht_introspection.peers.hmm import HMMClassifier
     from rcbht_introspection.peers.minirocket import MiniRocketClassifier
 
     if not fold.failures or not peers:
         return
-    windows = [_peer_window(raws[tf.trial], o, tf.end) for tf, _, o in fold.failures]
+    windows = [
+        _peer_window(raws[n], o, tf.end)
+        for n, (tf, _, o) in zip(failed, fold.failures, strict=True)
+    ]
     y = [lb.failure_class for _, lb, _ in fold.failures]
     if "hmm" in peers:
         fold.peers["hmm"] = HMMClassifier(random_state=fold.seed).fit(windows, y)
@@ -274,7 +280,8 @@ def _fold_results(
     train, test = split
     i = inputs
     fold = _make_fold(train, i.feats, i.labels, i.config, i.seed)
-    _fit_peers(fold, i.raws, [m for m in methods if m in PEERS])
+    failed = [n for n in train if i.labels[n].failed]
+    _fit_peers(fold, failed, i.raws, [m for m in methods if m in PEERS])
     return k, {
         m: [_run(fold, m, n, i.feats, i.labels, i.raws, i.contradictions) for n in test]
         for m in methods
@@ -501,6 +508,7 @@ def summarise(
             "alarm_signal": r.alarm_signal,
             "onset_estimate": r.onset_estimate,
             "predicted_class": r.predicted_class,
+            "class_given_onset": r.class_given_onset,
             "directions": r.directions,
         }
         for m in runs
