@@ -152,6 +152,10 @@ def test_blocks_of_a_straggling_message_are_put_in_place() -> None:
     track.extend([block(0.2)])
     track.drop_before(0.16)
     assert early.ends[: len(early)].tolist() == [0.05, 0.1]  # a copy: later changes stay out
+    # the origin is the earliest block ever given, also the straggler's, and survives pruning
+    assert track.origin is not None and track.origin[0] == 0.05 and len(track) == 2
+    assert early.origin is not None and early.origin[0] == 0.05
+    assert WrenchTrack().origin is None and track.until(0.01).origin is None
 
 
 def test_evaluate_train_scores_another_set_beside_minirocket(

@@ -78,6 +78,10 @@ class WrenchTrack:
         self.ends: NDArray[np.float64] = np.empty(0)
         self.means: NDArray[np.float64] = np.empty((0, N_AXES))
         self._size = 0
+        self.origin: NDArray[np.float64] | None = None
+        """The mean of the earliest block this track was given (kept by drop_before): the
+        stream's level at its start, free motion before the task's contacts."""
+        self._origin_end = math.inf
 
     def __len__(self) -> int:
         return self._size
@@ -88,6 +92,9 @@ class WrenchTrack:
         the last one's): those are put in place, so the ends stay sorted."""
         if not blocks:
             return
+        first = min(blocks, key=lambda b: b.end)
+        if first.end < self._origin_end:
+            self.origin, self._origin_end = np.asarray(first.mean, dtype=float), first.end
         late = self._size and blocks[0].end <= self.ends[self._size - 1]
         need = self._size + len(blocks)
         if need > len(self.ends):
@@ -136,6 +143,8 @@ class WrenchTrack:
         n = bisect_right(self.ends[: self._size], t)
         out = WrenchTrack()
         out.ends, out.means, out._size = self.ends[:n].copy(), self.means[:n].copy(), n
+        if self._origin_end <= t:
+            out.origin, out._origin_end = self.origin, self._origin_end
         return out
 
     @classmethod

@@ -106,5 +106,8 @@ def _words_wrench(state: dict[str, Any]) -> WordsWrenchEncoding:
         or len(enc.lower) != len(enc.scale)
         or (len(enc.lower) != enc.n_features - words.n_features)
     ):
-        raise ValueError("wrench arms, lower and scale do not match the word features")
+        raise ValueError(
+            "wrench arms, lower and scale do not match the word features (a model of another "
+            "words-wrench version: train it again)"
+        )
     return enc

@@ -1,11 +1,12 @@
 """The words + wrench encoding: the compact word features without absolute wrench values, plus
-the wrench since the window began relative to its level at that start.
+the wrench since the window began relative to its level at that start and to the stream's first
+block.
 
-Relative to the start, a constant sensor bias and a load held through the window cancel; the
-absolute mean values of the words (compact's `mean_value`) are left out for the same reason.
-Per arm and axis: the last, mean, minimum, maximum and spread of the block means
-(summaries/blocks.py) ending in the window and the means of its quarters, each minus the block
-before the window.
+Both references cancel a constant sensor bias; relative to the window's start a load held
+through the window cancels too, relative to the stream's start it stays (what the task has
+changed since free motion). The absolute mean values of the words (compact's `mean_value`) are
+left out. Per arm and axis: statistics of the block means (summaries/blocks.py) ending in the
+window (STATS).
 """
 
 from __future__ import annotations
@@ -24,9 +25,14 @@ from rcbht_introspection.grammar.encoding.compact import CompactEncoding
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.taxonomy.words import AXES
 
-STATS = ("last", "mean", "min", "max", "std", "q1", "q2", "q3", "q4")
-"""Statistics of each axis's relative block means over the window: q1..q4 are the means of its
-four quarters (in blocks), the shape of the departure."""
+STATS = (
+    "last", "mean", "min", "max", "std", "q1", "q2", "q3", "q4",
+    "level_last", "level_mean", "level_min", "level_max", "level_start",
+)  # fmt: skip
+"""Statistics of each axis's block means over the window. Relative to the block before the
+window: last, mean, min, max, spread, and the means of its four quarters (in blocks), the shape
+of the departure. Relative to the stream's first block (WrenchTrack.origin): last, mean, min and
+max, and the level the window began at: where the task has taken the wrench since free motion."""
 
 
 def wrench_feature_names(arms: Sequence[str]) -> list[str]:
@@ -54,6 +60,12 @@ def wrench_features(sample: SubtaskSample, arms: Sequence[str]) -> NDArray[np.fl
         for q in range(4):
             part = rel[quarter == q]
             out[row, :, 5 + q] = part.mean(axis=0) if len(part) else rel[-1]
+        origin = base if track.origin is None else track.origin
+        out[row, :, 9] = means[-1] - origin
+        out[row, :, 10] = means.mean(axis=0) - origin
+        out[row, :, 11] = means.min(axis=0) - origin
+        out[row, :, 12] = means.max(axis=0) - origin
+        out[row, :, 13] = base - origin
     flat: NDArray[np.float64] = out.reshape(-1)
     return flat
 
