@@ -25,14 +25,11 @@ from rcbht_introspection.grammar.encoding.compact import CompactEncoding
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.taxonomy.words import AXES
 
-STATS = (
-    "last", "mean", "min", "max", "std", "q1", "q2", "q3", "q4",
-    "level_last", "level_mean", "level_min", "level_max", "level_start",
-)  # fmt: skip
+STATS = ("last", "mean", "min", "max", "std", "q1", "q2", "q3", "q4", "level_last", "level_mean")
 """Statistics of each axis's block means over the window. Relative to the block before the
 window: last, mean, min, max, spread, and the means of its four quarters (in blocks), the shape
-of the departure. Relative to the stream's first block (WrenchTrack.origin): last, mean, min and
-max, and the level the window began at: where the task has taken the wrench since free motion."""
+of the departure. Relative to the stream's first block (WrenchTrack.origin): last and mean, where
+the task has taken the wrench since free motion."""
 
 
 def wrench_feature_names(arms: Sequence[str]) -> list[str]:
@@ -63,9 +60,6 @@ def wrench_features(sample: SubtaskSample, arms: Sequence[str]) -> NDArray[np.fl
         origin = base if track.origin is None else track.origin
         out[row, :, 9] = means[-1] - origin
         out[row, :, 10] = means.mean(axis=0) - origin
-        out[row, :, 11] = means.min(axis=0) - origin
-        out[row, :, 12] = means.max(axis=0) - origin
-        out[row, :, 13] = base - origin
     flat: NDArray[np.float64] = out.reshape(-1)
     return flat
 
