@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SOURCES, generated_trials, trial_folders
+from conftest import HIRO, SOURCES, generated_trials, require, trial_folders
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -177,3 +177,40 @@ def test_evaluate_train_scores_another_set_beside_minirocket(
     same = ["evaluate", str(trials[0]), "--train", *map(str, trials[:3]), "--permutations", "1",
             "--json", str(out), "--no-progress"]  # fmt: skip
     assert main(same) == 0 and json.loads(out.read_text())["n_test_trials"] == 1
+
+
+@pytest.mark.shared_data
+@pytest.mark.slow
+def test_a_sensor_offset_of_another_day_leaves_the_replayed_state(tmp_path: Path) -> None:
+    """Real Baxter bags: a model of session_a, two bags of other days replayed through the
+    nodes' sessions as recorded and with +-20 N added to Fz of every sample: the /task_state
+    time_accuracy moves by at most 0.03 (docs/results-live.md has the four bags over DDS)."""
+    from rcbht_introspection.learn.data import load_trials, read_any_trial
+    from rcbht_introspection.learn.live import live_training
+    from rcbht_introspection.live.replay import replay_beliefs, replay_summary
+    from rcbht_introspection.live.segmenter import arm_stream_factory
+    from rcbht_introspection.taxonomy.config import load_taxonomy_config
+
+    baxter = HIRO.parent / "baxter_pick_and_place"
+    require(baxter.is_dir(), f"Baxter bags not found at {baxter}")
+    bags = [*sorted(baxter.glob("session_a/*.bag")), *(baxter / "other_sessions" / f"{n}.bag"
+            for n in ("c0909_s09", "d0914_s01"))]  # fmt: skip
+    phases = "0=-,1=approach,2=grasp,5=lift,3=transport,4=place"
+    assert main(["bag", "import", *map(str, bags), "--out", str(tmp_path), "--wrench",
+                 "/tag_multimodal.wrench_stamped", "--phase", "/tag_multimodal.tag",
+                 "--phase-map", phases]) == 0  # fmt: skip
+    day = sorted(tmp_path.glob("s??.mcap"))
+    assert main(["calibrate", *map(str, day), "--out", str(tmp_path / "baxter.yaml")]) == 0
+    taxonomy = load_taxonomy_config("baxter", tmp_path / "baxter.yaml")
+    model, _ = live_training(load_trials(day, taxonomy=taxonomy), taxonomy=taxonomy)
+    others = [read_any_trial(tmp_path / f"{n}.mcap") for n in ("c0909_s09", "d0914_s01")]
+    accuracy = {}
+    for bias in (0.0, 20.0, -20.0):
+        shift = np.asarray([0.0, 0.0, bias, 0.0, 0.0, 0.0])
+        trials = [replace(t, wrench={a: w + shift for a, w in t.wrench.items()}) for t in others]
+        streamed = node_stream(trials, arm_stream_factory(taxonomy=taxonomy))
+        replays = replay_beliefs(streamed, model, "boundary", 2.0, trials=trials)
+        accuracy[bias] = replay_summary(replays, trials)["time_accuracy"]
+    assert accuracy[0.0] >= 0.8, accuracy
+    assert abs(accuracy[20.0] - accuracy[0.0]) <= 0.03, accuracy
+    assert abs(accuracy[-20.0] - accuracy[0.0]) <= 0.03, accuracy
