@@ -11,7 +11,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.sim.arm_config import Range, SensorConfig
@@ -103,6 +102,9 @@ def ornstein_uhlenbeck(
     rng: np.random.Generator,
 ) -> NDArray[np.float64]:
     """Low-frequency disturbance (N, 6): an exact-discretised Ornstein-Uhlenbeck process."""
+    # imported here: scipy.signal takes about a second to import, which a process that only
+    # dispatches trials to its --jobs workers (commands/sim.py) need not pay
+    from scipy.signal import lfilter
 
     n = len(time)
     if n < 2:
