@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
@@ -158,6 +159,21 @@ class BadInputs:
                 self.add(outcome)
             else:
                 kept.append(outcome)
+        return kept
+
+    def collect(
+        self, func: Callable[[T], R], items: Sequence[T], jobs: int = 1, strict: bool = False
+    ) -> list[R]:
+        """[func(item) for item in items] on `jobs` workers (parallel_map), each item whose
+        InputError is recorded left out (`strict`: the first one raised); when none of these
+        `items` could be used, an InputError (check_some, on this call's items alone)."""
+        part = BadInputs(self.command)
+        kept = part.keep(
+            parallel_map(func if strict else functools.partial(attempt, func), items, jobs)
+        )
+        part.check_some()
+        self.total += part.total
+        self.failed.extend(part.failed)
         return kept
 
     def lines(self) -> list[str]:

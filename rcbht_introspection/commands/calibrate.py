@@ -20,10 +20,8 @@ from rcbht_introspection.fleet import (
     BadInputs,
     add_parallel_options,
     add_strict_inputs,
-    attempt,
     backend,
     jobs_from_args,
-    parallel_map,
 )
 
 if TYPE_CHECKING:
@@ -64,8 +62,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     bad = BadInputs("calibrate")
     with backend(args.scheduler):
         read = functools.partial(_read_checked, repeated_policy(args))
-        checked = bad.keep(parallel_map(functools.partial(attempt, read), found, jobs))
-    bad.check_some()
+        checked = bad.collect(read, found, jobs)
     paths = [path for path, _, _ in checked]
     trials = [trial for _, trial, _ in checked]
     for path, _, findings in checked:

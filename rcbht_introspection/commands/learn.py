@@ -20,14 +20,7 @@ from rcbht_introspection.commands.sensor import (
     warn,
 )
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.fleet import (
-    BadInputs,
-    add_parallel_options,
-    attempt,
-    backend,
-    jobs_from_args,
-    parallel_map,
-)
+from rcbht_introspection.fleet import BadInputs, add_parallel_options, backend, jobs_from_args
 from rcbht_introspection.grammar import ENCODINGS
 from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
 from rcbht_introspection.taxonomy import StreamProfile
@@ -263,25 +256,16 @@ def load_checked(
     from rcbht_introspection.live.intake import load_intake_config
     from rcbht_introspection.taxonomy.stream import load_stream_config
 
-    if args.words not in WORD_SOURCES:
-        raise InputError(f"unknown word source {args.words!r} (known: {', '.join(WORD_SOURCES)})")
     stream = load_stream_config(args.stream_profile)
     read = functools.partial(
         load_trial_samples, words=args.words, taxonomy=taxonomy, repeated=repeated_policy(args),
         checks=load_intake_config(), stream=stream, strict=args.strict,
     )  # fmt: skip
-    found = find_inputs(args.inputs)
-    here = BadInputs(command)
     jobs = jobs_from_args(args) if hasattr(args, "jobs") else 1
     with backend(getattr(args, "scheduler", None)):
-        outcomes = parallel_map(
-            read if args.strict else functools.partial(attempt, read), found, jobs
+        trials = (bad or BadInputs(command)).collect(
+            read, find_inputs(args.inputs), jobs, args.strict
         )
-    trials = here.keep(outcomes)
-    here.check_some()
-    if bad is not None:
-        bad.total += here.total
-        bad.failed.extend(here.failed)
     for trial in trials:
         warn(command, trial.trial, trial.findings)
     report_dropped(command, dropped_counts(trials))

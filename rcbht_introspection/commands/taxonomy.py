@@ -26,10 +26,8 @@ from rcbht_introspection.fleet import (
     BadInputs,
     add_parallel_options,
     add_strict_inputs,
-    attempt,
     backend,
     jobs_from_args,
-    parallel_map,
 )
 from rcbht_introspection.taxonomy.words import Level
 
@@ -161,11 +159,9 @@ def run_label(args: argparse.Namespace) -> int:
     checks = load_intake_config()
     read = (repeated_policy(args), args.strict, checks.frozen_samples, checks.frozen_s)
     one = functools.partial(_label_one, label, read, args.format, args.out)
-    with backend(args.scheduler):
-        outcomes = parallel_map(functools.partial(attempt, one), trials, jobs)
     bad = BadInputs("label")
-    done = bad.keep(outcomes)
-    bad.check_some()
+    with backend(args.scheduler):
+        done = bad.collect(one, trials, jobs)
     for d in done:
         warn("label", d.folder.name, d.findings)
     report_dropped("label", {d.trial: d.dropped for d in done})

@@ -11,14 +11,7 @@ from typing import Any
 
 from rcbht_introspection.commands.sensor import add_strict, report_dropped
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.fleet import (
-    BadInputs,
-    Failed,
-    add_parallel_options,
-    attempt,
-    backend,
-    jobs_from_args,
-)
+from rcbht_introspection.fleet import BadInputs, add_parallel_options, backend, jobs_from_args
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -76,17 +69,10 @@ def _load(paths: list[str], bad: BadInputs, strict: bool = False) -> list[Any]:
     """The trials of `paths`: unique names (a name twice is an error naming both paths), one arm
     set; state times after the data or out of order dropped (`strict`: an error); a trial that
     cannot be read counted in `bad` and left out (`strict`: an error)."""
-    from rcbht_introspection.learn.data import find_inputs, read_any_trial
+    from rcbht_introspection.learn.data import find_inputs
 
-    found = find_inputs(paths)
-    read = functools.partial(read_any_trial, strict=strict)
-    here = BadInputs(bad.command)
-    outcomes = [read(p) if strict else attempt(read, p) for p in found]
-    pairs = [(p, t) for p, t in zip(found, outcomes, strict=True) if not isinstance(t, Failed)]
-    trials = here.keep(outcomes)
-    here.check_some()
-    bad.total += here.total
-    bad.failed.extend(here.failed)
+    pairs = bad.collect(functools.partial(_read_named, strict), find_inputs(paths), strict=strict)
+    trials = [trial for _, trial in pairs]
     first: dict[str, Path] = {}
     for path, trial in pairs:
         if trial.name in first:
@@ -99,6 +85,13 @@ def _load(paths: list[str], bad: BadInputs, strict: bool = False) -> list[Any]:
             f"trials mix arm sets {sorted({t.arms for t in trials})}", ", ".join(paths)
         )
     return trials
+
+
+def _read_named(strict: bool, path: Path) -> tuple[Path, Any]:
+    """(path, the trial read from it): the path names the trial in a duplicate-name error."""
+    from rcbht_introspection.learn.data import read_any_trial
+
+    return path, read_any_trial(path, strict=strict)
 
 
 def _labels(
