@@ -77,7 +77,8 @@ def jobs_from_args(args: argparse.Namespace) -> int:
 
 @contextlib.contextmanager
 def backend(scheduler: str | None) -> Iterator[None]:
-    """joblib's Dask backend on the scheduler at `scheduler` (None: joblib's default, loky)."""
+    """joblib's Dask backend on the scheduler at `scheduler` (None: joblib's default, loky); an
+    unreachable scheduler fails after Dask's `distributed.comm.timeouts.connect` (30 s default)."""
     if scheduler is None:
         yield
         return
@@ -90,7 +91,7 @@ def backend(scheduler: str | None) -> Iterator[None]:
     from joblib import parallel_config
 
     try:
-        client = Client(scheduler, timeout=30)  # type: ignore[no-untyped-call]
+        client = Client(scheduler)  # type: ignore[no-untyped-call]
     except OSError as exc:
         raise InputError(f"--scheduler {scheduler}: {exc}") from None
     with client, parallel_config(backend="dask"):

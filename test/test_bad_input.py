@@ -109,7 +109,7 @@ def test_train_evaluate_and_label_count_dropped_state_times(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{late[0]}/R_State.dat" in err and "after the last" in err
     out = tmp_path / "curve.json"
-    evaluate = ["evaluate", str(dataset), "--permutations", "2", "--json", str(out)]
+    evaluate = ["evaluate", str(dataset), "--permutations", "2", "--no-peers", "--json", str(out)]
     assert main(evaluate) == 0
     err = capsys.readouterr().err
     assert f"rcbht evaluate: {summary}" in err

@@ -830,9 +830,12 @@ def test_verify_eval_gives_the_same_json_on_joblib_workers_and_a_dask_cluster(
 def test_verify_eval_names_an_unreachable_scheduler(
     trials: list[Trial], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    import dask
+
     from rcbht_introspection.cli import main
 
     data = _write_set(trials, tmp_path / "set")
     args = ["verify-eval", str(data), "--no-peers", "--scheduler", "tcp://127.0.0.1:9"]
-    assert main(args) != 0
+    with dask.config.set({"distributed.comm.timeouts.connect": "2s"}):
+        assert main(args) != 0
     assert "error: --scheduler tcp://127.0.0.1:9: " in capsys.readouterr().err
