@@ -79,7 +79,7 @@ def test_evaluate_gives_the_same_curve_whatever_the_workers(
     sim_data: Path, tmp_path: Path, cluster: str
 ) -> None:
     args = ["evaluate", str(sim_data / SIM_SUCCESS), "--permutations", "3", "--no-progress"]
-    args += ["--validation-trials", "2", "--no-peers", "--json"]
+    args += ["--trials", "6", "--validation-trials", "2", "--no-peers", "--json"]
     runs = {}
     for name, extra in (("one", []), ("two", ["--jobs", "2"]), ("dask", ["--scheduler", cluster])):
         assert main([*args, str(tmp_path / f"{name}.json"), *extra]) == 0

@@ -146,7 +146,8 @@ SCENARIOS: tuple[tuple[str, int, bool, Spin], ...] = (
     ("one_arm_1kHz_verifier_executor", 1, True, "executor"),
 )
 """(name, arms, with verifier_node, the nodes' spin): the default spin (EventsExecutor), then
-rclpy's SingleThreadedExecutor on the same bags."""
+rclpy's SingleThreadedExecutor on the same bags (`RCBHT_BENCH_ROS_SPINS`: a comma-separated
+subset of the spins, default both)."""
 
 
 def run(out_dir: Path) -> dict[str, Any]:
@@ -168,7 +169,10 @@ def run(out_dir: Path) -> dict[str, Any]:
     results["verifier"] = str(verifier)
     results["dds_floor_1kHz"] = floor = _timed(run_floor, TARGET_RATE_HZ, seconds)
     bags = {arms: _scenario_bags(work, f"{arms}_arm", arms, sources) for arms in (1, 2)}
+    spins = os.environ.get("RCBHT_BENCH_ROS_SPINS", "events,executor").split(",")
     for name, arms, verifier_file, spin in SCENARIOS:
+        if spin not in spins:
+            continue
         options = ReplayEvalOptions(
             rate=rate,
             offline=False,
