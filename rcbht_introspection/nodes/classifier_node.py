@@ -21,6 +21,7 @@ from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import TeachRequest as TeachRequestMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from rcbht_interfaces.srv import Teach
+from rclpy.subscription import Subscription
 from std_msgs.msg import String
 
 from rcbht_introspection.learn.live import load_live_config
@@ -59,6 +60,8 @@ class ClassifierNode(ManagedNode):
         self.teaching: Teaching | None = None
         self.arrivals: Arrivals[WordsInput | PhaseInput] = Arrivals()
         """Inputs the executor delivered since the last settled()."""
+        self.input_subs: list[Subscription] = []
+        """The words and event subscriptions while active."""
 
     def spin_kind(self) -> str:
         """The `spin` parameter, except with teaching on: then rclpy's SingleThreadedExecutor.
@@ -155,6 +158,7 @@ class ClassifierNode(ManagedNode):
         self.phase_sub = self.subscribe(
             PhaseMsg, cfg.phase_topic, self.on_phase, phase_qos(cfg.qos_reliability)
         )
+        self.input_subs = [*self.word_subs, self.phase_sub]
         self.teach_srv = self.create_service(Teach, "~/teach", self.on_teach)
         self.teach_sub = self.create_subscription(
             TeachRequestMsg, cfg.teach_topic, self.on_teach_topic, qos_profile(100, "reliable")
@@ -178,7 +182,7 @@ class ClassifierNode(ManagedNode):
         self.destroy_service(self.teach_srv)
         if self.state_timer is not None:
             self.destroy_timer(self.state_timer)
-        self.word_subs = []
+        self.word_subs, self.input_subs = [], []
         self.get_logger().info(
             f"beliefs published {self.beliefs}, {self.counts}, "
             f"CPU {time.process_time() - self.cpu_at_start:.2f} s after configure"
@@ -192,12 +196,14 @@ class ClassifierNode(ManagedNode):
             self.log_teach_notes()
 
     def health(self, period_s: float) -> list[Health]:
-        """Model, belief-update latency of the period, words lost to a late join, teaching."""
-        extra: list[tuple[str, str]] = []
+        """Model, belief-update latency of the period, words lost to a late join, the fewest
+        publishers its readers matched on any input (a harness waits for >= 1), teaching."""
+        matched = min((sub.get_publisher_count() for sub in self.input_subs), default=0)
+        extra: list[tuple[str, str]] = [("input publishers matched", str(matched))]
         if self.teaching is not None:
             self.log_teach_notes()
             status = self.teaching.status()
-            extra = [
+            extra += [
                 ("taught windows", str(status.taught_windows)),
                 ("teach requests pending", str(status.pending)),
                 ("taught model version", str(status.model_version)),

@@ -316,7 +316,7 @@ class _Graph:
         # the graph shows a reader before the writer's side has matched it (and a writer before
         # the reader's side has); messages sent in between are lost, so the nodes' own
         # /diagnostics must count the segmenter's readers (observer, classifier), the verifier's
-        # reader (observer) and the publishers both nodes' intake matched
+        # reader (observer) and the publishers the nodes' readers matched
         verdicts, diagnostics = self.verdicts, self.diagnostics
         readers = 2 if verdicts is not None else 1  # segmenter (+ verifier)
         publishers = self.player.publishers
@@ -326,15 +326,20 @@ class _Graph:
             and (verdicts is None or all(s.get_publisher_count() > 0 for s in verdicts.subs))
             and all(self.node.count_subscribers(t) >= 2 for t in self.classifier_inputs)
             and diagnostics.segmenter_matched() >= 2
+            and diagnostics.classifier_matched()
             and diagnostics.intake_matched()
             and (verdicts is None or diagnostics.verifier_matched())
         )
 
     def classifier_gone(self) -> bool:
-        """The graph and the segmenter's diagnostics no longer see the classifier."""
-        return self.diagnostics.segmenter_matched() < 2 and all(
+        """The graph and the segmenter's diagnostics no longer see the classifier (its own last
+        status is then forgotten: the next classifier reports its matches anew)."""
+        gone = self.diagnostics.segmenter_matched() < 2 and all(
             self.node.count_subscribers(t) < 2 for t in self.classifier_inputs
         )
+        if gone:
+            self.diagnostics.latest.pop("classifier_node: belief", None)
+        return gone
 
     def play(
         self, bag: Path, msgs: list[BagMessage], stream_id: int

@@ -55,8 +55,15 @@ class DiagnosticWatch:
         return int(self.latest.get(status, {}).get(key, 0))
 
     def segmenter_matched(self) -> int:
-        """Subscribers the segmenter's writers matched on every word topic."""
-        return self.count("segmenter_node: outputs", "word subscribers matched")
+        """Subscribers the segmenter's writers matched on every word topic and on its applied
+        events."""
+        keys = ("word subscribers matched", "phase subscribers matched")
+        return min(self.count("segmenter_node: outputs", key) for key in keys)
+
+    def classifier_matched(self) -> bool:
+        """The classifier's readers matched a publisher on every input (its words and events):
+        what a writer sends before the reader's side matched waits for a retransmission."""
+        return self.count("classifier_node: belief", "input publishers matched") >= 1
 
     def intake_matched(self) -> bool:
         """The segmenter's readers matched a publisher on every input."""
