@@ -11,7 +11,7 @@ MSG_SOURCES := $(wildcard msg_defs/msg/*.msg msg_defs/srv/*.srv msg_defs/CMakeLi
 
 .PHONY: setup demo test bench soak lint clean
 
-setup: $(VENV)/.pkg-stamp
+setup: $(VENV)/.pkg-stamp $(VENV)/.numba-stamp
 
 # requirements-peers.txt (the `peers` extra: hmmlearn, aeon) is resolved together with the rest,
 # so its pins and requirements.txt's cannot disagree.
@@ -35,6 +35,13 @@ $(VENV)/.msgs-stamp: $(VENV)/.deps-stamp $(MSG_SOURCES)
 
 $(VENV)/.pkg-stamp: $(VENV)/.msgs-stamp $(PKG_SOURCES)
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation --force-reinstall . $(PIP_QUIET)
+	touch $@
+
+# aeon's MiniRocket kernels (the peer column of evaluate and verify-eval) are numba functions
+# compiled on first use and cached in the venv: compile them once here (about 30 s), not in
+# whichever command or test first scores the peers (twice when two processes race for it).
+$(VENV)/.numba-stamp: $(VENV)/.deps-stamp
+	$(PY) -c "import numpy as np; from aeon.transformations.collection.convolution_based import MiniRocket; MiniRocket(random_state=0).fit_transform(np.random.default_rng(0).normal(size=(4, 6, 20)))"
 	touch $@
 
 demo: setup
