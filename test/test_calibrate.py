@@ -262,6 +262,7 @@ def test_label_and_train_take_the_calibrated_file(
 
     curve = tmp_path / "curve.json"
     evaluate = ["evaluate", str(dataset), "--permutations", "1", "--validation-trials", "2"]
+    evaluate += ["--no-peers"]  # the profile is what is checked, not the peer column
     evaluate += ["--no-progress", "--json", str(curve), "--taxonomy-config", str(profile)]
     assert main(evaluate) == 0
     assert json.loads(curve.read_text())["taxonomy_profile"] == "noisy_sensor"

@@ -42,7 +42,7 @@ def test_evaluate_writes_the_documented_json_and_plot(
     data = _subset(trials, tmp_path / "subset")
     out, png = tmp_path / "eval.json", tmp_path / "curve.png"
     code = main(["evaluate", str(data), "--classifier", "mondrian", "--n-estimators", "10",
-                 "--permutations", "2", "--validation-trials", "3", "--json", str(out),
+                 "--permutations", "2", "--validation-trials", "3", "--no-peers", "--json", str(out),
                  "--plot", str(png), "--no-progress"])  # fmt: skip
     assert code == 0 and png.stat().st_size > 1000
     result = json.loads(out.read_text())

@@ -54,7 +54,7 @@ def test_a_second_task_trains_evaluates_and_runs_live(
 
     report = tmp_path / "evaluate.json"
     args = ["evaluate", *map(str, peg_bags), *calibrated, "--permutations", "1"]
-    args += ["--validation-trials", "2"]
+    args += ["--validation-trials", "2", "--no-peers"]
     assert main([*args, "--no-variant", "--no-progress", "--json", str(report)]) == 0
     evaluated = json.loads(report.read_text())
     assert evaluated["confusion_labels"] == list(PEG) and evaluated["n_trials"] == TRIALS

@@ -42,7 +42,7 @@ def test_baxter_bags_import_calibrate_train_verify_and_replay_over_dds(tmp_path:
     assert main(["calibrate", *day, "--out", str(profile)]) == 0
     taxonomy = ["--taxonomy-config", str(profile)]
     curve_file = tmp_path / "curve.json"
-    assert main(["evaluate", *day, *taxonomy, "--permutations", "3", "--no-progress",
+    assert main(["evaluate", *day, *taxonomy, "--permutations", "3", "--no-progress", "--no-peers",
                  "--json", str(curve_file)]) == 0  # fmt: skip
     curve = json.loads(curve_file.read_text())
     assert curve["task"]["subtasks"] == SUBTASKS

@@ -212,7 +212,7 @@ def test_evaluate_scores_the_live_words_and_live_windows(
     out, live_yaml = tmp_path / "eval.json", tmp_path / "live.yaml"
     live_yaml.write_text("live_augment:\n  stream_profile: live\n  window_s: 0.0\n")
     code = main(["evaluate", str(dataset_root(request, SIM_SUCCESS)), "--stream-profile", "live",
-                 "--permutations", "1", "--validation-trials", "2", "--no-variant",
+                 "--permutations", "1", "--validation-trials", "2", "--no-variant", "--no-peers",
                  "--live-score", "--live-config", str(live_yaml),
                  "--json", str(out), "--no-progress"])  # fmt: skip
     assert code == 0
