@@ -78,14 +78,14 @@ def _untimed(value: object) -> object:
 def test_evaluate_gives_the_same_curve_whatever_the_workers(
     sim_data: Path, tmp_path: Path, cluster: str
 ) -> None:
-    args = ["evaluate", str(sim_data / SIM_SUCCESS), "--permutations", "3", "--no-progress"]
+    args = ["evaluate", str(sim_data / SIM_SUCCESS), "--permutations", "2", "--no-progress"]
     args += ["--trials", "6", "--validation-trials", "2", "--no-peers", "--json"]
     runs = {}
     for name, extra in (("one", []), ("two", ["--jobs", "2"]), ("dask", ["--scheduler", cluster])):
         assert main([*args, str(tmp_path / f"{name}.json"), *extra]) == 0
         runs[name] = _untimed(_json(tmp_path / f"{name}.json"))
     one = runs["one"]
-    assert isinstance(one, dict) and len(one["curve"]) >= 2 and one["trial_splits"]["n"] == 3
+    assert isinstance(one, dict) and len(one["curve"]) >= 2 and one["trial_splits"]["n"] == 2
     assert runs["two"] == one
     assert runs["dask"] == one
 
