@@ -21,8 +21,6 @@ SIM_FAILURE = "SIM_MUJOCO_FAILURE"
 """Generated set of one jammed trial (SIM_JAMMED), aborted after three sub-tasks: incomplete."""
 SIM_JAMMED = "SIM-ONE-F-01-jamming"
 SIM_TRIALS = 8
-BENCH_MODEL_TRIALS = 10
-"""REAL HIRO trials of the ROS benchmark tests' model (the benchmark itself: 40)."""
 SIM_SEED = 10
 SOURCES = (pytest.param("hiro", marks=pytest.mark.shared_data), "sim")
 """Trial sources of a property test (parametrize values): the REAL HIRO successes from ../shared
@@ -67,8 +65,7 @@ def sim_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @pytest.fixture(scope="session")
 def bench_model(tmp_path_factory: pytest.TempPathFactory) -> Path | None:
     """The ROS benchmarks' classifier model, made once a session by bench/ros.py's bench_model
-    (`rcbht train` default on REAL HIRO 1-10, live head included: the tests check the pipeline,
-    not the model's accuracy, which `make bench` runs with trials 1-40), or
+    (`rcbht train` default on REAL HIRO 1-40, live head included; ~30 s on 2 shared cores), or
     None without the shared data, as the benchmarks run then. The ROS benchmark, the soak and
     the end-to-end replay share it instead of training it each."""
     from ros_support import require_ros
@@ -76,7 +73,7 @@ def bench_model(tmp_path_factory: pytest.TempPathFactory) -> Path | None:
     require_ros()  # bench/ros.py imports the replay harness, which imports rclpy
     from rcbht_introspection.bench.ros import bench_model as make
 
-    return make(tmp_path_factory.mktemp("bench_model"), last=BENCH_MODEL_TRIALS)
+    return make(tmp_path_factory.mktemp("bench_model"))
 
 
 def dataset_root(request: pytest.FixtureRequest, dataset: str) -> Path:

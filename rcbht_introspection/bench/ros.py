@@ -86,13 +86,13 @@ def two_arm_trial(a: Trial, b: Trial) -> Trial:
     return Trial(a.name, a.time, {"R": a.wrench["R"], "L": b.wrench["R"][idx]}, a.state_times)
 
 
-def bench_model(out_dir: Path, last: int = 40) -> Path | None:
-    """The model `rcbht train` writes by default (live head included) for HIRO trials 1-`last`."""
+def bench_model(out_dir: Path) -> Path | None:
+    """The model `rcbht train` writes by default (live head included) for HIRO trials 1-40."""
     hiro = shared_hiro()
 
     if hiro is None:
         return None
-    train = [f for f in find_trials([hiro]) if int(f.name.rsplit("-", 1)[1]) <= last]
+    train = [f for f in find_trials([hiro]) if int(f.name.rsplit("-", 1)[1]) <= 40]
     model, _ = live_training(load_trials(train, "auto"))
     return save_model(model, out_dir / "bench_model.rcbht")
 
