@@ -85,6 +85,10 @@ from rcbht_introspection.taxonomy.config import load_taxonomy_config
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier
 from rcbht_introspection.waiting import wait_until
 
+TEACH_ANSWER_S = 60.0
+"""How long the harness waits for ~/teach to answer (re-sent every 2 s): the classifier serves it
+between words, beside its learner process, on a machine the replay may keep busy."""
+
 
 @dataclass(frozen=True)
 class ReplayEvalOptions:
@@ -620,7 +624,9 @@ def _send_teach(client: Any, rec: BagRecord, trial: Trial) -> _Sent:
     calls = []
     for label, belief in zip(truth, finals, strict=True):
         sent = time.monotonic()
-        response = call_teach(client, teach_request(label, belief.start, belief.end))
+        response = call_teach(
+            client, teach_request(label, belief.start, belief.end), TEACH_ANSWER_S
+        )
         calls.append(round(time.monotonic() - sent, 4))
         if not response.accepted:
             raise InputError(f"teaching {label!r} refused: {response.message}", rec.playback.bag)
@@ -635,7 +641,7 @@ def _wait_taught(
 
     def learned() -> bool:
         nonlocal status
-        status = call_teach(client, teach_request(""))
+        status = call_teach(client, teach_request(""), TEACH_ANSWER_S)
         return bool(status.pending == 0)
 
     if not wait_until(learned, options.teach_timeout, poll=0.05):
