@@ -43,6 +43,7 @@ from rcbht_introspection.live.state import StateFilter
 from rcbht_introspection.live.teach import TeachRequest, TeachStatus
 from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile, run
 from rcbht_introspection.nodes.conversions import belief_msg, phase_input, words_input
+from rcbht_introspection.nodes.intake import fewest_publishers
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import ClassifierConfig, word_topics
 
@@ -61,7 +62,7 @@ class ClassifierNode(ManagedNode):
         self.arrivals: Arrivals[WordsInput | PhaseInput] = Arrivals()
         """Inputs the executor delivered since the last settled()."""
         self.input_subs: list[Subscription] = []
-        """The words and event subscriptions while active."""
+        """The words subscriptions, then the events subscription, while active."""
 
     def spin_kind(self) -> str:
         """The `spin` parameter, except with teaching on: then rclpy's SingleThreadedExecutor.
@@ -151,14 +152,13 @@ class ClassifierNode(ManagedNode):
         cfg = self.cfg
         # events the latched rcbht/phase replays were published before this moment
         self.session.rejoin(time.time_ns())
-        self.word_subs = [
+        self.input_subs = [
             self.subscribe(WordsMsg, topic, partial(self.on_words, arm), self.qos)
             for (arm, _), topic in word_topics(cfg.words_namespace, cfg.arms).items()
         ]
-        self.phase_sub = self.subscribe(
-            PhaseMsg, cfg.phase_topic, self.on_phase, phase_qos(cfg.qos_reliability)
+        self.input_subs.append(
+            self.subscribe(PhaseMsg, cfg.phase_topic, self.on_phase, phase_qos(cfg.qos_reliability))
         )
-        self.input_subs = [*self.word_subs, self.phase_sub]
         self.teach_srv = self.create_service(Teach, "~/teach", self.on_teach)
         self.teach_sub = self.create_subscription(
             TeachRequestMsg, cfg.teach_topic, self.on_teach_topic, qos_profile(100, "reliable")
@@ -175,14 +175,13 @@ class ClassifierNode(ManagedNode):
         )
 
     def deactivate(self) -> None:
-        for sub in self.word_subs:
+        for sub in self.input_subs:
             self.destroy_subscription(sub)
-        self.destroy_subscription(self.phase_sub)
         self.destroy_subscription(self.teach_sub)
         self.destroy_service(self.teach_srv)
         if self.state_timer is not None:
             self.destroy_timer(self.state_timer)
-        self.word_subs, self.input_subs = [], []
+        self.input_subs = []
         self.get_logger().info(
             f"beliefs published {self.beliefs}, {self.counts}, "
             f"CPU {time.process_time() - self.cpu_at_start:.2f} s after configure"
@@ -198,7 +197,7 @@ class ClassifierNode(ManagedNode):
     def health(self, period_s: float) -> list[Health]:
         """Model, belief-update latency of the period, words lost to a late join, the fewest
         publishers its readers matched on any input (a harness waits for >= 1), teaching."""
-        matched = min((sub.get_publisher_count() for sub in self.input_subs), default=0)
+        matched = fewest_publishers(self.input_subs)
         extra: list[tuple[str, str]] = [("input publishers matched", str(matched))]
         if self.teaching is not None:
             self.log_teach_notes()

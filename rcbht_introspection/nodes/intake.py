@@ -30,6 +30,13 @@ _Item = tuple[str, str | tuple[int, Sequence[float]]]
 """(arm ('' for an event), event name or (stamp ns, wrench))."""
 
 
+def fewest_publishers(subscriptions: Sequence[Subscription]) -> int:
+    """Fewest publishers any of `subscriptions` matched (0 for none). A harness waits for >= 1
+    before it plays: a writer can match a reader before the reader matches the writer, and what
+    it sends in between arrives only with a retransmission."""
+    return min((sub.get_publisher_count() for sub in subscriptions), default=0)
+
+
 class Intake:
     """The wrench subscription of each arm and the /task_phase subscription, created at
     activate and destroyed at deactivate; samples and events go to `on_sample` / `on_phase`."""
@@ -67,10 +74,8 @@ class Intake:
                 self.on_sample(arm, payload[0], payload[1], source)
 
     def publishers(self) -> int:
-        """Fewest publishers matched on any intake topic. A harness waits for >= 1 before it
-        plays: a writer can match this reader before this reader matches the writer, and DDS
-        drops what it sends in between."""
-        return min(sub.get_publisher_count() for sub in (*(s for _, s in self.wrench), self.phase))
+        """Fewest publishers matched on any intake topic (fewest_publishers)."""
+        return fewest_publishers([*(s for _, s in self.wrench), self.phase])
 
     def destroy(self) -> None:
         """Unsubscribe (deactivate)."""
