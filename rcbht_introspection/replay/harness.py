@@ -336,14 +336,10 @@ class _Graph:
         )
 
     def classifier_gone(self) -> bool:
-        """The graph and the segmenter's diagnostics no longer see the classifier (its own last
-        status is then forgotten: the next classifier reports its matches anew)."""
-        gone = self.diagnostics.segmenter_matched() < 2 and all(
+        """The graph and the segmenter's diagnostics no longer see the classifier."""
+        return self.diagnostics.segmenter_matched() < 2 and all(
             self.node.count_subscribers(t) < 2 for t in self.classifier_inputs
         )
-        if gone:
-            self.diagnostics.latest.pop("classifier_node: belief", None)
-        return gone
 
     def play(
         self, bag: Path, msgs: list[BagMessage], stream_id: int
@@ -470,6 +466,7 @@ def _restart_classifier(
         procs[:1],
         "the classifier to leave the graph",
     )
+    graph.diagnostics.forget("classifier_node: belief")  # its successor reports its own matches
     procs[1] = NodeProcess(
         "classifier_node", ws.cls_params, ws.env, ws.work / "classifier_node_restarted.log"
     )

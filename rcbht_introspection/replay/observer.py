@@ -54,6 +54,11 @@ class DiagnosticWatch:
         """The integer `key` of `status` last reported (0 before it was)."""
         return int(self.latest.get(status, {}).get(key, 0))
 
+    def forget(self, status: str) -> None:
+        """Drop the last `status` (its node stopped): a successor's must arrive before `count`
+        reports it again."""
+        self.latest.pop(status, None)
+
     def segmenter_matched(self) -> int:
         """Subscribers the segmenter's writers matched on every word topic and on its applied
         events."""
