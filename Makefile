@@ -13,7 +13,7 @@ MSG_SOURCES := $(wildcard msg_defs/msg/*.msg msg_defs/srv/*.srv msg_defs/CMakeLi
 
 setup: $(VENV)/.pkg-stamp $(VENV)/.numba-stamp
 
-# requirements-peers.txt (the `peers` extra: hmmlearn, aeon) is resolved together with the rest,
+# requirements-peers.txt (the `peers` extra: hmmlearn) is resolved together with the rest,
 # so its pins and requirements.txt's cannot disagree.
 $(VENV)/.deps-stamp: requirements.txt requirements-ros.txt requirements-peers.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -37,7 +37,7 @@ $(VENV)/.pkg-stamp: $(VENV)/.msgs-stamp $(PKG_SOURCES)
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation --force-reinstall . $(PIP_QUIET)
 	touch $@
 
-# aeon's MiniRocket kernels (the peer column of evaluate and verify-eval) are numba functions
+# aeon's MiniRocket kernels (the verifier's shape head, the peer columns) are numba functions
 # compiled on first use and cached in the venv: compile them once here (about 30 s), not in
 # whichever command or test first scores the peers (twice when two processes race for it).
 $(VENV)/.numba-stamp: $(VENV)/.deps-stamp

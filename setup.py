@@ -31,6 +31,7 @@ setup(
         "rosbags==0.11.9",
         "skops==0.16.0",
         "joblib==1.6.0",
+        "aeon==1.6.0",  # MiniRocket: the verifier's shape head
     ],
     # optional tools around the core, all installed by `make setup`: the MuJoCo simulator, the
     # plots, terminal progress bars, the anchors' peer baselines (requirements-peers.txt) and
@@ -39,7 +40,7 @@ setup(
         "sim": ["mujoco==4.0.0", "tqdm==4.70.1"],
         "plots": ["matplotlib==3.11.2"],
         "progress": ["tqdm==4.70.1"],
-        "peers": ["hmmlearn==0.3.3", "aeon==1.6.0"],
+        "peers": ["hmmlearn==0.3.3"],
         "fleet": ["dask==2026.8.0", "distributed==2026.8.0"],
     },
     python_requires=">=3.11",

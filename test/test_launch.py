@@ -384,6 +384,7 @@ ROSDEP_KEYS = {
     "rosbags": "python3-rosbags-pip",
     "mujoco": "python3-mujoco-pip",
     "skops": "python3-skops-pip",
+    "aeon": "python3-aeon-pip",
 }
 ROSDISTRO_PIP_KEYS = {"python3-rosbags-pip"}  # defined by rosdistro
 OPTIONAL_EXTRAS = {"peers", "sim", "plots"}
