@@ -15,6 +15,8 @@ from conftest import SIM_SUCCESS
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from sklearn.ensemble import RandomForestClassifier
+from sklearn.linear_model import LogisticRegression
+from sklearn.preprocessing import StandardScaler
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import find_trials, read_trial
@@ -43,6 +45,7 @@ from rcbht_introspection.verify.features import kind_columns, lag_ticks, trial_f
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel, label_of, read_labels
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier, save_verifier
 from rcbht_introspection.verify.monitor import NOMINAL, Verdict, VerifierSession
+from rcbht_introspection.verify.shape import ShapeHead, to_panel
 from rcbht_introspection.verify.stream import offline_verdicts
 from rcbht_introspection.verify.train import train_verifier
 
@@ -83,18 +86,20 @@ def held_out_model(
     config = load_verify_config()
     model = train_verifier(train, labels, config)
     reader = reader_of(model.detector, "wrench", 1)
-    rows, names = [], []
+    rows, windows, names = [], [], []
     for trial in train:
         tf = trial_features(trial, config)
         ticks = reader.ticks(tf)
         for onset in tf.times[5::50]:
-            for _, x in namings(reader, config.evidence_s, float(onset), ticks, float(onset)):
+            for r in namings(reader, config.evidence_s, float(onset), ticks, float(onset)):
                 latest = 12 * len(config.evidence_s)  # the last span's block: the newest
-                fz, fy = x[latest + 2], x[latest + 1]
+                fz, fy = r.features[latest + 2], r.features[latest + 1]
                 cls = "push" if fz > 0 else "pull"
-                rows.append(x)
+                rows.append(r.features)
+                windows.append(r.window)
                 names.append(TrialLabel(trial.name, "failure", cls, None, (0.0, float(np.sign(fy)) * 1e-3, 0.0)))  # fmt: skip
-    model.characteriser = Characteriser(n_estimators=20).fit(np.vstack(rows), names)
+    char = Characteriser(n_estimators=20, shape_weight=0.5)  # the shape head votes live too
+    model.characteriser = char.fit(np.vstack(rows), names, windows)
     path = tmp_path_factory.mktemp("held_out") / "v.npz"
     return load_verifier(save_verifier(model, path))
 
@@ -111,7 +116,7 @@ def offline_namings(
     reader = reader_of(model.detector, "wrench", len(model.arms))
     ticks = reader.ticks(tf)
     rows = namings(reader, config.evidence_s, detection.onset, ticks, detection.alarm, config.lag_s)
-    return [(t, model.characteriser.predict(x)) for t, x in rows]
+    return [(r.time, model.characteriser.predict(r.features, r.window)) for r in rows]
 
 
 def assert_live_names_as_offline(
@@ -436,9 +441,11 @@ def test_running_evidence_and_namings_are_the_span_summaries(
     want = [float(times[alarm]), *opened]
     if want[-1] != times[-1]:
         want.append(float(times[-1]))
-    assert [t for t, _ in named] == want
-    for t, x in named:
-        np.testing.assert_allclose(x, direct(round(t / step)), rtol=1e-12, atol=1e-12)
+    assert [r.time for r in named] == want
+    for r in named:
+        np.testing.assert_allclose(r.features, direct(round(r.time / step)), rtol=1e-12, atol=1e-12)
+        seen = vectors[first : round(r.time / step) + 1]  # the shape head's window
+        np.testing.assert_allclose(r.window, seen - reference, rtol=1e-12, atol=1e-12)
     spans_hit = {span_index(spans, t - onset) for t in opened}
     assert len(spans_hit) == len(opened)  # each naming after the alarm opens a new span
 
@@ -558,8 +565,9 @@ def test_a_saved_verifier_names_what_the_trained_one_names(
             loaded.detector.run(tf).normalised, trained.detector.run(tf).normalised
         )
         onset = float(tf.times[len(tf.times) // 2])
-        for _, x in namings(reader, config.evidence_s, onset, reader.ticks(tf), onset):
-            assert loaded.characteriser.predict(x) == trained.characteriser.predict(x)
+        for r in namings(reader, config.evidence_s, onset, reader.ticks(tf), onset):
+            x, w = r.features, r.window
+            assert loaded.characteriser.predict(x, w) == trained.characteriser.predict(x, w)
             rows += 1
     assert rows > len(trials)
     assert offline_verdicts(trials[-1], loaded) == offline_verdicts(trials[-1], trained)
@@ -839,3 +847,87 @@ def test_verify_eval_names_an_unreachable_scheduler(
     with dask.config.set({"distributed.comm.timeouts.connect": "2s"}):
         assert main(args) != 0
     assert "error: --scheduler tcp://127.0.0.1:9: " in capsys.readouterr().err
+
+
+def _shaped(n: int, seed: int, informative: bool) -> tuple[list[np.ndarray], list[str]]:
+    """Evidence windows of three classes: a rise, a fall or a bump on channel 0 (noise only
+    when not `informative`), of various lengths."""
+    rng = np.random.default_rng(seed)
+    windows, y = [], []
+    for i in range(n):
+        k = i % 3
+        ticks = int(rng.integers(12, 40))
+        t = np.linspace(0.0, 1.0, ticks)
+        curve = (t, -t, np.sin(np.pi * t))[k] if informative else np.zeros(ticks)
+        w = rng.normal(0.0, 0.2, (ticks, 4))
+        w[:, 0] += 3.0 * curve
+        windows.append(w)
+        y.append(f"class{k}")
+    return windows, y
+
+
+@pytest.mark.parametrize("n_classes", [2, 3])
+def test_the_shape_head_gives_scikit_learns_probabilities_and_reloads(n_classes: int) -> None:
+    windows, y = _shaped(60, 5, True)
+    keep = [i for i, c in enumerate(y) if int(c[-1]) < n_classes]
+    windows, y = [windows[i] for i in keep], [y[i] for i in keep]
+    head = ShapeHead(n_kernels=200, n_points=32).fit(windows, y)
+    features = head.transform_.transform(to_panel(windows, head.n_points))
+    reference = LogisticRegression(C=head.C, max_iter=300)
+    reference.fit(StandardScaler().fit_transform(features), y)  # the same fit, by scikit-learn
+    scaled = (features - head.mean_) / head.scale_
+    np.testing.assert_allclose(
+        head.predict_proba(windows), reference.predict_proba(scaled), atol=1e-9
+    )
+    assert list(head.classes_) == list(reference.classes_)
+    assert np.mean(head.classes_[head.predict_proba(windows).argmax(axis=1)] == np.array(y)) > 0.9
+    again = ShapeHead.from_arrays(head.get_params(), list(head.classes_), head.to_arrays())
+    np.testing.assert_array_equal(again.predict_proba(windows), head.predict_proba(windows))
+
+
+@pytest.mark.parametrize("shape_informs", [True, False])
+def test_the_shape_head_votes_only_when_it_helps_on_held_out_trials(shape_informs: bool) -> None:
+    """The learnt weight: > 0 when only the windows tell the classes apart, 0 when only the
+    forest's rows do."""
+    windows, y = _shaped(90, 7, shape_informs)
+    rng = np.random.default_rng(8)
+    X = rng.normal(size=(len(y), 5))
+    if not shape_informs:
+        X[:, 0] += 3.0 * np.array([int(c[-1]) for c in y])
+    labels = [TrialLabel(f"t{i // 3}", "failure", c) for i, c in enumerate(y)]
+    char = Characteriser(n_estimators=30).fit(X, labels, windows)
+    if shape_informs:
+        assert char.shape_ is not None and char.shape_weight_ > 0
+        assert char.predict(X[0], windows[0])[0] == y[0]
+    else:
+        assert char.shape_ is None and char.shape_weight_ == 0
+
+
+def test_a_saved_shape_head_names_as_before_and_refuses_tampering(
+    held_out_model: VerifierModel, tmp_path: Path
+) -> None:
+    """held_out_model went through save and load with its shape head (weight 0.5)."""
+    ch = held_out_model.characteriser
+    assert ch is not None and ch.shape_ is not None and ch.shape_weight_ == 0.5
+    path = save_verifier(held_out_model, tmp_path / "v.npz")
+    header, arrays = read_safe_npz(path, "verifier")
+    window = np.random.default_rng(0).normal(size=(15, 12))
+    again = load_verifier(path).characteriser
+    assert again is not None and again.shape_ is not None
+    np.testing.assert_array_equal(
+        again.shape_.predict_proba([window]), ch.shape_.predict_proba([window])
+    )
+    bad = tmp_path / "bad.npz"
+    for edit, match in (
+        (lambda h, a: h["characteriser"]["shape"].update(weight=0.0), "weight 0.0 is not in"),
+        (
+            lambda h, a: a.update({"shape.coef": a["shape.coef"][:, :-1]}),
+            "do not match its features",
+        ),
+        (lambda h, a: a.pop("shape.biases"), "biases"),
+    ):
+        h, a = json.loads(json.dumps(header)), dict(arrays)
+        edit(h, a)
+        write_safe_npz(bad, h, a)
+        with pytest.raises(InputError, match=match):
+            load_verifier(bad)

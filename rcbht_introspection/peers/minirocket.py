@@ -31,26 +31,11 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.linear_model import RidgeClassifierCV
 from sklearn.preprocessing import StandardScaler
 
+from rcbht_introspection.verify.shape import to_panel
+
 MIN_POINTS = 9
 """MiniRocket's kernels are 9 long: a series must have at least 9 time points."""
 RIDGE_ALPHAS = np.logspace(-3, 3, 10)
-
-
-def resample(window: np.ndarray, n_points: int) -> np.ndarray:
-    """(T, d) -> (d, n_points) by linear interpolation along time; T = 1 repeats the frame."""
-    frames = np.asarray(window, dtype=np.float64)
-    if frames.ndim == 1:
-        frames = frames[:, None]
-    if frames.ndim != 2 or len(frames) == 0:
-        raise ValueError(f"a window must be (T >= 1, d), got shape {frames.shape}")
-    old = np.linspace(0.0, 1.0, len(frames))
-    new = np.linspace(0.0, 1.0, n_points)
-    return np.stack([np.interp(new, old, channel) for channel in frames.T])
-
-
-def to_panel(windows: Sequence[np.ndarray], n_points: int) -> np.ndarray:
-    """(n_cases, n_channels, n_points) for aeon."""
-    return np.stack([resample(w, n_points) for w in windows])
 
 
 # sklearn has no type hints, so its bases are Any: strict mypy refuses to subclass them

@@ -15,13 +15,15 @@ The class is named again each time a span closes and when the stream ends; betwe
 ticks the last naming stands, so a tick after the alarm costs only a few additions.
 
 Heads (`Characteriser`): random forests for the class and, when the labels carry deviations, one
-per axis with '-', '0', '+'. Where every trial of a class deviated with the same signs and no
+per axis with '-', '0', '+'. Beside the class forest votes the shape head (verify/shape.py), which
+reads the evidence's ticks since onset, with the weight the training failures chose for it. Where every trial of a class deviated with the same signs and no
 other class shares them, the class head's probability of "one of those deviation classes" is
 shared among them by the direction heads' probabilities of their signs.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -31,6 +33,7 @@ from sklearn.base import BaseEstimator
 
 from rcbht_introspection.learn.forest import ForestHead
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
+from rcbht_introspection.verify.shape import ShapeHead, mix, vote_weight
 
 FAILURE = "class"
 """The failure-class head's name among the heads (the others: the deviation axes)."""
@@ -40,6 +43,8 @@ context, the raw-wrench baseline's mean wrench by time into the trial, the timin
 sub-task durations."""
 CLIP = 1e6
 """Evidence values are clipped here (an overflowing sensor must not give inf or NaN)."""
+WINDOW_TICKS = 20_000
+"""Ticks of the evidence the shape head reads (the latest; 1000 s at 20 Hz)."""
 
 
 def span_index(spans: Sequence[float], since_onset: float) -> int:
@@ -64,6 +69,8 @@ class RunningEvidence:
     """The span of the latest tick (-1 before the first)."""
     now: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """Where the task stands at the latest tick (`EvidenceReader.now`)."""
+    ticks: deque[np.ndarray] = field(default_factory=lambda: deque(maxlen=WINDOW_TICKS))
+    """The ticks' vectors since onset (the shape head's window)."""
 
     def __post_init__(self) -> None:
         self.sums = np.zeros((len(self.spans) + 1, len(self.reference)))
@@ -82,6 +89,7 @@ class RunningEvidence:
         self.counts[k] += 1
         np.maximum(self.high, v, out=self.high)
         np.minimum(self.low, v, out=self.low)
+        self.ticks.append(v)
         opened = k != self.current
         self.current = k
         return opened
@@ -100,6 +108,13 @@ class RunningEvidence:
         else:
             out += [last, last]
         return np.concatenate([*out, self.context, self.now])
+
+    def window(self) -> np.ndarray:
+        """(ticks, channels): the ticks' vectors since onset minus the reference (the reference
+        alone before the first)."""
+        seen = np.asarray(self.ticks) if self.ticks else self.reference[None, :]
+        window: np.ndarray = seen - self.reference
+        return window
 
 
 def sign_table(labels: Sequence[TrialLabel]) -> dict[tuple[str, ...], str]:
@@ -126,11 +141,14 @@ class Characteriser(BaseEstimator):  # type: ignore[misc]
         n_estimators: int = 100,
         min_samples_leaf: int = 2,
         compose: bool = True,
+        shape_weight: float | None = None,
         random_state: int = 0,
     ) -> None:
         self.n_estimators = n_estimators
         self.min_samples_leaf = min_samples_leaf
         self.compose = compose
+        self.shape_weight = shape_weight
+        """The shape head's vote weight (None: learnt from the training failures, vote_weight)."""
         self.random_state = random_state
 
     def _head(self) -> ForestHead:
@@ -140,12 +158,19 @@ class Characteriser(BaseEstimator):  # type: ignore[misc]
             random_state=self.random_state,
         )
 
-    def fit(self, X: np.ndarray, labels: Sequence[TrialLabel]) -> Characteriser:
-        """Rows of evidence features, each with the label of its trial."""
+    def fit(
+        self,
+        X: np.ndarray,
+        labels: Sequence[TrialLabel],
+        windows: Sequence[np.ndarray] = (),
+    ) -> Characteriser:
+        """Rows of evidence features, each with the label of its trial (and the evidence window
+        it was read from: the shape head learns from them)."""
         if len(X) == 0:
             raise ValueError("no failure trials to learn failure classes from")
         classes = [lb.failure_class for lb in labels]
         self.heads_: dict[str, ForestHead] = {FAILURE: self._fit_head(X, classes)}
+        self._fit_shape(X, labels, windows)
         labelled = [i for i, lb in enumerate(labels) if lb.directions() is not None]
         for axis in DIRECTION_AXES if labelled else ():
             y = [labels[i].directions()[axis] for i in labelled]  # type: ignore[index]
@@ -153,16 +178,39 @@ class Characteriser(BaseEstimator):  # type: ignore[misc]
         self.signs_ = sign_table(labels) if self.compose and labelled else {}
         return self
 
+    def _fit_shape(
+        self, X: np.ndarray, labels: Sequence[TrialLabel], windows: Sequence[np.ndarray]
+    ) -> None:
+        """The shape head and its vote weight (none without windows or with one class)."""
+        self.shape_: ShapeHead | None = None
+        self.shape_weight_ = 0.0
+        classes = [lb.failure_class for lb in labels]
+        if len(windows) != len(X) or len(set(classes)) < 2:
+            return
+        head = ShapeHead(random_state=self.random_state)
+        trials = [lb.trial for lb in labels]
+        weight = self.shape_weight
+        if weight is None:
+            weight = vote_weight(self._head, head, X, windows, classes, trials)
+        if weight > 0:
+            self.shape_, self.shape_weight_ = head.fit(windows, classes), weight
+
     def _fit_head(self, X: np.ndarray, y: Sequence[str]) -> ForestHead:
         """A head; one class alone is named with certainty (no trees)."""
         if len(set(y)) < 2:
             return Constant(str(y[0]), X.shape[1])
         return self._head().fit(X, y)
 
-    def predict(self, x: np.ndarray) -> tuple[str, dict[str, float], dict[str, str]]:
-        """(class, class probabilities, direction per axis) of one evidence row."""
+    def predict(
+        self, x: np.ndarray, window: np.ndarray | None = None
+    ) -> tuple[str, dict[str, float], dict[str, str]]:
+        """(class, class probabilities, direction per axis) of one evidence row (and its window,
+        which the shape head reads)."""
         row = np.clip(np.nan_to_num(np.asarray(x, dtype=float), nan=0.0), -CLIP, CLIP)[None, :]
         probs = _named(self.heads_[FAILURE], row)
+        shape = getattr(self, "shape_", None)
+        if shape is not None and window is not None:
+            probs = mix(probs, shape.predict_proba([window])[0], shape.classes_, self.shape_weight_)
         directions = {a: _named(h, row) for a, h in self.heads_.items() if a != FAILURE}
         if self.signs_ and len(directions) == len(DIRECTION_AXES):
             probs = _shared_by_signs(probs, directions, self.signs_)

@@ -101,7 +101,7 @@ def _ours(fitted: Fitted, tf: TrialFeatures, onset: float, start: float, lead: f
         return NO_NAMING
     ticks = fitted.reader.ticks(tf)
     evidence = namings(fitted.reader, _spans(fitted), onset, ticks, start, lead)
-    named = [(t, char.predict(x)) for t, x in evidence]
+    named = [(r.time, char.predict(r.features, r.window)) for r in evidence]
     if not named:
         return NO_NAMING
     return Naming([(t, n[0]) for t, n in named], named[-1][1][0], named[-1][1][2])

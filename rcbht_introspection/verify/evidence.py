@@ -15,6 +15,16 @@ from rcbht_introspection.verify.features import PER_ARM, TrialFeatures, kind_col
 from rcbht_introspection.verify.novelty import NominalLevel, TimingModel
 
 
+class Reading(NamedTuple):
+    """What a characteriser names the class from at one tick."""
+
+    time: float
+    features: np.ndarray
+    """The span summaries, context and where the task stands (`RunningEvidence.features`)."""
+    window: np.ndarray
+    """The ticks since onset minus the reference (`RunningEvidence.window`)."""
+
+
 class Tick(NamedTuple):
     """One tick as a characteriser keeps it."""
 
@@ -109,21 +119,21 @@ def namings(
     ticks: Sequence[Tick],
     start: float,
     lead: float = 0.0,
-) -> list[tuple[float, np.ndarray]]:
-    """(tick time, evidence features) at every tick a characteriser names the class again: the
-    first at or after `start` (the alarm; the evidence begins at onset, its reference `lead`
-    before), then each tick that opens a span, then the last tick."""
+) -> list[Reading]:
+    """The evidence at every tick a characteriser names the class again: the first at or after
+    `start` (the alarm; the evidence begins at onset, its reference `lead` before), then each
+    tick that opens a span, then the last tick."""
     before = [k for k in ticks if k.time < start - 1e-9]
     later = [k for k in ticks if k.time >= start - 1e-9]
     if not later:
         return []
     evidence = reader.begin(spans, onset, [*before, later[0]], lead)
-    out = [(later[0].time, evidence.features())]
+    out = [Reading(later[0].time, evidence.features(), evidence.window())]
     for k in later[1:]:
         if evidence.add(k.time, k.vector, reader.now(k, onset)):
-            out.append((k.time, evidence.features()))
-    if out[-1][0] != later[-1].time:
-        out.append((later[-1].time, evidence.features()))
+            out.append(Reading(k.time, evidence.features(), evidence.window()))
+    if out[-1].time != later[-1].time:
+        out.append(Reading(later[-1].time, evidence.features(), evidence.window()))
     return out
 
 

@@ -21,10 +21,11 @@ from rcbht_introspection.verify.config import VerifyConfig, check_verify_config
 from rcbht_introspection.verify.detector import Detector, SignalModels
 from rcbht_introspection.verify.labels import DIRECTION_AXES, DIRECTIONS
 from rcbht_introspection.verify.novelty import NeighbourModel, NominalLevel, TimingModel
+from rcbht_introspection.verify.shape import ShapeHead
 
 FORMAT = "rcbht-verifier"
-FORMAT_VERSION = 6
-"""6: change over lag_s, random-forest heads as packed arrays (5 and older: Mondrian heads;
+FORMAT_VERSION = 7
+"""7: the characteriser's shape head (6: forest heads only; 5 and older: Mondrian heads;
 retrain)."""
 KIND = "verifier"
 
@@ -101,6 +102,13 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
             "heads": heads,
             "signs": [[*key, cls] for key, cls in ch.signs_.items()],
         }
+        if ch.shape_ is not None:
+            header["characteriser"]["shape"] = {
+                "params": ch.shape_.get_params(),
+                "classes": [str(c) for c in ch.shape_.classes_],
+                "weight": ch.shape_weight_,
+            }
+            arrays.update({f"shape.{k}": v for k, v in ch.shape_.to_arrays().items()})
     write_safe_npz(path, header, arrays)
     return path
 
@@ -155,12 +163,26 @@ def _characteriser(c: dict[str, Any], arrays: dict[str, np.ndarray]) -> Characte
     if FAILURE not in ch.heads_:
         raise ValueError("no failure-class head")
     ch.signs_ = {tuple(str(v) for v in row[:-1]): str(row[-1]) for row in c["signs"]}
+    ch.shape_, ch.shape_weight_ = _shape(c.get("shape"), arrays)
     for key, cls in ch.signs_.items():
         if len(key) != len(DIRECTION_AXES) or not set(key) <= set(DIRECTIONS):
             raise ValueError(f"direction signs {list(key)} are not one of -, 0, + per axis")
         if cls not in ch.heads_[FAILURE].classes_:
             raise ValueError(f"direction signs name the unknown class {cls!r}")
     return ch
+
+
+def _shape(
+    s: dict[str, Any] | None, arrays: dict[str, np.ndarray]
+) -> tuple[ShapeHead | None, float]:
+    """The shape head and its vote weight (none in the file: no head, weight 0)."""
+    if s is None:
+        return None, 0.0
+    weight = float(s["weight"])
+    if not 0.0 < weight <= 1.0:
+        raise ValueError(f"the shape head's weight {weight} is not in (0, 1]")
+    own = {k[len("shape.") :]: a for k, a in arrays.items() if k.startswith("shape.")}
+    return ShapeHead.from_arrays(s["params"], s["classes"], own), weight
 
 
 def load_verifier(path: Path | str) -> VerifierModel:
@@ -190,4 +212,7 @@ def load_usable_verifier(path: str, arms: Sequence[str]) -> tuple[VerifierModel 
         return None, str(exc)
     if set(model.arms) != set(arms):
         return None, f"the model's arms {list(model.arms)} are not the node's {list(arms)}"
+    ch = model.characteriser
+    if ch is not None and ch.shape_ is not None:  # numba compiles or loads MiniRocket now,
+        ch.shape_.predict_proba([np.zeros((1, ch.shape_.n_channels_))])  # not at the first alarm
     return model, ""

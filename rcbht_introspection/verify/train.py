@@ -61,12 +61,14 @@ def fit_method(
     """Detector on the successes; characteriser on the failures' evidence, one row at every
     tick at which the class is named again: from the labelled onset, and from the detector's
     own alarm and onset estimate where it raises one (the evidence as the live verifier will
-    read it, which starts later or sooner than the label; its reference `lag_s` before)."""
+    read it, which starts later or sooner than the label; its reference `lag_s` before). The
+    verifier's view (`wrench`) adds the shape head; the baselines' views do not."""
     detector = Detector.fit(successes, config, signals, seed=seed, groups=groups)
     if view == "timing" and detector.models.timing is None:
         detector.models.timing = TimingModel.fit(successes, config)
     reader = reader_of(detector, view, arms_of(successes[0]))
     rows: list[np.ndarray] = []
+    windows: list[np.ndarray] = []
     labels: list[TrialLabel] = []
     for tf, label, onset in failures:
         ticks = reader.ticks(tf)
@@ -75,10 +77,12 @@ def fit_method(
         if d.alarm is not None and d.onset is not None:
             starts.append((d.onset, d.alarm, config.lag_s))
         for begin, start, lead in starts:
-            for _, x in namings(reader, config.evidence_s, begin, ticks, start, lead):
-                rows.append(x)
+            for reading in namings(reader, config.evidence_s, begin, ticks, start, lead):
+                rows.append(reading.features)
+                windows.append(reading.window)
                 labels.append(label)
-    char = Characteriser(random_state=seed).fit(np.vstack(rows), labels) if rows else None
+    shape = windows if view == "wrench" else []
+    char = Characteriser(random_state=seed).fit(np.vstack(rows), labels, shape) if rows else None
     return Fitted(detector, reader, char)
 
 
