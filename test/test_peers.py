@@ -26,7 +26,7 @@ from rcbht_introspection.peers.hmm import (
     HMMDetector,
 )
 from rcbht_introspection.peers.minirocket import MiniRocketClassifier
-from rcbht_introspection.verify.shape import resample
+from rcbht_introspection.summaries.windows import resample
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = REPO / "rcbht_introspection"

@@ -24,6 +24,7 @@ from rcbht_introspection.io.safe_file import read_safe_npz, write_safe_npz
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.forest import ForestHead, check_packed
 from rcbht_introspection.sim import load_sim_config, simulate_trial
+from rcbht_introspection.summaries.windows import to_panel
 from rcbht_introspection.verify.characterise import (
     FAILURE,
     Characteriser,
@@ -45,7 +46,7 @@ from rcbht_introspection.verify.features import kind_columns, lag_ticks, trial_f
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel, label_of, read_labels
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier, save_verifier
 from rcbht_introspection.verify.monitor import NOMINAL, Verdict, VerifierSession
-from rcbht_introspection.verify.shape import ShapeHead, to_panel
+from rcbht_introspection.verify.shape import ShapeHead
 from rcbht_introspection.verify.stream import offline_verdicts
 from rcbht_introspection.verify.train import train_verifier
 

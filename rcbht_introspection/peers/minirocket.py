@@ -31,7 +31,7 @@ from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.linear_model import RidgeClassifierCV
 from sklearn.preprocessing import StandardScaler
 
-from rcbht_introspection.verify.shape import to_panel
+from rcbht_introspection.summaries.windows import to_panel
 
 MIN_POINTS = 9
 """MiniRocket's kernels are 9 long: a series must have at least 9 time points."""

@@ -21,6 +21,8 @@ from sklearn.linear_model import LogisticRegression
 from sklearn.model_selection import GroupKFold
 from sklearn.preprocessing import StandardScaler
 
+from rcbht_introspection.summaries.windows import to_panel
+
 WEIGHTS = (0.0, 0.25, 0.5, 0.75, 1.0)
 """The shape head's vote weights tried (the forest has 1 - weight)."""
 FOLDS = 3
@@ -28,23 +30,6 @@ FOLDS = 3
 CLIP = 1e6
 PARAMETERS = ("channels_per_combination", "channel_indices", "dilations", "per_dilation", "biases")
 """MiniRocket's fitted parameters (aeon's `parameters` tuple, in its order)."""
-
-
-def resample(window: np.ndarray, n_points: int) -> np.ndarray:
-    """(T, d) -> (d, n_points) by linear interpolation along time; T = 1 repeats the frame."""
-    frames = np.asarray(window, dtype=np.float64)
-    if frames.ndim == 1:
-        frames = frames[:, None]
-    if frames.ndim != 2 or len(frames) == 0:
-        raise ValueError(f"a window must be (T >= 1, d), got shape {frames.shape}")
-    old = np.linspace(0.0, 1.0, len(frames))
-    new = np.linspace(0.0, 1.0, n_points)
-    return np.stack([np.interp(new, old, channel) for channel in frames.T])
-
-
-def to_panel(windows: Sequence[np.ndarray], n_points: int) -> np.ndarray:
-    """(n_cases, n_channels, n_points) for aeon."""
-    return np.stack([resample(w, n_points) for w in windows])
 
 
 class ShapeHead(BaseEstimator):  # type: ignore[misc]
