@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -932,3 +933,16 @@ def test_a_saved_shape_head_names_as_before_and_refuses_tampering(
         write_safe_npz(bad, h, a)
         with pytest.raises(InputError, match=match):
             load_verifier(bad)
+
+
+def test_the_shape_head_reads_a_flat_window_without_a_warning() -> None:
+    """A few ticks since onset barely vary on some channel (here by 1e-9): aeon would warn on
+    every naming."""
+    windows, y = _shaped(30, 9, True)
+    flat = np.zeros((3, 4))
+    flat[1, 0] = 1e-9
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        head = ShapeHead(n_kernels=200, n_points=32).fit([*windows, flat], [*y, y[0]])
+        proba = head.predict_proba([flat, np.ones((2, 4))])
+    np.testing.assert_allclose(proba.sum(axis=1), 1.0)

@@ -12,6 +12,7 @@ MiniRocket's parameters, the scaler's moments and the logistic coefficients.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -28,6 +29,10 @@ WEIGHTS = (0.0, 0.25, 0.5, 0.75, 1.0)
 FOLDS = 3
 """Trial-grouped folds of the training failures that choose the weight."""
 CLIP = 1e6
+"""Window values are clipped here (an overflowing sensor must not give inf)."""
+FLAT = "Data seen by instance of MiniRocket has one or more case/channel pairs"
+"""aeon's warning for a channel that barely varies: expected of a short window (a tick or two
+since onset, resampled), so not printed."""
 PARAMETERS = ("channels_per_combination", "channel_indices", "dilations", "per_dilation", "biases")
 """MiniRocket's fitted parameters (aeon's `parameters` tuple, in its order)."""
 
@@ -50,8 +55,10 @@ class ShapeHead(BaseEstimator):  # type: ignore[misc]
         panel = self._panel(windows)
         self.transform_: Any = MiniRocket(
             n_kernels=self.n_kernels, n_jobs=1, random_state=self.random_state
-        ).fit(panel)
-        features = self.transform_.transform(panel)
+        )
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=FLAT)
+            features = self.transform_.fit(panel).transform(panel)
         scaler = StandardScaler().fit(features)
         logistic = LogisticRegression(C=self.C, max_iter=300).fit(
             scaler.transform(features), [str(c) for c in y]
@@ -67,7 +74,10 @@ class ShapeHead(BaseEstimator):  # type: ignore[misc]
 
     def predict_proba(self, windows: Sequence[np.ndarray]) -> np.ndarray:
         """(n, classes) probabilities: the logistic regression's, as scikit-learn computes them."""
-        z = (self.transform_.transform(self._panel(windows)) - self.mean_) / self.scale_
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=FLAT)
+            features = self.transform_.transform(self._panel(windows))
+        z = (features - self.mean_) / self.scale_
         scores = z @ self.coef_.T + self.intercept_
         if len(self.classes_) == 2:  # one coefficient row: the sigmoid of the second class
             p1 = 1.0 / (1.0 + np.exp(-scores[:, 0]))
