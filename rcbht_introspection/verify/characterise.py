@@ -15,10 +15,11 @@ The class is named again each time a span closes and when the stream ends; betwe
 ticks the last naming stands, so a tick after the alarm costs only a few additions.
 
 Heads (`Characteriser`): random forests for the class and, when the labels carry deviations, one
-per axis with '-', '0', '+'. Beside the class forest votes the shape head (verify/shape.py), which
-reads the evidence's ticks since onset, with the weight the training failures chose for it. Where every trial of a class deviated with the same signs and no
-other class shares them, the class head's probability of "one of those deviation classes" is
-shared among them by the direction heads' probabilities of their signs.
+per axis with '-', '0', '+'. Beside the class forest votes the shape head (verify/shape.py),
+which reads the evidence's ticks since onset, with the weight the training failures chose for
+it. Where every trial of a class deviated with the same signs and no other class shares them,
+the class head's probability of "one of those deviation classes" is shared among them by the
+direction heads' probabilities of their signs.
 """
 
 from __future__ import annotations
@@ -208,9 +209,9 @@ class Characteriser(BaseEstimator):  # type: ignore[misc]
         which the shape head reads)."""
         row = np.clip(np.nan_to_num(np.asarray(x, dtype=float), nan=0.0), -CLIP, CLIP)[None, :]
         probs = _named(self.heads_[FAILURE], row)
-        shape = getattr(self, "shape_", None)
-        if shape is not None and window is not None:
-            probs = mix(probs, shape.predict_proba([window])[0], shape.classes_, self.shape_weight_)
+        if self.shape_ is not None and window is not None:
+            shape = self.shape_.predict_proba([window])[0]
+            probs = mix(probs, shape, self.shape_.classes_, self.shape_weight_)
         directions = {a: _named(h, row) for a, h in self.heads_.items() if a != FAILURE}
         if self.signs_ and len(directions) == len(DIRECTION_AXES):
             probs = _shared_by_signs(probs, directions, self.signs_)

@@ -7,7 +7,8 @@ multivariate MiniRocket (Dempster, Schmidt, Webb, KDD 2021), standardised and cl
 multinomial logistic regression. `vote_weight` learns how much it counts beside the forest from
 the training failures: held-out log-loss over trial-grouped folds, a weight of the grid
 WEIGHTS, 0 when the forest alone does best. Its fitted state is plain arrays (the safe file):
-MiniRocket's parameters, the scaler's moments and the logistic coefficients.
+MiniRocket's parameters, the scaler's moments and the logistic coefficients, set back into
+aeon's MiniRocket and scikit-learn's LogisticRegression when a file is read.
 """
 
 from __future__ import annotations
@@ -60,12 +61,11 @@ class ShapeHead(BaseEstimator):  # type: ignore[misc]
             warnings.filterwarnings("ignore", message=FLAT)
             features = self.transform_.fit(panel).transform(panel)
         scaler = StandardScaler().fit(features)
-        logistic = LogisticRegression(C=self.C, max_iter=300).fit(
+        self.mean_, self.scale_ = scaler.mean_, scaler.scale_
+        self.logistic_ = LogisticRegression(C=self.C, max_iter=300).fit(
             scaler.transform(features), [str(c) for c in y]
         )
-        self.mean_, self.scale_ = scaler.mean_, scaler.scale_
-        self.coef_, self.intercept_ = logistic.coef_, logistic.intercept_
-        self.classes_ = np.asarray(logistic.classes_, dtype=str)
+        self.classes_ = np.asarray(self.logistic_.classes_, dtype=str)
         self.n_channels_ = int(panel.shape[1])
         return self
 
@@ -73,18 +73,11 @@ class ShapeHead(BaseEstimator):  # type: ignore[misc]
         return to_panel([np.clip(np.nan_to_num(w), -CLIP, CLIP) for w in windows], self.n_points)
 
     def predict_proba(self, windows: Sequence[np.ndarray]) -> np.ndarray:
-        """(n, classes) probabilities: the logistic regression's, as scikit-learn computes them."""
+        """(n, classes) probabilities of the logistic regression, columns in classes_ order."""
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message=FLAT)
             features = self.transform_.transform(self._panel(windows))
-        z = (features - self.mean_) / self.scale_
-        scores = z @ self.coef_.T + self.intercept_
-        if len(self.classes_) == 2:  # one coefficient row: the sigmoid of the second class
-            p1 = 1.0 / (1.0 + np.exp(-scores[:, 0]))
-            return np.column_stack([1.0 - p1, p1])
-        scores -= scores.max(axis=1, keepdims=True)
-        e = np.exp(scores)
-        proba: np.ndarray = e / e.sum(axis=1, keepdims=True)
+        proba: np.ndarray = self.logistic_.predict_proba((features - self.mean_) / self.scale_)
         return proba
 
     def to_arrays(self) -> dict[str, np.ndarray]:
@@ -94,8 +87,8 @@ class ShapeHead(BaseEstimator):  # type: ignore[misc]
             **params,
             "mean": self.mean_,
             "scale": self.scale_,
-            "coef": self.coef_,
-            "intercept": self.intercept_,
+            "coef": self.logistic_.coef_,
+            "intercept": self.logistic_.intercept_,
             "n_channels": np.array(self.n_channels_),
         }
 
@@ -115,14 +108,19 @@ class ShapeHead(BaseEstimator):  # type: ignore[misc]
         mr.n_kernels_, mr._n_jobs, mr.is_fitted = max(head.n_kernels, 84), 1, True
         head.transform_ = mr
         head.mean_, head.scale_ = np.asarray(arrays["mean"]), np.asarray(arrays["scale"])
-        head.coef_, head.intercept_ = np.asarray(arrays["coef"]), np.asarray(arrays["intercept"])
+        coef, intercept = np.asarray(arrays["coef"]), np.asarray(arrays["intercept"])
         head.classes_ = np.asarray(classes, dtype=str)
         head.n_channels_ = int(arrays["n_channels"])
         n = len(head.mean_)
-        if head.scale_.shape != (n,) or head.coef_.shape[1:] != (n,):
+        if head.scale_.shape != (n,) or coef.shape[1:] != (n,):
             raise ValueError("the shape head's arrays do not match its features")
-        if head.coef_.shape[0] != (1 if len(head.classes_) == 2 else len(head.classes_)):
+        rows = 1 if len(head.classes_) == 2 else len(head.classes_)
+        if coef.shape[0] != rows or intercept.shape != (rows,):
             raise ValueError("the shape head's coefficients do not match its classes")
+        logistic = LogisticRegression(C=head.C, max_iter=300)  # the fitted state, set back
+        logistic.coef_, logistic.intercept_, logistic.classes_ = coef, intercept, head.classes_
+        logistic.n_features_in_ = n
+        head.logistic_ = logistic
         return head
 
 
