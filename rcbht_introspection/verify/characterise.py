@@ -34,7 +34,7 @@ from sklearn.base import BaseEstimator
 
 from rcbht_introspection.learn.forest import ForestHead
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
-from rcbht_introspection.verify.shape import ShapeHead, mix, vote_weight
+from rcbht_introspection.verify.shape import CLIP, ShapeHead, mix, vote_weight
 
 FAILURE = "class"
 """The failure-class head's name among the heads (the others: the deviation axes)."""
@@ -42,8 +42,6 @@ VIEWS = ("wrench", "raw", "timing")
 """What a characteriser's evidence reads: the verifier's change since before onset with its
 context, the raw-wrench baseline's mean wrench by time into the trial, the timing baseline's
 sub-task durations."""
-CLIP = 1e6
-"""Evidence values are clipped here (an overflowing sensor must not give inf or NaN)."""
 WINDOW_TICKS = 20_000
 """Ticks of the evidence the shape head reads (the latest; 1000 s at 20 Hz)."""
 

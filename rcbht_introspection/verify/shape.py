@@ -30,7 +30,8 @@ WEIGHTS = (0.0, 0.25, 0.5, 0.75, 1.0)
 FOLDS = 3
 """Trial-grouped folds of the training failures that choose the weight."""
 CLIP = 1e6
-"""Window values are clipped here (an overflowing sensor must not give inf)."""
+"""Evidence values are clipped here, the span summaries' and the windows' (an overflowing sensor
+must not give inf or NaN)."""
 FLAT = "Data seen by instance of MiniRocket has one or more case/channel pairs"
 """aeon's warning for a channel that barely varies: expected of a short window (a tick or two
 since onset, resampled), so not printed."""
