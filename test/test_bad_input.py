@@ -118,7 +118,7 @@ def test_train_evaluate_and_label_count_dropped_state_times(
     }
     # stderr is not a terminal here: plain progress lines, no carriage-return frames
     assert "\r" not in err
-    progress = [line for line in err.splitlines() if line.startswith("svm-forest/words-wrench: ")]
+    progress = [line for line in err.splitlines() if line.startswith("forest/words-wrench: ")]
     assert (
         1 <= len(progress) <= 11
         and progress[-1].split()[1].split("/")[0] == (progress[-1].split()[1].split("/")[1])

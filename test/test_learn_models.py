@@ -13,12 +13,17 @@ import pytest
 from conftest import SIM_FAILURE, SIM_JAMMED, SIM_SUCCESS, SOURCES, dataset_root
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.grammar.split import SubtaskSample
+from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.hiro import find_trials
 from rcbht_introspection.io.safe_file import checksum
 from rcbht_introspection.learn.data import load_samples, load_trials
 from rcbht_introspection.learn.model_file import load_model, save_model
-from rcbht_introspection.learn.models import train_model
+from rcbht_introspection.learn.models import (
+    RUNNING_PREFIXES,
+    VERDICT_TREES,
+    train_model,
+    with_prefixes,
+)
 
 REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 # S-01..S-21 have a long rotation, S-22..S-46 a 5 ms one: take both kinds
@@ -61,7 +66,14 @@ def samples(request: pytest.FixtureRequest) -> Samples:
 
 @pytest.mark.parametrize(
     ("classifier", "encoding"),
-    [("svm", "compact"), ("mondrian", "compact"), ("svm", "paper"), ("svm-tuned", "compact")],
+    [
+        ("svm", "compact"),
+        ("mondrian", "compact"),
+        ("svm", "paper"),
+        ("svm-tuned", "compact"),
+        ("forest", "words-wrench"),
+        ("svm-forest", "words-wrench"),
+    ],
 )
 def test_model_round_trips_through_the_safe_file(
     samples: Samples, tmp_path: Path, classifier: str, encoding: str
@@ -80,6 +92,27 @@ def test_model_round_trips_through_the_safe_file(
     )
     np.testing.assert_allclose(loaded.predict_proba_samples(valid), proba)
     assert loaded.predict_samples(valid) == model.predict_samples(valid)
+
+
+def test_the_default_names_finished_subtasks_by_the_forest_and_running_ones_by_the_vote(
+    samples: Samples, tmp_path: Path
+) -> None:
+    """train_model's default: the verdict head is the forest, the running head the SVM + forest
+    vote trained on prefixes too; both kinds survive the file."""
+    train, valid = samples
+    model = load_model(save_model(train_model(train), tmp_path / "model.rcbht"))
+    assert model.classifier == "forest" and model.live is not None
+    assert model.live.classifier == "svm-forest"
+    assert model.estimator.n_estimators == VERDICT_TREES
+    assert model.live.estimator.forest_.n_estimators == 100
+    head = train_model(train, "svm-forest", running_prefixes=())
+    assert head.live is None and head.classifier == "svm-forest"
+    early = [prefix_sample(s, 0.25) for s in valid]
+    prefixed = with_prefixes(train, RUNNING_PREFIXES["words-wrench"])
+    vote = train_model(prefixed, "svm-forest", running_prefixes=())
+    np.testing.assert_allclose(
+        model.live.predict_proba_samples(early), vote.predict_proba_samples(early)
+    )
 
 
 @pytest.mark.shared_data

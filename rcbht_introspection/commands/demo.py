@@ -126,9 +126,7 @@ def _train_model(args: argparse.Namespace, train: list[Path], out: Path) -> Path
 
     _step(f"2. train a words + wrench model on {len(train)} trials (plus live windows)")
     trials = load_trials(train, words="auto")
-    model, n_live = live_training(
-        trials, classifier="svm-forest", encoding="words-wrench", random_state=args.seed
-    )
+    model, n_live = live_training(trials, encoding="words-wrench", random_state=args.seed)
     model_path = save_model(model, out / "model.rcbht")
     n_samples = sum(len(t.samples) for t in trials)
     print(

@@ -22,7 +22,12 @@ from rcbht_introspection.commands.sensor import (
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.fleet import BadInputs, add_parallel_options, backend, jobs_from_args
 from rcbht_introspection.grammar import ENCODINGS
-from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
+from rcbht_introspection.learn import (
+    CLASSIFIER_HELP,
+    CLASSIFIERS,
+    DEFAULT_CLASSIFIER,
+    WORD_SOURCES,
+)
 from rcbht_introspection.taxonomy import StreamProfile
 
 PROTOCOLS = ("curve", "prequential")
@@ -182,7 +187,9 @@ def _add_live_scoring_options(ev: argparse.ArgumentParser) -> None:
 
 
 def _common(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--classifier", choices=CLASSIFIERS, default="svm-forest")
+    parser.add_argument(
+        "--classifier", choices=CLASSIFIERS, default=DEFAULT_CLASSIFIER, help=CLASSIFIER_HELP
+    )
     parser.add_argument("--encoding", choices=ENCODINGS, default="words-wrench")
     parser.add_argument(
         "--words",
@@ -332,7 +339,7 @@ def run_evaluate(args: argparse.Namespace) -> int:
             raise InputError(
                 f"--{option.replace('_', '-')} belongs to --protocol prequential", field=option
             )
-    args.classifier = args.classifier or "svm-forest"
+    args.classifier = args.classifier or DEFAULT_CLASSIFIER
     args.encoding = args.encoding or "words-wrench"
     if args.train:
         return run_transfer(args)

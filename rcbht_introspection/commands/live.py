@@ -17,7 +17,12 @@ from rcbht_introspection.commands.options import (
 )
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar import ENCODINGS
-from rcbht_introspection.learn import CLASSIFIERS, WORD_SOURCES
+from rcbht_introspection.learn import (
+    CLASSIFIER_HELP,
+    CLASSIFIERS,
+    DEFAULT_CLASSIFIER,
+    WORD_SOURCES,
+)
 from rcbht_introspection.live import MODES, BeliefMode
 
 if TYPE_CHECKING:
@@ -44,7 +49,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("inputs", nargs="+", type=Path, metavar="TRIAL_OR_DATASET_DIR")
     p.add_argument("--held-out", type=int, required=True, help="last N trials (sorted) replayed")
     p.add_argument("--model", type=Path, default=None, help="replay this model instead of training")
-    p.add_argument("--classifier", choices=CLASSIFIERS, default="svm-forest")
+    p.add_argument(
+        "--classifier", choices=CLASSIFIERS, default=DEFAULT_CLASSIFIER, help=CLASSIFIER_HELP
+    )
     p.add_argument("--encoding", choices=ENCODINGS, default="words-wrench")
     p.add_argument("--words", choices=WORD_SOURCES, default="auto")
     p.add_argument("--mode", choices=(*MODES, "both"), default="both")

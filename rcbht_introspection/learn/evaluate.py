@@ -36,7 +36,7 @@ from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.sensor_checks import RepeatedPolicy
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.learn import ClassifierKind
+from rcbht_introspection.learn import DEFAULT_CLASSIFIER, ClassifierKind
 from rcbht_introspection.learn.data import (
     TrialSamples,
     load_samples,
@@ -53,7 +53,13 @@ if TYPE_CHECKING:
 
 VALIDATION_TRIALS: dict[int, int] = {46: 10, 38: 8, 20: 6}
 """The paper's held-out trial counts by data-set size (REAL 36/10, SIM 30/8, two-arm 14/6)."""
-START_TRIALS: dict[str, int] = {"svm-forest": 1, "svm": 1, "svm-tuned": 1, "mondrian": 3}
+START_TRIALS: dict[str, int] = {
+    "forest": 1,
+    "svm-forest": 1,
+    "svm": 1,
+    "svm-tuned": 1,
+    "mondrian": 3,
+}
 PREFIX_FRACTIONS: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75)
 PEER_PREFIXES = PREFIX_FRACTIONS
 """The prefixes MiniRocket's prefix columns are trained on beside whole sub-tasks."""
@@ -65,7 +71,7 @@ NEAR_EMPTY_SECONDS = 0.05
 class Protocol:
     """Settings of one evaluation run."""
 
-    classifier: ClassifierKind = "svm-forest"
+    classifier: ClassifierKind = DEFAULT_CLASSIFIER
     encoding: EncodingName = "words-wrench"
     permutations: int = 20
     n_validation: int | None = None

@@ -23,6 +23,7 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.sensor_checks import RepeatedPolicy
+from rcbht_introspection.learn import DEFAULT_CLASSIFIER, running_classifier_of
 from rcbht_introspection.learn.data import read_any_trial, task_of_trials
 from rcbht_introspection.learn.models import RUNNING_PREFIXES, train_model, with_prefixes
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
@@ -207,10 +208,14 @@ def train_live_model(
         if prefixes is None:
             prefixes = RUNNING_PREFIXES.get(train_kwargs.get("encoding", "words-wrench"), ())
         model = train_model(samples, running_prefixes=(), **train_kwargs)
+        running = {
+            **train_kwargs,
+            "classifier": running_classifier_of(train_kwargs.get("classifier", DEFAULT_CLASSIFIER)),
+        }
         head = [*with_prefixes(samples, prefixes), *live]
-        model.live = train_model(head, running_prefixes=(), **train_kwargs)
+        model.live = train_model(head, running_prefixes=(), **running)
         if window:
-            model.window = train_model(window, running_prefixes=(), **train_kwargs)
+            model.window = train_model(window, running_prefixes=(), **running)
     model.training = training_header(config, len(live) if config is not None else 0, taxonomy)
     return model
 

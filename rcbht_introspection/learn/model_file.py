@@ -72,12 +72,14 @@ def _model_parts(model: SubtaskModel) -> tuple[dict[str, Any], dict[str, np.ndar
         header["training"] = model.training
     if model.classifier in ("svm", "svm-tuned"):
         arrays = {"svm_skops": np.frombuffer(sio.dumps(model.estimator), dtype=np.uint8)}
+    elif model.classifier == "forest":
+        header["forest"] = {"n_estimators": int(model.estimator.n_estimators)}
+        arrays = _forest_arrays(model.estimator)
     elif model.classifier == "svm-forest":
         vote = model.estimator
         header["vote"] = vote.get_params()
         arrays = {"svm_skops": np.frombuffer(sio.dumps(vote.svm_), dtype=np.uint8)}
-        arrays.update({FOREST_PREFIX + k: v for k, v in vote.forest_.arrays_.items()})
-        arrays[FOREST_PREFIX + "n_features"] = np.asarray(vote.forest_.n_features_in_)
+        arrays.update(_forest_arrays(vote.forest_))
     else:
         header["mondrian"], arrays = forest_arrays(model.estimator)
     return header, arrays
@@ -112,6 +114,8 @@ def _model_from_parts(
     try:
         if classifier in ("svm", "svm-tuned"):
             estimator: Any = _svm(arrays, path)
+        elif classifier == "forest":
+            estimator = _forest(header["forest"], header["classes"], arrays)
         elif classifier == "svm-forest":
             estimator = _vote(header, arrays, path)
         elif classifier == "mondrian":
@@ -147,12 +151,26 @@ def _svm(arrays: dict[str, np.ndarray], path: Path) -> Any:
     return sio.loads(data, trusted=list(SVM_TRUSTED_TYPES))
 
 
+def _forest_arrays(forest: ForestHead) -> dict[str, np.ndarray]:
+    """A packed forest's arrays under FOREST_PREFIX, with its number of features."""
+    arrays = {FOREST_PREFIX + k: v for k, v in forest.arrays_.items()}
+    arrays[FOREST_PREFIX + "n_features"] = np.asarray(forest.n_features_in_)
+    return arrays
+
+
+def _forest(
+    params: dict[str, Any], classes: list[str], arrays: dict[str, np.ndarray]
+) -> ForestHead:
+    """The stored forest (alone or in the vote), from its packed arrays."""
+    packed = {k[len(FOREST_PREFIX) :]: v for k, v in arrays.items() if k.startswith(FOREST_PREFIX)}
+    forest_params = {"n_estimators": int(params["n_estimators"]), "min_samples_leaf": 1}
+    return ForestHead.from_arrays(forest_params, classes, packed)
+
+
 def _vote(header: dict[str, Any], arrays: dict[str, np.ndarray], path: Path) -> SvmForestClassifier:
     """The stored SVM + forest vote: the SVM as above, the forest from its packed arrays."""
     params = {k: int(header["vote"][k]) for k in ("n_estimators", "random_state")}
-    packed = {k[len(FOREST_PREFIX) :]: v for k, v in arrays.items() if k.startswith(FOREST_PREFIX)}
-    forest_params = {"n_estimators": params["n_estimators"], "min_samples_leaf": 1}
-    forest = ForestHead.from_arrays(forest_params, header["classes"], packed)
+    forest = _forest(params, header["classes"], arrays)
     return SvmForestClassifier.from_members(_svm(arrays, path), forest, params)
 
 

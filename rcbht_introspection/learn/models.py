@@ -17,7 +17,13 @@ from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.grammar.encoding.cache import SampleCache
 from rcbht_introspection.grammar.encoding.registry import AnyEncoding, make_encoding
 from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
-from rcbht_introspection.learn import CLASSIFIERS, ClassifierKind
+from rcbht_introspection.learn import (
+    CLASSIFIERS,
+    DEFAULT_CLASSIFIER,
+    ClassifierKind,
+    running_classifier_of,
+)
+from rcbht_introspection.learn.forest import ForestHead
 from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 from rcbht_introspection.learn.svm import fit_svm, make_svm, svm_predict_proba, tune_svm
 from rcbht_introspection.learn.vote import SvmForestClassifier
@@ -103,9 +109,15 @@ RUNNING_PREFIXES: dict[str, tuple[float, ...]] = {"words-wrench": (0.1, 0.25, 0.
 running head from train_model; rcbht train may still add a live head, learn/live.py)."""
 
 
+VERDICT_TREES = 300
+"""Trees of the `forest` classifier: it names a sub-task once, when it has ended, so its size
+costs nothing live, and more trees only lower the variance of its vote (`n_estimators` sizes the
+forests that run at every word: the vote's and Mondrian's)."""
+
+
 def train_model(
     samples: Sequence[SubtaskSample],
-    classifier: ClassifierKind = "svm-forest",
+    classifier: ClassifierKind = DEFAULT_CLASSIFIER,
     encoding: EncodingName = "words-wrench",
     random_state: int = 0,
     taxonomy_profile: str = "reference",
@@ -122,10 +134,11 @@ def train_model(
 
     `augment_prefixes` (e.g. (0.25, 0.5, 0.75)) also trains on those first fractions of every
     sub-task, so a live classifier is not surprised by a sub-task that has only just begun.
-    `running_prefixes` (None: RUNNING_PREFIXES of the encoding) trains a second head for running
-    windows (`model.live`) on the whole sub-tasks and these prefixes of each; the model itself,
-    which gives final verdicts, stays on whole sub-tasks.
+    `running_prefixes` (None: RUNNING_PREFIXES of the encoding) trains a running head
+    (`model.live`, running_classifier_of(classifier)) on the whole sub-tasks and these prefixes;
+    the model itself, which gives final verdicts, stays on whole sub-tasks.
     `cache`: a SampleCache shared by models trained on the same samples (else the encoding's own).
+    `n_estimators`: trees of the vote's and the Mondrian forest (`forest` has VERDICT_TREES);
     `max_nodes`, `max_points`: the Mondrian forest's memory budget (None: unbounded).
     """
     if classifier not in CLASSIFIERS:
@@ -140,8 +153,9 @@ def train_model(
             samples, classifier, encoding, random_state, taxonomy_profile, n_estimators,
             augment_prefixes, cache, task, taxonomy_sha256, max_nodes, max_points, (),
         )  # fmt: skip
+        running = running_classifier_of(classifier)
         model.live = train_model(
-            samples, classifier, encoding, random_state, taxonomy_profile, n_estimators,
+            samples, running, encoding, random_state, taxonomy_profile, n_estimators,
             tuple(augment_prefixes) + tuple(running_prefixes), cache, task, taxonomy_sha256,
             max_nodes, max_points, (),
         )  # fmt: skip
@@ -176,9 +190,12 @@ def _fit_classifier(
     nodes and points of the Mondrian forest (trees also of the vote's forest)."""
     n_estimators, max_nodes, max_points = budget
     if classifier != "mondrian" and len(set(y)) < 2:
-        raise InputError("the SVM needs samples of at least two sub-tasks")
+        raise InputError(f"the {classifier} classifier needs samples of at least two sub-tasks")
     if classifier == "svm-forest":
         return SvmForestClassifier(n_estimators, random_state).fit(X, y)
+    if classifier == "forest":
+        forest = ForestHead(VERDICT_TREES, min_samples_leaf=1, random_state=random_state)
+        return forest.fit(X, y)
     if classifier in ("svm", "svm-tuned"):
         svm = make_svm(random_state)
         if classifier == "svm-tuned":
@@ -212,4 +229,11 @@ def task_of_samples(samples: Sequence[SubtaskSample]) -> Task:
     return task_of_names(per_trial.values())
 
 
-__all__ = ["RUNNING_PREFIXES", "SubtaskModel", "task_of_samples", "train_model", "with_prefixes"]
+__all__ = [
+    "RUNNING_PREFIXES",
+    "VERDICT_TREES",
+    "SubtaskModel",
+    "task_of_samples",
+    "train_model",
+    "with_prefixes",
+]
