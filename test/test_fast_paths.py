@@ -198,7 +198,7 @@ def test_svm_fast_probabilities_equal_checked_pipeline(
 ) -> None:
     """svm_predict_proba == Pipeline.predict_proba bit for bit; bad input still raises."""
     samples = _samples(request, source)
-    model = train_model(samples)
+    model = train_model(samples, "svm", running_prefixes=())
     X = model.features(samples)
     assert np.array_equal(svm_predict_proba(model.estimator, X), model.estimator.predict_proba(X))
     for row in X:
