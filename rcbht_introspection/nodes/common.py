@@ -339,10 +339,7 @@ def run(
                 print(f"[{name}] error: {node.config_error}", file=sys.stderr, flush=True)
                 return 2
         stop.up()
-        # start-up objects (rclpy, NumPy, scikit-learn, the model) live until exit: keep them
-        # out of the cyclic collector, whose full passes over them stall a 1 kHz callback
-        gc.collect()
-        gc.freeze()
+        keep_out_of_collector()  # start-up objects: rclpy, NumPy, scikit-learn, the model
         spin(executor, node, stop)
     finally:
         if node is not None:
@@ -366,6 +363,13 @@ def make_executor(spin: Spin | str, context: Context | None = None) -> tuple[Exe
             return SingleThreadedExecutor(context=context), False
         return EventsExecutor(context=context), True
     return SingleThreadedExecutor(context=context), False
+
+
+def keep_out_of_collector() -> None:
+    """Collect, then freeze what the process holds now: it lives on, and the cyclic collector's
+    full passes over it would stall a 1 kHz callback or player for tens of milliseconds."""
+    gc.collect()
+    gc.freeze()
 
 
 SPIN_WAIT_S = 0.02

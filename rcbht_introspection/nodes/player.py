@@ -15,6 +15,7 @@ from rclpy.qos import QoSProfile
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import BagMessage, BagWriter
+from rcbht_introspection.nodes.common import keep_out_of_collector
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.waiting import wait_until
 
@@ -86,6 +87,7 @@ class BagPlayer:
         if not messages:
             return 0
         self.prepare(messages)
+        keep_out_of_collector()  # the messages, and whatever the process built before playing
         t0_bag = messages[0].t_ns
         t0 = time.perf_counter()
         count = 0

@@ -21,7 +21,6 @@ learns beside its live path; those bags' sample -> belief latency is reported ap
 from __future__ import annotations
 
 import dataclasses
-import gc
 import tempfile
 import time
 from dataclasses import dataclass
@@ -352,10 +351,6 @@ class _Graph:
         with observer.lock:
             since = observer.obs.mark()
         playback = Playback(bag)
-        # what this process built before playing (trials, a model it trained) stays out of the
-        # cyclic collector, whose full passes over it would hold up a 1 kHz player (as the nodes)
-        gc.collect()
-        gc.freeze()
         t0 = time.monotonic()
         self.player.play(msgs, rate=options.rate, on_publish=playback.on_publish)
         playback.play_s = time.monotonic() - t0
