@@ -134,6 +134,11 @@ class ArmController(Generic[ConfigT, StateT]):
         self.state.aborted = True
         self._switch(t, "backoff")
 
+    def abort(self, t: float) -> None:
+        """A planner's cancel at `t`: give up and back off, unless already backing off or done."""
+        if self.state.phase not in ("backoff", "done"):
+            self._abort(t)
+
     def _guarded_move(self, tick: Tick, speed: float, timeout: float) -> bool:
         """Descend at `speed` until the force passes the contact threshold (True); abort after
         `timeout` without contact."""

@@ -113,7 +113,11 @@ class ServoRig:
     controller on the physics (the right arm's six servos, the tool height from its z slide)."""
 
     def __init__(
-        self, model: mujoco.MjModel, data: mujoco.MjData, pitch: float | None = None
+        self,
+        model: mujoco.MjModel,
+        data: mujoco.MjData,
+        pitch: float | None = None,
+        yaw: float = 0.0,
     ) -> None:
         self.model = model
         self.data = data
@@ -124,6 +128,10 @@ class ServoRig:
         if pitch is not None:  # the arm starts tilted: joint and servo at the pitch
             data.qpos[qadr[4]] = pitch
             data.ctrl[self.act[4]] = pitch
+        if yaw:  # a corrected attempt: the hand turned about the tool axis from the start
+            data.qpos[qadr[3]] = yaw
+            data.ctrl[self.act[3]] = yaw
+        self.yaw = yaw
         for _ in range(int(SETTLE_TIME / self.dt)):
             mujoco.mj_step(model, data)  # the servos take the weight before the sensor is tared
         self.tare: NDArray[np.float64] = data.sensordata.copy()
@@ -138,32 +146,45 @@ class ServoRig:
     ) -> Wrench:
         """Run `controller` (targets relative to the hand's `start`) until it is done or
         `max_steps`; the tared tool-frame wrench per physics step (compression: +Fz)."""
-        model, data, dt, act, tare = self.model, self.data, self.dt, self.act, self.tare
-        sx, sy, sz = start
-        offsets = (sx, sy, sz, 0.0, 0.0, 0.0)
-        raw = np.empty((max_steps, model.nsensordata))
-        sensordata, qpos, ctrl = data.sensordata, data.qpos, data.ctrl
-        qz = self.qz
+        raw = np.empty((max_steps, self.model.nsensordata))
+        offsets = self.offsets(start)
         step = 0
         while step < max_steps and not controller.done:
-            t = step * dt
-            u = controller.update(
-                t,
-                dt,
-                tare[0] - sensordata[0],
-                tare[1] - sensordata[1],
-                tare[2] - sensordata[2],
-                sz + qpos[qz],
-            )
-            for i in range(6):
-                ctrl[act[i]] = u[i] - offsets[i]
-            if before_step is not None:
-                before_step()
-            mujoco.mj_step(model, data)
-            raw[step] = sensordata
+            raw[step] = self.step(controller, step, offsets, before_step)
             if after_step is not None:
-                after_step(t + dt)
+                after_step(step * self.dt + self.dt)
             step += 1
         # tool-frame convention: the wrench the part exerts on the sensor (compression: +Fz), tared
-        wrench: Wrench = tare[None, :] - raw[:step]
+        wrench: Wrench = self.tare[None, :] - raw[:step]
         return wrench
+
+    def offsets(self, start: tuple[float, float, float]) -> tuple[float, ...]:
+        """What each servo target is taken from: the hand's start, and its yaw."""
+        sx, sy, sz = start
+        return (sx, sy, sz, -self.yaw, 0.0, 0.0)
+
+    def step(
+        self,
+        controller: ArmController[Any, Any],
+        step: int,
+        offsets: tuple[float, ...],
+        before_step: StepHook | None = None,
+    ) -> NDArray[np.float64]:
+        """One control tick and physics step; the raw sensor data after it (not tared)."""
+        data, tare, sensordata = self.data, self.tare, self.data.sensordata
+        u = controller.update(
+            step * self.dt,
+            self.dt,
+            tare[0] - sensordata[0],
+            tare[1] - sensordata[1],
+            tare[2] - sensordata[2],
+            offsets[2] + data.qpos[self.qz],
+        )
+        ctrl, act = data.ctrl, self.act
+        for i in range(6):
+            ctrl[act[i]] = u[i] - offsets[i]
+        if before_step is not None:
+            before_step()
+        mujoco.mj_step(self.model, data)
+        readings: NDArray[np.float64] = sensordata
+        return readings

@@ -79,17 +79,47 @@ def measure(
     rng: np.random.Generator,
 ) -> NDArray[np.float64]:
     """Add bias, slow drift, white noise and quantization to a true (tared) wrench (N, 6)."""
+    return quantize(_with_errors(wrench, time, config, draw, rng), config)
+
+
+def sensor_errors(
+    time: NDArray[np.float64],
+    config: SensorConfig,
+    draw: SensorDraw,
+    rng: np.random.Generator,
+) -> NDArray[np.float64]:
+    """The sensor's additive errors alone at the sample times (N, 6), drawn as `measure` draws
+    them; causal, so a live attempt reads its samples' errors as a prefix of these."""
+    errors: NDArray[np.float64] = _with_errors(np.zeros((len(time), 6)), time, config, draw, rng)
+    return errors
+
+
+def _with_errors(
+    wrench: NDArray[np.float64],
+    time: NDArray[np.float64],
+    config: SensorConfig,
+    draw: SensorDraw,
+    rng: np.random.Generator,
+) -> NDArray[np.float64]:
+    """The wrench plus bias, drift, white noise and the two Ornstein-Uhlenbeck disturbances."""
     std = np.array([config.noise_force] * 3 + [config.noise_torque] * 3) * draw.noise_scale
-    q = np.array([config.quantization_force] * 3 + [config.quantization_torque] * 3)
     drift = draw.drift[None, :] * np.sin(
         2 * np.pi * time[:, None] / draw.drift_period + draw.drift_phase
     )
-    out = wrench + draw.bias[None, :] + drift + rng.normal(0.0, 1.0, wrench.shape) * std[None, :]
+    out: NDArray[np.float64] = (
+        wrench + draw.bias[None, :] + drift + rng.normal(0.0, 1.0, wrench.shape) * std[None, :]
+    )
     fast = (config.vibration_force, config.vibration_torque, config.vibration_time)
     slow = (config.wander_force, config.wander_torque, config.wander_time)
     for force_std, torque_std, tau in (fast, slow):
         out += ornstein_uhlenbeck(time, force_std, torque_std, tau, draw.noise_scale, rng)
-    quantized: NDArray[np.float64] = np.round(out / q) * q
+    return out
+
+
+def quantize(values: NDArray[np.float64], config: SensorConfig) -> NDArray[np.float64]:
+    """The sensor's output resolution applied to readings (..., 6)."""
+    q = np.array([config.quantization_force] * 3 + [config.quantization_torque] * 3)
+    quantized: NDArray[np.float64] = np.round(values / q) * q
     return quantized
 
 

@@ -1,0 +1,212 @@
+"""A simulated trial run attempt by attempt, one sensor sample at a time: what sim_node and
+`rcbht closed-loop` step.
+
+A trial's world (the housing's pose error, the part's slip in the hand, friction, the sensor) is
+drawn once and persists across its attempts. Each attempt starts at the approach start with a
+correction of the held part's believed pose: the arm shifts the whole plan by (x, y, z) and
+turns the hand by yaw. An attempt ends when the arm's controller is done: seated (its own seat
+check passed, then the mating), failed by its own checks (an insertion time-out, or the planned
+stroke ended without a snap), or aborted by the planner; a failed attempt backs off, then the
+arm returns to the approach start at the back-off speed (counted as time, no samples).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from rcbht_introspection.io.bags import END_PHASE
+from rcbht_introspection.sim import arm_run
+from rcbht_introspection.sim.config import FailureType, SimConfig
+from rcbht_introspection.sim.controller import SnapController
+from rcbht_introspection.sim.model import build_model
+from rcbht_introspection.sim.sensor import decimation, quantize, sensor_errors
+from rcbht_introspection.sim.simulate import MAX_DURATION, TrialDraw, draw_trial, run_physics
+
+Pose = tuple[float, float, float, float]
+"""A correction of the held part's pose: x, y, z (m), yaw (rad)."""
+ARM = "R"
+"""The arm whose wrench an episode records (the one-arm scenario)."""
+
+
+@dataclass(frozen=True)
+class World:
+    """One trial's world, the same for all its attempts."""
+
+    seed: int
+    failure: FailureType | None
+    draw: TrialDraw
+    redraws: int
+    as_requested: bool
+    """The uncorrected task ends as asked: fails for a failure class, seats for a nominal."""
+
+    @property
+    def failing(self) -> bool:
+        return self.failure is not None and self.as_requested
+
+    @property
+    def truth(self) -> Pose:
+        """The correction that undoes the world's errors: the housing's pose error less the
+        part's slip in the hand (what the oracle applies)."""
+        p = self.draw.physics
+        dx, dy, dyaw = p.part_offset
+        ox, oy, oz = p.female_offset
+        return (ox - dx, oy - dy, oz, math.radians(p.female_yaw) - dyaw)
+
+
+def draw_world(config: SimConfig, seed: int, failure: FailureType | None) -> World:
+    """The world of trial `seed`, drawn as `rcbht sim` draws it (redrawn up to the config's
+    max_attempts times) until the uncorrected task fails with `failure` (or seats, for None),
+    judged by where the part itself ends (`part_seated`)."""
+
+    def attempt(rng: np.random.Generator) -> tuple[tuple[TrialDraw, bool], bool]:
+        draw = draw_trial(config, rng, failure)
+        final = _FinalState()
+        run_physics(config, draw.physics, draw.plan, False, observer=final)
+        agrees = final.seated(config) == (failure is None)
+        return (draw, agrees), agrees
+
+    (draw, agrees), redraws = arm_run.redraw_until(seed, config.failures.max_attempts, attempt)
+    return World(seed, failure, draw, redraws, agrees)
+
+
+class _FinalState:
+    """Observer of a physics run that keeps its model and data, to judge where it ended."""
+
+    def __init__(self) -> None:
+        self.model: mujoco.MjModel | None = None
+        self.data: mujoco.MjData | None = None
+
+    def __call__(self, t: float, phase: str, model: mujoco.MjModel, data: mujoco.MjData) -> None:
+        self.model, self.data = model, data
+
+    def seated(self, config: SimConfig) -> bool:
+        assert self.model is not None and self.data is not None
+        return part_seated(config, self.model, self.data)
+
+
+def part_seated(config: SimConfig, model: mujoco.MjModel, data: mujoco.MjData) -> bool:
+    """True when the held part's shoulder is below the hooks' retention face, inside the
+    housing: measured on the part's block, which sits off the hand's centre by its slip."""
+    g = config.geometry
+    block = data.geom("male_block").xpos  # its centre: half the block's height above its base
+    female = data.body("female").xpos
+    shoulder = block[2] + 0.5 * g.male_lower_height
+    hook = female[2] + g.male_lower_height + g.hook_play
+    lateral = math.hypot(block[0] - female[0], block[1] - female[1])
+    return bool(shoulder < hook - 1e-4 and lateral < g.hook_depth)
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One sensor sample of an attempt: its time from the attempt's first sample, the arm's
+    wrench, and the sub-task events (time, name) due before it."""
+
+    time: float
+    wrench: NDArray[np.float64]
+    events: tuple[tuple[float, str], ...]
+
+
+@dataclass(frozen=True)
+class AttemptEnd:
+    """How an attempt ended: the arm's own seat check and why, the physical truth, its
+    duration and the return to the approach start that a failed attempt needs."""
+
+    seated: bool
+    reason: str
+    latched: bool
+    duration: float
+    return_s: float
+
+
+class Attempt:
+    """One attempt of a world under a correction, stepped a sensor sample at a time."""
+
+    def __init__(
+        self, config: SimConfig, world: World, correction: Pose, index: int, rate_hz: float
+    ) -> None:
+        draw = world.draw
+        cx, cy, cz, cyaw = correction
+        sx, sy, sz = draw.physics.start_pose
+        physics = replace(draw.physics, start_pose=(sx + cx, sy + cy, sz + cz))
+        self.config = config
+        self.model = build_model(config, physics)
+        self.data = mujoco.MjData(self.model)
+        self.rig = arm_run.ServoRig(self.model, self.data, pitch=draw.plan.tilt, yaw=cyaw)
+        self.controller = SnapController(config, draw.plan)
+        self.offsets = self.rig.offsets(draw.plan.start)
+        self.k = decimation(rate_hz, self.rig.dt)
+        self.period = 1.0 / rate_hz
+        n = int(MAX_DURATION * rate_hz)
+        rng = np.random.default_rng([world.seed, index, 11])
+        times = np.arange(n, dtype=np.float64) * self.period
+        self.errors = sensor_errors(times, config.sensor, draw.sensor, rng)
+        self.step_count = 0
+        self.samples = 0
+        self.reason = ""
+        self._phase = self.controller.state.phase
+        self._events: list[tuple[float, str]] = [(0.0, self._phase)]
+        self.end: AttemptEnd | None = None
+
+    @property
+    def time(self) -> float:
+        """Physics time of the attempt (s)."""
+        return self.step_count * self.rig.dt
+
+    def abort(self, reason: str = "aborted") -> None:
+        """The planner's cancel: the arm backs off from here."""
+        if not self.reason:
+            self.reason = reason
+        self.controller.abort(self.time)
+
+    def step(self) -> Sample | None:
+        """The next sensor sample (k physics steps, box-averaged), None once the attempt ended."""
+        if self.end is not None:
+            return None
+        if self.controller.done or self.samples >= len(self.errors):
+            self._finish()
+            return None
+        raw = np.zeros(self.model.nsensordata)
+        for _ in range(self.k):
+            raw += self.rig.step(self.controller, self.step_count, self.offsets)
+            self.step_count += 1
+            self._watch()
+        tared = self.rig.tare[:6] - raw[:6] / self.k
+        t = round(self.samples * self.period, 9)
+        wrench = quantize(tared + self.errors[self.samples], self.config.sensor)
+        self.samples += 1
+        events, self._events = tuple(self._events), []
+        return Sample(t, wrench, events)
+
+    def _watch(self) -> None:
+        """Sub-task events as the controller switches; the arm's own failed checks abort."""
+        st = self.controller.state
+        if st.phase == self._phase:
+            return
+        t = arm_run.on_clock(st.phase_start, self.period)
+        if st.phase == "mating" and st.seat_time is None:
+            self.abort("no_snap")  # the stroke ended without a snap: its seat check failed
+        elif st.phase == "backoff" and not self.reason:
+            self.reason = "timeout"
+        elif st.phase in self.controller.subtasks:
+            self._events.append((t, st.phase))
+        self._phase = self.controller.state.phase
+
+    def _finish(self) -> None:
+        st = self.controller.state
+        seated = st.seat_time is not None and not st.aborted
+        duration = round(self.samples * self.period, 9)
+        climb = self.controller.plan.start[2] - (self.offsets[2] + self.data.qpos[self.rig.qz])
+        back = 0.0 if seated else max(0.0, climb) / self.config.controller.backoff_speed
+        self.end = AttemptEnd(
+            seated, "seated" if seated else self.reason or "unseated",
+            part_seated(self.config, self.model, self.data), duration, back,
+        )  # fmt: skip
+
+    def end_event(self) -> tuple[float, str]:
+        """The end-of-task event after the attempt's last sample."""
+        return (round(self.samples * self.period, 9), END_PHASE)
