@@ -16,6 +16,7 @@ setup(
         (f"share/{package_name}/config", glob("config/*.yaml") + glob("config/*.xml")),
         # the simulator's experiment configurations, apart from the nodes' configuration
         (f"share/{package_name}/config/sim", glob("config/sim/*.yaml")),
+        (f"share/{package_name}/config/recovery", glob("config/recovery/*.yaml")),
         (f"share/{package_name}/launch", glob("launch/*.launch.py")),
         # `ros2 run rcbht_introspection <node>` looks for lib/<package>/<executable>; data_files
         # put them there under colcon and under plain pip alike (console_scripts go to bin/ with pip)

@@ -27,6 +27,7 @@ from rcbht_introspection.nodes.params import (
     VerifierConfig,
     load_node_config,
 )
+from rcbht_introspection.plan.recovery import ClassRecovery, RecoveryConfig, load_recovery_config
 from rcbht_introspection.sim.config import SimConfig, load_sim_config
 from rcbht_introspection.sim.peg_config import PegConfig, load_peg_config
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
@@ -106,6 +107,24 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
         (load_sim_config, cell_with_slips((0.00205, 0.0025), (0.06, 0.08)))
     ],
     "sim/peg.yaml": [(load_peg_config, PegConfig())],
+    "recovery/snap.yaml": [
+        (
+            lambda p: load_recovery_config(path=p),
+            RecoveryConfig(
+                classes={
+                    "deviation": ClassRecovery(
+                        "undo_direction", size={"x": 0.002, "y": 0.002, "yaw": 0.06}
+                    ),
+                    "misalignment": ClassRecovery(
+                        "try", candidates=({"y": 0.0055}, {"y": -0.0055})
+                    ),
+                    "jamming": ClassRecovery("try", candidates=({"yaw": 0.16}, {"yaw": -0.16})),
+                    "missed_snap": ClassRecovery("try", candidates=({"z": -0.0055},)),
+                    "anomaly": ClassRecovery("retry"),
+                }
+            ),
+        )
+    ],
     "live.yaml": [(load_live_config, LiveAugmentConfig())],
     "teach.yaml": [(load_teach_config, TeachConfig())],
     "verify.yaml": [(load_verify_config, VerifyConfig())],

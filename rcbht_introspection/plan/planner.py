@@ -1,0 +1,219 @@
+"""The reference planner without ROS: verdicts and attempt results in, decisions out.
+
+One Planner runs one trial: it starts attempts, aborts the running one when its policy reads an
+alarm, and picks the next attempt's correction from the recovery table, until the arm's own
+seat check passes or the attempts run out. planner_node and `rcbht closed-loop` drive the same
+class, so their decisions are the same for the same verdicts and results.
+
+Policies: `none` (one attempt), `retry` (the same plan again after the arm's own failure),
+`search` (a blind grid search of corrections after the arm's own failure), `introspect` (abort
+on the verifier's alarm, recover from the named class and directions), `oracle` (abort on the
+alarm, then the true correction: the upper bound).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from typing import Literal, get_args
+
+from rcbht_introspection.plan.recovery import (
+    ANOMALY,
+    VERDICT_AXES,
+    ClassRecovery,
+    Correction,
+    RecoveryConfig,
+)
+
+PolicyName = Literal["none", "retry", "search", "introspect", "oracle"]
+POLICIES: tuple[str, ...] = get_args(PolicyName)
+READS_VERDICTS = ("introspect", "oracle")
+"""Policies that abort on the verifier's alarm."""
+DecisionKind = Literal["attempt", "abort", "stop"]
+
+
+@dataclass(frozen=True)
+class Report:
+    """How an attempt ended, as the arm reports it: its own seat check, and why."""
+
+    seated: bool
+    reason: str
+    """seated, timeout, no_snap (the arm's own checks), aborted (cancelled), rejected."""
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One decision of the planner: start attempt n with a correction, abort it, or stop."""
+
+    kind: DecisionKind
+    attempt: int
+    time: float
+    """Seconds into the attempt (0 for an attempt's start)."""
+    correction: Correction = field(default_factory=Correction)
+    failure_class: str = ""
+    reason: str = ""
+
+    def to_dict(self) -> dict[str, object]:
+        return {
+            "kind": self.kind,
+            "attempt": self.attempt,
+            "time": round(self.time, 6),
+            "correction": {a: round(v, 7) for a, v in self.correction.as_dict().items()},
+            "failure_class": self.failure_class,
+            "reason": self.reason,
+        }
+
+
+def search_grid(step: Mapping[str, float]) -> Iterator[Correction]:
+    """The blind search's corrections in order: one axis at +-step first, then pairs, then all,
+    then the same rings at twice the step, and so on."""
+    axes = [a for a in ("x", "y", "yaw") if a in step]
+    for ring in itertools.count(1):
+        for n in range(1, len(axes) + 1):
+            for chosen in itertools.combinations(axes, n):
+                for signs in itertools.product((1.0, -1.0), repeat=n):
+                    yield Correction.of(
+                        {a: s * ring * step[a] for a, s in zip(chosen, signs, strict=True)}
+                    )
+
+
+class Planner:
+    """One trial's decisions under a policy (see the module's docstring)."""
+
+    def __init__(
+        self,
+        policy: PolicyName,
+        recovery: RecoveryConfig,
+        sizes: Mapping[str, float] | None = None,
+        truth: Correction | None = None,
+    ) -> None:
+        if policy not in POLICIES:
+            raise ValueError(f"unknown policy {policy!r} (known: {', '.join(POLICIES)})")
+        if policy == "oracle" and truth is None:
+            raise ValueError("the oracle policy needs the trial's true correction")
+        self.policy = policy
+        self.recovery = recovery
+        self.sizes = dict(sizes or {})
+        """Learnt first step per correction axis (the verifier file's deviation sizes)."""
+        self.truth = truth
+        self.grid = search_grid(recovery.search_step)
+        self.attempt = 0
+        self.correction = Correction()
+        self.decisions: list[Decision] = []
+        self._steps: dict[str, float] = {}
+        self._signs: dict[str, float] = {}
+        self._tried: dict[str, tuple[Correction, int]] = {}
+        self._alarm_at: float | None = None
+        self._aborted: Decision | None = None
+        self._named: tuple[str, dict[str, str]] | None = None
+        """The verifier's latest class and directions on the running attempt."""
+        self._moves: list[tuple[str, Correction]] = []
+        """Per correction introspect made: the class family that called for it, the one before."""
+
+    @property
+    def reads_verdicts(self) -> bool:
+        return self.policy in READS_VERDICTS
+
+    def first(self) -> Decision:
+        """The first attempt, uncorrected."""
+        return self._start(Correction(), "first attempt")
+
+    def verdict(
+        self, time: float, alarm: bool, failure_class: str, directions: Mapping[str, str]
+    ) -> Decision | None:
+        """A verdict on the running attempt: the abort, when the policy reacts to it.
+
+        Both verdict policies abort only the uncorrected plan: a corrected attempt departs from
+        the nominal wrench by design, so its alarms say little about whether it will seat; it
+        runs to the arm's own end. The oracle aborts at the alarm; introspect lets the verifier
+        name the class for naming_wait_s first, and keeps the latest naming of every attempt."""
+        if not self.reads_verdicts or self._aborted is not None or not alarm:
+            return None
+        if self._alarm_at is None:
+            self._alarm_at = time
+        if failure_class not in ("", ANOMALY):
+            self._named = (failure_class, dict(directions))
+        if self.correction != Correction():
+            return None
+        if self.policy == "introspect" and time - self._alarm_at < self.recovery.naming_wait_s:
+            return None
+        cls, dirs = self._named or (ANOMALY, {})
+        signs = ",".join(f"{a}{d}" for a, d in sorted(dirs.items()) if d in "+-")
+        self._aborted = Decision("abort", self.attempt, time, self.correction, cls, signs)
+        self.decisions.append(self._aborted)
+        return self._aborted
+
+    def ended(self, report: Report, time: float) -> Decision:
+        """The running attempt ended: the next attempt, or stop."""
+        if report.seated:
+            return self._stop(time, "seated")
+        if self.policy == "none" or self.attempt >= self.recovery.max_attempts:
+            return self._stop(time, f"gave up after {report.reason}")
+        nxt = self._next_correction().clipped(self.recovery.bounds)
+        return self._start(nxt, f"after {report.reason}")
+
+    def _next_correction(self) -> Correction:
+        if self.policy == "retry":
+            return self.correction
+        if self.policy == "search":
+            return next(self.grid)
+        if self.policy == "oracle":
+            assert self.truth is not None
+            return self.truth
+        if self._named is None:  # introspect, nothing named: the same plan again
+            return self.correction
+        cls, directions = self._named
+        family = cls.split("_", 1)[0]
+        base = self.correction
+        if self._moves and self._moves[-1][0] != family:
+            base = self._moves[-1][1]  # the last move's diagnosis was contradicted: undo it
+        self._moves.append((family, base))
+        return self._recover(cls, self.recovery.recovery_of(cls), base, directions)
+
+    def _recover(
+        self, cls: str, entry: ClassRecovery, base: Correction, directions: Mapping[str, str]
+    ) -> Correction:
+        if entry.action == "undo_direction":
+            return self._undo(entry, base, directions)
+        if entry.action == "try" and entry.candidates:
+            origin, tries = self._tried.get(cls, (base, 0))
+            self._tried[cls] = (origin, tries + 1)
+            out = origin
+            for axis, value in entry.candidates[tries % len(entry.candidates)].items():
+                out = out.moved(axis, value)
+            return out
+        return base
+
+    def _undo(
+        self, entry: ClassRecovery, base: Correction, directions: Mapping[str, str]
+    ) -> Correction:
+        """Move against each named direction; an axis whose direction flipped since its last
+        move overshot: its step halves (a bisection between the last two corrections)."""
+        out = base
+        for verdict_axis, direction in directions.items():
+            axis = VERDICT_AXES.get(verdict_axis)
+            if axis is None or direction not in ("+", "-"):
+                continue
+            sign = 1.0 if direction == "+" else -1.0
+            step = self._steps.get(axis, self.sizes.get(axis, entry.size.get(axis, 0.0)))
+            if self._signs.get(axis, sign) != sign:
+                step /= 2.0
+            self._steps[axis], self._signs[axis] = step, sign
+            out = out.moved(axis, -sign * step)
+        return out
+
+    def _start(self, correction: Correction, reason: str) -> Decision:
+        self.attempt += 1
+        self.correction = correction
+        self._alarm_at = None
+        self._aborted = None
+        self._named = None
+        decision = Decision("attempt", self.attempt, 0.0, correction, reason=reason)
+        self.decisions.append(decision)
+        return decision
+
+    def _stop(self, time: float, reason: str) -> Decision:
+        decision = Decision("stop", self.attempt, time, self.correction, reason=reason)
+        self.decisions.append(decision)
+        return decision
