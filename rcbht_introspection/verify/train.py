@@ -14,7 +14,7 @@ from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detector
 from rcbht_introspection.verify.evidence import EvidenceReader, arms_of, namings, reader_of
 from rcbht_introspection.verify.features import TrialFeatures, trial_features
-from rcbht_introspection.verify.labels import TrialLabel
+from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
 from rcbht_introspection.verify.model_file import VerifierModel
 from rcbht_introspection.verify.novelty import TimingModel
 
@@ -112,5 +112,17 @@ def train_verifier(
             "sessions": len(set(groups.values())),
             "failures": len(failed),
             "classes": sorted({labels[n].failure_class for n in failed}),
+            "deviation_size": deviation_sizes([labels[n] for n in failed]),
         },
     )
+
+
+def deviation_sizes(failed: Sequence[TrialLabel]) -> dict[str, float]:
+    """Per direction axis (x, y, r), the median size of the labelled deviations that moved it:
+    how far a planner first corrects along a named direction (m, m, rad)."""
+    out = {}
+    for i, axis in enumerate(DIRECTION_AXES):
+        sizes = [abs(lb.deviation[i]) for lb in failed if lb.deviation and lb.deviation[i]]
+        if sizes:
+            out[axis] = round(float(np.median(sizes)), 7)
+    return out
