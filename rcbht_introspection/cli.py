@@ -24,6 +24,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "rcbht_introspection.commands.ros",  # bag, replay-eval
     "rcbht_introspection.commands.teach",  # teach (a running classifier_node)
     "rcbht_introspection.commands.verify",  # verify-train, verify-eval
+    "rcbht_introspection.commands.closed_loop",  # closed-loop (planner + verifier + simulator)
     "rcbht_introspection.commands.demo",  # demo
 )
 

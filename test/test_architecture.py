@@ -12,16 +12,23 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "rcbht_introspection"
-CORE = ("taxonomy", "summaries", "grammar", "learn", "live", "sim", "io", "audit")
+CORE = ("taxonomy", "summaries", "grammar", "learn", "live", "sim", "io", "audit", "plan")
 """Subpackages of the pure core (NumPy, SciPy, scikit-learn, MuJoCo; io/ also reads bags with the
 pure-Python rosbags)."""
 ROS_AND_PLOTTING = frozenset(
     {"rclpy", "matplotlib", "geometry_msgs", "std_msgs", "rcbht_interfaces", "diagnostic_msgs"}
 )
-ROS_FREE = ("waiting", "config_files", "replay.scoring", "replay.supervision")
+ROS_FREE = (
+    "waiting",
+    "config_files",
+    "replay.scoring",
+    "replay.supervision",
+    "closed_loop.experiment",
+)
 """Modules outside the core that must work without ROS, with all they import: the one polling
 loop (every layer waits with it), the replay's scores (unit-tested without ROS) and the process
-supervision (the node processes import rclpy, their supervisor does not)."""
+supervision (the node processes import rclpy, their supervisor does not), and the offline
+closed loop."""
 
 
 def _modules() -> dict[str, Path]:
