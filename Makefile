@@ -7,7 +7,7 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 PKG_SOURCES := $(shell find rcbht_introspection config launch resource scripts -type f -not -name '*.pyc' 2>/dev/null) setup.py setup.cfg package.xml
-MSG_SOURCES := $(wildcard msg_defs/msg/*.msg msg_defs/srv/*.srv msg_defs/CMakeLists.txt msg_defs/package.xml)
+MSG_SOURCES := $(wildcard msg_defs/msg/*.msg msg_defs/srv/*.srv msg_defs/action/*.action msg_defs/CMakeLists.txt msg_defs/package.xml)
 
 .PHONY: setup demo test bench soak lint clean
 

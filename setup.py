@@ -20,7 +20,7 @@ setup(
         (f"share/{package_name}/launch", glob("launch/*.launch.py")),
         # `ros2 run rcbht_introspection <node>` looks for lib/<package>/<executable>; data_files
         # put them there under colcon and under plain pip alike (console_scripts go to bin/ with pip)
-        (f"lib/{package_name}", ["scripts/segmenter_node", "scripts/classifier_node", "scripts/verifier_node"]),
+        (f"lib/{package_name}", ["scripts/segmenter_node", "scripts/classifier_node", "scripts/verifier_node", "scripts/sim_node", "scripts/planner_node"]),
     ],
     # the runtime (nodes, core, bag tools, CLI) beside rclpy and the messages, at the pins of
     # requirements*.txt (a test keeps them equal)

@@ -23,7 +23,9 @@ from rcbht_introspection.learn.live import LiveAugmentConfig, load_live_config
 from rcbht_introspection.learn.online import TeachConfig, load_teach_config
 from rcbht_introspection.nodes.params import (
     ClassifierConfig,
+    PlannerConfig,
     SegmenterConfig,
+    SimNodeConfig,
     VerifierConfig,
     load_node_config,
 )
@@ -131,6 +133,8 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
     "segmenter.yaml": [(lambda p: load_node_config(SegmenterConfig, p), SegmenterConfig())],
     "classifier.yaml": [(lambda p: load_node_config(ClassifierConfig, p), ClassifierConfig())],
     "verifier.yaml": [(lambda p: load_node_config(VerifierConfig, p), VerifierConfig())],
+    "sim_node.yaml": [(lambda p: load_node_config(SimNodeConfig, p), SimNodeConfig())],
+    "planner.yaml": [(lambda p: load_node_config(PlannerConfig, p), PlannerConfig())],
 }
 """Every shipped YAML file, how it is loaded and what it must load to (the values before the
 loader was unified)."""

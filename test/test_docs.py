@@ -12,7 +12,9 @@ import yaml
 
 from rcbht_introspection.nodes.params import (
     ClassifierConfig,
+    PlannerConfig,
     SegmenterConfig,
+    SimNodeConfig,
     VerifierConfig,
     defaults,
     descriptions,
@@ -43,6 +45,8 @@ def table_after(heading: str) -> dict[str, tuple[str, str]]:
         (SegmenterConfig, "### segmenter_node"),
         (ClassifierConfig, "### classifier_node"),
         (VerifierConfig, "### verifier_node"),
+        (SimNodeConfig, "### sim_node"),
+        (PlannerConfig, "### planner_node"),
     ],
 )
 def test_parameter_tables_match_the_config_dataclasses(cls: type, heading: str) -> None:

@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import functools
 import statistics
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from rcbht_introspection.closed_loop.run import TrialRecord, run_trial
 from rcbht_introspection.fleet import parallel_map
@@ -168,3 +169,30 @@ def policy_summary(records: Sequence[TrialRecord], max_attempts: int) -> dict[st
 
 def _share(count: int, total: int) -> float | None:
     return round(count / total, 4) if total else None
+
+
+ABORT_TIME_TOLERANCE_S = 0.5
+"""Over DDS an abort lands later than in-process (the verdict's and the cancel's transport):
+decision timelines agree when each abort is this close to the offline one."""
+
+
+def stop_success(timelines: Sequence[Sequence[Mapping[str, Any]]]) -> float | None:
+    """Share of trials whose last decision stops them as seated (the arm's own check)."""
+    ends = [t[-1]["reason"] == "seated" for t in timelines if t]
+    return round(sum(ends) / len(ends), 4) if ends else None
+
+
+def compare_decisions(a: Sequence[Mapping[str, Any]], b: Sequence[Mapping[str, Any]]) -> bool:
+    """Two decision timelines agree: the same kinds, attempts, classes and corrections in the
+    same order, abort times within ABORT_TIME_TOLERANCE_S."""
+    if len(a) != len(b):
+        return False
+    for x, y in zip(a, b, strict=True):
+        same = (x["kind"], x["attempt"], x["failure_class"]) == (
+            y["kind"], y["attempt"], y["failure_class"]
+        )  # fmt: skip
+        close = all(abs(x["correction"][k] - y["correction"][k]) < 1e-6 for k in x["correction"])
+        timely = x["kind"] != "abort" or abs(x["time"] - y["time"]) <= ABORT_TIME_TOLERANCE_S
+        if not (same and close and timely):
+            return False
+    return True

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from rcbht_introspection.plan.planner import Planner, PolicyName, Report
-from rcbht_introspection.plan.recovery import VERDICT_AXES, Correction, RecoveryConfig
+from rcbht_introspection.plan.planner import Planner, PolicyName, Report, make_planner
+from rcbht_introspection.plan.recovery import Correction, RecoveryConfig
 from rcbht_introspection.sim.config import SimConfig
 from rcbht_introspection.sim.episode import ARM, Attempt, AttemptEnd, World
 from rcbht_introspection.verify.model_file import VerifierModel
@@ -78,19 +78,6 @@ class TrialRecord:
         }
 
 
-def planner_for(
-    policy: PolicyName, world: World, recovery: RecoveryConfig, verifier: VerifierModel | None
-) -> Planner:
-    """The trial's planner: the verifier file's learnt deviation sizes, the world's truth for
-    the oracle; a verifier policy without a verifier runs as `retry`."""
-    if policy == "introspect" and verifier is None:
-        policy = "retry"
-    learnt = (verifier.trained_on.get("deviation_size") or {}) if verifier else {}
-    sizes = {VERDICT_AXES[a]: float(v) for a, v in learnt.items() if a in VERDICT_AXES}
-    truth = Correction(*world.truth)
-    return Planner(policy, recovery, sizes, truth)
-
-
 def run_trial(
     config: SimConfig,
     world: World,
@@ -99,7 +86,8 @@ def run_trial(
     verifier: VerifierModel | None,
 ) -> TrialRecord:
     """The trial's attempts under the policy until the planner stops."""
-    planner = planner_for(policy, world, recovery, verifier)
+    trained_on = verifier.trained_on if verifier is not None else None
+    planner = make_planner(policy, recovery, trained_on, Correction(*world.truth))
     record = TrialRecord(world.seed, world.failure or "", policy)
     decision = planner.first()
     while decision.kind == "attempt":

@@ -51,6 +51,19 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="verifier file (rcbht verify-train); default: one trained here on other seeds",
     )
     p.add_argument("--json", type=Path, default=None, metavar="OUT", help="write the results")
+    p.add_argument(
+        "--save-verifier", type=Path, default=None, metavar="FILE", help="keep the verifier used"
+    )
+    p.add_argument(
+        "--ros",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="also run the trials through the nodes over DDS (sim, segmenter, verifier, planner "
+        "and, with --model, classifier), logs in DIR; the JSON compares them trial for trial",
+    )
+    p.add_argument("--rate-factor", type=float, default=4.0, help="--ros: sim speed (default 4)")
+    p.add_argument("--model", type=Path, default=None, help="--ros: classifier_node's model file")
     add_parallel_options(p)
     p.set_defaults(func=cmd_closed_loop)
 
@@ -99,6 +112,8 @@ def cmd_closed_loop(args: argparse.Namespace) -> int:
         worlds = draw_worlds(config, classes, args.trials, args.nominal, args.seed, jobs)
         result = _run(args, config, worlds, policies, recovery, verifier, jobs)
     result["classes"] = classes
+    if args.ros is not None:
+        result["ros"] = _over_ros(args, worlds, policies, result, verifier)
     text = json.dumps(result, indent=2)
     if args.json is not None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
@@ -117,15 +132,20 @@ def _verifier(
     from rcbht_introspection.verify.config import load_verify_config
     from rcbht_introspection.verify.model_file import load_verifier
 
-    if not {"introspect", "oracle"} & set(policies):
+    if not {"introspect", "oracle"} & set(policies) and args.ros is None:
         return None
+    from rcbht_introspection.verify.model_file import save_verifier
+
     if args.verifier is not None:
         try:
             return load_verifier(args.verifier)
         except (OSError, ValueError) as exc:
             raise InputError(f"unusable verifier: {exc}", path=args.verifier) from None
     print("training a verifier on other seeds of the same config ...", file=sys.stderr)
-    return train_default_verifier(config, classes, load_verify_config(), args.seed, jobs=jobs)
+    model = train_default_verifier(config, classes, load_verify_config(), args.seed, jobs=jobs)
+    if args.save_verifier is not None:
+        save_verifier(model, args.save_verifier)
+    return model
 
 
 def _run(
@@ -172,3 +192,45 @@ def _table(result: dict[str, Any]) -> str:
             f"nominal mean time {s['nominal_mean_time_s']} s"
         )
     return "\n".join(lines)
+
+
+def _over_ros(
+    args: argparse.Namespace,
+    worlds: Any,
+    policies: list[str],
+    result: dict[str, Any],
+    verifier: Any,
+) -> dict[str, Any]:
+    """Each policy's trials through the nodes; per trial, whether its decisions match the
+    offline run's (kinds, classes, corrections; abort times within a tolerance)."""
+    from rcbht_introspection.closed_loop.experiment import compare_decisions, stop_success
+    from rcbht_introspection.replay.closed_loop import RosLoopOptions, run_over_ros, sample_counts
+    from rcbht_introspection.verify.model_file import save_verifier
+
+    verifier_file = args.verifier or save_verifier(verifier, args.ros / "verifier.npz")
+    items = [(w.seed, w.failure) for w in (*worlds.failing, *worlds.nominal)]
+    out: dict[str, Any] = {}
+    for policy in policies:
+        options = RosLoopOptions(
+            args.ros / policy, policy, str(verifier_file), str(args.config or ""),
+            str(args.recovery or ""), str(args.model or ""), args.rate_factor,
+        )  # fmt: skip
+        runs, codes = run_over_ros(items, options)
+        offline = result["policies"][policy]["trials"]
+        out[policy] = {
+            "exit_codes": codes,
+            "samples": sample_counts(options.work),
+            "success_over_ros": stop_success([r.decisions for r in runs if r.failure]),
+            "success_offline": stop_success(
+                [t["decisions"] for t in offline if t["class"] != "nominal"]
+            ),
+            "same_decisions": [
+                compare_decisions(t["decisions"], r.decisions)
+                for t, r in zip(offline, runs, strict=True)
+            ],
+            "trials": [
+                {"seed": r.seed, "class": r.failure or "nominal", "decisions": r.decisions}
+                for r in runs
+            ],
+        }
+    return out

@@ -11,7 +11,7 @@ import sys
 
 from rcbht_introspection.nodes.lifetime import StopSignal
 
-NODES = ("segmenter_node", "classifier_node", "verifier_node")
+NODES = ("segmenter_node", "classifier_node", "verifier_node", "sim_node", "planner_node")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -26,8 +26,12 @@ def main(argv: list[str] | None = None) -> int:
         from rcbht_introspection.nodes.segmenter_node import main as node_main
     elif name == "classifier_node":
         from rcbht_introspection.nodes.classifier_node import main as node_main
-    else:
+    elif name == "verifier_node":
         from rcbht_introspection.nodes.verifier_node import main as node_main
+    elif name == "sim_node":
+        from rcbht_introspection.nodes.sim_node import main as node_main
+    else:
+        from rcbht_introspection.nodes.planner_node import main as node_main
     return node_main(args, stop)
 
 

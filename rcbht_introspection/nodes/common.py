@@ -37,8 +37,10 @@ from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import (
     ClassifierConfig,
     NodeConfig,
+    PlannerConfig,
     Reliability,
     SegmenterConfig,
+    SimNodeConfig,
     VerifierConfig,
     config_from_parameters,
     defaults,
@@ -132,7 +134,11 @@ class ManagedNode(LifecycleNode):
     """
 
     def __init__(
-        self, name: str, config_class: type[SegmenterConfig | ClassifierConfig | VerifierConfig]
+        self,
+        name: str,
+        config_class: type[
+            SegmenterConfig | ClassifierConfig | VerifierConfig | SimNodeConfig | PlannerConfig
+        ],
     ) -> None:
         super().__init__(name)
         self.config_class = config_class

@@ -174,7 +174,46 @@ class VerifierConfig:
     spin: Spin = _f(DEFAULT_SPIN, SPIN_HELP)
 
 
-NodeConfig = TypeVar("NodeConfig", bound=SegmenterConfig | ClassifierConfig | VerifierConfig)
+@dataclass(frozen=True)
+class SimNodeConfig:
+    """sim_node: the simulated snap cell as a robot: /wrench, /task_phase and ~/attempt."""
+
+    sim_config: str = _f("", "simulator config file (empty: config/sim/cell.yaml)")
+    recovery_file: str = _f(
+        "", "recovery table whose bounds every attempt goal must keep (empty: the snap table)"
+    )
+    rate_factor: float = _f(1.0, "simulated seconds per wall-clock second (1: real time)")
+    wrench_topic: str = _f("/wrench", "geometry_msgs/WrenchStamped of the arm's sensor")
+    phase_topic: str = _f("/task_phase", "std_msgs/String sub-task events of the controller")
+    frame_id: str = _f("r_ft", "frame of the published wrench")
+    qos_depth: int = _f(10000, QOS_DEPTH_HELP)
+    qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
+    spin: Spin = _f("executor", SPIN_HELP)
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """planner_node: rcbht/verdict and the attempts' results -> attempts, aborts, decisions."""
+
+    policy: Literal["none", "retry", "search", "introspect", "oracle"] = _f(
+        "introspect", "none, retry, search, introspect or oracle (docs/closed-loop.md)"
+    )
+    recovery_file: str = _f("", "recovery table (empty: config/recovery/snap.yaml)")
+    verifier_file: str = _f(
+        "", "the verifier_node's file: its learnt correction sizes (empty: introspect runs retry)"
+    )
+    attempt_action: str = _f("/sim_node/attempt", "rcbht_interfaces/Attempt action server")
+    verdict_topic: str = _f("rcbht/verdict", "rcbht_interfaces/Verdict of verifier_node")
+    decision_topic: str = _f("rcbht/decision", "rcbht_interfaces/PlanDecision: every decision")
+    qos_depth: int = _f(10000, QOS_DEPTH_HELP)
+    qos_reliability: Reliability = _f("reliable", "reliable or best_effort")
+    spin: Spin = _f("executor", SPIN_HELP)
+
+
+NodeConfig = TypeVar(
+    "NodeConfig",
+    bound=SegmenterConfig | ClassifierConfig | VerifierConfig | SimNodeConfig | PlannerConfig,
+)
 """The config of one node (the checks and the defaults file depend on which)."""
 
 
@@ -246,6 +285,9 @@ TOPIC_FIELDS = (
     "teach_topic",
     "verdict_topic",
     "health_topic",
+    "wrench_topic",
+    "decision_topic",
+    "attempt_action",
 )
 
 
@@ -266,12 +308,14 @@ def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
         _check_segmenter(cfg, path)
     if isinstance(cfg, ClassifierConfig):
         _check_classifier(cfg, path)
+    if isinstance(cfg, SimNodeConfig):
+        _check(cfg.rate_factor > 0, "rate_factor", f"must be > 0, got {cfg.rate_factor}", path)
     return cfg
 
 
 def _check_common(cfg: NodeConfig, path: Path | None) -> None:
-    """The parameters every node has: arms, QoS depth, topic names."""
-    arms = cfg.arms
+    """The parameters every node has: arms (the robot's), QoS depth, topic names."""
+    arms = getattr(cfg, "arms", ("R",))
     _check(1 <= len(arms) <= 2, "arms", f"expected one or two arms, got {list(arms)}", path)
     _check(
         len(set(arms)) == len(arms) and all(arms),
@@ -392,11 +436,15 @@ NODE_NAMES: dict[type, str] = {
     SegmenterConfig: "segmenter_node",
     ClassifierConfig: "classifier_node",
     VerifierConfig: "verifier_node",
+    SimNodeConfig: "sim_node",
+    PlannerConfig: "planner_node",
 }
 CONFIG_FILES: dict[type, str] = {
     SegmenterConfig: "segmenter.yaml",
     ClassifierConfig: "classifier.yaml",
     VerifierConfig: "verifier.yaml",
+    SimNodeConfig: "sim_node.yaml",
+    PlannerConfig: "planner.yaml",
 }
 
 

@@ -217,3 +217,23 @@ class Planner:
         decision = Decision("stop", self.attempt, time, self.correction, reason=reason)
         self.decisions.append(decision)
         return decision
+
+
+def make_planner(
+    policy: PolicyName,
+    recovery: RecoveryConfig,
+    trained_on: Mapping[str, object] | None,
+    truth: Correction | None = None,
+) -> Planner:
+    """The planner of one trial: the first steps learnt by the verifier (its file's
+    `trained_on["deviation_size"]`, per verdict axis); `trained_on` None means no verifier, and
+    introspect then runs as retry."""
+    if policy == "introspect" and trained_on is None:
+        policy = "retry"
+    learnt = (trained_on or {}).get("deviation_size") or {}
+    sizes = {
+        VERDICT_AXES[a]: float(v)
+        for a, v in dict(learnt).items()  # type: ignore[call-overload]
+        if a in VERDICT_AXES
+    }
+    return Planner(policy, recovery, sizes, truth)

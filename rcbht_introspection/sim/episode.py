@@ -104,7 +104,8 @@ def part_seated(config: SimConfig, model: mujoco.MjModel, data: mujoco.MjData) -
 @dataclass(frozen=True)
 class Sample:
     """One sensor sample of an attempt: its time from the attempt's first sample, the arm's
-    wrench, and the sub-task events (time, name) due before it."""
+    wrench, and the sub-task events (time, name) due before it: each event goes with the first
+    sample at or after its time, as a recorded trial's events are fed."""
 
     time: float
     wrench: NDArray[np.float64]
@@ -179,7 +180,8 @@ class Attempt:
         t = round(self.samples * self.period, 9)
         wrench = quantize(tared + self.errors[self.samples], self.config.sensor)
         self.samples += 1
-        events, self._events = tuple(self._events), []
+        events = tuple(e for e in self._events if e[0] <= t + 1e-9)
+        self._events = self._events[len(events) :]
         return Sample(t, wrench, events)
 
     def _watch(self) -> None:
