@@ -1,7 +1,8 @@
 """The introspection nodes with their parameter files; one or two arms as a launch argument.
 
 ros2 launch rcbht_introspection introspection.launch.py arms:=two model_file:=$HOME/model.rcbht
-verifier_node (failure detection, /task_health) runs with verifier:=true or a verifier_file.
+verifier_node (failure detection, /task_health) runs with verifier:=true or a verifier_file;
+closed_loop:=true adds sim_node (the simulated cell) and planner_node (policy:=...).
 """
 
 from __future__ import annotations
@@ -47,6 +48,14 @@ def verifier_enabled(value: str, verifier_file: str) -> bool:
     return value == "true" or (value == "" and bool(verifier_file))
 
 
+def switch(name: str, value: str) -> bool:
+    """A true/false launch argument ('' is false)."""
+    value = value.strip().lower()
+    if value not in ("", "true", "false"):
+        raise ValueError(f"{name}: expected true or false, got {value!r}")
+    return value == "true"
+
+
 def launch_nodes(context: LaunchContext) -> list[Node]:
     """The nodes, their parameters computed from the launch arguments."""
     segmenter, classifier = arm_parameters(parse_arms(LaunchConfiguration("arms").perform(context)))
@@ -60,8 +69,16 @@ def launch_nodes(context: LaunchContext) -> list[Node]:
     if verifier_file:
         verifier["verifier_file"] = os.path.abspath(os.path.expanduser(verifier_file))
     chosen = [("segmenter_node", segmenter), ("classifier_node", classifier)]
-    if verifier_enabled(LaunchConfiguration("verifier").perform(context), verifier_file):
+    closed_loop = switch("closed_loop", LaunchConfiguration("closed_loop").perform(context))
+    if closed_loop or verifier_enabled(
+        LaunchConfiguration("verifier").perform(context), verifier_file
+    ):
         chosen.append(("verifier_node", verifier))
+    if closed_loop:
+        planner = {"policy": LaunchConfiguration("policy").perform(context)}
+        if verifier_file:
+            planner["verifier_file"] = verifier["verifier_file"]
+        chosen += [("sim_node", {}), ("planner_node", planner)]
     nodes = []
     for name, overrides in chosen:
         params_file = LaunchConfiguration(name.replace("_node", "_params")).perform(context)
@@ -103,6 +120,16 @@ def generate_launch_description() -> LaunchDescription:
                 "verifier_params)",
             ),
             DeclareLaunchArgument(
+                "closed_loop",
+                default_value="false",
+                description="true: also sim_node (the simulated snap cell) and planner_node",
+            ),
+            DeclareLaunchArgument(
+                "policy",
+                default_value="introspect",
+                description="planner_node's policy: none, retry, search, introspect or oracle",
+            ),
+            DeclareLaunchArgument(
                 "segmenter_params",
                 default_value=os.path.join(config, "segmenter.yaml"),
                 description="segmenter_node ROS parameter file",
@@ -116,6 +143,16 @@ def generate_launch_description() -> LaunchDescription:
                 "verifier_params",
                 default_value=os.path.join(config, "verifier.yaml"),
                 description="verifier_node ROS parameter file",
+            ),
+            DeclareLaunchArgument(
+                "sim_params",
+                default_value=os.path.join(config, "sim_node.yaml"),
+                description="sim_node ROS parameter file",
+            ),
+            DeclareLaunchArgument(
+                "planner_params",
+                default_value=os.path.join(config, "planner.yaml"),
+                description="planner_node ROS parameter file",
             ),
             OpaqueFunction(function=launch_nodes),
         ]

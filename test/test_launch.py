@@ -313,6 +313,21 @@ def test_the_verifier_argument_adds_verifier_node(
     assert verifier["verifier_file"] == verifier_file
 
 
+def test_closed_loop_adds_the_simulated_cell_and_the_planner(
+    launch_api: None, install: Install
+) -> None:
+    nodes = launch(LAUNCH_FILE, closed_loop="true", policy="oracle", verifier_file="/data/v.npz")
+    params = node_parameters(nodes, install)
+    assert sorted(params) == [
+        "classifier_node", "planner_node", "segmenter_node", "sim_node", "verifier_node"
+    ]  # fmt: skip
+    assert params["planner_node"]["policy"] == "oracle"
+    assert params["planner_node"]["verifier_file"] == params["verifier_node"]["verifier_file"]
+    assert params["sim_node"]["wrench_topic"] == params["segmenter_node"]["wrench_topics"][0]
+    with pytest.raises(ValueError, match="closed_loop"):
+        launch(LAUNCH_FILE, closed_loop="yes")
+
+
 def test_verifier_false_leaves_it_out_and_a_bad_value_fails(launch_api: None) -> None:
     nodes = launch(LAUNCH_FILE, verifier="false", verifier_file="/data/v.npz")
     assert "verifier_node" not in {n.executable for n in nodes}
