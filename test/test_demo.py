@@ -36,10 +36,16 @@ def test_demo_on_simulated_trials(tmp_path: Path, capsys: pytest.CaptureFixture[
     assert (out / "task_state_timeline.png").stat().st_size > 10_000
     verified = json.loads((out / "verify_eval.json").read_text())
     runs = {r["failure_class"] or r["outcome"]: r for r in verified["runs"]}
-    assert set(runs) == {"success", "deviation_x-"}  # one nominal, one failing held-out trial
+    assert set(runs) == {"success", "deviation_x+"}  # one nominal, one failing held-out trial
     assert all(r["matches_offline"] for r in runs.values())  # the node alarms as offline
     assert "verifier: detection_accuracy" in text
     assert len(list(out.glob("failure_timeline_*.png"))) == 2
+    loop = json.loads((out / "closed_loop.json").read_text())  # the closed loop over ROS
+    kinds = [d["kind"] for d in loop["decisions"]]
+    assert kinds[:2] == ["attempt", "abort"] and kinds[-1] == "stop", loop["decisions"]
+    assert loop["decisions"][-1]["reason"] == "seated" and len(kinds) == 4, loop["decisions"]
+    assert set(loop["exit_codes"].values()) == {0}, loop["exit_codes"]
+    assert (out / "closed_loop_timeline.png").stat().st_size > 10_000
 
 
 def test_demo_task_choice_is_for_simulated_data(

@@ -3,7 +3,10 @@
 Simulate trials (the project's own simulator), train a sub-task model on most of them, convert
 the held-out trials to bags, replay them through segmenter_node and classifier_node (separate
 processes, real DDS), then print the /task_state timeline against the truth, the accuracy, and
-save a plot. --task peg-in-hole simulates the second task (its own four sub-tasks, a noisy
+save a plot. With the simulated snap assembly it then trains a verifier on the repeated-program
+cell, replays a nominal and a failing trial through verifier_node, and ends with the closed
+loop: a failing cell trial run by sim_node, recovered by planner_node (all five nodes as
+processes of their own) and its timeline figure. --task peg-in-hole simulates the second task (its own four sub-tasks, a noisy
 100 Hz sensor). With --data hiro it uses the ../shared HIRO data instead (train on REAL trials
 1-40, replay 41-46). It names every missing part instead of failing obscurely.
 """
@@ -86,7 +89,8 @@ def cmd_demo(args: argparse.Namespace) -> int:
     bags, durations = _held_out_bags(held, out)
     _replay(args, bags, model_path, out, source, durations)
     if use_sim and args.task == "snap-assembly":
-        _verify_demo(args, out, model_path)
+        verifier_path = _verify_demo(args, out, model_path)
+        _closed_loop_demo(args, out, model_path, verifier_path)
     else:
         print("(verification: the simulated snap assembly only; it has failure trials)")
     print(f"scores: {out / 'replay_eval.json'}  ({time.monotonic() - started:.0f} s in all)")
@@ -182,13 +186,13 @@ def _replay(
     print(f"plot: {plot}")
 
 
-DEMO_FAILURES = ("deviation_x-", "jamming")
+DEMO_FAILURES = ("deviation_x+", "jamming")
 """Failure classes the demo's verifier learns; the held-out failing trial is of the first."""
 CELL_SUCCESSES = 12
 """Successful cell trials the demo's verifier learns from (config/sim/cell.yaml)."""
 
 
-def _verify_demo(args: argparse.Namespace, out: Path, model_path: Path) -> None:
+def _verify_demo(args: argparse.Namespace, out: Path, model_path: Path) -> Path:
     """Train a verifier on simulated trials of the repeated-program cell (config/sim/cell.yaml:
     a success spread narrow enough for a slipped part to show at its first contact), then replay
     one nominal and one failing held-out cell trial through the nodes with verifier_node."""
@@ -213,6 +217,42 @@ def _verify_demo(args: argparse.Namespace, out: Path, model_path: Path) -> None:
     print(verifier_summary(result["verifier"]))
     for trial in replayed:
         print(f"plot: {_plot_verdicts(trial, verifier, out)}")
+    return verifier_path
+
+
+CLOSED_LOOP_CLASS = "deviation_x+"
+"""The failing world the closed-loop step recovers from: the part slipped +x in the hand."""
+
+
+def _closed_loop_demo(
+    args: argparse.Namespace, out: Path, model_path: Path, verifier_path: Path
+) -> None:
+    """Step 8: one failing cell trial through the five nodes: the verifier's alarm, the abort,
+    the correction from the named class, the retry; its decisions and timeline figure."""
+    from rcbht_introspection.plots.closed_loop import plot_closed_loop
+    from rcbht_introspection.replay.closed_loop import RosLoopOptions, run_over_ros
+
+    _step("8. close the loop: sim_node runs a failing cell trial, planner_node recovers it")
+    seed = 1000 * (args.seed + 1) + 197
+    options = RosLoopOptions(
+        out / "closed_loop", "introspect", str(verifier_path), model_file=str(model_path),
+        rate_factor=args.rate, record=True,
+    )  # fmt: skip
+    runs, codes = run_over_ros([(seed, CLOSED_LOOP_CLASS)], options)
+    trial = runs[0]
+    for d in trial.decisions:
+        c = ", ".join(f"{a} {v:+.4f}" for a, v in d["correction"].items() if v)
+        what = d["failure_class"] or d["reason"]
+        print(f"   {d['kind']:>7} attempt {d['attempt']} at {d['time']:.2f} s: {what} {c}")
+    (out / "closed_loop.json").write_text(
+        json.dumps({"seed": seed, "class": CLOSED_LOOP_CLASS, "decisions": trial.decisions,
+                    "exit_codes": codes}, indent=2)
+    )  # fmt: skip
+    if trial.timeline is not None:
+        title = f"closed loop, cell trial {seed} ({CLOSED_LOOP_CLASS})"
+        print(
+            f"plot: {plot_closed_loop(trial.timeline, title, out / 'closed_loop_timeline.png', args.rate)}"
+        )
 
 
 def _train_cell_verifier(

@@ -45,6 +45,8 @@ class RosLoopOptions:
     recovery_file: str = ""
     model_file: str = ""
     rate_factor: float = 4.0
+    record: bool = False
+    """Keep what a timeline shows: /wrench, /task_state and the verdicts, as they arrived."""
 
 
 @dataclass
@@ -54,6 +56,19 @@ class RosTrial:
     seed: int
     failure: str
     decisions: list[dict[str, Any]] = field(default_factory=list)
+    timeline: Timeline | None = None
+
+
+@dataclass
+class Timeline:
+    """What arrived during one trial, on the wall clock from its start (s)."""
+
+    wrench: list[tuple[float, float, float, float]] = field(default_factory=list)
+    """(t, Fx, Fy, Fz)."""
+    states: list[tuple[float, str]] = field(default_factory=list)
+    verdicts: list[tuple[float, bool, str]] = field(default_factory=list)
+    """(t, alarm, failure class)."""
+    decisions: list[tuple[float, dict[str, Any]]] = field(default_factory=list)
 
 
 def _start(options: RosLoopOptions, env: dict[str, str]) -> list[NodeProcess]:
@@ -111,7 +126,7 @@ def run_over_ros(
     codes: dict[str, int | None] = {}
     try:
         with RosSession("rcbht_closed_loop", domain_id=domain) as ros:
-            client = _LoopClient(ros.node)
+            client = _LoopClient(ros.node, options.record)
             wait_for_nodes(client.ready, 120.0, procs, "sim_node and planner_node services")
             runs = [client.run(seed, failure, options, procs) for seed, failure in trials]
     finally:
@@ -124,15 +139,44 @@ def run_over_ros(
 class _LoopClient:
     """The client side: the two services and the decision topic."""
 
-    def __init__(self, node: Any) -> None:
-        from rcbht_interfaces.msg import PlanDecision
+    def __init__(self, node: Any, record: bool) -> None:
+        from geometry_msgs.msg import WrenchStamped
+        from rcbht_interfaces.msg import PlanDecision, Verdict
         from rcbht_interfaces.srv import RunTrial, StartTrial
+        from std_msgs.msg import String
 
         self.start = node.create_client(StartTrial, "/sim_node/start_trial")
         self.run_trial = node.create_client(RunTrial, "/planner_node/run_trial")
         self.decisions: list[Any] = []
-        node.create_subscription(PlanDecision, "rcbht/decision", self.decisions.append, 10000)
+        node.create_subscription(PlanDecision, "rcbht/decision", self._on_decision, 10000)
         self.count = 0
+        self.timeline: Timeline | None = None
+        self.t0 = time.monotonic()
+        if record:
+            node.create_subscription(WrenchStamped, "/wrench", self._on_wrench, 10000)
+            node.create_subscription(String, "/task_state", self._on_state, 1000)
+            node.create_subscription(Verdict, "rcbht/verdict", self._on_verdict, 10000)
+
+    def _now(self) -> float:
+        return time.monotonic() - self.t0
+
+    def _on_decision(self, msg: Any) -> None:
+        self.decisions.append(msg)
+        if self.timeline is not None:
+            self.timeline.decisions.append((self._now(), _decision(msg)))
+
+    def _on_wrench(self, msg: Any) -> None:
+        if self.timeline is not None:
+            f = msg.wrench.force
+            self.timeline.wrench.append((self._now(), f.x, f.y, f.z))
+
+    def _on_state(self, msg: Any) -> None:
+        if self.timeline is not None:
+            self.timeline.states.append((self._now(), msg.data))
+
+    def _on_verdict(self, msg: Any) -> None:
+        if self.timeline is not None:
+            self.timeline.verdicts.append((self._now(), bool(msg.alarm), msg.failure_class))
 
     def ready(self) -> bool:
         return bool(self.start.service_is_ready() and self.run_trial.service_is_ready())
@@ -153,6 +197,8 @@ class _LoopClient:
         if not started.accepted:
             raise InputError(f"sim_node refused trial {seed}: {started.message}")
         self.count += 1
+        if options.record:
+            self.timeline, self.t0 = Timeline(), time.monotonic()
         truth = list(started.truth) if options.policy == "oracle" else []
         asked = self._call(self.run_trial, RunTrial.Request(trial=self.count, truth=truth), procs)
         if not asked.accepted:
@@ -165,6 +211,7 @@ class _LoopClient:
         wait_for_nodes(stopped, TRIAL_TIMEOUT_S, procs, f"the end of trial {seed}")
         time.sleep(0.05)
         trial.decisions = [_decision(d) for d in self.decisions if d.trial == self.count]
+        trial.timeline, self.timeline = self.timeline, None
         return trial
 
 
