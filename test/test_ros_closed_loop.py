@@ -26,11 +26,27 @@ from rcbht_introspection.replay.supervision import (
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
+def _small_verifier(path: Path) -> Path:
+    """A verifier of the cell trained on a few trials of other seeds (as the default, smaller)."""
+    from rcbht_introspection.closed_loop.experiment import train_default_verifier
+    from rcbht_introspection.config_files import config_path
+    from rcbht_introspection.sim import load_sim_config
+    from rcbht_introspection.verify.config import load_verify_config
+    from rcbht_introspection.verify.model_file import save_verifier
+
+    cell = load_sim_config(config_path("sim/cell.yaml"))
+    classes = ("deviation_x+", "jamming")
+    model = train_default_verifier(cell, classes, load_verify_config(), 0, 2, 12)
+    return save_verifier(model, path)
+
+
 def test_the_nodes_decide_as_the_in_process_loop_on_the_same_worlds(tmp_path: Path) -> None:
     require_ros()
     out = tmp_path / "loop.json"
+    verifier = _small_verifier(tmp_path / "verifier.npz")
     args = ["closed-loop", "--trials", "2", "--nominal", "1", "--classes", "deviation_x+,jamming",
-            "--policy", "introspect", "--ros", str(tmp_path / "ros"), "--rate-factor", "4"]  # fmt: skip
+            "--policy", "introspect", "--verifier", str(verifier), "--ros", str(tmp_path / "ros"),
+            "--rate-factor", "8"]  # fmt: skip
     assert main([*args, "--json", str(out)]) == 0
     result = json.loads(out.read_text())
     ros = result["ros"]["introspect"]
