@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import TYPE_CHECKING
 
 from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.action import Attempt as AttemptAction
@@ -25,8 +26,9 @@ from rcbht_introspection.nodes.conversions import to_time
 from rcbht_introspection.nodes.lifetime import StopSignal
 from rcbht_introspection.nodes.params import SimNodeConfig
 from rcbht_introspection.plan.recovery import Correction, load_recovery_config
-from rcbht_introspection.sim import load_sim_config
-from rcbht_introspection.sim.episode import Attempt, World, draw_world
+
+if TYPE_CHECKING:  # the simulator (MuJoCo, the sim extra) is imported when the node configures
+    from rcbht_introspection.sim.episode import Attempt, World
 
 RATE_HZ = 200.0
 STEP_S = 0.005
@@ -40,6 +42,12 @@ class SimNode(ManagedNode):
         super().__init__("sim_node", SimNodeConfig)
 
     def configure(self, cfg: SimNodeConfig) -> None:
+        try:
+            from rcbht_introspection.sim import load_sim_config
+        except ImportError as exc:
+            raise InputError(
+                f"sim_node needs the simulator's MuJoCo (the sim extra): {exc}"
+            ) from None
         self.cfg = cfg
         self.sim = load_sim_config(cfg.sim_config or config_path("sim/cell.yaml"))
         self.bounds = load_recovery_config("snap", cfg.recovery_file or None).bounds
@@ -78,6 +86,8 @@ class SimNode(ManagedNode):
         if self.attempt is not None:
             res.message = "an attempt is running"
             return res
+        from rcbht_introspection.sim.episode import draw_world
+
         try:
             self.world = draw_world(self.sim, int(req.seed), req.failure or None)
         except InputError as exc:
@@ -97,6 +107,8 @@ class SimNode(ManagedNode):
         if problem or self.world is None:
             handle.abort()
             return AttemptAction.Result(reason="rejected", message=problem)
+        from rcbht_introspection.sim.episode import Attempt
+
         index = int(goal.attempt) - 1
         self.attempt = Attempt(self.sim, self.world, correction.values(), index, RATE_HZ)
         self.goal, self.ended, self.started = handle, Future(), time.monotonic()
