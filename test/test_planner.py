@@ -31,10 +31,16 @@ TABLE = RecoveryConfig(
 FAILED = Report(False, "timeout")
 
 
-def _abort_on(planner: Planner, cls: str, directions: dict[str, str], at: float = 5.0) -> None:
+def _abort_on(
+    planner: Planner,
+    cls: str,
+    directions: dict[str, str],
+    probabilities: dict[str, float] | None = None,
+    at: float = 5.0,
+) -> None:
     """An alarm at `at` named `cls` until the planner aborts (naming_wait_s later)."""
     t = at
-    while planner.verdict(t, True, cls, directions) is None:
+    while planner.verdict(t, True, cls, directions, probabilities) is None:
         t += 0.05
         assert t < at + 5.0, "the planner never aborted"
 
@@ -95,23 +101,28 @@ def test_introspect_does_not_abort_a_corrected_attempt_and_halves_an_overshoot()
     assert math.isclose(third.correction.x, -0.002 + 0.001)
 
 
-def test_introspect_undoes_a_move_whose_diagnosis_the_next_attempt_contradicts() -> None:
+def test_a_contradicted_diagnosis_gives_way_to_the_next_likeliest_class() -> None:
     planner = Planner("introspect", TABLE)
     planner.first()
-    _abort_on(planner, "misalignment", {})
+    ranked = {"misalignment": 0.6, "deviation_r+": 0.3, "jamming": 0.1}
+    _abort_on(planner, "misalignment", {}, ranked)
     assert planner.ended(Report(False, "aborted"), 6.0).correction == Correction(y=0.005)
-    planner.verdict(5.0, True, "deviation_r+", {"r": "+"})
+    planner.verdict(5.0, True, "deviation_x-", {"x": "-"})  # another family named
     third = planner.ended(FAILED, 20.0)
-    assert third.correction == Correction(yaw=-0.06)  # from the base, without the y move
+    assert third.correction == Correction(yaw=-0.06)  # the runner-up, from the clean plan
 
 
-def test_introspect_tries_a_class_s_candidates_in_turn() -> None:
-    planner = Planner("introspect", TABLE)
-    planner.first()
-    _abort_on(planner, "misalignment", {})
-    planner.ended(Report(False, "aborted"), 6.0)
-    planner.verdict(5.0, True, "misalignment", {})
-    assert planner.ended(FAILED, 20.0).correction == Correction(y=-0.005)
+def test_a_try_class_named_again_tries_its_next_candidate_when_that_is_worth_more() -> None:
+    def third(ranked: dict[str, float]) -> Correction:
+        planner = Planner("introspect", TABLE)
+        planner.first()
+        _abort_on(planner, "misalignment", {}, ranked)
+        planner.ended(Report(False, "aborted"), 6.0)
+        planner.verdict(5.0, True, "misalignment", {})
+        return planner.ended(FAILED, 20.0).correction
+
+    assert third({"misalignment": 0.9, "deviation_r+": 0.1}) == Correction(y=-0.005)
+    assert third({"misalignment": 0.5, "deviation_r+": 0.4}) == Correction(yaw=-0.06)
 
 
 def test_an_unnamed_alarm_aborts_after_the_wait_and_retries_as_before() -> None:

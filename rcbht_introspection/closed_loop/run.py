@@ -115,7 +115,9 @@ def _run_attempt(
         for t, name in sample.events:
             session.phase(name, t)
         for v in session.push(ARM, sample.time, sample.wrench):
-            decision = planner.verdict(v.time, v.alarm, v.failure_class, v.directions)
+            decision = planner.verdict(
+                v.time, v.alarm, v.failure_class, v.directions, v.class_probabilities
+            )
             if decision is not None:
                 attempt.abort()
                 alarm = (v.alarm_time, decision.failure_class)

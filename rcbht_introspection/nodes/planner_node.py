@@ -108,7 +108,8 @@ class PlannerNode(ManagedNode):
         if self.planner is None or self.goal is None or msg.stream_id < self.stream_floor:
             return
         directions = dict(zip(msg.direction_axes, msg.directions, strict=False))
-        abort = self.planner.verdict(msg.time, msg.alarm, msg.failure_class, directions)
+        ranked = dict(zip(msg.classes, msg.probabilities, strict=False))
+        abort = self.planner.verdict(msg.time, msg.alarm, msg.failure_class, directions, ranked)
         if abort is not None:
             self.publish(abort)
             self.goal.cancel_goal_async()

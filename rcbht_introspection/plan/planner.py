@@ -14,6 +14,7 @@ alarm, then the true correction: the upper bound).
 from __future__ import annotations
 
 import itertools
+import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Literal, get_args
@@ -40,6 +41,49 @@ class Report:
     seated: bool
     reason: str
     """seated, timeout, no_snap (the arm's own checks), aborted (cancelled), rejected."""
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """A class the verifier gave the clean attempt, its probability and its directions."""
+
+    failure_class: str
+    probability: float
+    directions: dict[str, str]
+
+
+MAX_HYPOTHESES = 3
+"""Classes of the clean attempt's verdict kept as hypotheses (the likeliest first)."""
+_SIGNED_AXES = re.compile(r"([a-z])([+-])")
+
+
+def _family(failure_class: str) -> str:
+    return failure_class.split("_", 1)[0]
+
+
+def _directions(failure_class: str, verdict: Mapping[str, str]) -> dict[str, str]:
+    """A class's directions: its name's signed axes (`deviation_x+y-`), else the verdict's."""
+    _, _, dirs = failure_class.partition("_")
+    signed = dict(_SIGNED_AXES.findall(dirs))
+    if dirs and "".join(f"{a}{d}" for a, d in signed.items()) == dirs:
+        return signed
+    return dict(verdict)
+
+
+def _hypotheses(
+    named: str, directions: Mapping[str, str], probabilities: Mapping[str, float]
+) -> list[Hypothesis]:
+    """The named class first, then the other likeliest ones with a probability above 0."""
+    ranked = sorted(probabilities.items(), key=lambda kv: -kv[1])
+    classes = [named, *(c for c, p in ranked if c != named and p > 0)][:MAX_HYPOTHESES]
+    return [
+        Hypothesis(
+            c,
+            float(probabilities.get(c, 1.0 if c == named else 0.0)),
+            _directions(c, directions if c == named else {}),
+        )
+        for c in classes
+    ]
 
 
 @dataclass(frozen=True)
@@ -103,13 +147,16 @@ class Planner:
         self.decisions: list[Decision] = []
         self._steps: dict[str, float] = {}
         self._signs: dict[str, float] = {}
-        self._tried: dict[str, tuple[Correction, int]] = {}
+        self._tried: dict[str, int] = {}
+        """Per class of a `try` recovery: the candidates tried so far."""
+        self._hypotheses: list[Hypothesis] = []
+        """The clean attempt's classes, likeliest first: what introspect recovers from."""
+        self._current = 0
+        self._ranked: dict[str, float] = {}
         self._alarm_at: float | None = None
         self._aborted: Decision | None = None
         self._named: tuple[str, dict[str, str]] | None = None
         """The verifier's latest class and directions on the running attempt."""
-        self._moves: list[tuple[str, Correction]] = []
-        """Per correction introspect made: the class family that called for it, the one before."""
 
     @property
     def reads_verdicts(self) -> bool:
@@ -120,25 +167,34 @@ class Planner:
         return self._start(Correction(), "first attempt")
 
     def verdict(
-        self, time: float, alarm: bool, failure_class: str, directions: Mapping[str, str]
+        self,
+        time: float,
+        alarm: bool,
+        failure_class: str,
+        directions: Mapping[str, str],
+        probabilities: Mapping[str, float] | None = None,
     ) -> Decision | None:
         """A verdict on the running attempt: the abort, when the policy reacts to it.
 
         Both verdict policies abort only the uncorrected plan: a corrected attempt departs from
         the nominal wrench by design, so its alarms say little about whether it will seat; it
         runs to the arm's own end. The oracle aborts at the alarm; introspect lets the verifier
-        name the class for naming_wait_s first, and keeps the latest naming of every attempt."""
+        name the class for naming_wait_s first, keeps its classes ranked by probability as
+        the hypotheses to recover from, and the latest naming of every later attempt."""
         if not self.reads_verdicts or self._aborted is not None or not alarm:
             return None
         if self._alarm_at is None:
             self._alarm_at = time
         if failure_class not in ("", ANOMALY):
             self._named = (failure_class, dict(directions))
+            self._ranked = dict(probabilities or {failure_class: 1.0})
         if self.correction != Correction():
             return None
         if self.policy == "introspect" and time - self._alarm_at < self.recovery.naming_wait_s:
             return None
         cls, dirs = self._named or (ANOMALY, {})
+        self._hypotheses = _hypotheses(cls, dirs, self._ranked) if self._named else []
+        self._current = 0
         signs = ",".join(f"{a}{d}" for a, d in sorted(dirs.items()) if d in "+-")
         self._aborted = Decision("abort", self.attempt, time, self.correction, cls, signs)
         self.decisions.append(self._aborted)
@@ -161,25 +217,46 @@ class Planner:
         if self.policy == "oracle":
             assert self.truth is not None
             return self.truth
-        if self._named is None:  # introspect, nothing named: the same plan again
+        if not self._hypotheses:  # introspect, nothing named: the same plan again
             return self.correction
-        cls, directions = self._named
-        family = cls.split("_", 1)[0]
-        base = self.correction
-        if self._moves and self._moves[-1][0] != family:
-            base = self._moves[-1][1]  # the last move's diagnosis was contradicted: undo it
-        self._moves.append((family, base))
-        return self._recover(cls, self.recovery.recovery_of(cls), base, directions)
+        if self.correction == Correction():  # the clean attempt was aborted: the likeliest
+            return self._recover(self._hypotheses[0], Correction())
+        return self._after_failed_recovery()
 
-    def _recover(
-        self, cls: str, entry: ClassRecovery, base: Correction, directions: Mapping[str, str]
-    ) -> Correction:
+    def _after_failed_recovery(self) -> Correction:
+        """A corrected attempt failed. Refine the current hypothesis when its attempt was named
+        with its family again and refining is worth more than the next hypothesis (a `try`'s
+        remaining candidates weigh its probability by their share); else recover from the next
+        hypothesis, from the clean plan."""
+        h = self._hypotheses[self._current]
+        entry = self.recovery.recovery_of(h.failure_class)
+        named = self._named
+        same = named is not None and _family(named[0]) == _family(h.failure_class)
+        nxt = (
+            self._hypotheses[self._current + 1]
+            if self._current + 1 < len(self._hypotheses)
+            else None
+        )
+        if same and named is not None and entry.action == "undo_direction":
+            return self._undo(entry, self.correction, _directions(*named))
+        tried = self._tried.get(h.failure_class, 0)
+        left = len(entry.candidates) - tried if entry.action == "try" else 0
+        share = left / len(entry.candidates) if entry.candidates else 0.0
+        if left > 0 and (nxt is None or (same and h.probability * share >= nxt.probability)):
+            return self._recover(h, Correction())
+        if nxt is None:
+            return self.correction
+        self._current += 1
+        return self._recover(nxt, Correction())
+
+    def _recover(self, h: Hypothesis, base: Correction) -> Correction:
+        entry = self.recovery.recovery_of(h.failure_class)
         if entry.action == "undo_direction":
-            return self._undo(entry, base, directions)
+            return self._undo(entry, base, h.directions)
         if entry.action == "try" and entry.candidates:
-            origin, tries = self._tried.get(cls, (base, 0))
-            self._tried[cls] = (origin, tries + 1)
-            out = origin
+            tries = self._tried.get(h.failure_class, 0)
+            self._tried[h.failure_class] = tries + 1
+            out = base
             for axis, value in entry.candidates[tries % len(entry.candidates)].items():
                 out = out.moved(axis, value)
             return out
