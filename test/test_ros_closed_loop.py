@@ -1,6 +1,7 @@
 """The closed loop over real DDS: sim_node, segmenter_node, verifier_node and planner_node as
 processes of their own decide as the in-process loop does on the same worlds; sim_node rejects
-a bad goal without moving; every node exits 0 on SIGINT in the middle of an attempt."""
+a bad goal without moving; each of the five nodes exits 0 on SIGINT in the middle of an
+attempt."""
 
 from __future__ import annotations
 
@@ -13,7 +14,13 @@ import pytest
 from ros_support import require_ros
 
 from rcbht_introspection.cli import main
-from rcbht_introspection.nodes.params import PlannerConfig, SegmenterConfig, SimNodeConfig
+from rcbht_introspection.nodes.params import (
+    ClassifierConfig,
+    PlannerConfig,
+    SegmenterConfig,
+    SimNodeConfig,
+    VerifierConfig,
+)
 from rcbht_introspection.replay.supervision import (
     NodeProcess,
     lease_domain,
@@ -66,6 +73,8 @@ def _start(tmp_path: Path, env: dict[str, str]) -> dict[str, NodeProcess]:
     specs: list[tuple[str, type, dict[str, Any]]] = [
         ("sim_node", SimNodeConfig, {"rate_factor": 2.0}),
         ("segmenter_node", SegmenterConfig, {}),
+        ("classifier_node", ClassifierConfig, {}),  # no model: it publishes 'unknown'
+        ("verifier_node", VerifierConfig, {}),  # no verifier file: no verdicts
         ("planner_node", PlannerConfig, {"policy": "introspect"}),  # no verifier file
     ]
     return {
