@@ -25,7 +25,13 @@ from rcbht_introspection.sim.config import FailureType, SimConfig
 from rcbht_introspection.sim.controller import SnapController
 from rcbht_introspection.sim.model import build_model
 from rcbht_introspection.sim.sensor import decimation, quantize, sensor_errors
-from rcbht_introspection.sim.simulate import MAX_DURATION, TrialDraw, draw_trial, run_physics
+from rcbht_introspection.sim.simulate import (
+    MAX_DURATION,
+    TrialDraw,
+    below_hooks,
+    draw_trial,
+    run_physics,
+)
 
 Pose = tuple[float, float, float, float]
 """A correction of the held part's pose: x, y, z (m), yaw (rad)."""
@@ -92,13 +98,8 @@ class _FinalState:
 def part_seated(config: SimConfig, model: mujoco.MjModel, data: mujoco.MjData) -> bool:
     """True when the held part's shoulder is below the hooks' retention face, inside the
     housing: measured on the part's block, which sits off the hand's centre by its slip."""
-    g = config.geometry
     block = data.geom("male_block").xpos  # its centre: half the block's height above its base
-    female = data.body("female").xpos
-    shoulder = block[2] + 0.5 * g.male_lower_height
-    hook = female[2] + g.male_lower_height + g.hook_play
-    lateral = math.hypot(block[0] - female[0], block[1] - female[1])
-    return bool(shoulder < hook - 1e-4 and lateral < g.hook_depth)
+    return below_hooks(config, block[2] + 0.5 * config.geometry.male_lower_height, block[:2], data)
 
 
 @dataclass(frozen=True)

@@ -187,12 +187,19 @@ def _holder_step(config: SimConfig, rig: arm_run.ServoRig) -> arm_run.StepHook:
 
 def _latched(config: SimConfig, model: mujoco.MjModel, data: mujoco.MjData) -> bool:
     """True when the male's shoulder is below the hooks' retention face, inside the housing."""
-    g = config.geometry
     male = data.body("male").xpos
+    return below_hooks(config, male[2] + config.geometry.male_lower_height, male[:2], data)
+
+
+def below_hooks(
+    config: SimConfig, shoulder: float, centre: NDArray[np.float64], data: mujoco.MjData
+) -> bool:
+    """True when a shoulder at height `shoulder`, centred at `centre` (x, y), is below the
+    hooks' retention face and within their depth of the housing's axis."""
+    g = config.geometry
     female = data.body("female").xpos
-    shoulder = male[2] + g.male_lower_height
     hook = female[2] + g.male_lower_height + g.hook_play
-    lateral = math.hypot(male[0] - female[0], male[1] - female[1])
+    lateral = math.hypot(centre[0] - female[0], centre[1] - female[1])
     return bool(shoulder < hook - 1e-4 and lateral < g.hook_depth)
 
 
