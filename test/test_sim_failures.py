@@ -214,7 +214,11 @@ def test_failure_record_in_bags_and_sim_meta(tmp_path: Path) -> None:
     assert "failure" not in index[0]
     record = index[1]["failure"]
     assert record["class"] == "misalignment" == index[1]["outcome"]
-    assert record["onset_rule"] == NOVEL_CONTACT and record["deviation"] is None
+    assert record["onset_rule"] == NOVEL_CONTACT
+    # the part's offset against the housing: the housing's own (4-7 mm in y) negated
+    offset, housing_y = record["deviation"], index[1]["female_offset"][1]
+    assert offset["x"] == 0.0 and offset["yaw"] == 0.0
+    assert 0.004 <= abs(offset["y"]) <= 0.0075 and offset["y"] * housing_y < 0
     back = read_trial_bag(paths[1])
     assert back.outcome == "misalignment" and back.metadata["failure"] == record
     assert "failure" not in read_trial_bag(paths[0]).metadata

@@ -31,7 +31,8 @@ __all__ = [
 
 @dataclass(frozen=True)
 class PartDeviation:
-    """The held part's slip in the hand: x, y (m) and yaw (rad), unknown to the controller."""
+    """The held part's offset against the housing, x, y (m) and yaw (rad), unknown to the
+    controller: a slip in the hand, or the housing's own offset negated."""
 
     x: float = 0.0
     y: float = 0.0

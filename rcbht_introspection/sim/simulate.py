@@ -296,8 +296,26 @@ def _failure_metadata(
         "onset": None if onset.time is None else arm_run.on_clock(onset.time, period),
         "onset_rule": onset.rule,
         "onset_contact": onset.contact,
-        "deviation": draw.deviation.to_dict() if deviation_dirs(failure) else None,
+        "deviation": relative_deviation(draw).to_dict() if moves_part(failure) else None,
     }
+
+
+def moves_part(failure: FailureType) -> bool:
+    """True for the classes whose error is a lateral or yaw offset of the part against the
+    housing (deviation, misalignment, jamming); a missed snap's is vertical."""
+    return deviation_dirs(failure) is not None or failure in ("misalignment", "jamming")
+
+
+def relative_deviation(draw: TrialDraw) -> PartDeviation:
+    """The failure's offset of the held part against the housing: its slip in the hand less the
+    housing's offset from the nominal twin's, the error a correction has to undo."""
+    p, twin = draw.physics, draw.twin
+    dx, dy, dyaw = p.part_offset
+    return PartDeviation(
+        x=dx - (p.female_offset[0] - twin.female_offset[0]),
+        y=dy - (p.female_offset[1] - twin.female_offset[1]),
+        yaw=dyaw - math.radians(p.female_yaw - twin.female_yaw),
+    )
 
 
 def simulate_trial(
