@@ -31,6 +31,7 @@ from rcbht_introspection.verify.characterise import (
     Characteriser,
     RunningEvidence,
     _shared_by_signs,
+    class_head,
     sign_table,
     span_index,
 )
@@ -153,7 +154,9 @@ def test_failure_labels_come_from_the_simulator(labels: dict[str, TrialLabel]) -
     assert all(lb.onset is not None and lb.onset > 0 for lb in failed)
     assert failed[0].directions() == {"x": "0", "y": "0", "r": "+"}
     assert failed[1].directions() == {"x": "0", "y": "-", "r": "0"}
-    assert failed[2].directions() is None
+    misaligned = failed[2].directions()  # the housing's offset, as the part's against it
+    assert misaligned is not None and misaligned["x"] == misaligned["r"] == "0"
+    assert misaligned["y"] != "0"
 
 
 def test_live_session_equals_the_batch_detector(
@@ -526,6 +529,41 @@ def test_the_sign_table_ties_signs_to_a_class_only_when_unambiguous() -> None:
     assert table == {("+", "0", "0"): "slip_x"}
 
 
+def _two_sided_characteriser() -> Characteriser:
+    """A characteriser of `slip_x` (always +x) and `beside` (y + or -, by feature 1)."""
+    rng = np.random.default_rng(0)
+    rows, labels = [], []
+    for k in range(40):
+        side = 1.0 if k % 2 else -1.0
+        cls, dev = ("slip_x", (0.002, 0.0, 0.0)) if k < 20 else ("beside", (0.0, side * 0.005, 0.0))
+        rows.append([10.0 if cls == "slip_x" else 0.0, side if k >= 20 else 0.0, rng.normal()])
+        labels.append(TrialLabel(f"t{k}", "failure", cls, 1.0, dev))
+    return Characteriser(n_estimators=20, min_samples_leaf=1, compose=True).fit(
+        np.array(rows), labels
+    )
+
+
+def test_a_class_whose_deviations_change_sign_names_them_with_its_own_head() -> None:
+    """A housing to either side (misalignment, y + or -): the general heads learn from the
+    classes of one sign pattern only, the class's own y head names its side when it is named."""
+    ch = _two_sided_characteriser()
+    assert set(ch.heads_) == {FAILURE, *DIRECTION_AXES, class_head("y", "beside")}
+    assert list(ch.heads_["y"].classes_) == ["0"]  # slip_x only: beside's signs vary
+    for side, want in ((1.0, "+"), (-1.0, "-")):
+        cls, _, dirs = ch.predict(np.array([0.0, side, 0.0]))
+        assert cls == "beside" and dirs["y"] == want
+    assert ch.predict(np.array([10.0, 0.0, 0.0]))[2] == {"x": "+", "y": "0", "r": "0"}
+
+
+def test_a_verifier_file_keeps_the_heads_of_a_class(trained: VerifierModel, tmp_path: Path) -> None:
+    ch = _two_sided_characteriser()
+    model = dataclasses.replace(trained, characteriser=ch)
+    loaded = load_verifier(save_verifier(model, tmp_path / "v.npz")).characteriser
+    assert loaded is not None and set(loaded.heads_) == set(ch.heads_)
+    for row in ([0.0, 1.0, 0.0], [0.0, -1.0, 0.3], [10.0, 0.0, 0.0]):
+        assert loaded.predict(np.array(row)) == ch.predict(np.array(row))
+
+
 def test_direction_signs_share_the_deviation_classes_mass() -> None:
     """The class head's probability of "one of the sign table's classes" is shared among them
     by the direction heads' belief in each one's signs; other classes keep theirs."""
@@ -541,12 +579,20 @@ def test_direction_signs_share_the_deviation_classes_mass() -> None:
     assert _shared_by_signs(probs, {a: {"-": 1.0} for a in "xyr"}, signs) == probs  # no belief
 
 
-def test_the_characteriser_heads_and_composed_signs(trained: VerifierModel) -> None:
+def test_the_characteriser_heads_and_composed_signs(
+    trained: VerifierModel, labels: dict[str, TrialLabel]
+) -> None:
     ch = trained.characteriser
     assert ch is not None
-    assert set(ch.heads_) == {FAILURE, *DIRECTION_AXES}
+    assert set(ch.heads_) == {FAILURE, *DIRECTION_AXES}  # no class has two sign patterns
     assert list(ch.heads_[FAILURE].classes_) == sorted(FAILURES)
-    assert ch.signs_ == {("0", "0", "+"): "deviation_r+", ("0", "-", "0"): "deviation_y-"}
+    # the one misalignment's housing offset shares deviation_y-'s signs or not
+    misaligned = next(lb for lb in labels.values() if lb.failure_class == "misalignment")
+    shared = (misaligned.directions() or {}).get("y") == "-"
+    assert ch.signs_ == {
+        ("0", "0", "+"): "deviation_r+",
+        **({} if shared else {("0", "-", "0"): "deviation_y-"}),
+    }
     assert list(ch.heads_["x"].classes_) == ["0"]  # every deviation here is 0 along x
 
 

@@ -15,9 +15,11 @@ The class is named again each time a span closes and when the stream ends; betwe
 ticks the last naming stands, so a tick after the alarm costs only a few additions.
 
 Heads (`Characteriser`): random forests for the class and, when the labels carry deviations, one
-per axis with '-', '0', '+'. Beside the class forest votes the shape head (verify/shape.py),
-which reads the evidence's ticks since onset, with the weight the training failures chose for
-it. Where every trial of a class deviated with the same signs and no other class shares them,
+per axis with '-', '0', '+' (learnt from the classes whose deviations always have the same
+signs), and one per axis for each class whose deviations change sign on that axis (a housing
+that sits to either side), which names the directions when that class is named. Beside the
+class forest votes the shape head (verify/shape.py), which reads the evidence's ticks since
+onset, with the weight the training failures chose for it. Where every trial of a class deviated with the same signs and no other class shares them,
 the class head's probability of "one of those deviation classes" is shared among them by the
 direction heads' probabilities of their signs.
 """
@@ -116,19 +118,28 @@ class RunningEvidence:
         return window
 
 
+def class_head(axis: str, failure_class: str) -> str:
+    """The name of a direction head of one class: `axis@class`."""
+    return f"{axis}@{failure_class}"
+
+
+def _signs_by_class(labels: Sequence[TrialLabel]) -> dict[str, set[tuple[str, ...]]]:
+    """The direction signs (x, y, r) each class's labelled trials carry."""
+    signs: dict[str, set[tuple[str, ...]]] = {}
+    for lb in labels:
+        if (d := lb.directions()) is not None:
+            signs.setdefault(lb.failure_class, set()).add(tuple(d[a] for a in DIRECTION_AXES))
+    return signs
+
+
 def sign_table(labels: Sequence[TrialLabel]) -> dict[tuple[str, ...], str]:
     """Direction signs (x, y, r) -> failure class, from labelled failures: a class whose every
     trial carries a deviation of the same signs, and whose signs no other class shares."""
-    signs: dict[str, set[tuple[str, ...] | None]] = {}
-    for lb in labels:
-        d = lb.directions()
-        signs.setdefault(lb.failure_class, set()).add(
-            None if d is None else tuple(d[a] for a in DIRECTION_AXES)
-        )
+    unlabelled = {lb.failure_class for lb in labels if lb.directions() is None}
     owners: dict[tuple[str, ...], list[str]] = {}
-    for cls, found in signs.items():
-        if len(found) == 1 and (only := next(iter(found))) is not None:
-            owners.setdefault(only, []).append(cls)
+    for cls, found in _signs_by_class(labels).items():
+        if len(found) == 1 and cls not in unlabelled:
+            owners.setdefault(next(iter(found)), []).append(cls)
     return {key: names[0] for key, names in owners.items() if len(names) == 1}
 
 
@@ -170,10 +181,19 @@ class Characteriser(BaseEstimator):  # type: ignore[misc]
         classes = [lb.failure_class for lb in labels]
         self.heads_: dict[str, ForestHead] = {FAILURE: self._fit_head(X, classes)}
         self._fit_shape(X, labels, windows)
+        signs = _signs_by_class(labels)
         labelled = [i for i, lb in enumerate(labels) if lb.directions() is not None]
+        consistent = [i for i in labelled if len(signs[labels[i].failure_class]) == 1]
+        general = consistent or labelled
         for axis in DIRECTION_AXES if labelled else ():
-            y = [labels[i].directions()[axis] for i in labelled]  # type: ignore[index]
-            self.heads_[axis] = self._fit_head(X[labelled], y)
+            y = [labels[i].directions()[axis] for i in general]  # type: ignore[index]
+            self.heads_[axis] = self._fit_head(X[general], y)
+        for cls, found in signs.items() if consistent else ():
+            mine = [i for i in labelled if labels[i].failure_class == cls]
+            for k, axis in enumerate(DIRECTION_AXES):
+                if len(found) > 1 and len({key[k] for key in found}) > 1:
+                    y = [labels[i].directions()[axis] for i in mine]  # type: ignore[index]
+                    self.heads_[class_head(axis, cls)] = self._fit_head(X[mine], y)
         self.signs_ = sign_table(labels) if self.compose and labelled else {}
         return self
 
@@ -210,11 +230,15 @@ class Characteriser(BaseEstimator):  # type: ignore[misc]
         if self.shape_ is not None and window is not None:
             shape = self.shape_.predict_proba([window])[0]
             probs = mix(probs, shape, self.shape_.classes_, self.shape_weight_)
-        directions = {a: _named(h, row) for a, h in self.heads_.items() if a != FAILURE}
+        directions = {a: _named(self.heads_[a], row) for a in DIRECTION_AXES if a in self.heads_}
         if self.signs_ and len(directions) == len(DIRECTION_AXES):
             probs = _shared_by_signs(probs, directions, self.signs_)
+        named = max(probs, key=probs.__getitem__)
+        for axis in DIRECTION_AXES:  # a class with its own heads: its directions
+            if (head := self.heads_.get(class_head(axis, named))) is not None:
+                directions[axis] = _named(head, row)
         dirs = {a: max(p, key=p.__getitem__) for a, p in directions.items()}
-        return max(probs, key=probs.__getitem__), probs, dirs
+        return named, probs, dirs
 
 
 def _named(head: ForestHead, row: np.ndarray) -> dict[str, float]:

@@ -149,7 +149,7 @@ def _characteriser(c: dict[str, Any], arrays: dict[str, np.ndarray]) -> Characte
     ch = Characteriser(**c["params"])
     ch.heads_ = {}
     for name, h in c["heads"].items():
-        if name != FAILURE and name not in DIRECTION_AXES:
+        if name != FAILURE and name.partition("@")[0] not in DIRECTION_AXES:
             raise ValueError(f"unknown characteriser head {name!r}")
         if h.get("constant"):
             ch.heads_[name] = Constant(**h["params"])
