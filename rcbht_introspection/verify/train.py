@@ -112,17 +112,24 @@ def train_verifier(
             "sessions": len(set(groups.values())),
             "failures": len(failed),
             "classes": sorted({labels[n].failure_class for n in failed}),
-            "deviation_size": deviation_sizes([labels[n] for n in failed]),
+            "deviation_by_class": deviations_by_class([labels[n] for n in failed]),
         },
     )
 
 
-def deviation_sizes(failed: Sequence[TrialLabel]) -> dict[str, float]:
-    """Per direction axis (x, y, r), the median size of the labelled deviations that moved it:
-    how far a planner first corrects along a named direction (m, m, rad)."""
-    out = {}
-    for i, axis in enumerate(DIRECTION_AXES):
-        sizes = [abs(lb.deviation[i]) for lb in failed if lb.deviation and lb.deviation[i]]
-        if sizes:
-            out[axis] = round(float(np.median(sizes)), 7)
+def deviations_by_class(failed: Sequence[TrialLabel]) -> dict[str, dict[str, dict[str, float]]]:
+    """Per failure class with labelled deviations: `size`, the median per axis (a planner's
+    first step), and `spread`, half the 10-90 % range (its next step when that missed)."""
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for cls in sorted({lb.failure_class for lb in failed}):
+        mine = [lb for lb in failed if lb.failure_class == cls]
+        size, spread = {}, {}
+        for i, axis in enumerate(DIRECTION_AXES):
+            sizes = [abs(lb.deviation[i]) for lb in mine if lb.deviation and lb.deviation[i]]
+            if sizes:
+                low, mid, high = np.percentile(sizes, [10, 50, 90])
+                size[axis] = round(float(mid), 7)
+                spread[axis] = round(float(high - low) / 2, 7)
+        if size:
+            out[cls] = {"size": size, "spread": spread}
     return out
