@@ -9,7 +9,14 @@ from pathlib import Path
 import pytest
 
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.plan.planner import Decision, Planner, Report, search_grid
+from rcbht_introspection.plan.planner import (
+    Decision,
+    Planner,
+    Report,
+    Steps,
+    make_planner,
+    search_grid,
+)
 from rcbht_introspection.plan.recovery import (
     ClassRecovery,
     Correction,
@@ -25,6 +32,7 @@ TABLE = RecoveryConfig(
     classes={
         "deviation": ClassRecovery("undo_direction", size={"x": 0.002, "yaw": 0.06}),
         "misalignment": ClassRecovery("try", candidates=({"y": 0.005}, {"y": -0.005})),
+        "jamming": ClassRecovery("undo_direction", size={"yaw": 0.16}, candidates=({"yaw": 0.1},)),
         "anomaly": ClassRecovery("retry"),
     },
 )
@@ -79,7 +87,7 @@ def test_search_walks_its_grid_one_axis_first_within_the_bounds() -> None:
 
 
 def test_introspect_waits_for_a_class_then_undoes_the_named_direction() -> None:
-    planner = Planner("introspect", TABLE, sizes={"x": 0.0025})
+    planner = Planner("introspect", TABLE, {"deviation_x+": Steps(size={"x": 0.0025})})
     planner.first()
     assert planner.verdict(5.0, True, "", {}) is None  # alarm, no class yet
     assert planner.verdict(5.3, True, "deviation_x+", {"x": "+", "y": "0"}) is None
@@ -99,6 +107,44 @@ def test_introspect_does_not_abort_a_corrected_attempt_and_halves_an_overshoot()
         assert planner.verdict(t, True, "deviation_x-", {"x": "-"}) is None
     third = planner.ended(FAILED, 20.0)
     assert math.isclose(third.correction.x, -0.002 + 0.001)
+
+
+def test_a_missed_correction_moves_by_the_learnt_spread_then_halves() -> None:
+    """An undershoot (the same direction named again) moves on by the spread, an overshoot
+    back; only the class's own axes move, from the steps learnt for it."""
+    trained_on = {"deviation_by_class": {"jamming": {"size": {"r": 0.16}, "spread": {"r": 0.03}}}}
+    planner = make_planner("introspect", TABLE, trained_on)
+    planner.first()
+    _abort_on(planner, "jamming", {"x": "+", "r": "-"})
+    assert planner.ended(Report(False, "aborted"), 6.0).correction == Correction(yaw=0.16)
+    planner.verdict(5.0, True, "jamming", {"r": "-"})  # still short of the housing's yaw
+    third = planner.ended(FAILED, 20.0).correction
+    assert math.isclose(third.yaw, 0.19) and third.x == 0.0
+    planner.verdict(5.0, True, "jamming", {"r": "+"})  # now beyond it
+    assert math.isclose(planner.ended(FAILED, 20.0).correction.yaw, 0.19 - 0.015)
+
+
+def test_a_refinement_yields_to_a_runner_up_worth_more_than_half_the_hypothesis() -> None:
+    """Correcting along a wrong hypothesis makes an error of its own family: named again, it
+    is refined only while its probability is worth twice the runner-up's."""
+
+    def third(ranked: dict[str, float]) -> Correction:
+        planner = Planner("introspect", TABLE)
+        planner.first()
+        _abort_on(planner, "jamming", {"r": "-"}, ranked)
+        assert planner.ended(Report(False, "aborted"), 6.0).correction == Correction(yaw=0.16)
+        planner.verdict(5.0, True, "jamming", {"r": "+"})
+        return planner.ended(FAILED, 20.0).correction
+
+    assert third({"jamming": 0.8, "deviation_x+": 0.2}) == Correction(yaw=0.16 - 0.08)
+    assert third({"jamming": 0.5, "deviation_x+": 0.4}) == Correction(x=-0.002)
+
+
+def test_a_class_named_without_directions_falls_back_to_its_candidates() -> None:
+    planner = Planner("introspect", TABLE)
+    planner.first()
+    _abort_on(planner, "jamming", {"r": "0"})
+    assert planner.ended(Report(False, "aborted"), 6.0).correction == Correction(yaw=0.1)
 
 
 def test_a_contradicted_diagnosis_gives_way_to_the_next_likeliest_class() -> None:
@@ -145,7 +191,7 @@ def test_the_oracle_aborts_at_the_first_alarm_then_applies_the_truth() -> None:
 
 
 def test_corrections_stay_within_the_bounds_and_bad_ones_are_named() -> None:
-    planner = Planner("introspect", TABLE, sizes={"x": 0.05})
+    planner = Planner("introspect", TABLE, {"deviation_x+": Steps(size={"x": 0.05})})
     planner.first()
     _abort_on(planner, "deviation_x+", {"x": "+"})
     assert planner.ended(Report(False, "aborted"), 6.0).correction.x == -0.01

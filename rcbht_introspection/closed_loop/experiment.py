@@ -114,7 +114,7 @@ def train_default_verifier(
     classes: Sequence[FailureType],
     verify_config: VerifyConfig,
     seed: int,
-    per_class: int = 6,
+    per_class: int = 12,
     successes: int = 40,
     jobs: int = 1,
 ) -> VerifierModel:

@@ -17,7 +17,7 @@ import itertools
 import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Literal, get_args
+from typing import Any, Literal, get_args
 
 from rcbht_introspection.plan.recovery import (
     ANOMALY,
@@ -44,6 +44,16 @@ class Report:
 
 
 @dataclass(frozen=True)
+class Steps:
+    """One failure class's learnt correction steps per correction axis (x, y, yaw): `size`
+    first (the median labelled deviation), then `spread` when that missed (half their 10-90 %
+    range), halved at each later miss."""
+
+    size: dict[str, float] = field(default_factory=dict)
+    spread: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Hypothesis:
     """A class the verifier gave the clean attempt, its probability and its directions."""
 
@@ -54,6 +64,9 @@ class Hypothesis:
 
 MAX_HYPOTHESES = 3
 """Classes of the clean attempt's verdict kept as hypotheses (the likeliest first)."""
+REFINE_SHARE = 0.5
+"""A refinement along the named directions weighs its hypothesis's probability as a `try`
+class with one of two candidates left."""
 _SIGNED_AXES = re.compile(r"([a-z])([+-])")
 
 
@@ -73,14 +86,15 @@ def _directions(failure_class: str, verdict: Mapping[str, str]) -> dict[str, str
 def _hypotheses(
     named: str, directions: Mapping[str, str], probabilities: Mapping[str, float]
 ) -> list[Hypothesis]:
-    """The named class first, then the other likeliest ones with a probability above 0."""
+    """The named class first, then the other likeliest ones with a probability above 0; each
+    with the verdict's directions unless its name carries its own."""
     ranked = sorted(probabilities.items(), key=lambda kv: -kv[1])
     classes = [named, *(c for c, p in ranked if c != named and p > 0)][:MAX_HYPOTHESES]
     return [
         Hypothesis(
             c,
             float(probabilities.get(c, 1.0 if c == named else 0.0)),
-            _directions(c, directions if c == named else {}),
+            _directions(c, directions),
         )
         for c in classes
     ]
@@ -129,7 +143,7 @@ class Planner:
         self,
         policy: PolicyName,
         recovery: RecoveryConfig,
-        sizes: Mapping[str, float] | None = None,
+        steps: Mapping[str, Steps] | None = None,
         truth: Correction | None = None,
     ) -> None:
         if policy not in POLICIES:
@@ -138,15 +152,15 @@ class Planner:
             raise ValueError("the oracle policy needs the trial's true correction")
         self.policy = policy
         self.recovery = recovery
-        self.sizes = dict(sizes or {})
-        """Learnt first step per correction axis (the verifier file's deviation sizes)."""
+        self.steps = dict(steps or {})
+        """Learnt steps per failure class (the verifier file's labelled deviations)."""
         self.truth = truth
         self.grid = search_grid(recovery.search_step)
         self.attempt = 0
         self.correction = Correction()
         self.decisions: list[Decision] = []
-        self._steps: dict[str, float] = {}
-        self._signs: dict[str, float] = {}
+        self._steps: dict[str, list[float]] = {}
+        """Per correction axis, the steps moved along it for the current hypothesis."""
         self._tried: dict[str, int] = {}
         """Per class of a `try` recovery: the candidates tried so far."""
         self._hypotheses: list[Hypothesis] = []
@@ -220,13 +234,15 @@ class Planner:
         if not self._hypotheses:  # introspect, nothing named: the same plan again
             return self.correction
         if self.correction == Correction():  # the clean attempt was aborted: the likeliest
-            return self._recover(self._hypotheses[0], Correction())
+            return self._recover(self._hypotheses[0])
         return self._after_failed_recovery()
 
     def _after_failed_recovery(self) -> Correction:
         """A corrected attempt failed. Refine the current hypothesis when its attempt was named
         with its family again and refining is worth more than the next hypothesis (a `try`'s
-        remaining candidates weigh its probability by their share); else recover from the next
+        remaining candidates weigh its probability by their share, a refinement along the named
+        directions by REFINE_SHARE): a correction along a wrong hypothesis makes an error of
+        that very family, so the naming alone proves little. Else recover from the next
         hypothesis, from the clean plan."""
         h = self._hypotheses[self._current]
         entry = self.recovery.recovery_of(h.failure_class)
@@ -237,47 +253,65 @@ class Planner:
             if self._current + 1 < len(self._hypotheses)
             else None
         )
-        if same and named is not None and entry.action == "undo_direction":
-            return self._undo(entry, self.correction, _directions(*named))
+        refine = same and entry.action == "undo_direction" and any(self._steps.values())
+        worth = nxt is None or h.probability * REFINE_SHARE >= nxt.probability
+        if refine and worth and named is not None:
+            return self._undo(named[0], entry, self.correction, _directions(*named))
         tried = self._tried.get(h.failure_class, 0)
-        left = len(entry.candidates) - tried if entry.action == "try" else 0
+        left = len(entry.candidates) - tried if entry.action == "try" or tried else 0
         share = left / len(entry.candidates) if entry.candidates else 0.0
         if left > 0 and (nxt is None or (same and h.probability * share >= nxt.probability)):
-            return self._recover(h, Correction())
+            return self._recover(h)
         if nxt is None:
             return self.correction
         self._current += 1
-        return self._recover(nxt, Correction())
+        return self._recover(nxt)
 
-    def _recover(self, h: Hypothesis, base: Correction) -> Correction:
+    def _recover(self, h: Hypothesis) -> Correction:
+        """The first correction for hypothesis `h`, from the clean plan: against its directions,
+        else its table's next candidate."""
         entry = self.recovery.recovery_of(h.failure_class)
+        self._steps = {}
         if entry.action == "undo_direction":
-            return self._undo(entry, base, h.directions)
-        if entry.action == "try" and entry.candidates:
+            out = self._undo(h.failure_class, entry, Correction(), h.directions)
+            if out != Correction() or not entry.candidates:
+                return out
+        if entry.action != "retry" and entry.candidates:
             tries = self._tried.get(h.failure_class, 0)
             self._tried[h.failure_class] = tries + 1
-            out = base
+            out = Correction()
             for axis, value in entry.candidates[tries % len(entry.candidates)].items():
                 out = out.moved(axis, value)
             return out
-        return base
+        return Correction()
 
     def _undo(
-        self, entry: ClassRecovery, base: Correction, directions: Mapping[str, str]
+        self,
+        failure_class: str,
+        entry: ClassRecovery,
+        base: Correction,
+        directions: Mapping[str, str],
     ) -> Correction:
-        """Move against each named direction; an axis whose direction flipped since its last
-        move overshot: its step halves (a bisection between the last two corrections)."""
+        """Move against each named direction on the class's axes. The first move is the learnt
+        size (else the table's); an axis moved before missed, so the next move is the learnt
+        spread (else half the last), in the newly named direction, halved at each later miss."""
+        learnt = self.steps.get(failure_class) or self.steps.get(_family(failure_class), Steps())
         out = base
         for verdict_axis, direction in directions.items():
             axis = VERDICT_AXES.get(verdict_axis)
             if axis is None or direction not in ("+", "-"):
                 continue
-            sign = 1.0 if direction == "+" else -1.0
-            step = self._steps.get(axis, self.sizes.get(axis, entry.size.get(axis, 0.0)))
-            if self._signs.get(axis, sign) != sign:
-                step /= 2.0
-            self._steps[axis], self._signs[axis] = step, sign
-            out = out.moved(axis, -sign * step)
+            if axis not in learnt.size and axis not in entry.size:
+                continue
+            moved = self._steps.setdefault(axis, [])
+            if not moved:
+                step = learnt.size.get(axis, entry.size.get(axis, 0.0))
+            elif len(moved) == 1 and learnt.spread.get(axis):
+                step = learnt.spread[axis]
+            else:
+                step = moved[-1] / 2.0
+            moved.append(step)
+            out = out.moved(axis, -step if direction == "+" else step)
         return out
 
     def _start(self, correction: Correction, reason: str) -> Decision:
@@ -299,18 +333,22 @@ class Planner:
 def make_planner(
     policy: PolicyName,
     recovery: RecoveryConfig,
-    trained_on: Mapping[str, object] | None,
+    trained_on: Mapping[str, Any] | None,
     truth: Correction | None = None,
 ) -> Planner:
-    """The planner of one trial: the first steps learnt by the verifier (its file's
-    `trained_on["deviation_size"]`, per verdict axis); `trained_on` None means no verifier, and
-    introspect then runs as retry."""
+    """The planner of one trial, with the steps the verifier learnt per class (its file's
+    `trained_on["deviation_by_class"]`); `trained_on` None means no verifier, and introspect
+    then runs as retry."""
     if policy == "introspect" and trained_on is None:
         policy = "retry"
-    learnt = (trained_on or {}).get("deviation_size") or {}
-    sizes = {
-        VERDICT_AXES[a]: float(v)
-        for a, v in dict(learnt).items()  # type: ignore[call-overload]
-        if a in VERDICT_AXES
+    learnt = (trained_on or {}).get("deviation_by_class") or {}
+    steps = {
+        cls: Steps(
+            **{
+                part: {VERDICT_AXES[a]: float(v) for a, v in record.get(part, {}).items()}
+                for part in ("size", "spread")
+            }
+        )
+        for cls, record in learnt.items()
     }
-    return Planner(policy, recovery, sizes, truth)
+    return Planner(policy, recovery, steps, truth)
