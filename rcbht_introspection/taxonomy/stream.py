@@ -120,7 +120,7 @@ class IntakeCounters:
     interpolated_samples: int = 0
     rate_changes: int = 0
     late_boundaries: int = 0
-    internal_errors: int = 0
+    malformed_boundaries: int = 0
 
 
 class DomainTracker:
@@ -395,33 +395,28 @@ class ArmStream:
         except (TypeError, ValueError):
             self.counters.malformed_samples += 1
             return out
-        try:
-            if len(values) == 6:
-                finite = values[0] + values[1] + values[2] + values[3] + values[4] + values[5]
-                dt = t - self._last_t
-                # the steady case: finite, increasing, at the nominal rate (no policy applies)
-                if (
-                    finite - finite == 0.0
-                    and self._dt_lo <= dt <= self._dt_hi
-                    and not self._finished
-                ):
-                    if self._periods:
-                        self._periods = []
-                    self._last_t = t
-                    self._last_y = values
-                    ts = self._ts
-                    ts.append(t)
-                    self._ys.append(values)
-                    if len(ts) == self.window:
-                        self._block(out)
-                    return out
-            if self._finished:
-                self.counters.malformed_samples += 1
-                return out
-            for t_in, y_in in self._intake(t, values):
-                self._feed(t_in, y_in, out)
-        except Exception:  # a bug, never bad input: counted, the stream goes on
-            self.counters.internal_errors += 1
+        # the steady case: six finite values (an overflowing sum takes the checked path),
+        # increasing at the nominal rate: no policy applies
+        if (
+            len(values) == 6
+            and math.isfinite(sum(values))
+            and self._dt_lo <= t - self._last_t <= self._dt_hi
+            and not self._finished
+        ):
+            if self._periods:
+                self._periods = []
+            self._last_t = t
+            self._last_y = values
+            self._ts.append(t)
+            self._ys.append(values)
+            if len(self._ts) == self.window:
+                self._block(out)
+            return out
+        if self._finished:
+            self.counters.malformed_samples += 1
+            return out
+        for t_in, y_in in self._intake(t, values):
+            self._feed(t_in, y_in, out)
         return out
 
     def push_many(self, t: np.ndarray, wrench: np.ndarray) -> list[Word]:
@@ -497,12 +492,15 @@ class ArmStream:
         out: list[Word] = []
         try:
             t = float(t)
-            if t < self._last_t:
-                self.counters.late_boundaries += 1
-            self.ctx.boundaries.append(t)
-            self._poll(out)
-        except Exception:
-            self.counters.internal_errors += 1
+        except (TypeError, ValueError):
+            t = math.nan
+        if not math.isfinite(t):
+            self.counters.malformed_boundaries += 1
+            return out
+        if t < self._last_t:
+            self.counters.late_boundaries += 1
+        self.ctx.boundaries.append(t)
+        self._poll(out)
         return out
 
     def finish(self) -> list[Word]:
