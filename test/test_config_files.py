@@ -118,9 +118,15 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
                         "undo_direction", size={"x": 0.002, "y": 0.002, "yaw": 0.06}
                     ),
                     "misalignment": ClassRecovery(
-                        "try", candidates=({"y": 0.0055}, {"y": -0.0055})
+                        "undo_direction",
+                        size={"y": 0.0055},
+                        candidates=({"y": 0.0055}, {"y": -0.0055}),
                     ),
-                    "jamming": ClassRecovery("try", candidates=({"yaw": 0.16}, {"yaw": -0.16})),
+                    "jamming": ClassRecovery(
+                        "undo_direction",
+                        size={"yaw": 0.16},
+                        candidates=({"yaw": 0.16}, {"yaw": -0.16}),
+                    ),
                     "missed_snap": ClassRecovery("try", candidates=({"z": -0.0055},)),
                     "anomaly": ClassRecovery("retry"),
                 }
