@@ -189,21 +189,6 @@ def _task_of_header(header: dict[str, Any], path: Path) -> Task:
         ) from None
 
 
-def model_summary(path: Path | str) -> dict[str, Any]:
-    """Header of a model file (for `rcbht train` output and diagnostics)."""
-    model = load_model(path)
-    return {
-        "classifier": model.classifier,
-        "encoding": model.encoding,
-        "classes": model.classes_,
-        "taxonomy_profile": model.taxonomy_profile,
-        "taxonomy_sha256": model.taxonomy_sha256,
-        "task": model.task.to_dict(),
-        "n_features": model.encoder.n_features,
-        "training": model.training,
-    }
-
-
 def profile_mismatch(model: SubtaskModel, taxonomy: TaxonomyConfig) -> str:
     """Why `model` must not classify words of `taxonomy` ('' when it may): a model trained on
     another profile's words (its recorded digest differs) sees words it never learned."""
@@ -246,7 +231,6 @@ __all__ = [
     "FORMAT_VERSION",
     "load_model",
     "load_subtask_model",
-    "model_summary",
     "profile_mismatch",
     "save_model",
 ]

@@ -7,8 +7,8 @@ name order), at the sample times in [start, end]; a sub-task shorter than one sa
 window of [start, start + fraction * duration], as grammar/split.prefix_sample cuts the words.
 Each window is taken relative to its first sample (a constant sensor bias and a held load cancel).
 Whole sub-tasks are scored by a MiniRocket trained on whole windows, prefixes by one trained on
-the whole windows and their prefixes (PREFIXES), as the words + wrench estimator's running head
-is: each column gets the stronger reference.
+the whole windows and their prefixes (the caller's fractions), as the words + wrench
+estimator's running head is: each column gets the stronger reference.
 MiniRocketClassifier (peers/minirocket.py) resamples every window to the same length.
 """
 
@@ -22,8 +22,6 @@ from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.peers.minirocket import MiniRocketClassifier
 
-PREFIXES: tuple[float, ...] = (0.1, 0.25, 0.5, 0.75)
-"""Fractions of each training sub-task MiniRocket also learns from."""
 Raw = tuple[np.ndarray, np.ndarray]
 """(time (N,), wrench (N, 6 * arms)) of one trial."""
 
@@ -77,7 +75,7 @@ class SubtaskWrench:
         self, samples: Sequence[SubtaskSample], seed: int, prefixes: Sequence[float] = ()
     ) -> MiniRocketClassifier:
         """MiniRocket (random_state `seed`) trained on the samples' whole windows and, for the
-        prefix columns, also their first `prefixes` (PREFIXES)."""
+        prefix columns, also their first `prefixes` (fractions of each sub-task)."""
         model = MiniRocketClassifier(random_state=seed)
         fractions = (1.0, *prefixes)
         windows = [w for f in fractions for w in self.windows(samples, f)]

@@ -86,8 +86,6 @@ class ControllerConfig(ForceLoopConfig):
     approach_timeout: float = 15.0
     tilt: Range = (0.12, 0.22)
     """Initial side-approach tilt (rad) about the y axis, removed during the rotation sub-task."""
-    lateral_lead: float = 0.004
-    """The male starts this far (m) towards -x, so its low edge lands on the +x chamfer."""
     rotation_speed: Range = (0.025, 0.05)
     """Angular speed (rad/s) of the alignment rotation."""
     rotation_force: Range = (5.0, 9.0)
