@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -21,10 +22,12 @@ from numpy.typing import NDArray
 
 from rcbht_introspection.io.bags import END_PHASE
 from rcbht_introspection.sim import arm_run
+from rcbht_introspection.sim.arm_config import SensorConfig
+from rcbht_introspection.sim.arm_control import ArmController
 from rcbht_introspection.sim.config import FailureType, SimConfig
 from rcbht_introspection.sim.controller import SnapController
 from rcbht_introspection.sim.model import build_model
-from rcbht_introspection.sim.sensor import decimation, quantize, sensor_errors
+from rcbht_introspection.sim.sensor import SensorDraw, decimation, quantize, sensor_errors
 from rcbht_introspection.sim.simulate import (
     MAX_DURATION,
     TrialDraw,
@@ -125,28 +128,30 @@ class AttemptEnd:
     return_s: float
 
 
-class Attempt:
-    """One attempt of a world under a correction, stepped a sensor sample at a time."""
+class SteppedAttempt:
+    """An attempt stepped a sensor sample at a time: the task's model, rig and controller are
+    the subclass's; the sensor, the events, the abort and the stepping are shared."""
 
     def __init__(
-        self, config: SimConfig, world: World, correction: Pose, index: int, rate_hz: float
+        self,
+        rig: arm_run.ServoRig,
+        controller: ArmController[Any, Any],
+        start: tuple[float, float, float],
+        sensor: tuple[SensorConfig, SensorDraw],
+        noise_seed: tuple[int, int],
+        rate_hz: float,
+        max_duration: float,
     ) -> None:
-        draw = world.draw
-        cx, cy, cz, cyaw = correction
-        sx, sy, sz = draw.physics.start_pose
-        physics = replace(draw.physics, start_pose=(sx + cx, sy + cy, sz + cz))
-        self.config = config
-        self.model = build_model(config, physics)
-        self.data = mujoco.MjData(self.model)
-        self.rig = arm_run.ServoRig(self.model, self.data, pitch=draw.plan.tilt, yaw=cyaw)
-        self.controller = SnapController(config, draw.plan)
-        self.offsets = self.rig.offsets(draw.plan.start)
+        self.rig, self.model, self.data = rig, rig.model, rig.data
+        self.controller = controller
+        self.offsets = self.rig.offsets(start)
         self.k = decimation(rate_hz, self.rig.dt)
         self.period = 1.0 / rate_hz
-        n = int(MAX_DURATION * rate_hz)
-        rng = np.random.default_rng([world.seed, index, 11])
-        times = np.arange(n, dtype=np.float64) * self.period
-        self.errors = sensor_errors(times, config.sensor, draw.sensor, rng)
+        self.sensor = sensor[0]
+        times = np.arange(int(max_duration * rate_hz), dtype=np.float64) * self.period
+        rng = np.random.default_rng([*noise_seed, 11])
+        self.errors = sensor_errors(times, sensor[0], sensor[1], rng)
+        self.before_step: arm_run.StepHook | None = None
         self.step_count = 0
         self.samples = 0
         self.reason = ""
@@ -170,46 +175,83 @@ class Attempt:
         if self.end is not None:
             return None
         if self.controller.done or self.samples >= len(self.errors):
-            self._finish()
+            self.end = self._end()
             return None
         raw = np.zeros(self.model.nsensordata)
         for _ in range(self.k):
-            raw += self.rig.step(self.controller, self.step_count, self.offsets)
+            if self.controller.done:  # a partial last block is no sample (as resample drops it)
+                self.end = self._end()
+                return None
+            raw += self.rig.step(self.controller, self.step_count, self.offsets, self.before_step)
             self.step_count += 1
             self._watch()
         tared = self.rig.tare[:6] - raw[:6] / self.k
         t = round(self.samples * self.period, 9)
-        wrench = quantize(tared + self.errors[self.samples], self.config.sensor)
+        wrench = quantize(tared + self.errors[self.samples], self.sensor)
         self.samples += 1
         events = tuple(e for e in self._events if e[0] <= t + 1e-9)
         self._events = self._events[len(events) :]
         return Sample(t, wrench, events)
 
     def _watch(self) -> None:
-        """Sub-task events as the controller switches; the arm's own failed checks abort."""
+        """Sub-task events as the controller switches; an abort by the arm's own checks is a
+        time-out (a task's own checks: _checked)."""
         st = self.controller.state
         if st.phase == self._phase:
             return
         t = arm_run.on_clock(st.phase_start, self.period)
-        if st.phase == "mating" and st.seat_time is None:
-            self.abort("no_snap")  # the stroke ended without a snap: its seat check failed
+        if self._checked(st.phase):
+            pass
         elif st.phase == "backoff" and not self.reason:
             self.reason = "timeout"
         elif st.phase in self.controller.subtasks:
             self._events.append((t, st.phase))
         self._phase = self.controller.state.phase
 
-    def _finish(self) -> None:
-        st = self.controller.state
-        seated = st.seat_time is not None and not st.aborted
-        duration = round(self.samples * self.period, 9)
-        climb = self.controller.plan.start[2] - (self.offsets[2] + self.data.qpos[self.rig.qz])
-        back = 0.0 if seated else max(0.0, climb) / self.config.controller.backoff_speed
-        self.end = AttemptEnd(
-            seated, "seated" if seated else self.reason or "unseated",
-            part_seated(self.config, self.model, self.data), duration, back,
-        )  # fmt: skip
+    def _checked(self, phase: str) -> bool:
+        """A task's own check on entering `phase` (True: it acted on it)."""
+        return False
+
+    def _end(self) -> AttemptEnd:
+        raise NotImplementedError
 
     def end_event(self) -> tuple[float, str]:
         """The end-of-task event after the attempt's last sample."""
         return (round(self.samples * self.period, 9), END_PHASE)
+
+
+class Attempt(SteppedAttempt):
+    """One attempt of a snap world under a correction."""
+
+    def __init__(
+        self, config: SimConfig, world: World, correction: Pose, index: int, rate_hz: float
+    ) -> None:
+        draw = world.draw
+        cx, cy, cz, cyaw = correction
+        sx, sy, sz = draw.physics.start_pose
+        physics = replace(draw.physics, start_pose=(sx + cx, sy + cy, sz + cz))
+        self.config, self.plan = config, draw.plan
+        model = build_model(config, physics)
+        rig = arm_run.ServoRig(model, mujoco.MjData(model), pitch=draw.plan.tilt, yaw=cyaw)
+        super().__init__(
+            rig, SnapController(config, draw.plan), draw.plan.start,
+            (config.sensor, draw.sensor), (world.seed, index), rate_hz, MAX_DURATION,
+        )  # fmt: skip
+
+    def _checked(self, phase: str) -> bool:
+        """The stroke ended without a snap: the arm's seat check failed."""
+        if phase == "mating" and self.controller.state.seat_time is None:
+            self.abort("no_snap")
+            return True
+        return False
+
+    def _end(self) -> AttemptEnd:
+        st = self.controller.state
+        seated = st.seat_time is not None and not st.aborted
+        duration = round(self.samples * self.period, 9)
+        climb = self.plan.start[2] - (self.offsets[2] + self.data.qpos[self.rig.qz])
+        back = 0.0 if seated else max(0.0, climb) / self.config.controller.backoff_speed
+        return AttemptEnd(
+            seated, "seated" if seated else self.reason or "unseated",
+            part_seated(self.config, self.model, self.data), duration, back,
+        )  # fmt: skip
