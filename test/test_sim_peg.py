@@ -140,8 +140,10 @@ def test_cli_task_option(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert cli_main([*args, "--progress", "off"]) == 0
     assert (out / "SIM-PEG-S-01" / TASK_FILE).is_file()
     assert "peg-in-hole" in capsys.readouterr().out
-    assert cli_main([*args, "--failures"]) == 2
-    assert "successes only" in capsys.readouterr().err
+    failing = tmp_path / "F"
+    two = ["sim", "--task", "peg-in-hole", "--trials", "2", "--failures", "--progress", "off"]
+    assert cli_main([*two, "--out", str(failing)]) == 0
+    assert (failing / "SIM-PEG-F-02-hole_yaw").is_dir()
     assert cli_main([*args, "--scenario", "two-arm"]) == 2
     assert "no scenario 'two-arm'" in capsys.readouterr().err
 

@@ -187,7 +187,9 @@ def write_dataset(
     out = Path(out_dir)
     _clear_previous_set(out)
     out.mkdir(parents=True, exist_ok=True)
-    types = failure_classes(config.failures) if isinstance(config, SimConfig) else ()
+    types = (
+        failure_classes(config.failures) if isinstance(config, SimConfig) else config.failures.types
+    )
     plan = trial_plan(n_trials, seed, failures, types)
     units = [
         _Unit(i, trial_seed, failure, days[session_of(i, n_trials, sessions)] if days else None)

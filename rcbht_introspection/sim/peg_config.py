@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from rcbht_introspection.config_files import config_path, load_config
+from rcbht_introspection.errors import InputError
 from rcbht_introspection.sim.arm_config import (
     ArmPhysicsConfig,
     ForceLoopConfig,
@@ -122,6 +123,23 @@ class PegSensorConfig(SensorConfig):
     quantization_torque: float = 0.001
 
 
+PEG_FAILURES: tuple[str, ...] = ("hole_yaw",)
+"""The peg task's failure classes."""
+
+
+@dataclass(frozen=True)
+class PegFailureConfig:
+    """The peg task's failure family (`rcbht sim --task peg-in-hole --failures`, `rcbht
+    closed-loop --task peg`), its size drawn uniformly, its sign at random."""
+
+    types: tuple[str, ...] = ("hole_yaw",)
+    """hole_yaw: the hole turned about the vertical beyond the square peg's fit, so the peg
+    lands on the hole's edges and the search or the insertion times out."""
+    hole_yaw: Range = (0.035, 0.07)
+    """Size (rad) of the hole's yaw error: a few degrees beyond the peg's fit (about 0.025 rad),
+    where the peg still drops into the hole's mouth and jams."""
+
+
 @dataclass(frozen=True)
 class PegConfig:
     """Every number of the peg-in-hole simulator, one object per trial set."""
@@ -131,10 +149,26 @@ class PegConfig:
     controller: PegControllerConfig = field(default_factory=PegControllerConfig)
     variation: PegVariationConfig = field(default_factory=PegVariationConfig)
     sensor: PegSensorConfig = field(default_factory=PegSensorConfig)
+    failures: PegFailureConfig = field(default_factory=PegFailureConfig)
     max_attempts: int = 4
     """Draws of one trial until its peg ends in the hole (a failed draw is redrawn)."""
 
 
+def check_peg_config(config: PegConfig) -> None:
+    """Validation: known failure types, a yaw range of two sizes low to high."""
+    fc = config.failures
+    for i, name in enumerate(fc.types):
+        if name not in PEG_FAILURES:
+            known = ", ".join(PEG_FAILURES)
+            raise InputError(
+                f"unknown failure type {name!r} (known: {known})", field=f"failures.types[{i}]"
+            )
+    low, high = fc.hole_yaw
+    if not 0 < low <= high:
+        raise InputError("must be 0 < low <= high", field="failures.hole_yaw")
+
+
 def load_peg_config(path: Path | str | None = None) -> PegConfig:
     """Load config/sim/peg.yaml (or `path`); unknown keys and wrong types give one-line errors."""
-    return load_config(PegConfig, path if path is not None else config_path("sim/peg.yaml"))
+    file = path if path is not None else config_path("sim/peg.yaml")
+    return load_config(PegConfig, file, check=check_peg_config)

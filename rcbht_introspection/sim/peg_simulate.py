@@ -8,18 +8,24 @@ otherwise is redrawn, up to max_attempts (counted in metadata["attempts"]).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
 
+from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim import arm_run
 from rcbht_introspection.sim.arm_run import Wrench, uniform
-from rcbht_introspection.sim.peg_config import PegConfig
+from rcbht_introspection.sim.peg_config import PEG_FAILURES, PegConfig
 from rcbht_introspection.sim.peg_controller import PEG_TASK, PegController, PegPlan, PegState
 from rcbht_introspection.sim.peg_model import GRIP, PegPhysics, build_peg_model
 from rcbht_introspection.sim.sensor import SensorDraw, decimation, draw_sensor, measure
 
+DEPARTURE_NOISE = 3.0
+"""A failure's onset: its wrench departs from its twin's by this many times the sensor's noise."""
+WRENCH_DEPARTURE = "wrench_departure"
+"""The onset rule of the peg task's failures."""
 BOUND_SLACK = 1.0
 """Time (s) added to the sum of the phases' bounds (each may overrun its bound by a step)."""
 PLAN_DRAWS: tuple[str, ...] = (
@@ -41,7 +47,8 @@ PLAN_DRAWS: tuple[str, ...] = (
 def draw_peg_trial(
     config: PegConfig, rng: np.random.Generator
 ) -> tuple[PegPhysics, PegPlan, SensorDraw]:
-    """Sample one trial's hole pose error, friction, controller set-points and sensor errors."""
+    """Sample one trial's hole pose error, friction, controller set-points and sensor errors
+    (a failure's error is drawn after them: draw_peg_failure)."""
     var, cc = config.variation, config.controller
     # a point on a square of Chebyshev radius rho: beyond the chamfer's capture in x or y
     rho = uniform(rng, var.hole_offset)
@@ -61,6 +68,19 @@ def draw_peg_trial(
     plan = PegPlan(start=start, **set_points, ripple_seed=arm_run.draw_seed(rng))
     sensor = draw_sensor(config.sensor, rng, var.bias_force, var.bias_torque, var.noise_scale)
     return physics, plan, sensor
+
+
+def draw_peg_failure(
+    config: PegConfig, physics: PegPhysics, failure: str, rng: np.random.Generator
+) -> tuple[PegPhysics, float]:
+    """The trial's physics with the failure's error added, and that error's yaw (rad): the
+    hole turned by a size in `failures.hole_yaw`, either way."""
+    if failure not in PEG_FAILURES:
+        known = ", ".join(PEG_FAILURES)
+        raise InputError(f"unknown failure type {failure!r} (known: {known})", field="failure")
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    yaw = sign * uniform(rng, config.failures.hole_yaw)
+    return replace(physics, hole_yaw=physics.hole_yaw + math.degrees(yaw)), yaw
 
 
 def max_duration(config: PegConfig) -> float:
@@ -89,7 +109,7 @@ def run_peg_physics(
     max_steps = int(max_duration(config) / rig.dt)
     release = _gripper_release(controller, model, data)
     wrench = rig.run(controller, plan.start, max_steps, release)
-    return wrench, controller.state, _in_hole(config, data)
+    return wrench, controller.state, in_hole(config, data)
 
 
 def _gripper_release(
@@ -105,7 +125,7 @@ def _gripper_release(
     return release
 
 
-def _in_hole(config: PegConfig, data: mujoco.MjData) -> bool:
+def in_hole(config: PegConfig, data: mujoco.MjData) -> bool:
     """True when the peg's tip lies near the hole's floor, inside the hole."""
     g = config.geometry
     peg = data.body("peg").xpos
@@ -116,61 +136,113 @@ def _in_hole(config: PegConfig, data: mujoco.MjData) -> bool:
     return bool(tip < floor + g.chamfer and lateral < g.clearance + 1e-4)
 
 
-def _draw_and_run(
-    config: PegConfig, rng: np.random.Generator
-) -> tuple[tuple[PegPhysics, SensorDraw, Wrench, PegState, bool], bool]:
+@dataclass(frozen=True)
+class PegRun:
+    """One draw of a peg trial and its physics: the failure's yaw error (0 for a nominal)."""
+
+    physics: PegPhysics
+    twin: PegPhysics
+    """The same draw without the failure's error."""
+    plan: PegPlan
+    sensor: SensorDraw
+    raw: Wrench
+    state: PegState
+    inserted: bool
+    failure_yaw: float
+
+
+def draw_and_run(
+    config: PegConfig, rng: np.random.Generator, failure: str | None = None
+) -> tuple[PegRun, bool]:
     """One attempt at a trial: draw it and run its physics; it agrees when the peg ended in the
-    hole without an abort."""
+    hole without an abort (for a nominal trial), or did not (for a failure)."""
     physics, plan, sensor = draw_peg_trial(config, rng)
+    twin, yaw = physics, 0.0
+    if failure is not None:
+        physics, yaw = draw_peg_failure(config, physics, failure, rng)
     raw, state, inserted = run_peg_physics(config, physics, plan)
-    return (physics, sensor, raw, state, inserted), inserted and not state.aborted
+    run = PegRun(physics, twin, plan, sensor, raw, state, inserted, yaw)
+    return run, (inserted and not state.aborted) == (failure is None)
+
+
+def departure_onset(config: PegConfig, run: PegRun) -> float | None:
+    """Where a failure first shows: the first physics step at which its wrench departs from its
+    nominal twin's by more than DEPARTURE_NOISE x the sensor's noise on any axis (None: never)."""
+    twin, _, _ = run_peg_physics(config, run.twin, run.plan)
+    n = min(len(twin), len(run.raw))
+    noise = config.sensor
+    limit = DEPARTURE_NOISE * np.array([noise.noise_force] * 3 + [noise.noise_torque] * 3)
+    apart = np.flatnonzero((np.abs(run.raw[:n] - twin[:n]) > limit).any(axis=1))
+    return float(apart[0] + 1) * config.physics.timestep if len(apart) else None
+
+
+def _failure_record(
+    config: PegConfig, failure: str, run: PegRun, period: float
+) -> dict[str, object]:
+    """meta.json's failure entry: the class, its onset on the sample clock and the hole's error
+    as the peg's against it (the yaw negated), as the snap task records a deviation."""
+    onset = departure_onset(config, run)
+    return {
+        "class": failure,
+        "onset": None if onset is None else arm_run.on_clock(onset, period),
+        "onset_rule": "none" if onset is None else WRENCH_DEPARTURE,
+        "deviation": {"x": 0.0, "y": 0.0, "yaw": round(-run.failure_yaw, 6)},
+    }
 
 
 def _peg_metadata(
     seed: int,
     attempts: int,
     rate: float,
-    physics: PegPhysics,
-    sensor: SensorDraw,
-    state: PegState,
-    inserted: bool,
+    run: PegRun,
+    failure: str | None,
 ) -> dict[str, object]:
     """meta.json of a peg-in-hole trial: its task, the attempts, the outcome and the draw."""
+    physics, state = run.physics, run.state
     return {
         "seed": int(seed),
         "task": PEG_TASK.to_dict(),
         "scenario": "one-arm",
-        "requested": "success",
+        "requested": failure or "success",
         "attempts": attempts,
-        "inserted": inserted,
+        "inserted": run.inserted,
         "aborted": state.aborted,
         "rate_hz": rate,
         "hole_offset": [round(v, 6) for v in physics.hole_offset],
         "hole_yaw_deg": round(physics.hole_yaw, 4),
         "friction_scale": round(physics.friction_scale, 4),
-        "noise_scale": round(sensor.noise_scale, 4),
+        "noise_scale": round(run.sensor.noise_scale, 4),
     }
 
 
 def simulate_peg_trial(
-    config: PegConfig, seed: int, rate_hz: float | None = None, name: str | None = None
+    config: PegConfig,
+    seed: int,
+    rate_hz: float | None = None,
+    name: str | None = None,
+    failure: str | None = None,
 ) -> Trial:
     """Simulate one peg-in-hole trial (deterministic for `seed`) at the sensor's rate (default
-    the config's)."""
+    the config's); `failure` None means a successful insertion."""
     rate = config.sensor.rate_hz if rate_hz is None else rate_hz
     k = decimation(rate, config.physics.timestep)
-    (physics, sensor, raw, state, inserted), attempts = arm_run.redraw_until(
-        seed, config.max_attempts, lambda rng: _draw_and_run(config, rng)
+    run, attempts = arm_run.redraw_until(
+        seed, config.max_attempts, lambda rng: draw_and_run(config, rng, failure)
     )
     noise = arm_run.sensor_rng(seed, attempts)
+    ok = run.inserted and not run.state.aborted
+    metadata = _peg_metadata(seed, attempts, rate, run, failure)
+    outcome = "success" if ok else failure or "failure"
+    if failure is not None and not ok:
+        metadata["failure"] = _failure_record(config, failure, run, 1.0 / rate)
     return arm_run.sensor_trial(
         name or f"sim-peg-{seed}",
-        raw,
+        run.raw,
         k,
         rate,
-        lambda samples, time: {"R": measure(samples, time, config.sensor, sensor, noise)},
-        state.switch_times,
-        "success" if inserted and not state.aborted else "failure",
-        _peg_metadata(seed, attempts, rate, physics, sensor, state, inserted),
-        state.phases,
+        lambda samples, time: {"R": measure(samples, time, config.sensor, run.sensor, noise)},
+        run.state.switch_times,
+        outcome,
+        metadata,
+        run.state.phases,
     )

@@ -52,7 +52,7 @@ SIM_TASK_TABLE: dict[str, SimTask] = {  # keyed by SimTaskName; looked up by any
         None,
     ),
     "peg-in-hole": SimTask(
-        "peg-in-hole", PEG_TASK, "sim/peg.yaml", load_peg_config, ("one-arm",), False, "PEG"
+        "peg-in-hole", PEG_TASK, "sim/peg.yaml", load_peg_config, ("one-arm",), True, "PEG"
     ),
 }
 
@@ -90,7 +90,7 @@ def trial_simulator(
     """The function that simulates one trial of the task with this config, scenario and rate."""
     if isinstance(config, PegConfig) and sim_task.name == "peg-in-hole":
         peg = config
-        return lambda seed, failure, name: simulate_peg_trial(peg, seed, rate_hz, name)
+        return lambda seed, failure, name: simulate_peg_trial(peg, seed, rate_hz, name, failure)
     if isinstance(config, SimConfig) and sim_task.name == "snap-assembly":
         snap = config
         return lambda seed, failure, name: simulate_trial(
