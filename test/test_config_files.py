@@ -133,6 +133,22 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
             ),
         )
     ],
+    "recovery/peg.yaml": [
+        (
+            lambda p: load_recovery_config(path=p),
+            RecoveryConfig(
+                search_step={"yaw": 0.05},
+                classes={
+                    "hole_yaw": ClassRecovery(
+                        "undo_direction",
+                        size={"yaw": 0.07},
+                        candidates=({"yaw": 0.07}, {"yaw": -0.07}),
+                    ),
+                    "anomaly": ClassRecovery("retry"),
+                },
+            ),
+        )
+    ],
     "live.yaml": [(load_live_config, LiveAugmentConfig())],
     "teach.yaml": [(load_teach_config, TeachConfig())],
     "verify.yaml": [(load_verify_config, VerifyConfig())],

@@ -5,18 +5,22 @@ attempts, expected time per success), with the unnecessary aborts on nominal tri
 from __future__ import annotations
 
 import functools
+import math
 import statistics
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from rcbht_introspection.closed_loop.run import TrialRecord, run_trial
+from rcbht_introspection.closed_loop.run import TaskConfig, TaskWorld, TrialRecord, run_trial
 from rcbht_introspection.fleet import parallel_map
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.plan.planner import PolicyName
 from rcbht_introspection.plan.recovery import RecoveryConfig
-from rcbht_introspection.sim.config import FailureType, SimConfig
-from rcbht_introspection.sim.episode import World, draw_world
+from rcbht_introspection.sim.episode import draw_world
+from rcbht_introspection.sim.failures import failure_classes
+from rcbht_introspection.sim.peg_config import PegConfig
+from rcbht_introspection.sim.peg_episode import draw_peg_world
+from rcbht_introspection.sim.peg_simulate import simulate_peg_trial
 from rcbht_introspection.sim.simulate import simulate_trial
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.labels import label_of
@@ -28,6 +32,8 @@ SEED_BLOCK = 100_000
 NOMINAL_OFFSET = 50_000
 TRAIN_OFFSET = 90_000
 """The default verifier's trials: the next seed's block from here (other seeds than any test)."""
+MIN_PER_CLASS = 12
+"""The default verifier's failures per class, at least."""
 MAX_DRAWS_PER_FAILING = 3
 """Worlds drawn at most per failing trial asked for: a class whose draws all seat is counted."""
 Progress = Callable[[int], object]
@@ -38,18 +44,27 @@ class Worlds:
     """The worlds every policy runs: failing ones, nominal ones, and the draws that did not
     fail per requested class (the arm seated them uncorrected)."""
 
-    failing: list[World]
-    nominal: list[World]
+    failing: list[TaskWorld]
+    nominal: list[TaskWorld]
     not_failing: dict[str, int]
 
 
-def _draw(config: SimConfig, item: tuple[int, FailureType | None]) -> World:
+def task_classes(config: TaskConfig) -> tuple[str, ...]:
+    """The failure classes a task's config draws."""
+    if isinstance(config, PegConfig):
+        return config.failures.types
+    return failure_classes(config.failures)
+
+
+def _draw(config: TaskConfig, item: tuple[int, str | None]) -> TaskWorld:
+    if isinstance(config, PegConfig):
+        return draw_peg_world(config, item[0], item[1])
     return draw_world(config, item[0], item[1])
 
 
 def draw_worlds(
-    config: SimConfig,
-    classes: Sequence[FailureType],
+    config: TaskConfig,
+    classes: Sequence[str],
     n_failing: int,
     n_nominal: int,
     seed: int,
@@ -59,7 +74,7 @@ def draw_worlds(
     and counted) and `n_nominal` worlds that seat."""
     draw = functools.partial(_draw, config)
     base = seed * SEED_BLOCK
-    failing: list[World] = []
+    failing: list[TaskWorld] = []
     not_failing: dict[str, int] = {}
     i = 0
     while len(failing) < n_failing and i < MAX_DRAWS_PER_FAILING * n_failing:
@@ -78,16 +93,16 @@ def draw_worlds(
 
 
 def _run(
-    config: SimConfig,
+    config: TaskConfig,
     recovery: RecoveryConfig,
     verifier: VerifierModel | None,
-    item: tuple[World, PolicyName],
+    item: tuple[TaskWorld, PolicyName],
 ) -> TrialRecord:
     return run_trial(config, item[0], item[1], recovery, verifier)
 
 
 def run_policies(
-    config: SimConfig,
+    config: TaskConfig,
     worlds: Worlds,
     policies: Sequence[PolicyName],
     recovery: RecoveryConfig,
@@ -104,24 +119,31 @@ def run_policies(
     return out
 
 
-def _train_trial(config: SimConfig, item: tuple[int, FailureType | None]) -> Trial:
+def _train_trial(config: TaskConfig, item: tuple[int, str | None]) -> Trial:
     seed, failure = item
-    return simulate_trial(config, seed, failure=failure, name=f"TRAIN-{seed}-{failure or 'S'}")
+    name = f"TRAIN-{seed}-{failure or 'S'}"
+    if isinstance(config, PegConfig):
+        return simulate_peg_trial(config, seed, failure=failure, name=name)
+    return simulate_trial(config, seed, failure=failure, name=name)
 
 
 def train_default_verifier(
-    config: SimConfig,
-    classes: Sequence[FailureType],
+    config: TaskConfig,
+    classes: Sequence[str],
     verify_config: VerifyConfig,
     seed: int,
-    per_class: int = 12,
+    per_class: int | None = None,
     successes: int = 40,
     jobs: int = 1,
 ) -> VerifierModel:
     """A verifier trained on simulated trials of the same config on other seeds than any
-    experiment of `seed` runs: `successes` nominal ones and `per_class` of each class."""
+    experiment of `seed` runs: `successes` nominal ones and `per_class` of each class (None:
+    MIN_PER_CLASS, and at least as many failures in all as successes, so a task of few classes
+    learns its directions from as many trials as its detector learns the nominal from)."""
+    if per_class is None:
+        per_class = max(MIN_PER_CLASS, math.ceil(successes / max(1, len(classes))))
     base = (seed + 1) * SEED_BLOCK + TRAIN_OFFSET
-    items: list[tuple[int, FailureType | None]] = [(base + i, None) for i in range(successes)]
+    items: list[tuple[int, str | None]] = [(base + i, None) for i in range(successes)]
     items += [
         (base + successes + k, cls)
         for k, cls in enumerate(c for c in classes for _ in range(per_class))

@@ -9,12 +9,29 @@ from dataclasses import dataclass, field
 from rcbht_introspection.plan.planner import Planner, PolicyName, Report, make_planner
 from rcbht_introspection.plan.recovery import Correction, RecoveryConfig
 from rcbht_introspection.sim.config import SimConfig
-from rcbht_introspection.sim.episode import ARM, Attempt, AttemptEnd, World
+from rcbht_introspection.sim.episode import ARM, Attempt, AttemptEnd, Pose, SteppedAttempt, World
+from rcbht_introspection.sim.peg_config import PegConfig
+from rcbht_introspection.sim.peg_episode import PegAttempt, PegWorld
 from rcbht_introspection.verify.model_file import VerifierModel
 from rcbht_introspection.verify.monitor import VerifierSession
 
 RATE_HZ = 200.0
-"""The simulated sensor's rate (the snap cell's, as `rcbht sim`)."""
+"""The simulated snap sensor's rate (the snap cell's, as `rcbht sim`); the peg task's is its
+config's."""
+TaskConfig = SimConfig | PegConfig
+"""A simulated task's config: the snap assembly's or the peg-in-hole's."""
+TaskWorld = World | PegWorld
+
+
+def start_attempt(
+    config: TaskConfig, world: TaskWorld, correction: Pose, index: int
+) -> SteppedAttempt:
+    """Attempt `index` of the world under a correction, on its task's simulator."""
+    if isinstance(config, PegConfig) and isinstance(world, PegWorld):
+        return PegAttempt(config, world, correction, index, config.sensor.rate_hz)
+    if isinstance(config, SimConfig) and isinstance(world, World):
+        return Attempt(config, world, correction, index, RATE_HZ)
+    raise TypeError(f"a {type(world).__name__} cannot run on a {type(config).__name__}")
 
 
 @dataclass(frozen=True)
@@ -79,8 +96,8 @@ class TrialRecord:
 
 
 def run_trial(
-    config: SimConfig,
-    world: World,
+    config: TaskConfig,
+    world: TaskWorld,
     policy: PolicyName,
     recovery: RecoveryConfig,
     verifier: VerifierModel | None,
@@ -91,9 +108,7 @@ def run_trial(
     record = TrialRecord(world.seed, world.failure or "", policy)
     decision = planner.first()
     while decision.kind == "attempt":
-        attempt = Attempt(
-            config, world, decision.correction.values(), decision.attempt - 1, RATE_HZ
-        )
+        attempt = start_attempt(config, world, decision.correction.values(), decision.attempt - 1)
         session = VerifierSession(verifier) if verifier and planner.reads_verdicts else None
         alarm = _run_attempt(attempt, planner, session)
         assert attempt.end is not None
@@ -104,7 +119,7 @@ def run_trial(
 
 
 def _run_attempt(
-    attempt: Attempt, planner: Planner, session: VerifierSession | None
+    attempt: SteppedAttempt, planner: Planner, session: VerifierSession | None
 ) -> tuple[float | None, str]:
     """Step the attempt to its end, the verifier judging it until the planner aborts; the
     alarm's time and the class the abort named."""

@@ -15,8 +15,8 @@ from rcbht_introspection.fleet import add_parallel_options, backend, jobs_from_a
 
 POLICY_CHOICES = ("none", "retry", "search", "introspect", "oracle")
 """plan.planner.POLICIES, spelled out so that `rcbht --help` imports no engine."""
-TASKS = {"snap": "sim/cell.yaml"}
-"""Task -> its default simulator config (the repeated-program cell of the snap assembly)."""
+TASKS = {"snap": "sim/cell.yaml", "peg": "sim/peg.yaml"}
+"""Task -> its default simulator config (the snap assembly: the repeated-program cell)."""
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -94,18 +94,21 @@ def _classes(all_classes: tuple[str, ...], text: str | None) -> list[str]:
 
 def cmd_closed_loop(args: argparse.Namespace) -> int:
     """Draw the worlds, train or load the verifier, run the policies, write the JSON."""
-    from rcbht_introspection.closed_loop.experiment import draw_worlds
+    from rcbht_introspection.closed_loop.experiment import draw_worlds, task_classes
     from rcbht_introspection.config_files import config_path
     from rcbht_introspection.plan.recovery import load_recovery_config
     from rcbht_introspection.sim import load_sim_config
-    from rcbht_introspection.sim.failures import failure_classes
+    from rcbht_introspection.sim.peg_config import load_peg_config
 
     if args.trials < 0 or args.nominal < 0 or args.trials + args.nominal == 0:
         raise InputError("need at least one trial (--trials, --nominal)", field="trials")
+    if args.ros is not None and args.task != "snap":
+        raise InputError("sim_node runs the snap task only", field="ros")
     policies: list[Any] = _policies(args.policy)
-    config = load_sim_config(args.config or config_path(TASKS[args.task]))
+    load = load_peg_config if args.task == "peg" else load_sim_config
+    config = load(args.config or config_path(TASKS[args.task]))
     recovery = load_recovery_config(args.task, args.recovery)
-    classes = _classes(failure_classes(config.failures), args.classes)
+    classes = _classes(task_classes(config), args.classes)
     jobs = jobs_from_args(args)
     with backend(args.scheduler):
         verifier = _verifier(args, config, classes, policies, jobs)
