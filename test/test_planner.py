@@ -110,18 +110,37 @@ def test_introspect_does_not_abort_a_corrected_attempt_and_halves_an_overshoot()
 
 
 def test_a_missed_correction_moves_by_the_learnt_spread_then_halves() -> None:
-    """An undershoot (the same direction named again) moves on by the spread, an overshoot
-    back; only the class's own axes move, from the steps learnt for it."""
+    """A class whose name carries its side: an undershoot (the same direction named again)
+    moves on by the learnt spread, an overshoot back by half the last step; only the class's
+    own axes move, by the steps learnt for it."""
+    trained_on = {
+        "deviation_by_class": {"deviation_x+": {"size": {"x": 0.002}, "spread": {"x": 0.0005}}}
+    }
+    planner = make_planner("introspect", TABLE, trained_on)
+    planner.first()
+    _abort_on(planner, "deviation_x+", {"x": "+", "r": "-"})
+    assert planner.ended(Report(False, "aborted"), 6.0).correction == Correction(x=-0.002)
+    planner.verdict(5.0, True, "deviation_x+", {"x": "+"})  # still short of the slip
+    third = planner.ended(FAILED, 20.0).correction
+    assert math.isclose(third.x, -0.0025) and third.yaw == 0.0
+    planner.verdict(5.0, True, "deviation_x-", {"x": "-"})  # now beyond it
+    assert math.isclose(planner.ended(FAILED, 20.0).correction.x, -0.0025 + 0.00025)
+
+
+def test_a_side_the_verdict_guessed_is_mirrored_before_it_is_refined() -> None:
+    """A class whose side comes from the verdict (jamming turns either way): named the same
+    way after its correction failed, the other side at the same size comes next, once; then
+    the spread as for any class."""
     trained_on = {"deviation_by_class": {"jamming": {"size": {"r": 0.16}, "spread": {"r": 0.03}}}}
     planner = make_planner("introspect", TABLE, trained_on)
     planner.first()
     _abort_on(planner, "jamming", {"x": "+", "r": "-"})
     assert planner.ended(Report(False, "aborted"), 6.0).correction == Correction(yaw=0.16)
-    planner.verdict(5.0, True, "jamming", {"r": "-"})  # still short of the housing's yaw
-    third = planner.ended(FAILED, 20.0).correction
-    assert math.isclose(third.yaw, 0.19) and third.x == 0.0
-    planner.verdict(5.0, True, "jamming", {"r": "+"})  # now beyond it
-    assert math.isclose(planner.ended(FAILED, 20.0).correction.yaw, 0.19 - 0.015)
+    planner.verdict(5.0, True, "jamming", {"r": "-"})  # the same side again: unconfirmed
+    assert planner.ended(FAILED, 20.0).correction == Correction(yaw=-0.16)
+    planner.verdict(5.0, True, "jamming", {"r": "+"})  # short on the other side
+    assert math.isclose(planner.ended(FAILED, 20.0).correction.yaw, -0.19)
+    assert planner.ended(FAILED, 20.0).kind == "stop"  # TABLE's four attempts are spent
 
 
 def test_a_refinement_yields_to_a_runner_up_worth_more_than_half_the_hypothesis() -> None:

@@ -74,13 +74,19 @@ def _family(failure_class: str) -> str:
     return failure_class.split("_", 1)[0]
 
 
-def _directions(failure_class: str, verdict: Mapping[str, str]) -> dict[str, str]:
-    """A class's directions: its name's signed axes (`deviation_x+y-`), else the verdict's."""
+def _signed(failure_class: str) -> dict[str, str] | None:
+    """The signed axes a class's name carries (`deviation_x+y-`), None when it has none."""
     _, _, dirs = failure_class.partition("_")
     signed = dict(_SIGNED_AXES.findall(dirs))
     if dirs and "".join(f"{a}{d}" for a, d in signed.items()) == dirs:
         return signed
-    return dict(verdict)
+    return None
+
+
+def _directions(failure_class: str, verdict: Mapping[str, str]) -> dict[str, str]:
+    """A class's directions: its name's signed axes (`deviation_x+y-`), else the verdict's."""
+    signed = _signed(failure_class)
+    return dict(verdict) if signed is None else signed
 
 
 def _hypotheses(
@@ -161,6 +167,10 @@ class Planner:
         self.decisions: list[Decision] = []
         self._steps: dict[str, list[float]] = {}
         """Per correction axis, the steps moved along it for the current hypothesis."""
+        self._sides: dict[str, str] = {}
+        """Per correction axis, the direction the verdict named at its first move."""
+        self._mirrored: set[str] = set()
+        """Correction axes already tried on their other side."""
         self._tried: dict[str, int] = {}
         """Per class of a `try` recovery: the candidates tried so far."""
         self._hypotheses: list[Hypothesis] = []
@@ -256,7 +266,10 @@ class Planner:
         refine = same and entry.action == "undo_direction" and any(self._steps.values())
         worth = nxt is None or h.probability * REFINE_SHARE >= nxt.probability
         if refine and worth and named is not None:
-            return self._undo(named[0], entry, self.correction, _directions(*named))
+            dirs = _directions(*named)
+            if _signed(h.failure_class) is None and (other := self._other_side(dirs)):
+                return other
+            return self._undo(named[0], entry, self.correction, dirs)
         tried = self._tried.get(h.failure_class, 0)
         left = len(entry.candidates) - tried if entry.action == "try" or tried else 0
         share = left / len(entry.candidates) if entry.candidates else 0.0
@@ -271,7 +284,7 @@ class Planner:
         """The first correction for hypothesis `h`, from the clean plan: against its directions,
         else its table's next candidate."""
         entry = self.recovery.recovery_of(h.failure_class)
-        self._steps = {}
+        self._steps, self._sides, self._mirrored = {}, {}, set()
         if entry.action == "undo_direction":
             out = self._undo(h.failure_class, entry, Correction(), h.directions)
             if out != Correction() or not entry.candidates:
@@ -284,6 +297,21 @@ class Planner:
                 out = out.moved(axis, value)
             return out
         return Correction()
+
+    def _other_side(self, directions: Mapping[str, str]) -> Correction | None:
+        """The correction mirrored on each axis moved once whose direction the verdict named
+        the same way again: a side read from the verdict, not the class's name, may be a guess
+        the wrench could not confirm, and the other side at the same size is then likelier than
+        a longer move (once per axis; None when no axis qualifies)."""
+        out = self.correction
+        for verdict_axis, axis in VERDICT_AXES.items():
+            if len(self._steps.get(axis, ())) != 1 or axis in self._mirrored:
+                continue
+            if directions.get(verdict_axis) == self._sides.get(axis):
+                out = out.moved(axis, -2.0 * self.correction.get(axis))
+                self._mirrored.add(axis)
+                self._sides[axis] = "+" if self._sides[axis] == "-" else "-"
+        return out if out != self.correction else None
 
     def _undo(
         self,
@@ -303,6 +331,7 @@ class Planner:
                 continue
             if axis not in learnt.size and axis not in entry.size:
                 continue
+            self._sides.setdefault(axis, direction)
             moved = self._steps.setdefault(axis, [])
             if not moved:
                 step = learnt.size.get(axis, entry.size.get(axis, 0.0))
