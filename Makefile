@@ -16,6 +16,7 @@ setup: $(VENV)/.pkg-stamp $(VENV)/.numba-stamp
 # requirements-peers.txt (the `peers` extra: hmmlearn) is resolved together with the rest,
 # so its pins and requirements.txt's cannot disagree.
 $(VENV)/.deps-stamp: requirements.txt requirements-ros.txt requirements-peers.txt
+	@for tool in cmake cc; do command -v $$tool > /dev/null || { 	  echo "make: $$tool not found; building msg_defs needs CMake and a C compiler" 	    "(Debian: apt install cmake build-essential)" >&2; exit 1; }; done
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt \
 	  -r requirements-peers.txt $(PIP_QUIET)
