@@ -26,28 +26,48 @@ def layout_sections(text: str) -> dict[str, str]:
     return sections
 
 
-def missing_modules(text: str, package: Path = PACKAGE) -> list[str]:
-    """Modules of `package` whose name the section of their folder in `text` does not name
-    (a subpackage's modules anywhere below it count in the subpackage's section)."""
-    sections = layout_sections(text)
-    missing = []
+MODULE_NAME = re.compile(r"(?<![\w/.-])(\w+)\.py\b")
+"""A module as layout.md names it: its file name, `name.py` (a prose word is not a module)."""
+
+
+def _modules(package: Path) -> dict[str, set[str]]:
+    """Folder ('' for the package's top level) -> its modules' file stems, a subpackage's
+    deeper modules counted in its top folder."""
+    out: dict[str, set[str]] = {}
     for path in sorted(package.rglob("*.py")):
         rel = path.relative_to(package)
         if rel.name == "__init__.py" or "__pycache__" in rel.parts:
             continue
         folder = rel.parts[0] if len(rel.parts) > 1 else ""
-        words = sections.get(folder, "")
-        if not re.search(rf"(?<![\w/.]){re.escape(rel.stem)}(\.py)?(?!\w)", words):
-            missing.append(str(rel))
-    return missing
+        out.setdefault(folder, set()).add(rel.stem)
+    return out
 
 
-def test_layout_names_every_module() -> None:
-    """Each module's name appears in its folder's entry of docs/layout.md."""
-    assert missing_modules(LAYOUT.read_text()) == []
+def layout_mismatches(text: str, package: Path = PACKAGE) -> tuple[list[str], list[str]]:
+    """(modules of `package` their folder's section in `text` does not name as `name.py`,
+    `name.py` the sections name that are no module of their folder)."""
+    sections = layout_sections(text)
+    modules = _modules(package)
+    missing, unknown = [], []
+    for folder, stems in sorted(modules.items()):
+        named = set(MODULE_NAME.findall(sections.get(folder, "")))
+        missing += [f"{folder}/{s}.py" if folder else f"{s}.py" for s in sorted(stems - named)]
+    for folder, words in sorted(sections.items()):
+        if folder == "(outside)":
+            continue
+        named = set(MODULE_NAME.findall(words))
+        names = sorted(named - modules.get(folder, set()))
+        unknown += [f"{folder}/{n}.py" if folder else f"{n}.py" for n in names]
+    return missing, unknown
 
 
-def test_the_layout_check_sees_a_missing_module() -> None:
-    """Removing a module's name from its folder's entry makes the check fail for it."""
-    text = LAYOUT.read_text().replace("waiting.py", "waits.py")
-    assert missing_modules(text) == ["waiting.py"]
+def test_layout_names_every_module_and_no_other() -> None:
+    """Each module's file name appears in its folder's entry of docs/layout.md, and every file
+    name there is a module of that folder."""
+    assert layout_mismatches(LAYOUT.read_text()) == ([], [])
+
+
+def test_the_layout_check_sees_a_missing_and_an_unknown_module() -> None:
+    """A module named only as a prose word is missing; a file name without a module is unknown."""
+    text = LAYOUT.read_text().replace("waiting.py", "waiting").replace("order.py", "orders.py")
+    assert layout_mismatches(text) == (["waiting.py", "live/order.py"], ["live/orders.py"])
