@@ -12,9 +12,12 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "rcbht_introspection"
-CORE = ("taxonomy", "summaries", "grammar", "learn", "live", "sim", "io", "audit", "plan")
+CORE = (
+    "taxonomy", "summaries", "grammar", "learn", "live", "sim", "io", "audit", "plan", "verify",
+    "peers",
+)  # fmt: skip
 """Subpackages of the pure core (NumPy, SciPy, scikit-learn, MuJoCo; io/ also reads bags with the
-pure-Python rosbags)."""
+pure-Python rosbags; peers/ the anchors' hmmlearn and aeon)."""
 ROS_AND_PLOTTING = frozenset(
     {"rclpy", "matplotlib", "geometry_msgs", "std_msgs", "rcbht_interfaces", "diagnostic_msgs"}
 )
@@ -40,14 +43,27 @@ def _modules() -> dict[str, Path]:
 
 
 def _imports(path: Path) -> set[str]:
-    """Every module name imported by the file (absolute names)."""
+    """Every module name imported by the file (absolute names); a file that calls
+    `import_module` also imports each of the package's modules a string of it names."""
     names = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    tree = ast.parse(path.read_text())
+    loads = False
+    for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
             names.add(node.module)
             names.update(f"{node.module}.{alias.name}" for alias in node.names)
         elif isinstance(node, ast.Import):
             names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.Attribute | ast.Name):
+            loads |= (node.attr if isinstance(node, ast.Attribute) else node.id) == "import_module"
+    if loads:
+        names.update(
+            node.value
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Constant)
+            and isinstance(node.value, str)
+            and node.value.startswith(f"{PACKAGE.name}.")
+        )
     return names
 
 
@@ -154,6 +170,14 @@ def test_the_nodes_use_rclpy_s_public_api_and_decode_no_cdr() -> None:
             private = {m for m in imported if m.startswith(PRIVATE_ROS)}
             decoders = {m for m in imported if m.rsplit(".", 1)[-1] in CDR_DECODERS}
             assert not private | decoders, f"{path.name} imports {sorted(private | decoders)}"
+
+
+def test_modules_loaded_by_name_are_edges_of_the_graph() -> None:
+    """`rcbht` loads its subcommands and `make bench` its benchmarks by name: the graph has
+    those edges, so the rules above hold for what they load."""
+    graph = _graph()
+    assert "rcbht_introspection.commands.closed_loop" in graph["rcbht_introspection.cli"]
+    assert "rcbht_introspection.bench.ros" in graph["rcbht_introspection.bench.__main__"]
 
 
 def test_the_cycle_finder_finds_a_cycle() -> None:

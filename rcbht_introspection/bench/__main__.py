@@ -11,12 +11,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
-import os
-import platform
 import signal
 import sys
 import time
 from pathlib import Path
+
+from rcbht_introspection.bench.machine import machine
 
 BENCHMARKS: tuple[str, ...] = (
     "rcbht_introspection.bench.taxonomy",
@@ -33,25 +33,6 @@ OPTIONAL: tuple[str, ...] = (
     "rcbht_introspection.bench.stops",
     "rcbht_introspection.bench.teach",
 )
-
-
-def machine() -> dict[str, object]:
-    """What the figures were measured on."""
-    cpu = ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return {
-        "cpu": cpu,
-        "cores": os.cpu_count(),
-        "python": platform.python_version(),
-        "platform": platform.platform(),
-        "load_avg_at_start": os.getloadavg(),
-    }
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from rcbht_introspection.bench import ros
-from rcbht_introspection.bench.__main__ import machine
+from rcbht_introspection.bench.machine import machine
 from rcbht_introspection.bench.process_watch import Tracked, process_figures
 from rcbht_introspection.bench.soak_traffic import (
     ARMS,
