@@ -20,7 +20,7 @@ from rcbht_introspection.io.hiro import (
     DROPPED_STATE_TIMES,
     dropped_state_times,
     find_trials,
-    read_state,
+    read_state_times,
     read_trial,
     write_trial,
 )
@@ -56,7 +56,7 @@ def test_state_times_after_the_data_or_out_of_order_are_dropped_and_recorded(
     with pytest.raises(InputError, match=r"R_State\.dat, line 3, field state time: state time out"):
         read_trial(folder, strict=True)
     with pytest.raises(InputError, match="line 3, field state time: state time out of order"):
-        read_state(state)
+        read_state_times(state, strict=True)
     state.write_text("0\n2\n5\n7\n30\n")  # only the extra line after the data: HIRO names stay
     trial = read_trial(folder)
     assert trial.state_times == (0.0, 2.0, 5.0, 7.0) and trial.phases == ()
@@ -211,11 +211,11 @@ def test_duplicate_trial_names_name_both_sources(
 
 
 def test_duplicate_input_bag_names_name_both_paths(tmp_path: Path) -> None:
-    from rcbht_introspection.io.bag_import import ImportOptions, import_bags
+    from rcbht_introspection.io.bag_import import ImportOptions, plan_imports
 
     paths = [tmp_path / "day1" / "run.bag", tmp_path / "day2" / "run.bag"]
     with pytest.raises(InputError, match=f"two input bags are named 'run', {paths[0]} and"):
-        next(import_bags(paths, tmp_path / "out", ImportOptions(phase="/state")))
+        plan_imports(paths, tmp_path / "out", ImportOptions(phase="/state"))[0].run()
 
 
 class _Terminal(io.StringIO):

@@ -377,7 +377,7 @@ def test_phase_csv_relative_and_absolute(tmp_path: Path) -> None:
 
 
 def test_a_csv_folder_serves_several_bags(tmp_path: Path) -> None:
-    from rcbht_introspection.io.bag_import import ImportOptions, import_bags
+    from rcbht_introspection.io.bag_import import ImportOptions, plan_imports
     from rcbht_introspection.io.bags import read_trial_bag
 
     bags = [tagged_bag(tmp_path, seed)[0] for seed in (8, 9)]
@@ -386,16 +386,17 @@ def test_a_csv_folder_serves_several_bags(tmp_path: Path) -> None:
     for bag, t in zip(bags, (1.0, 2.0), strict=True):
         (folder / f"{bag.stem}.csv").write_text(f"time,phase\n0,reach\n{t},insert\n")
     options = ImportOptions(wrench={"R": "/tag_multimodal.wrench_stamped"}, phase_csv=folder)
-    done = list(import_bags(bags, tmp_path / "out", options))
+    planned = plan_imports(bags, tmp_path / "out", options)
+    done = [(p.bag, p.out, p.run()) for p in planned]
     assert [out.name for _, out, _ in done] == ["run8.mcap", "run9.mcap"]
     for (_, out, report), t in zip(done, (1.0, 2.0), strict=True):
         trial = read_trial_bag(out)
         assert trial.phases == ("reach", "insert") and report.phase_counts.end == "appended"
         assert trial.state_times[1] == pytest.approx(t, abs=1e-9)  # a CSV time is kept as given
     with pytest.raises(InputError, match=r"run8\.mcap: exists already"):
-        next(import_bags(bags, tmp_path / "out", options))
+        plan_imports(bags, tmp_path / "out", options)
     with pytest.raises(InputError, match="one CSV for several bags"):
-        next(import_bags(bags, tmp_path / "o2", ImportOptions(phase_csv=folder / "run8.csv")))
+        plan_imports(bags, tmp_path / "o2", ImportOptions(phase_csv=folder / "run8.csv"))
 
 
 def test_resampling_is_linear_interpolation_on_a_fixed_grid(tmp_path: Path) -> None:

@@ -15,6 +15,7 @@ import pytest
 from conftest import SOURCES, golden_or_engine, trial_folders
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from references import compact_raw_features_reference
 
 from rcbht_introspection.grammar.encoding.axes import (
     NUMPY_MIN_WORDS,
@@ -26,7 +27,6 @@ from rcbht_introspection.grammar.encoding.cache import SampleCache as _SampleCac
 from rcbht_introspection.grammar.encoding.compact import (
     VALUE_KEYS,
     compact_raw_features,
-    compact_raw_features_reference,
 )
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
 from rcbht_introspection.io.hiro import read_trial

@@ -8,10 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import SIM_SUCCESS
+from references import resample_labels
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.compact import CompactEncoding
-from rcbht_introspection.grammar.encoding.paper import PaperEncoding, resample_labels
+from rcbht_introspection.grammar.encoding.paper import PaperEncoding
 from rcbht_introspection.grammar.encoding.registry import encoding_from_state
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.learn.data import load_trials

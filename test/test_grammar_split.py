@@ -8,7 +8,7 @@ import pytest
 from conftest import SIM_SUCCESS
 
 from rcbht_introspection.grammar.split import SubtaskSample, split_words, window_sample
-from rcbht_introspection.io.hiro import find_trials, read_state, read_trial
+from rcbht_introspection.io.hiro import find_trials, read_state_times, read_trial
 from rcbht_introspection.io.rcbht_format import read_trial_words
 from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level, TrialWords, Word
@@ -75,7 +75,7 @@ def test_golden_split_conserves_duration_and_count(hiro_data: Path) -> None:
     rotation sub-task is not empty."""
     trial = hiro_data / "REAL_HIRO_ONE_SA_SUCCESS" / "20121127-HIROSA-S-30"
     words = read_trial_words(trial / "golden", levels=LEVELS)
-    state = read_state(trial / "R_State.dat")
+    state = read_state_times(trial / "R_State.dat", strict=True).times
     end = max(w.end for w in words.axis_words("R", Level.BEHAVIOR, "Fx"))
     parts = split_words(words, state, end)
     assert len(parts) == 4 and parts[1].duration == pytest.approx(0.005)

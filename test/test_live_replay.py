@@ -17,7 +17,7 @@ from rcbht_introspection.io.trial import SUBTASKS
 from rcbht_introspection.learn.data import load_samples, load_trials
 from rcbht_introspection.learn.live import (
     LiveAugmentConfig,
-    live_samples,
+    live_windows,
     load_live_config,
     sample_times,
     stream_factory,
@@ -156,7 +156,8 @@ def test_beliefs_and_task_state_do_not_depend_on_how_inputs_are_grouped(case: di
 def test_live_samples_hold_only_words_final_by_t_inside_the_window(case: dict) -> None:
     streamed, config = case["streamed"], case["config"]
     release = {(w.arm, w.level, w.axis, w.seq): t for t, w in streamed.released()}
-    samples = live_samples(streamed, config)
+    boundary_windows, moving_windows = live_windows(streamed, config)
+    samples = boundary_windows + moving_windows
     starts = {name: start for name, start, _ in streamed.subtask_windows()}
     boundary = [s for s in samples if s.start == starts[s.subtask]]
     window = [s for s in samples if s.start != starts[s.subtask]]

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from rcbht_introspection.cli import main
-from rcbht_introspection.io.conformance import compare_trial, first_difference
+from rcbht_introspection.io.conformance import compare_arms, first_difference
 from rcbht_introspection.io.hiro import find_trials, read_trial
 from rcbht_introspection.io.rcbht_format import level_path, read_records, read_words
 from rcbht_introspection.taxonomy.batch import label_trial
@@ -23,7 +23,7 @@ def test_every_composites_and_llbehaviors_file_is_identical(hiro_data: Path, dat
     diffs = []
     total = 0
     for folder in trials:
-        for level, axis, diff in compare_trial(folder, label_trial(read_trial(folder))):
+        for _, level, axis, diff in compare_arms(folder, label_trial(read_trial(folder))):
             total += 1
             if diff is not None:
                 diffs.append(f"{folder.name} {level.value} {axis}: {diff}")
@@ -106,7 +106,7 @@ def test_failure_trials_made_by_the_reference_code_state(hiro_data: Path, trial:
     folder = hiro_data / "REAL_HIRO_ONE_SA_ERROR_CHARAC" / trial
     diffs = [
         (level.value, axis, diff)
-        for level, axis, diff in compare_trial(folder, label_trial(read_trial(folder)))
+        for _, level, axis, diff in compare_arms(folder, label_trial(read_trial(folder)))
         if level is Level.COMPOSITION and diff is not None
     ]
     assert diffs == []

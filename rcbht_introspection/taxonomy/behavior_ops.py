@@ -13,7 +13,7 @@ from rcbht_introspection.taxonomy import behaviors as bh
 from rcbht_introspection.taxonomy import compositions as mc
 from rcbht_introspection.taxonomy import primitives as pr
 from rcbht_introspection.taxonomy.config import TaxonomyConfig
-from rcbht_introspection.taxonomy.ops import BufferedOp, Op, PairPass, Row, label_in, run_ops
+from rcbht_introspection.taxonomy.ops import BufferedOp, Op, PairPass, Row, label_in
 
 
 class ComposeBehaviors(BufferedOp):
@@ -276,8 +276,3 @@ def refinement_cycle(config: TaxonomyConfig) -> list[Op]:
             end=bh.B_T2E,
         ),
     ]
-
-
-def compose_behaviors(mcs: list[Row], config: TaxonomyConfig) -> list[Row]:
-    """llbehComposition's scan on a whole axis (before refinement)."""
-    return run_ops([ComposeBehaviors(config)], mcs)

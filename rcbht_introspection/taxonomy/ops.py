@@ -16,7 +16,7 @@ step 3 (final once that pass stops).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from rcbht_introspection.taxonomy.compositions import state_limits
@@ -255,12 +255,3 @@ def label_in(*labels: int, field: int) -> Callable[[Row], bool]:
 def run_ops(ops: list[Op], rows: list[Row]) -> list[Row]:
     """Push a whole list through operators and finish: a pass applied to a complete sequence."""
     return Chain(ops).run_all(rows)
-
-
-def whole_context(
-    config: TaxonomyConfig, state_times: Sequence[float], end_time: float
-) -> StreamContext:
-    """The context of a complete trial (every boundary and the end known)."""
-    return StreamContext(
-        config, boundaries=list(state_times), now=math.inf, ended=True, end_time=end_time
-    )

@@ -2,8 +2,8 @@
 
 Two paths give bit-identical floats: NumPy over long sequences, plain Python with per-label keys
 over short ones (NumPy's fixed cost dominates there); every sum is taken in the word order of
-the plain definition (compact.compact_raw_features_reference). A running window owns an
-AxisMemo (the belief tracker keeps one per stream) and hands it to the encoding explicitly.
+the plain definition (compact_raw_features_reference in test/references.py). A running window
+owns an AxisMemo (the belief tracker keeps one per stream) and hands it to the encoding explicitly.
 """
 
 from __future__ import annotations

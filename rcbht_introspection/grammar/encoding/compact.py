@@ -7,7 +7,6 @@ ranking (selection.py), the rest are min-max scaled with bounds fixed at fit tim
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -19,7 +18,7 @@ from numpy.typing import NDArray
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.grammar.encoding.axes import AxisMemo, add_axis_features
 from rcbht_introspection.grammar.encoding.cache import SampleCache
-from rcbht_introspection.grammar.encoding.labels import LABEL_ALIASES, sample_arms
+from rcbht_introspection.grammar.encoding.labels import sample_arms
 from rcbht_introspection.grammar.encoding.selection import pairwise_selection
 from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.taxonomy.words import AXES, LEVELS, Level
@@ -58,44 +57,6 @@ def compact_raw_features(
                     features.update(memo.features(prefix, words, value_key))
                 else:
                     add_axis_features(features, prefix, words, value_key)
-    return features
-
-
-def compact_raw_features_reference(sample: SubtaskSample, arms: Sequence[str]) -> dict[str, float]:
-    """The plain per-word definition of `compact_raw_features` (kept as its test oracle)."""
-    features: dict[str, float] = {}
-    duration = max(sample.duration, 0.0)
-    features["log_duration"] = math.log(max(duration, MIN_DURATION))
-    for arm in arms:
-        for level in LEVELS:
-            value_key = VALUE_KEYS[level]
-            for axis in AXES:
-                words = sorted(sample.words.axis_words(arm, level, axis), key=lambda w: w.start)
-                prefix = f"{arm}/{level.value}/{axis}/"
-                if not words:
-                    continue
-                labels = [LABEL_ALIASES.get(w.label.strip(), w.label.strip()) for w in words]
-                spans = [max(w.end - w.start, 0.0) for w in words]
-                total = sum(spans)
-                weights = spans if total > 0 else [1.0] * len(words)
-                wsum = sum(weights)
-                features[prefix + "n_words"] = math.log1p(len(words))
-                for label, weight in zip(labels, weights, strict=True):
-                    key = prefix + "count:" + label
-                    features[key] = features.get(key, 0.0) + 1.0
-                    key = prefix + "frac:" + label
-                    features[key] = features.get(key, 0.0) + weight / wsum
-                for a, b in itertools.pairwise(labels):
-                    key = prefix + f"bigram:{a}>{b}"
-                    features[key] = features.get(key, 0.0) + 1.0
-                mean = sum(
-                    w.features.get(value_key, 0.0) * wt
-                    for w, wt in zip(words, weights, strict=True)
-                )
-                features[prefix + "mean_value"] = mean / wsum
-    for key in list(features):
-        if "/count:" in key or "/bigram:" in key:
-            features[key] = math.log1p(features[key])
     return features
 
 

@@ -41,15 +41,6 @@ def _axis_label_arrays(
     return label_arrays(sample.words.axis_words(arm, level, axis), level)
 
 
-def resample_labels(words: Sequence[Word], level: Level, n: int) -> np.ndarray:
-    """Spec 3 'slice_and_find_mode': n equal-duration bins, each the label covering it longest.
-
-    Times run from the first word's start to the last word's end (words sorted by start);
-    ties go to the label that appears first. An empty sequence gives -1 everywhere.
-    """
-    return resample_arrays(*label_arrays(words, level), n)
-
-
 def resample_arrays(starts: np.ndarray, ends: np.ndarray, codes: np.ndarray, n: int) -> np.ndarray:
     """resample_labels on the output of label_arrays (lets callers cache the label arrays)."""
     out = np.full(n, -1.0)
