@@ -231,3 +231,61 @@ def test_the_length_check_sees_a_long_function() -> None:
 
     assert _long_functions(function("f", MAX_FUNCTION_LINES + 1)) == [("f", 61)]
     assert _long_functions(function("g", MAX_FUNCTION_LINES)) == []
+
+
+DOCS = PACKAGE.parent / "docs"
+
+
+def _names_used(tree: ast.AST) -> list[str]:
+    """Every name a module uses: loads, attributes, imports and identifier strings."""
+    out: list[str] = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name):
+            out.append(node.id)
+        elif isinstance(node, ast.Attribute):
+            out.append(node.attr)
+        elif isinstance(node, ast.alias):
+            out.append(node.name.rsplit(".", 1)[-1])
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+            out.append(node.value)
+    return out
+
+
+def unused_public_names(sources: dict[str, str], docs: str) -> list[str]:
+    """Public top-level functions and classes nothing in `sources` uses (an `__all__` entry is
+    no use) and `docs` does not describe: dead, or helpers only the tests call."""
+    trees = {name: ast.parse(text) for name, text in sources.items()}
+    used: dict[str, int] = {}
+    for tree in trees.values():
+        for n in _names_used(tree):
+            used[n] = used.get(n, 0) + 1
+    out = []
+    for module, tree in sorted(trees.items()):
+        exported = [
+            e.value
+            for node in tree.body
+            if isinstance(node, ast.Assign)
+            and any(isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets)
+            and isinstance(node.value, ast.List | ast.Tuple)
+            for e in node.value.elts
+            if isinstance(e, ast.Constant)
+        ]
+        for node in tree.body:
+            if not isinstance(node, ast.FunctionDef | ast.ClassDef) or node.name.startswith("_"):
+                continue
+            uses = used.get(node.name, 0) - exported.count(node.name)
+            if uses <= 0 and f"`{node.name}" not in docs:
+                out.append(f"{module}.{node.name}")
+    return out
+
+
+def test_every_public_function_has_a_caller_or_is_documented() -> None:
+    sources = {name: path.read_text() for name, path in _modules().items()}
+    docs = "\n".join(p.read_text() for p in sorted(DOCS.glob("*.md")))
+    assert unused_public_names(sources, docs) == []
+
+
+def test_the_unused_name_check_sees_a_helper_only_tests_call() -> None:
+    sources = {"m": "def used():\n    pass\n\n\ndef helper():\n    used()\n", "n": "import m\n"}
+    assert unused_public_names(sources, "") == ["m.helper"]
+    assert unused_public_names(sources, "`helper(x)` does ...") == []
