@@ -289,3 +289,14 @@ def test_the_unused_name_check_sees_a_helper_only_tests_call() -> None:
     sources = {"m": "def used():\n    pass\n\n\ndef helper():\n    used()\n", "n": "import m\n"}
     assert unused_public_names(sources, "") == ["m.helper"]
     assert unused_public_names(sources, "`helper(x)` does ...") == []
+
+
+def test_no_module_changes_scikit_learn_s_global_config() -> None:
+    """scikit-learn's config is process-wide: a node or library that sets it changes every other
+    estimator of the process; `config_context` scopes it to the calls that need it."""
+    setters = [
+        name
+        for name, path in _modules().items()
+        if "set_config" in _names_used(ast.parse(path.read_text()))
+    ]
+    assert setters == []

@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
+import sklearn
 
 from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
@@ -277,13 +278,16 @@ class BeliefTracker:
             return belief(UNKNOWN, (0.0,) * len(self.classes))  # no wrench of its own yet
         memo = {"memo": self._axis_memo} if getattr(model, "takes_axis_memo", False) else {}
         try:
-            proba = self._in_class_order(model, model.predict_proba_samples([sample], **memo))
-            if final:
-                # a verdict is the model's own prediction (as offline evaluation uses it), which
-                # for a probabilistic SVM need not be the arg-max of its probabilities
-                verdict = str(model.predict_samples([sample], **memo)[0])
-            else:
-                verdict = self.classes[int(np.argmax(proba))]  # live: one model call
+            # one sample at a time: scikit-learn's per-call checks cost more than the prediction
+            # (the features are finite by construction); only for these calls, not globally
+            with sklearn.config_context(assume_finite=True, skip_parameter_validation=True):
+                proba = self._in_class_order(model, model.predict_proba_samples([sample], **memo))
+                if final:
+                    # a verdict is the model's own prediction (as offline evaluation uses it),
+                    # which for a probabilistic SVM need not be the arg-max of its probabilities
+                    verdict = str(model.predict_samples([sample], **memo)[0])
+                else:
+                    verdict = self.classes[int(np.argmax(proba))]  # live: one model call
         except Exception as exc:  # a bad model must not stop the node
             self.last_error = f"{type(exc).__name__}: {exc}"
             return belief(UNKNOWN, (0.0,) * len(self.classes))

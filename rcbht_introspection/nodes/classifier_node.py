@@ -15,7 +15,6 @@ import time
 from functools import partial
 from pathlib import Path
 
-import sklearn
 from rcbht_interfaces.msg import Belief as BeliefMsg
 from rcbht_interfaces.msg import Phase as PhaseMsg
 from rcbht_interfaces.msg import TeachRequest as TeachRequestMsg
@@ -53,8 +52,6 @@ class ClassifierNode(ManagedNode):
 
     def __init__(self) -> None:
         super().__init__("classifier_node", ClassifierConfig)
-        # predictions on one sample at a time: skip sklearn's per-call input validation
-        sklearn_fast_predict()
         self.counts: dict[str, int] = {}  # kept across reconfigures (live/classifier.COUNTS)
         self.watch = CounterWatch()
         self.latency = LatencyWindow()
@@ -309,11 +306,6 @@ class ClassifierNode(ManagedNode):
 
     def publish_state(self) -> None:
         self.state_pub.publish(String(data=self.session.state.state))
-
-
-def sklearn_fast_predict() -> None:
-    """Per-sample predictions: skip scikit-learn's input validation (features are finite)."""
-    sklearn.set_config(assume_finite=True, skip_parameter_validation=True)
 
 
 def main(args: list[str] | None = None, stop: StopSignal | None = None) -> int:
