@@ -15,6 +15,7 @@ import pytest
 from conftest import SIM_SUCCESS
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from sklearn.base import clone
 from sklearn.ensemble import RandomForestClassifier
 from sklearn.linear_model import LogisticRegression
 from sklearn.preprocessing import StandardScaler
@@ -29,6 +30,7 @@ from rcbht_introspection.summaries.windows import to_panel
 from rcbht_introspection.verify.characterise import (
     FAILURE,
     Characteriser,
+    Constant,
     RunningEvidence,
     _shared_by_signs,
     class_head,
@@ -562,6 +564,18 @@ def test_a_verifier_file_keeps_the_heads_of_a_class(trained: VerifierModel, tmp_
     assert loaded is not None and set(loaded.heads_) == set(ch.heads_)
     for row in ([0.0, 1.0, 0.0], [0.0, -1.0, 0.3], [10.0, 0.0, 0.0]):
         assert loaded.predict(np.array(row)) == ch.predict(np.array(row))
+
+
+def test_a_constant_head_s_parameters_are_scikit_learn_s() -> None:
+    """get_params as BaseEstimator defines it (deep or not), so clone and set_params work."""
+    head = Constant("deviation_x+", 7)
+    assert (
+        head.get_params()
+        == head.get_params(deep=False)
+        == {"only": "deviation_x+", "n_features": 7}
+    )
+    copy = clone(head).set_params(n_features=9)
+    assert copy.get_params() == {"only": "deviation_x+", "n_features": 9}
 
 
 def test_direction_signs_share_the_deviation_classes_mass() -> None:

@@ -29,7 +29,6 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 from sklearn.base import BaseEstimator
@@ -274,11 +273,9 @@ class Constant(ForestHead):
     def __init__(self, only: str = "", n_features: int = 0) -> None:
         super().__init__()
         self.only = only
+        self.n_features = n_features
         self.classes_ = np.array([only], dtype=str)
         self.n_features_in_ = n_features
 
     def predict_proba(self, X: np.ndarray) -> np.ndarray:
         return np.ones((len(np.atleast_2d(X)), 1))
-
-    def get_params(self, deep: bool = True) -> dict[str, Any]:
-        return {"only": self.only, "n_features": self.n_features_in_}
