@@ -300,3 +300,58 @@ def test_no_module_changes_scikit_learn_s_global_config() -> None:
         if "set_config" in _names_used(ast.parse(path.read_text()))
     ]
     assert setters == []
+
+
+def foreign_private_writes(source: str) -> list[str]:
+    """Assignments to a private attribute (`x._name`) of an object that is neither `self` /
+    `cls` nor made in the same method by the enclosing class: another library's internals."""
+    found = []
+    for cls in (n for n in ast.walk(ast.parse(source)) if isinstance(n, ast.ClassDef)):
+        for fn in (n for n in cls.body if isinstance(n, ast.FunctionDef)):
+            own = {"self", "cls"}
+            for node in ast.walk(fn):
+                if isinstance(node, ast.Assign) and isinstance(node.value, ast.Call):
+                    made = ast.unparse(node.value.func)
+                    if made in (cls.name, "cls", "type(self)"):
+                        own |= {t.id for t in node.targets if isinstance(t, ast.Name)}
+            found += _private_writes(fn, own)
+    return found
+
+
+def _private_writes(fn: ast.FunctionDef, own: set[str]) -> list[str]:
+    out = []
+    for node in ast.walk(fn):
+        if not isinstance(node, ast.Assign | ast.AugAssign | ast.AnnAssign):
+            continue
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+        for target in (t for tt in targets for t in ast.walk(tt)):
+            if (
+                isinstance(target, ast.Attribute)
+                and target.attr.startswith("_")
+                and not target.attr.startswith("__")
+                and not (isinstance(target.value, ast.Name) and target.value.id in own)
+            ):
+                out.append(f"{fn.name}: {ast.unparse(target)}")
+    return out
+
+
+def test_no_module_sets_another_library_s_private_attributes() -> None:
+    writes = {
+        name: found
+        for name, path in _modules().items()
+        if (found := foreign_private_writes(path.read_text()))
+    }
+    assert writes == {}
+
+
+def test_the_private_write_check_sees_a_foreign_one() -> None:
+    source = (
+        "class Head:\n"
+        "    @classmethod\n"
+        "    def load(cls):\n"
+        "        head = cls()\n"
+        "        head._ok = 1\n"
+        "        mr = MiniRocket()\n"
+        "        mr._n_jobs = 1\n"
+    )
+    assert foreign_private_writes(source) == ["load: mr._n_jobs"]

@@ -102,16 +102,18 @@ class ShapeHead(BaseEstimator):  # type: ignore[misc]
 
         head = cls(**params)
         kinds = (np.int32, np.int32, np.int32, np.int32, np.float32)
+        n_channels = int(arrays["n_channels"])
         mr = MiniRocket(n_kernels=head.n_kernels, n_jobs=1, random_state=head.random_state)
+        # aeon's public fit sets its fitted state; the kernels' parameters are then the file's
+        mr.fit(np.zeros((2, n_channels, head.n_points), dtype=np.float32))
         mr.parameters = tuple(
             np.asarray(arrays[k], dtype=t) for k, t in zip(PARAMETERS, kinds, strict=True)
         )
-        mr.n_kernels_, mr._n_jobs, mr.is_fitted = max(head.n_kernels, 84), 1, True
         head.transform_ = mr
         head.mean_, head.scale_ = np.asarray(arrays["mean"]), np.asarray(arrays["scale"])
         coef, intercept = np.asarray(arrays["coef"]), np.asarray(arrays["intercept"])
         head.classes_ = np.asarray(classes, dtype=str)
-        head.n_channels_ = int(arrays["n_channels"])
+        head.n_channels_ = n_channels
         n = len(head.mean_)
         if head.scale_.shape != (n,) or coef.shape[1:] != (n,):
             raise ValueError("the shape head's arrays do not match its features")
