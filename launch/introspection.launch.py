@@ -63,6 +63,8 @@ def launch_nodes(context: LaunchContext) -> list[Node]:
     model_file = LaunchConfiguration("model_file").perform(context)
     if model_file:
         classifier["model_file"] = os.path.abspath(os.path.expanduser(model_file))
+        if os.path.isfile(classifier["model_file"]):  # a teaching cold start has none yet
+            segmenter["taxonomy_model_file"] = classifier["model_file"]  # the model's profile
     # Plain Node actions: the nodes are lifecycle nodes whose `autostart` parameter (default
     # true) takes them to active by themselves; set autostart: false to drive the transitions.
     verifier_file = LaunchConfiguration("verifier_file").perform(context)
@@ -105,7 +107,8 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument(
                 "model_file",
                 default_value="",
-                description="model file written by `rcbht train` (empty: as in classifier_params)",
+                description="model file written by `rcbht train` (empty: as in classifier_params); "
+                "an existing one is also the segmenter's taxonomy_model_file",
             ),
             DeclareLaunchArgument(
                 "verifier",

@@ -1,6 +1,7 @@
 """`rcbht calibrate` (taxonomy/calibration.py): a profile for a noisy 100 Hz sensor, made at test
 time, where the default profile cuts a primitive at almost every window; the profile file's
-round trip; its use by label, train, the live stream factory; and HIRO kept close."""
+round trip; its use by label, train, the live stream factory; the model file that carries it to
+live-eval and segmenter_node; and HIRO kept close."""
 
 from __future__ import annotations
 
@@ -20,6 +21,12 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.data import load_trial_samples
 from rcbht_introspection.learn.model_file import load_model
 from rcbht_introspection.live.segmenter import arm_stream_factory
+from rcbht_introspection.nodes.params import (
+    SegmenterConfig,
+    config_from_parameters,
+    defaults,
+    segmenter_taxonomy,
+)
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.calibration import (
     MAX_CUT_FRACTION,
@@ -85,6 +92,19 @@ def dataset(trials: list[Trial], tmp_path_factory: pytest.TempPathFactory) -> Pa
     for trial in trials:
         write_trial(trial, root / trial.name)
     return root
+
+
+@pytest.fixture(scope="module")
+def calibrated_model(
+    dataset: Path, calibration: Calibration, tmp_path_factory: pytest.TempPathFactory
+) -> tuple[Path, Path]:
+    """The calibrated profile's file, and the model `rcbht train --taxonomy-config` makes with it."""
+    folder = tmp_path_factory.mktemp("calibrated_model")
+    profile = write_taxonomy_config(calibration.config, folder / "robot.yaml")
+    model = folder / "model.rcbht"
+    train = ["train", str(dataset), "--out", str(model), "--no-live-augment"]
+    assert main([*train, "--taxonomy-config", str(profile)]) == 0
+    return profile, model
 
 
 # --------------------------------------------------------------------------- the table
@@ -241,9 +261,9 @@ def test_rcbht_calibrate_writes_the_profile_and_the_report(
 
 
 def test_label_and_train_take_the_calibrated_file(
-    dataset: Path, calibration: Calibration, tmp_path: Path
+    dataset: Path, calibration: Calibration, calibrated_model: tuple[Path, Path], tmp_path: Path
 ) -> None:
-    profile = write_taxonomy_config(calibration.config, tmp_path / "robot.yaml")
+    profile, model = calibrated_model
     folder = find_trials([dataset])[0]
     out = tmp_path / "words"
     args = ["label", str(folder), "--out", str(out), "--format", "jsonl"]
@@ -253,12 +273,11 @@ def test_label_and_train_take_the_calibrated_file(
     n = sum(len(expected.axis_words("R", Level.PRIMITIVE, a)) for a in AXES)
     assert sum(r["level"] == "primitive" for r in records) == n
 
-    model = tmp_path / "model.rcbht"
-    train = ["train", str(dataset), "--out", str(model), "--no-live-augment"]
-    assert main([*train, "--taxonomy-config", str(profile)]) == 0
-    trained = load_model(model)
+    trained = load_model(model)  # `rcbht train --taxonomy-config`: the fixture
     assert trained.taxonomy_profile == "noisy_sensor"
     assert trained.taxonomy_sha256 == taxonomy_digest(calibration.config)
+    assert trained.taxonomy == calibration.config  # the whole profile travels in the file
+    assert trained.live is not None and trained.live.taxonomy == calibration.config
 
     curve = tmp_path / "curve.json"
     evaluate = ["evaluate", str(dataset), "--permutations", "1", "--validation-trials", "2"]
@@ -266,6 +285,55 @@ def test_label_and_train_take_the_calibrated_file(
     evaluate += ["--no-progress", "--json", str(curve), "--taxonomy-config", str(profile)]
     assert main(evaluate) == 0
     assert json.loads(curve.read_text())["taxonomy_profile"] == "noisy_sensor"
+
+
+def test_live_eval_labels_with_the_profile_the_model_carries(
+    dataset: Path,
+    calibrated_model: tuple[Path, Path],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """`rcbht live-eval --model` without a profile option replays the held-out trial as with the
+    calibrated profile's file given; another profile is refused, in one line."""
+    profile, model = calibrated_model
+    args = ["live-eval", str(dataset), "--held-out", "1", "--model", str(model)]
+    args += ["--mode", "boundary"]
+    runs = {}
+    for name, given in (("carried", []), ("given", ["--taxonomy-config", str(profile)])):
+        out = tmp_path / f"{name}.json"
+        assert main([*args, *given, "--json", str(out)]) == 0
+        runs[name] = json.loads(out.read_text())
+    assert {run["taxonomy_profile"] for run in runs.values()} == {"noisy_sensor"}
+    carried, given = (runs[k]["results"]["model/boundary"] for k in ("carried", "given"))
+    assert carried["timelines"] == given["timelines"]
+    assert carried["time_accuracy"] == given["time_accuracy"] > 0
+    capsys.readouterr()
+    assert main([*args, "--profile", "reference"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "trained on words of taxonomy profile 'noisy_sensor'" in err and "\n" not in err, err
+
+
+def test_segmenter_node_takes_the_profile_from_its_model_file(
+    calibration: Calibration, calibrated_model: tuple[Path, Path]
+) -> None:
+    """segmenter_node's taxonomy parameters: the model file alone gives the profile it carries,
+    the same profile named beside it too; another profile is refused naming the file."""
+    profile, model = calibrated_model
+
+    def labels_with(**parameters: str) -> object:
+        values = {**defaults(SegmenterConfig), **parameters}
+        return segmenter_taxonomy(config_from_parameters(SegmenterConfig, values))
+
+    assert labels_with(taxonomy_model_file=str(model)) == calibration.config
+    both = {"taxonomy_model_file": str(model), "taxonomy_config_file": str(profile)}
+    assert labels_with(**both) == calibration.config
+    assert labels_with(taxonomy_config_file=str(profile)) == calibration.config
+    assert labels_with() == default_config()
+    with pytest.raises(InputError) as info:
+        labels_with(taxonomy_model_file=str(model), taxonomy_profile="reference")
+    message = str(info.value)
+    assert message.startswith(f"{model}: the model was trained on words of taxonomy profile "
+                              "'noisy_sensor'") and "\n" not in message  # fmt: skip
 
 
 def test_golden_words_are_the_reference_profiles_only(

@@ -288,6 +288,14 @@ def test_launch_arguments_reach_the_nodes(
     classifier = next(n for n in nodes if n.executable == "classifier_node")
     assert classifier.parameters[0] == str(params_file)
     assert classifier.parameters[-1]["model_file"] == "/data/model.rcbht"
+    segmenter = next(n for n in nodes if n.executable == "segmenter_node")
+    assert len(segmenter.parameters) == 1  # no file there yet (a teaching cold start)
+    model = tmp_path / "model.rcbht"
+    model.write_bytes(b"")
+    nodes = launch(LAUNCH_FILE, model_file=str(model))
+    segmenter = next(n for n in nodes if n.executable == "segmenter_node")
+    assert segmenter.parameters[-1] == {"taxonomy_model_file": str(model)}  # the model's profile
+    assert node_parameters(nodes, install)["segmenter_node"]["taxonomy_model_file"] == str(model)
 
 
 @pytest.mark.parametrize(

@@ -1,6 +1,6 @@
 """Sub-task models on golden words of REAL trials and on the engine's words of generated trials:
-training, the safe model file (round trip, tampering, wrong version, wrong encoding), online
-updates, and the near-empty rotation sub-task (REAL only)."""
+training, the safe model file (round trip, tampering, wrong version, wrong encoding, the taxonomy
+profile it carries), online updates, and the near-empty rotation sub-task (REAL only)."""
 
 from __future__ import annotations
 
@@ -17,13 +17,19 @@ from rcbht_introspection.grammar.split import SubtaskSample, prefix_sample
 from rcbht_introspection.io.hiro import find_trials
 from rcbht_introspection.io.safe_file import checksum
 from rcbht_introspection.learn.data import load_samples, load_trials
-from rcbht_introspection.learn.model_file import load_model, save_model
+from rcbht_introspection.learn.model_file import (
+    load_model,
+    model_file_taxonomy,
+    model_taxonomy,
+    save_model,
+)
 from rcbht_introspection.learn.models import (
     RUNNING_PREFIXES,
     VERDICT_TREES,
     train_model,
     with_prefixes,
 )
+from rcbht_introspection.taxonomy.config import default_config, taxonomy_digest
 
 REAL = "REAL_HIRO_ONE_SA_SUCCESS"
 # S-01..S-21 have a long rotation, S-22..S-46 a 5 ms one: take both kinds
@@ -251,6 +257,89 @@ def test_bad_model_files_give_one_line_errors(
         load_model(path, expect_encoding="paper")
     with pytest.raises(InputError, match="not found"):
         load_model(tmp_path / "missing.npz")
+
+
+STIFF = dataclasses.replace(
+    default_config(),
+    profile="stiff_sensor",
+    window=7,
+    fit_threshold=0.95,
+    fit_noise_floor={"Fz": 0.02},
+    calibrated_thresholds={"Fz": (90.0, 60.0, 30.0, 2.0, -2.0, -30.0, -60.0, -90.0)},
+)
+"""A profile as `rcbht calibrate` writes one: another window, fit rule, noise floor, Fz spectrum."""
+
+
+@pytest.fixture(scope="module")
+def stiff_model(sim_samples: Samples, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A model file trained with STIFF (and a running head)."""
+    train, _ = sim_samples
+    model = train_model(train, "svm", "compact", running_prefixes=(0.5,), taxonomy=STIFF)
+    return save_model(model, tmp_path_factory.mktemp("stiff") / "stiff.rcbht")
+
+
+def test_the_model_file_carries_the_profile_it_was_trained_with(
+    stiff_model: Path, tmp_path: Path
+) -> None:
+    """The profile is embedded (running head too) and labels the model's words unless another is
+    given, which is refused; a file without it (older) records only name and digest."""
+    loaded = load_model(stiff_model)
+    assert loaded.taxonomy == STIFF and loaded.live is not None and loaded.live.taxonomy == STIFF
+    assert (loaded.taxonomy_profile, loaded.taxonomy_sha256) == (
+        "stiff_sensor",
+        taxonomy_digest(STIFF),
+    )
+    assert model_taxonomy(loaded) == STIFF == model_file_taxonomy(stiff_model)
+    renamed = dataclasses.replace(STIFF, profile="other")  # the same values: the same words
+    assert model_file_taxonomy(stiff_model, renamed) == renamed
+    for refuse in (lambda: model_taxonomy(loaded, default_config(), stiff_model),
+                   lambda: model_file_taxonomy(stiff_model, default_config())):  # fmt: skip
+        with pytest.raises(InputError) as info:
+            refuse()
+        message = str(info.value)
+        assert message.startswith(f"{stiff_model}: the model was trained on words of taxonomy "
+                                  "profile 'stiff_sensor'") and "\n" not in message  # fmt: skip
+
+    def older(header: dict, arrays: dict) -> None:
+        del header["taxonomy"], header["live"]["taxonomy"]
+        header["checksum"] = checksum(header, {k: v for k, v in arrays.items() if k != "header"})
+
+    old = _rewrite(stiff_model, tmp_path / "old.npz", older)
+    assert load_model(old).taxonomy is None
+    assert load_model(old).taxonomy_sha256 == taxonomy_digest(STIFF)
+    assert model_file_taxonomy(old, STIFF) == STIFF
+    with pytest.raises(InputError, match="trained on words of taxonomy profile 'stiff_sensor'"):
+        model_file_taxonomy(old)  # the reference profile: not the one it was trained with
+
+
+@pytest.mark.parametrize(
+    ("values", "expected"),
+    [
+        ({"window": 0}, "field taxonomy.window: must be >= 1, got 0"),
+        ({"fit_threshold": "high"}, "field taxonomy.fit_threshold: expected a number, got 'high'"),
+        ({"calibrated_thresholds": {"Fz": [1.0, 2.0]}},
+         "field taxonomy.calibrated_thresholds.Fz: expected 8 values, got 2"),
+        ({"shiny": True}, "field taxonomy.shiny: unknown key"),
+        ({"fit_threshold": 0.5}, "field taxonomy: the embedded taxonomy profile 'stiff_sensor' "
+                                 "does not have the recorded digest"),
+    ],
+)  # fmt: skip
+def test_a_tampered_embedded_profile_is_a_one_line_error(
+    stiff_model: Path, tmp_path: Path, values: dict, expected: str
+) -> None:
+    """A bad value or a profile changed behind its digest, in a file whose checksum was
+    rewritten to match: refused by the loader and by the header-only reader alike."""
+
+    def tamper(header: dict, arrays: dict) -> None:
+        header["taxonomy"].update(values)
+        header["checksum"] = checksum(header, {k: v for k, v in arrays.items() if k != "header"})
+
+    bad = _rewrite(stiff_model, tmp_path / "bad.npz", tamper)
+    for read in (load_model, model_file_taxonomy):
+        with pytest.raises(InputError) as info:
+            read(bad)
+        message = str(info.value)
+        assert message.startswith(f"{bad}, {expected}") and "\n" not in message, message
 
 
 @pytest.mark.parametrize(

@@ -1,7 +1,7 @@
 """Another task end to end, as docs/your-robot.md walks it: bags of the simulated peg-in-hole (its
 own four phase names, a noisy 100 Hz sensor) through `rcbht calibrate`, `rcbht train`, `rcbht
-evaluate` and `rcbht replay-eval`, whose segmenter_node process loads the calibrated profile and
-whose classifier_node publishes the task's names on /task_state."""
+evaluate` and `rcbht replay-eval`, whose segmenter_node process takes the calibrated profile from
+the model file and whose classifier_node publishes the task's names on /task_state."""
 
 from __future__ import annotations
 
@@ -63,11 +63,13 @@ def test_a_second_task_trains_evaluates_and_runs_live(
     scores = tmp_path / "replay.json"
     bags = [str(b) for b in held_out]
     # the calibrated model on reference-profile words is refused before any node starts
-    assert main(["replay-eval", *bags, "--model", str(model)]) == 2
+    assert main(["replay-eval", *bags, "--model", str(model), "--profile", "reference"]) == 2
     assert "trained on words of taxonomy profile 'peg_sensor'" in capsys.readouterr().err
-    args = ["replay-eval", *bags, "--model", str(model), *calibrated, "--rate", RATE]
+    # no profile option: the segmenter labels with the profile the model file carries
+    args = ["replay-eval", *bags, "--model", str(model), "--rate", RATE]
     assert main([*args, "--json", str(scores)]) == 0
     result = json.loads(scores.read_text())
+    assert result["profile"] == "peg_sensor"
     assert result["clean_shutdown"], (result["exit_codes"], result.get("shutdown_logs"))
     assert result["dropped_wrench"] == 0
     assert result["subtasks"] == len(PEG) * HELD_OUT

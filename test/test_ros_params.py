@@ -42,6 +42,7 @@ def test_every_parameter_is_described(cls: type) -> None:
         (SegmenterConfig, {"qos_depth": "ten"}, "qos_depth"),
         (SegmenterConfig, {"event_hold_s": -1.0}, "event_hold_s"),
         (SegmenterConfig, {"taxonomy_config_file": "/no/such.yaml"}, "taxonomy_config_file"),
+        (SegmenterConfig, {"taxonomy_model_file": "/no/such.rcbht"}, "taxonomy_model_file"),
         (SegmenterConfig, {"wrench_topic": "/w"}, "wrench_topic"),
         (ClassifierConfig, {"mode": "psychic"}, "mode"),
         (ClassifierConfig, {"window_s": 0.0}, "window_s"),

@@ -75,8 +75,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
     header = (
         f"Taxonomy profile {name!r}, written by `rcbht calibrate` from {len(paths)} input(s) "
         f"at {calibration.rate_hz:.4g} Hz (docs/taxonomy.md, 'Calibrating for a new sensor').\n"
-        f"rcbht label/train/evaluate: --taxonomy-config {args.out.name}; segmenter_node: "
-        f"-p taxonomy_config_file:=<path> -p taxonomy_profile:={name}"
+        f"rcbht label/train/evaluate: --taxonomy-config {args.out.name}; a model trained with "
+        "it carries it (replay-eval, live-eval, segmenter_node's taxonomy_model_file)"
     )
     write_taxonomy_config(config, args.out, header=header)
     comparison = compare_profiles(trials, default_config(), config)

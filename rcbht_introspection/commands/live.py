@@ -59,7 +59,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("--live-config", type=Path, default=None, metavar="YAML")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", type=Path, default=None, metavar="OUT")
-    add_taxonomy_options(p)
+    add_taxonomy_options(p, with_model=True)
     add_state_options(p)
     p.set_defaults(func=run_live_eval)
 
@@ -77,9 +77,9 @@ def run_live_eval(args: argparse.Namespace) -> int:
     train_paths, held_paths = paths[: -args.held_out], paths[-args.held_out :]
     config = load_live_config(args.live_config)
     state = state_from_args(args)
-    taxonomy = taxonomy_from_args(args)
+    given, taxonomy = _given_model(args)
     factory = stream_factory(config, taxonomy)
-    models = _live_eval_models(args, train_paths, config, taxonomy, factory)
+    models = given or _live_eval_models(args, train_paths, config, taxonomy, factory)
     held = [read_any_trial(p) for p in held_paths]
     # the held-out trials one after another through the nodes' code, as bags played in turn
     streamed = node_stream(held, factory)
@@ -87,6 +87,7 @@ def run_live_eval(args: argparse.Namespace) -> int:
     result: dict[str, Any] = {
         "train": [p.name for p in train_paths],
         "held_out": [p.name for p in held_paths],
+        "taxonomy_profile": taxonomy.profile if taxonomy else config.taxonomy_profile,
         "stream_profile": config.stream_profile,
         "state_rule": dataclasses.asdict(state),
         "results": {},
@@ -108,6 +109,20 @@ def run_live_eval(args: argparse.Namespace) -> int:
     return 0
 
 
+def _given_model(
+    args: argparse.Namespace,
+) -> tuple[dict[str, SubtaskModel], TaxonomyConfig | None]:
+    """The --model (as "model"; none: {}) and the profile that labels the words: the options'
+    (refused when it is not the model's), else the one the model embeds."""
+    taxonomy = taxonomy_from_args(args)
+    if args.model is None:
+        return {}, taxonomy
+    from rcbht_introspection.learn.model_file import load_model, model_taxonomy
+
+    model = load_model(args.model)
+    return {"model": model}, model_taxonomy(model, taxonomy, args.model)
+
+
 def _live_eval_models(
     args: argparse.Namespace,
     train_paths: list[Path],
@@ -115,21 +130,13 @@ def _live_eval_models(
     taxonomy: TaxonomyConfig | None,
     factory: Any,
 ) -> dict[str, SubtaskModel]:
-    """The models to compare: the --model given, or one trained without and one with live
-    windows ("before" and "after") on the training trials."""
+    """The models to compare: one trained without and one with live windows ("before" and
+    "after") on the training trials."""
     from rcbht_introspection.grammar.encoding.cache import SampleCache
     from rcbht_introspection.learn.data import load_trials
     from rcbht_introspection.learn.live import train_live_model, trial_live_windows
-    from rcbht_introspection.learn.model_file import load_model, profile_mismatch
-    from rcbht_introspection.taxonomy.config import default_config
 
     models: dict[str, SubtaskModel] = {}
-    if args.model is not None:
-        models["model"] = load_model(args.model)
-        mismatch = profile_mismatch(models["model"], taxonomy or default_config())
-        if mismatch:
-            raise InputError(mismatch, args.model)
-        return models
     trials = load_trials(train_paths, args.words, taxonomy)
     samples = [s for t in trials for s in t.samples]
     windows = trial_live_windows(train_paths, config, factory).values()

@@ -13,14 +13,16 @@ if TYPE_CHECKING:
     from rcbht_introspection.taxonomy.config import TaxonomyConfig
 
 
-def add_taxonomy_options(parser: argparse.ArgumentParser) -> None:
-    """--profile NAME and --taxonomy-config FILE (e.g. the output of `rcbht calibrate`)."""
+def add_taxonomy_options(parser: argparse.ArgumentParser, with_model: bool = False) -> None:
+    """--profile NAME and --taxonomy-config FILE (e.g. the output of `rcbht calibrate`);
+    `with_model`: neither given, a --model file's own profile labels the words."""
+    model = "; with --model neither is needed: the model file carries its profile"
     parser.add_argument(
         "--profile",
         default=None,
         metavar="NAME",
         help="taxonomy profile: of config/rcbht.yaml (default reference), or of "
-        "--taxonomy-config (default: its only profile)",
+        f"--taxonomy-config (default: its only profile){model if with_model else ''}",
     )
     parser.add_argument(
         "--taxonomy-config",

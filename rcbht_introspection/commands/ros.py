@@ -120,14 +120,16 @@ def _add_segmenter_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--profile",
         default="",
-        help="taxonomy profile of the segmenter: of config/rcbht.yaml (default reference), or of "
-        "--taxonomy-config (default: its only profile)",
+        help="taxonomy profile of the segmenter: of config/rcbht.yaml, or of --taxonomy-config "
+        "(default: its only profile); it must be the model's (default: the profile the model "
+        "file carries, else reference)",
     )
     p.add_argument(
         "--taxonomy-config",
         default="",
         metavar="FILE",
-        help="YAML file of taxonomy profiles for the segmenter, e.g. written by `rcbht calibrate`",
+        help="YAML file of taxonomy profiles for the segmenter, e.g. written by `rcbht calibrate` "
+        "(default: the model's own profile)",
     )
     p.add_argument(
         "--stream-profile",

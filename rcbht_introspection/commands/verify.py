@@ -211,15 +211,11 @@ def _contradictions(model_file: Path, trials: list[Any], config: Any) -> dict[st
     """Per trial, the contradicting final verdicts `model_file`'s classifier gives live."""
     from rcbht_introspection.commands.progress import progress_bar
     from rcbht_introspection.learn.live import load_live_config, stream_factory
-    from rcbht_introspection.learn.model_file import load_model, profile_mismatch
-    from rcbht_introspection.taxonomy.config import default_config
+    from rcbht_introspection.learn.model_file import load_model, model_taxonomy
     from rcbht_introspection.verify.mismatch import trial_contradictions
 
     model = load_model(model_file)
-    problem = profile_mismatch(model, default_config())
-    if problem:
-        raise InputError(problem, model_file)
-    factory = stream_factory(load_live_config())
+    factory = stream_factory(load_live_config(), model_taxonomy(model, path=model_file))
     p = config.mismatch_min_probability
     out = {}
     bar = progress_bar(len(trials), "classifier verdicts", "trial")

@@ -29,7 +29,7 @@ from rcbht_introspection.learn.models import RUNNING_PREFIXES, train_model, with
 from rcbht_introspection.live.replay import StreamedTrial, stream_trial, words_until
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.taxonomy import StreamProfile
-from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config, taxonomy_digest
+from rcbht_introspection.taxonomy.config import TaxonomyConfig, default_config
 
 if TYPE_CHECKING:
     from rcbht_introspection.learn.models import SubtaskModel
@@ -192,9 +192,7 @@ def train_live_model(
     """
 
     train_kwargs.setdefault("cache", SampleCache())  # both models encode `samples`
-    used = taxonomy or default_config()
-    train_kwargs.setdefault("taxonomy_profile", used.profile)
-    train_kwargs.setdefault("taxonomy_sha256", taxonomy_digest(used))
+    train_kwargs.setdefault("taxonomy", taxonomy or default_config())  # embedded in the file
     if config is None:
         model = train_model(samples, **train_kwargs)
     else:  # the live head also reads the encoding's running prefixes (learn/models.py)

@@ -1,9 +1,9 @@
 """The safe sub-task model file: loading never executes code.
 
-A model file is a safe file (io/safe_file.py): a JSON header (format version,
-classifier, encoding with its fitted parameters, class names, taxonomy profile, SHA-256 of all
-content) and plain arrays. The SVM pipeline is stored with skops and loaded with an explicit
-trusted-type list, the Mondrian forest as its node arrays (mondrian_state.py).
+A model file is a safe file (io/safe_file.py): a JSON header (format version, classifier,
+encoding with its fitted parameters, class names, the taxonomy profile's name, digest and values,
+SHA-256 of all content) and plain arrays. The SVM pipeline is stored with skops and loaded with an
+explicit trusted-type list, the Mondrian forest as its node arrays (mondrian_state.py).
 """
 
 from __future__ import annotations
@@ -22,7 +22,13 @@ from rcbht_introspection.learn.models import SubtaskModel
 from rcbht_introspection.learn.mondrian_state import forest_arrays, forest_from_arrays
 from rcbht_introspection.learn.vote import SvmForestClassifier
 from rcbht_introspection.task import Task, task_of_names
-from rcbht_introspection.taxonomy.config import TaxonomyConfig, taxonomy_digest
+from rcbht_introspection.taxonomy.config import (
+    TaxonomyConfig,
+    default_config,
+    taxonomy_digest,
+    taxonomy_from_document,
+    taxonomy_values,
+)
 
 FORMAT = "rcbht-subtask-model"
 FORMAT_VERSION = 1
@@ -68,6 +74,8 @@ def _model_parts(model: SubtaskModel) -> tuple[dict[str, Any], dict[str, np.ndar
         "random_state": model.random_state,
         "task": model.task.to_dict(),
     }
+    if model.taxonomy is not None:
+        header["taxonomy"] = taxonomy_values(model.taxonomy)
     if model.training:
         header["training"] = model.training
     if model.classifier in ("svm", "svm-tuned"):
@@ -130,16 +138,41 @@ def _model_from_parts(
         ) from None
     if [str(c) for c in estimator.classes_] != header.get("classes"):
         raise InputError("class names differ from the header", path, field="classes")
+    name, sha256 = _recorded_profile(header)
     return SubtaskModel(
         classifier,
         encoder,
         estimator,
-        str(header.get("taxonomy_profile", "reference")),
+        name,
         int(header.get("random_state", 0)),
         dict(header.get("training") or {}),
         task=_task_of_header(header, path),
-        taxonomy_sha256=str(header.get("taxonomy_sha256", "")),
+        taxonomy_sha256=sha256,
+        taxonomy=_embedded_taxonomy(header, path),
     )
+
+
+def _recorded_profile(header: dict[str, Any]) -> tuple[str, str]:
+    """The name and digest of the taxonomy profile a header records ('' digest: older files)."""
+    return str(header.get("taxonomy_profile", "reference")), str(header.get("taxonomy_sha256", ""))
+
+
+def _embedded_taxonomy(header: dict[str, Any], path: Path) -> TaxonomyConfig | None:
+    """The profile a header embeds (None in older files), checked as a profile file is and
+    against the recorded digest: a bad value or an altered profile is a one-line InputError."""
+    if header.get("taxonomy") is None:
+        return None
+    name, sha256 = _recorded_profile(header)
+    taxonomy = taxonomy_from_document(header, name, path=path, section=("taxonomy",))
+    digest = taxonomy_digest(taxonomy)
+    if digest != sha256:
+        raise InputError(
+            f"the embedded taxonomy profile {name!r} does not have the recorded digest "
+            f"taxonomy_sha256 {sha256[:12] or 'empty'} (sha256 {digest[:12]})",
+            path,
+            field="taxonomy",
+        )
+    return taxonomy
 
 
 def _svm(arrays: dict[str, np.ndarray], path: Path) -> Any:
@@ -189,17 +222,43 @@ def _task_of_header(header: dict[str, Any], path: Path) -> Task:
         ) from None
 
 
-def profile_mismatch(model: SubtaskModel, taxonomy: TaxonomyConfig) -> str:
-    """Why `model` must not classify words of `taxonomy` ('' when it may): a model trained on
-    another profile's words (its recorded digest differs) sees words it never learned."""
-    if not model.taxonomy_sha256 or model.taxonomy_sha256 == taxonomy_digest(taxonomy):
-        return ""
-    return (
-        f"the model was trained on words of taxonomy profile {model.taxonomy_profile!r} "
-        f"(sha256 {model.taxonomy_sha256[:12]}), not of {taxonomy.profile!r} "
-        f"(sha256 {taxonomy_digest(taxonomy)[:12]}); give the profile it was trained with "
-        "(--taxonomy-config / --profile, or the segmenter's taxonomy_config_file)"
-    )
+def model_taxonomy(
+    model: SubtaskModel, given: TaxonomyConfig | None = None, path: Path | str | None = None
+) -> TaxonomyConfig:
+    """The profile that labels the words `model` classifies: `given` (an override, refused when
+    it is not the model's), else the one the model embeds (older files: reference)."""
+    recorded = (model.taxonomy_profile, model.taxonomy_sha256)
+    return _labelling_taxonomy(recorded, model.taxonomy, given, path)
+
+
+def model_file_taxonomy(path: Path | str, given: TaxonomyConfig | None = None) -> TaxonomyConfig:
+    """model_taxonomy of the model file at `path`, from its header alone (checksum verified,
+    classifier not built): what segmenter_node labels with for that model."""
+    header, _ = read_checked(Path(path), "model", FORMAT, FORMAT_VERSION, "rcbht train")
+    embedded = _embedded_taxonomy(header, Path(path))
+    return _labelling_taxonomy(_recorded_profile(header), embedded, given, path)
+
+
+def _labelling_taxonomy(
+    recorded: tuple[str, str],
+    embedded: TaxonomyConfig | None,
+    given: TaxonomyConfig | None,
+    path: Path | str | None,
+) -> TaxonomyConfig:
+    """`given`, else `embedded`, else reference; an InputError when its digest is not the
+    `recorded` (name, digest): the model would see words of a profile it never learned."""
+    name, sha256 = recorded
+    taxonomy = given or embedded or default_config()
+    digest = taxonomy_digest(taxonomy)
+    if sha256 and sha256 != digest:
+        raise InputError(
+            f"the model was trained on words of taxonomy profile {name!r} "
+            f"(sha256 {sha256[:12]}), not of {taxonomy.profile!r} (sha256 {digest[:12]}); give "
+            "the profile it was trained with (--taxonomy-config / --profile, or the segmenter's "
+            "taxonomy_config_file)",
+            path,
+        )
+    return taxonomy
 
 
 def load_subtask_model(path: str, expected_profile: str = "") -> tuple[SubtaskModel | None, str]:
@@ -231,6 +290,7 @@ __all__ = [
     "FORMAT_VERSION",
     "load_model",
     "load_subtask_model",
-    "profile_mismatch",
+    "model_file_taxonomy",
+    "model_taxonomy",
     "save_model",
 ]

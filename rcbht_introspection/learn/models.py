@@ -28,6 +28,7 @@ from rcbht_introspection.learn.mondrian import MondrianForestClassifier
 from rcbht_introspection.learn.svm import fit_svm, make_svm, svm_predict_proba, tune_svm
 from rcbht_introspection.learn.vote import SvmForestClassifier
 from rcbht_introspection.task import HIRO_TASK, Task, task_of_names
+from rcbht_introspection.taxonomy.config import TaxonomyConfig, taxonomy_digest
 
 
 @dataclass
@@ -50,9 +51,18 @@ class SubtaskModel:
     """Optional head for window-mode windows [t - window_s, t] (learn/live.py)."""
     taxonomy_sha256: str = ""
     """taxonomy.config.taxonomy_digest of the profile its words came from ('' in older files)."""
+    taxonomy: TaxonomyConfig | None = None
+    """The profile its words came from, embedded in the model file; given, taxonomy_profile and
+    taxonomy_sha256 are its name and digest (None: older files, a cold-started taught model)."""
     takes_axis_memo: ClassVar[bool] = True
     """Its predict calls take `memo=` (an AxisMemo): the belief tracker passes the one it owns
     for its running windows (other models it is given need not)."""
+
+    def __post_init__(self) -> None:
+        """The recorded name and digest are those of the embedded profile, when there is one."""
+        if self.taxonomy is not None:
+            self.taxonomy_profile = self.taxonomy.profile
+            self.taxonomy_sha256 = taxonomy_digest(self.taxonomy)
 
     def head(self, final: bool, mode: str = "boundary") -> SubtaskModel:
         """The model for a finished sub-task (final) or a running window: in window mode the
@@ -129,6 +139,7 @@ def train_model(
     max_nodes: int | None = None,
     max_points: int | None = None,
     running_prefixes: Sequence[float] | None = None,
+    taxonomy: TaxonomyConfig | None = None,
 ) -> SubtaskModel:
     """Fit the encoding and the classifier on `samples` (training data only).
 
@@ -140,6 +151,7 @@ def train_model(
     `cache`: a SampleCache shared by models trained on the same samples (else the encoding's own).
     `n_estimators`: trees of the vote's and the Mondrian forest (`forest` has VERDICT_TREES);
     `max_nodes`, `max_points`: the Mondrian forest's memory budget (None: unbounded).
+    `taxonomy`: the profile the samples' words came from (SubtaskModel.taxonomy).
     """
     if classifier not in CLASSIFIERS:
         raise InputError(f"unknown classifier {classifier!r} (known: {', '.join(CLASSIFIERS)})")
@@ -151,13 +163,13 @@ def train_model(
     if running_prefixes:
         model = train_model(
             samples, classifier, encoding, random_state, taxonomy_profile, n_estimators,
-            augment_prefixes, cache, task, taxonomy_sha256, max_nodes, max_points, (),
+            augment_prefixes, cache, task, taxonomy_sha256, max_nodes, max_points, (), taxonomy,
         )  # fmt: skip
         running = running_classifier_of(classifier)
         model.live = train_model(
             samples, running, encoding, random_state, taxonomy_profile, n_estimators,
             tuple(augment_prefixes) + tuple(running_prefixes), cache, task, taxonomy_sha256,
-            max_nodes, max_points, (),
+            max_nodes, max_points, (), taxonomy,
         )  # fmt: skip
         return model
     samples = with_prefixes(samples, augment_prefixes)
@@ -167,14 +179,9 @@ def train_model(
     budget = (n_estimators, max_nodes, max_points)
     estimator = _fit_classifier(classifier, X, y, samples, task, random_state, budget)
     return SubtaskModel(
-        classifier,
-        encoder,
-        estimator,
-        taxonomy_profile,
-        random_state,
-        task=task,
-        taxonomy_sha256=taxonomy_sha256,
-    )
+        classifier, encoder, estimator, taxonomy_profile, random_state, task=task,
+        taxonomy_sha256=taxonomy_sha256, taxonomy=taxonomy,
+    )  # fmt: skip
 
 
 def _fit_classifier(

@@ -28,6 +28,7 @@ from rcbht_introspection.live.intake import IntakeConfig, check_intake
 from rcbht_introspection.live.state import TaskStateConfig, check_task_state
 from rcbht_introspection.nodes.spin import DEFAULT_SPIN, SPIN_HELP, Spin
 from rcbht_introspection.taxonomy import StreamProfile
+from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
 
 Reliability = Literal["reliable", "best_effort"]
 """QoS reliability of every subscription and publisher of a node."""
@@ -70,12 +71,17 @@ class SegmenterConfig:
     )
     taxonomy_profile: str = _f(
         "",
-        "taxonomy profile of config/rcbht.yaml (empty: reference), or of taxonomy_config_file "
-        "(empty: its only profile)",
+        "taxonomy profile of config/rcbht.yaml (empty: the one taxonomy_model_file carries, else "
+        "reference), or of taxonomy_config_file (empty: its only profile)",
     )
     taxonomy_config_file: str = _f(
         "",
         "optional YAML file of taxonomy profiles instead of config/rcbht.yaml (e.g. from `rcbht calibrate`)",
+    )
+    taxonomy_model_file: str = _f(
+        "",
+        "model file (`rcbht train`) whose taxonomy profile labels the words; a profile that "
+        "taxonomy_profile or taxonomy_config_file names must be that model's (empty: no model)",
     )
     stream_profile: StreamProfile = _f(
         "reference",
@@ -359,9 +365,22 @@ def _check_wrench_intake(cfg: SegmenterConfig | VerifierConfig, path: Path | Non
         f"must be in [event_hold_s, 600], got {cfg.event_max_hold_s}",
         path,
     )
-    for name in ("taxonomy_config_file", "stream_config_file", "task_file"):
+    for name in ("taxonomy_config_file", "taxonomy_model_file", "stream_config_file", "task_file"):
         value = getattr(cfg, name, "")
         _check(not value or Path(value).is_file(), name, f"no such file: {value}", path)
+
+
+def segmenter_taxonomy(cfg: SegmenterConfig) -> TaxonomyConfig:
+    """The profile segmenter_node labels with: the one taxonomy_profile / taxonomy_config_file
+    name, else the one taxonomy_model_file embeds, else reference; refused when not the model's."""
+    named = bool(cfg.taxonomy_profile or cfg.taxonomy_config_file)
+    given = load_taxonomy_config(cfg.taxonomy_profile or None, cfg.taxonomy_config_file or None)
+    if not cfg.taxonomy_model_file:
+        return given
+    # imported here: a node without a model file needs no skops (the model file's SVM)
+    from rcbht_introspection.learn.model_file import model_file_taxonomy
+
+    return model_file_taxonomy(cfg.taxonomy_model_file, given if named else None)
 
 
 def _check_verifier(cfg: VerifierConfig, path: Path | None) -> None:

@@ -44,9 +44,9 @@ from rcbht_introspection.nodes.common import ManagedNode, phase_qos, qos_profile
 from rcbht_introspection.nodes.conversions import phase_msg, words_msg
 from rcbht_introspection.nodes.intake import Intake
 from rcbht_introspection.nodes.lifetime import StopSignal
-from rcbht_introspection.nodes.params import SegmenterConfig, word_topics
+from rcbht_introspection.nodes.params import SegmenterConfig, segmenter_taxonomy, word_topics
 from rcbht_introspection.task import load_task_file
-from rcbht_introspection.taxonomy.config import load_taxonomy_config, taxonomy_digest
+from rcbht_introspection.taxonomy.config import taxonomy_digest
 from rcbht_introspection.taxonomy.words import LEVELS
 
 TARE_SERVICE = "~/tare"
@@ -66,9 +66,7 @@ class SegmenterNode(ManagedNode):
 
     def configure(self, cfg: SegmenterConfig) -> None:
         self.cfg = cfg
-        taxonomy = load_taxonomy_config(
-            cfg.taxonomy_profile or None, cfg.taxonomy_config_file or None
-        )
+        taxonomy = segmenter_taxonomy(cfg)
         self.taxonomy_profile = taxonomy.profile
         self.taxonomy_sha256 = taxonomy_digest(taxonomy)
         factory = arm_stream_factory(

@@ -40,7 +40,7 @@ from rcbht_introspection.io.bags import (
     wrench_topic,
 )
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.learn.model_file import load_model, profile_mismatch
+from rcbht_introspection.learn.model_file import load_model
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.offline import percentiles_ms
 from rcbht_introspection.live.segmenter import arm_stream_factory
@@ -51,6 +51,7 @@ from rcbht_introspection.nodes.params import (
     SegmenterConfig,
     VerifierConfig,
     load_node_config,
+    segmenter_taxonomy,
 )
 from rcbht_introspection.nodes.player import BagPlayer
 from rcbht_introspection.nodes.spin import DEFAULT_SPIN, Spin
@@ -81,7 +82,7 @@ from rcbht_introspection.replay.verify_scoring import (
     verifier_scores,
 )
 from rcbht_introspection.taxonomy import StreamProfile
-from rcbht_introspection.taxonomy.config import load_taxonomy_config
+from rcbht_introspection.taxonomy.config import TaxonomyConfig
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier
 from rcbht_introspection.waiting import wait_until
 
@@ -97,7 +98,7 @@ class ReplayEvalOptions:
     rate: float = 1.0
     mode: BeliefMode = "boundary"
     profile: str = ""
-    """Taxonomy profile of config/rcbht.yaml (empty: reference) or of taxonomy_config_file."""
+    """Taxonomy profile of config/rcbht.yaml or of taxonomy_config_file (neither: the model's)."""
     taxonomy_config_file: str = ""
     """A file of taxonomy profiles, e.g. from `rcbht calibrate` (empty: config/rcbht.yaml)."""
     stream_profile: StreamProfile = "reference"
@@ -130,28 +131,23 @@ def _params(
     work: Path, arms: tuple[str, ...], model_path: Path | None, options: ReplayEvalOptions
 ) -> tuple[SegmenterConfig, ClassifierConfig, Path, Path]:
     """The nodes' configurations, and their parameter files written to `work`."""
-    seg = SegmenterConfig(
-        arms=arms,
-        wrench_topics=tuple(wrench_topic(a, arms) for a in arms),
-        taxonomy_profile=options.profile,
-        taxonomy_config_file=options.taxonomy_config_file,
-    )
-    model_file = str(Path(model_path).resolve()) if model_path else ""
+    seg = _segmenter(model_path, options, arms)
     seg_params = write_params(
         work / "segmenter.yaml",
         SegmenterConfig,
         {
             "arms": list(arms),
             "wrench_topics": list(seg.wrench_topics),
-            "taxonomy_profile": options.profile,
-            "taxonomy_config_file": options.taxonomy_config_file,
-            "stream_profile": options.stream_profile,
-            "spin": options.spin,
+            "taxonomy_profile": seg.taxonomy_profile,
+            "taxonomy_config_file": seg.taxonomy_config_file,
+            "taxonomy_model_file": seg.taxonomy_model_file,
+            "stream_profile": seg.stream_profile,
+            "spin": seg.spin,
         },
     )
     values: dict[str, Any] = {
         "spin": options.spin,
-        "model_file": model_file,
+        "model_file": seg.taxonomy_model_file,  # the model the segmenter takes its profile from
         "mode": options.mode,
         "arms": list(arms),
         **({"state": dataclasses.asdict(options.state)} if options.state is not None else {}),
@@ -166,6 +162,22 @@ def _params(
     # what the node reads from the file (the offline reference runs with its state rule)
     cls_cfg = load_node_config(ClassifierConfig, cls_params)
     return seg, cls_cfg, seg_params, cls_params
+
+
+def _segmenter(
+    model_path: Path | None, options: ReplayEvalOptions, arms: tuple[str, ...] = ("R",)
+) -> SegmenterConfig:
+    """segmenter_node's configuration in a replay of `arms`: the options' profiles, and the model
+    file, whose embedded profile labels the words when the options name none."""
+    return SegmenterConfig(
+        arms=arms,
+        wrench_topics=tuple(wrench_topic(a, arms) for a in arms),
+        taxonomy_profile=options.profile,
+        taxonomy_config_file=options.taxonomy_config_file,
+        taxonomy_model_file=str(Path(model_path).resolve()) if model_path else "",
+        stream_profile=options.stream_profile,
+        spin=options.spin,
+    )
 
 
 def verifier_params(
@@ -207,9 +219,11 @@ def teach_path(work: Path, options: ReplayEvalOptions) -> Path:
     return Path(options.teach_file) if options.teach_file else work / "taught.rcbht"
 
 
-def _check_request(bags: list[Path], model_path: Path | None, options: ReplayEvalOptions) -> None:
-    """One-line errors for a replay that cannot run: no model file, a bad rate, teaching
-    options that do not fit, a model of another taxonomy profile."""
+def _check_request(
+    bags: list[Path], model_path: Path | None, options: ReplayEvalOptions
+) -> TaxonomyConfig:
+    """The profile the segmenter will label with; one-line errors for a replay that cannot run:
+    no model file, a bad rate, teaching options that do not fit, a model of another profile."""
     if model_path is not None and not Path(model_path).is_file():
         raise InputError("no such model file", model_path)
     if options.rate <= 0:
@@ -217,12 +231,8 @@ def _check_request(bags: list[Path], model_path: Path | None, options: ReplayEva
     if options.teach_first:
         _check_teaching(len(bags), model_path, options)
     if model_path is not None:
-        taxonomy = load_taxonomy_config(
-            options.profile or None, options.taxonomy_config_file or None
-        )
-        mismatch = profile_mismatch(load_model(model_path), taxonomy)
-        if mismatch:
-            raise InputError(mismatch, model_path)
+        load_model(model_path)  # a file the classifier node could not load is refused here
+    return segmenter_taxonomy(_segmenter(model_path, options))
 
 
 def _check_teaching(n_bags: int, model_path: Path | None, options: ReplayEvalOptions) -> None:
@@ -555,7 +565,7 @@ def replay_eval(
 
     Without a model (None) the classifier publishes "unknown"; latencies and drops still count.
     """
-    _check_request(bags, model_path, options)
+    taxonomy = _check_request(bags, model_path, options)
     trials, arms = _read_bags(bags)
     verifier = check_verifier(options.verifier_file, arms) if options.verifier_file else None
     domain_id = options.domain_id or lease_domain()
@@ -588,7 +598,7 @@ def replay_eval(
             "bags": [str(b) for b in bags],
             "rate": options.rate,
             "mode": options.mode,
-            "profile": options.profile,
+            "profile": taxonomy.profile,
             "stream_profile": options.stream_profile,
             "model": str(model_path),
             "teach_first": options.teach_first,
@@ -686,7 +696,7 @@ def load_reference(
 ) -> Reference:
     """The model file, the stream factory and the classifier settings that the nodes use (the
     offline run to compare)."""
-    taxonomy = load_taxonomy_config(options.profile or None, options.taxonomy_config_file or None)
+    taxonomy = segmenter_taxonomy(_segmenter(model_path, options))
     factory = arm_stream_factory(stream_profile=options.stream_profile, taxonomy=taxonomy)
     return Reference(load_model(model_path), factory, classifier.state, classifier.window_s)
 

@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from rcbht_introspection.config_files import (
+    config_from_document,
     config_path,
     load_profile,
     only_profile,
@@ -142,9 +145,30 @@ def write_taxonomy_config(config: TaxonomyConfig, path: Path | str, header: str 
     return write_profile(path, config.profile, config, omit=("profile",), header=header)
 
 
+def taxonomy_values(config: TaxonomyConfig) -> dict[str, Any]:
+    """The profile's values (not its name) as plain data: what taxonomy_digest hashes and a
+    model file embeds."""
+    return {k: v for k, v in to_mapping(config).items() if k != "profile"}
+
+
+def taxonomy_from_document(
+    document: Any, profile: str, *, path: Path | str, section: Sequence[str] = ()
+) -> TaxonomyConfig:
+    """Profile `profile` from the values at `section` of plain data (e.g. a model file's header),
+    checked as a profile of config/rcbht.yaml is: a bad value is a one-line InputError."""
+    return config_from_document(
+        TaxonomyConfig,
+        document,
+        path=path,
+        section=section,
+        fixed={"profile": profile},
+        check=_check,
+    )
+
+
 def taxonomy_digest(config: TaxonomyConfig) -> str:
     """SHA-256 of the profile's values (not its name): equal digests label alike."""
-    values = {k: v for k, v in to_mapping(config).items() if k != "profile"}
+    values = taxonomy_values(config)
     return hashlib.sha256(json.dumps(values, sort_keys=True).encode()).hexdigest()
 
 
