@@ -128,15 +128,15 @@ def test_a_missed_correction_moves_by_the_learnt_spread_then_halves() -> None:
 
 
 def test_a_side_the_verdict_guessed_is_mirrored_before_it_is_refined() -> None:
-    """A class whose side comes from the verdict (jamming turns either way): named the same
-    way after its correction failed, the other side at the same size comes next, once; then
-    the spread as for any class."""
+    """A class whose side comes from the verdict (jamming turns either way): named again after
+    its correction failed, whichever way, the other side at the same size comes next, once;
+    then the spread as for any class."""
     trained_on = {"deviation_by_class": {"jamming": {"size": {"r": 0.16}, "spread": {"r": 0.03}}}}
     planner = make_planner("introspect", TABLE, trained_on)
     planner.first()
     _abort_on(planner, "jamming", {"x": "+", "r": "-"})
     assert planner.ended(Report(False, "aborted"), 6.0).correction == Correction(yaw=0.16)
-    planner.verdict(5.0, True, "jamming", {"r": "-"})  # the same side again: unconfirmed
+    planner.verdict(5.0, True, "jamming", {"r": "+"})  # flipped: overshoot, or the wrong side
     assert planner.ended(FAILED, 20.0).correction == Correction(yaw=-0.16)
     planner.verdict(5.0, True, "jamming", {"r": "+"})  # short on the other side
     assert math.isclose(planner.ended(FAILED, 20.0).correction.yaw, -0.19)
@@ -155,7 +155,7 @@ def test_a_refinement_yields_to_a_runner_up_worth_more_than_half_the_hypothesis(
         planner.verdict(5.0, True, "jamming", {"r": "+"})
         return planner.ended(FAILED, 20.0).correction
 
-    assert third({"jamming": 0.8, "deviation_x+": 0.2}) == Correction(yaw=0.16 - 0.08)
+    assert third({"jamming": 0.8, "deviation_x+": 0.2}) == Correction(yaw=-0.16)  # other side
     assert third({"jamming": 0.5, "deviation_x+": 0.4}) == Correction(x=-0.002)
 
 

@@ -167,8 +167,6 @@ class Planner:
         self.decisions: list[Decision] = []
         self._steps: dict[str, list[float]] = {}
         """Per correction axis, the steps moved along it for the current hypothesis."""
-        self._sides: dict[str, str] = {}
-        """Per correction axis, the direction the verdict named at its first move."""
         self._mirrored: set[str] = set()
         """Correction axes already tried on their other side."""
         self._tried: dict[str, int] = {}
@@ -267,7 +265,7 @@ class Planner:
         worth = nxt is None or h.probability * REFINE_SHARE >= nxt.probability
         if refine and worth and named is not None:
             dirs = _directions(*named)
-            if _signed(h.failure_class) is None and (other := self._other_side(dirs)):
+            if _signed(h.failure_class) is None and (other := self._other_side()):
                 return other
             return self._undo(named[0], entry, self.correction, dirs)
         tried = self._tried.get(h.failure_class, 0)
@@ -284,7 +282,7 @@ class Planner:
         """The first correction for hypothesis `h`, from the clean plan: against its directions,
         else its table's next candidate."""
         entry = self.recovery.recovery_of(h.failure_class)
-        self._steps, self._sides, self._mirrored = {}, {}, set()
+        self._steps, self._mirrored = {}, set()
         if entry.action == "undo_direction":
             out = self._undo(h.failure_class, entry, Correction(), h.directions)
             if out != Correction() or not entry.candidates:
@@ -298,19 +296,16 @@ class Planner:
             return out
         return Correction()
 
-    def _other_side(self, directions: Mapping[str, str]) -> Correction | None:
-        """The correction mirrored on each axis moved once whose direction the verdict named
-        the same way again: a side read from the verdict, not the class's name, may be a guess
-        the wrench could not confirm, and the other side at the same size is then likelier than
-        a longer move (once per axis; None when no axis qualifies)."""
+    def _other_side(self) -> Correction | None:
+        """The correction mirrored on each axis moved once: a side read from the verdict, not
+        the class's name, may be a guess the wrench could not confirm, and a naming after the
+        miss is as ambiguous (a flip means overshoot or the wrong side), so the other side at
+        the same size comes first (once per axis; None when no axis qualifies)."""
         out = self.correction
-        for verdict_axis, axis in VERDICT_AXES.items():
-            if len(self._steps.get(axis, ())) != 1 or axis in self._mirrored:
-                continue
-            if directions.get(verdict_axis) == self._sides.get(axis):
+        for axis in VERDICT_AXES.values():
+            if len(self._steps.get(axis, ())) == 1 and axis not in self._mirrored:
                 out = out.moved(axis, -2.0 * self.correction.get(axis))
                 self._mirrored.add(axis)
-                self._sides[axis] = "+" if self._sides[axis] == "-" else "-"
         return out if out != self.correction else None
 
     def _undo(
@@ -331,7 +326,6 @@ class Planner:
                 continue
             if axis not in learnt.size and axis not in entry.size:
                 continue
-            self._sides.setdefault(axis, direction)
             moved = self._steps.setdefault(axis, [])
             if not moved:
                 step = learnt.size.get(axis, entry.size.get(axis, 0.0))
