@@ -43,19 +43,32 @@ ARM = "R"
 
 
 @dataclass(frozen=True)
-class World:
-    """One trial's world, the same for all its attempts."""
+class TrialWorld:
+    """What every task's trial world has: its seed, the failure asked for, the draws it took,
+    and whether the uncorrected task ends as asked (fails for a failure, seats for a nominal)."""
 
     seed: int
-    failure: FailureType | None
-    draw: TrialDraw
+    failure: str | None
     redraws: int
     as_requested: bool
-    """The uncorrected task ends as asked: fails for a failure class, seats for a nominal."""
 
     @property
     def failing(self) -> bool:
         return self.failure is not None and self.as_requested
+
+
+def corrected_start(
+    start: tuple[float, float, float], correction: Pose
+) -> tuple[float, float, float]:
+    """The hand's start shifted by a correction's x, y, z (its yaw turns the hand)."""
+    return (start[0] + correction[0], start[1] + correction[1], start[2] + correction[2])
+
+
+@dataclass(frozen=True)
+class World(TrialWorld):
+    """One snap trial's world, the same for all its attempts."""
+
+    draw: TrialDraw
 
     @property
     def truth(self) -> Pose:
@@ -80,7 +93,7 @@ def draw_world(config: SimConfig, seed: int, failure: FailureType | None) -> Wor
         return (draw, agrees), agrees
 
     (draw, agrees), redraws = arm_run.redraw_until(seed, config.failures.max_attempts, attempt)
-    return World(seed, failure, draw, redraws, agrees)
+    return World(seed, failure, redraws, agrees, draw=draw)
 
 
 class _FinalState:
@@ -144,6 +157,7 @@ class SteppedAttempt:
     ) -> None:
         self.rig, self.model, self.data = rig, rig.model, rig.data
         self.controller = controller
+        self.start = start
         self.offsets = self.rig.offsets(start)
         self.k = decimation(rate_hz, self.rig.dt)
         self.period = 1.0 / rate_hz
@@ -213,6 +227,24 @@ class SteppedAttempt:
         return False
 
     def _end(self) -> AttemptEnd:
+        """The arm's own seat check and why, the physical truth, the samples' duration, and the
+        climb back to the approach start a failed attempt needs, at the task's return speed."""
+        st = self.controller.state
+        seated = st.seat_time is not None and not st.aborted
+        duration = round(self.samples * self.period, 9)
+        climb = self.start[2] - (self.offsets[2] + self.data.qpos[self.rig.qz])
+        back = 0.0 if seated else max(0.0, climb) / self._return_speed()
+        return AttemptEnd(
+            seated, "seated" if seated else self.reason or "unseated",
+            self._in_place(), duration, back,
+        )  # fmt: skip
+
+    def _in_place(self) -> bool:
+        """The part physically where the task puts it (the task's own judgement)."""
+        raise NotImplementedError
+
+    def _return_speed(self) -> float:
+        """Speed (m/s) of the return to the approach start after a failed attempt."""
         raise NotImplementedError
 
     def end_event(self) -> tuple[float, str]:
@@ -227,12 +259,12 @@ class Attempt(SteppedAttempt):
         self, config: SimConfig, world: World, correction: Pose, index: int, rate_hz: float
     ) -> None:
         draw = world.draw
-        cx, cy, cz, cyaw = correction
-        sx, sy, sz = draw.physics.start_pose
-        physics = replace(draw.physics, start_pose=(sx + cx, sy + cy, sz + cz))
-        self.config, self.plan = config, draw.plan
+        physics = replace(
+            draw.physics, start_pose=corrected_start(draw.physics.start_pose, correction)
+        )
+        self.config = config
         model = build_model(config, physics)
-        rig = arm_run.ServoRig(model, mujoco.MjData(model), pitch=draw.plan.tilt, yaw=cyaw)
+        rig = arm_run.ServoRig(model, mujoco.MjData(model), pitch=draw.plan.tilt, yaw=correction[3])
         super().__init__(
             rig, SnapController(config, draw.plan), draw.plan.start,
             (config.sensor, draw.sensor), (world.seed, index), rate_hz, MAX_DURATION,
@@ -245,13 +277,8 @@ class Attempt(SteppedAttempt):
             return True
         return False
 
-    def _end(self) -> AttemptEnd:
-        st = self.controller.state
-        seated = st.seat_time is not None and not st.aborted
-        duration = round(self.samples * self.period, 9)
-        climb = self.plan.start[2] - (self.offsets[2] + self.data.qpos[self.rig.qz])
-        back = 0.0 if seated else max(0.0, climb) / self.config.controller.backoff_speed
-        return AttemptEnd(
-            seated, "seated" if seated else self.reason or "unseated",
-            part_seated(self.config, self.model, self.data), duration, back,
-        )  # fmt: skip
+    def _in_place(self) -> bool:
+        return part_seated(self.config, self.model, self.data)
+
+    def _return_speed(self) -> float:
+        return self.config.controller.backoff_speed

@@ -11,7 +11,7 @@ import mujoco
 import numpy as np
 
 from rcbht_introspection.sim import arm_run
-from rcbht_introspection.sim.episode import AttemptEnd, Pose, SteppedAttempt
+from rcbht_introspection.sim.episode import Pose, SteppedAttempt, TrialWorld, corrected_start
 from rcbht_introspection.sim.peg_config import PegConfig
 from rcbht_introspection.sim.peg_controller import PegController
 from rcbht_introspection.sim.peg_model import GRIP, build_peg_model
@@ -19,19 +19,10 @@ from rcbht_introspection.sim.peg_simulate import PegRun, draw_and_run, in_hole, 
 
 
 @dataclass(frozen=True)
-class PegWorld:
+class PegWorld(TrialWorld):
     """One peg trial's world, the same for all its attempts."""
 
-    seed: int
-    failure: str | None
     run: PegRun
-    redraws: int
-    as_requested: bool
-    """The uncorrected task ends as asked: fails for a failure class, inserts for a nominal."""
-
-    @property
-    def failing(self) -> bool:
-        return self.failure is not None and self.as_requested
 
     @property
     def truth(self) -> Pose:
@@ -44,7 +35,7 @@ def draw_peg_world(config: PegConfig, seed: int, failure: str | None) -> PegWorl
     run, redraws = arm_run.redraw_until(
         seed, config.max_attempts, lambda rng: _agreeing(config, rng, failure)
     )
-    return PegWorld(seed, failure, run[0], redraws, run[1])
+    return PegWorld(seed, failure, redraws, run[1], run=run[0])
 
 
 def _agreeing(
@@ -61,12 +52,12 @@ class PegAttempt(SteppedAttempt):
         self, config: PegConfig, world: PegWorld, correction: Pose, index: int, rate_hz: float
     ) -> None:
         run = world.run
-        cx, cy, cz, cyaw = correction
-        sx, sy, sz = run.physics.start_pose
-        physics = replace(run.physics, start_pose=(sx + cx, sy + cy, sz + cz))
+        physics = replace(
+            run.physics, start_pose=corrected_start(run.physics.start_pose, correction)
+        )
         self.config, self.plan = config, run.plan
         model = build_peg_model(config, physics)
-        rig = arm_run.ServoRig(model, mujoco.MjData(model), yaw=cyaw)
+        rig = arm_run.ServoRig(model, mujoco.MjData(model), yaw=correction[3])
         controller = PegController(config, run.plan)
         super().__init__(
             rig, controller, run.plan.start,
@@ -80,13 +71,8 @@ class PegAttempt(SteppedAttempt):
 
         self.before_step = release
 
-    def _end(self) -> AttemptEnd:
-        st = self.controller.state
-        inserted = st.seat_time is not None and not st.aborted
-        duration = round(self.samples * self.period, 9)
-        climb = self.plan.start[2] - (self.offsets[2] + self.data.qpos[self.rig.qz])
-        back = 0.0 if inserted else max(0.0, climb) / self.plan.retreat_speed
-        return AttemptEnd(
-            inserted, "seated" if inserted else self.reason or "unseated",
-            in_hole(self.config, self.data), duration, back,
-        )  # fmt: skip
+    def _in_place(self) -> bool:
+        return in_hole(self.config, self.data)
+
+    def _return_speed(self) -> float:
+        return self.plan.retreat_speed
