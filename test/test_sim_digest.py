@@ -29,7 +29,7 @@ CASES: dict[str, tuple[Callable[[], Trial], str]] = {
     ),
     "snap two-arm misalignment": (
         lambda: simulate_trial(load_sim_config(), 5, scenario="two-arm", failure="misalignment"),
-        "e8433e14fde9f7e076037653c1d24f9c44b4ca70aa09c4e9f532fda7eb345d68",
+        "85462b3b76e9b3c1a33ce68b442f0a142fab75e6c93d86a9ebe875c8d0318659",
     ),
     "snap deviation with onset": (
         lambda: simulate_trial(load_sim_config(), 7, failure="deviation_x+"),
@@ -38,6 +38,10 @@ CASES: dict[str, tuple[Callable[[], Trial], str]] = {
     "peg success": (
         lambda: simulate_peg_trial(load_peg_config(), 3),
         "f832bf0f79e0ef671f1c90b1031928b6300a6d5f6180e224d5a2de8cc505723d",
+    ),
+    "peg hole_yaw": (
+        lambda: simulate_peg_trial(load_peg_config(), 31, failure="hole_yaw"),
+        "38359f7035bd5985252fa85a3a2954548dcbcff9ed2d0cf16ffebbf97cdeda4a",
     ),
 }
 
