@@ -11,17 +11,17 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from rcbht_introspection.closed_loop.run import TaskConfig, TaskWorld, TrialRecord, run_trial
+from rcbht_introspection.closed_loop.run import TaskWorld, TrialRecord, run_trial
 from rcbht_introspection.fleet import parallel_map
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.plan.planner import PolicyName
 from rcbht_introspection.plan.recovery import RecoveryConfig
 from rcbht_introspection.sim.episode import draw_world
-from rcbht_introspection.sim.failures import failure_classes
 from rcbht_introspection.sim.peg_config import PegConfig
 from rcbht_introspection.sim.peg_episode import draw_peg_world
 from rcbht_introspection.sim.peg_simulate import simulate_peg_trial
 from rcbht_introspection.sim.simulate import simulate_trial
+from rcbht_introspection.sim.tasks import TaskConfig
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.labels import label_of
 from rcbht_introspection.verify.model_file import VerifierModel
@@ -47,13 +47,6 @@ class Worlds:
     failing: list[TaskWorld]
     nominal: list[TaskWorld]
     not_failing: dict[str, int]
-
-
-def task_classes(config: TaskConfig) -> tuple[str, ...]:
-    """The failure classes a task's config draws."""
-    if isinstance(config, PegConfig):
-        return config.failures.types
-    return failure_classes(config.failures)
 
 
 def _draw(config: TaskConfig, item: tuple[int, str | None]) -> TaskWorld:

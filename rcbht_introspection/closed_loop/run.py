@@ -12,14 +12,13 @@ from rcbht_introspection.sim.config import SimConfig
 from rcbht_introspection.sim.episode import ARM, Attempt, AttemptEnd, Pose, SteppedAttempt, World
 from rcbht_introspection.sim.peg_config import PegConfig
 from rcbht_introspection.sim.peg_episode import PegAttempt, PegWorld
+from rcbht_introspection.sim.tasks import TaskConfig
 from rcbht_introspection.verify.model_file import VerifierModel
 from rcbht_introspection.verify.monitor import VerifierSession
 
 RATE_HZ = 200.0
 """The simulated snap sensor's rate (the snap cell's, as `rcbht sim`); the peg task's is its
 config's."""
-TaskConfig = SimConfig | PegConfig
-"""A simulated task's config: the snap assembly's or the peg-in-hole's."""
 TaskWorld = World | PegWorld
 
 

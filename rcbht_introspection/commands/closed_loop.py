@@ -94,11 +94,12 @@ def _classes(all_classes: tuple[str, ...], text: str | None) -> list[str]:
 
 def cmd_closed_loop(args: argparse.Namespace) -> int:
     """Draw the worlds, train or load the verifier, run the policies, write the JSON."""
-    from rcbht_introspection.closed_loop.experiment import draw_worlds, task_classes
+    from rcbht_introspection.closed_loop.experiment import draw_worlds
     from rcbht_introspection.config_files import config_path
     from rcbht_introspection.plan.recovery import load_recovery_config
     from rcbht_introspection.sim import load_sim_config
     from rcbht_introspection.sim.peg_config import load_peg_config
+    from rcbht_introspection.sim.tasks import task_failure_classes
 
     if args.trials < 0 or args.nominal < 0 or args.trials + args.nominal == 0:
         raise InputError("need at least one trial (--trials, --nominal)", field="trials")
@@ -108,7 +109,7 @@ def cmd_closed_loop(args: argparse.Namespace) -> int:
     load = load_peg_config if args.task == "peg" else load_sim_config
     config = load(args.config or config_path(TASKS[args.task]))
     recovery = load_recovery_config(args.task, args.recovery)
-    classes = _classes(task_classes(config), args.classes)
+    classes = _classes(task_failure_classes(config), args.classes)
     jobs = jobs_from_args(args)
     with backend(args.scheduler):
         verifier = _verifier(args, config, classes, policies, jobs)

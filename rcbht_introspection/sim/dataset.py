@@ -21,8 +21,7 @@ from rcbht_introspection.fleet import parallel_map
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import write_trial
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.sim.config import FailureType, SimConfig
-from rcbht_introspection.sim.failures import failure_classes
+from rcbht_introspection.sim.config import FailureType
 from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
 from rcbht_introspection.sim.sessions import SessionSensor, draw_sessions, in_session, session_of
 from rcbht_introspection.sim.tasks import (
@@ -32,6 +31,7 @@ from rcbht_introspection.sim.tasks import (
     TrialSimulator,
     check_request,
     get_sim_task,
+    task_failure_classes,
     trial_simulator,
 )
 
@@ -187,9 +187,7 @@ def write_dataset(
     out = Path(out_dir)
     _clear_previous_set(out)
     out.mkdir(parents=True, exist_ok=True)
-    types = (
-        failure_classes(config.failures) if isinstance(config, SimConfig) else config.failures.types
-    )
+    types = task_failure_classes(config)
     plan = trial_plan(n_trials, seed, failures, types)
     units = [
         _Unit(i, trial_seed, failure, days[session_of(i, n_trials, sessions)] if days else None)

@@ -11,6 +11,7 @@ from typing import Literal, get_args
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim.config import FailureType, SimConfig, load_sim_config
+from rcbht_introspection.sim.failures import failure_classes
 from rcbht_introspection.sim.peg_config import PegConfig, load_peg_config
 from rcbht_introspection.sim.peg_controller import PEG_TASK
 from rcbht_introspection.sim.peg_simulate import simulate_peg_trial
@@ -55,6 +56,13 @@ SIM_TASK_TABLE: dict[str, SimTask] = {  # keyed by SimTaskName; looked up by any
         "peg-in-hole", PEG_TASK, "sim/peg.yaml", load_peg_config, ("one-arm",), True, "PEG"
     ),
 }
+
+
+def task_failure_classes(config: TaskConfig) -> tuple[str, ...]:
+    """The failure classes a task's config draws (each snap deviation class is one)."""
+    if isinstance(config, PegConfig):
+        return config.failures.types
+    return failure_classes(config.failures)
 
 
 def get_sim_task(name: str) -> SimTask:
