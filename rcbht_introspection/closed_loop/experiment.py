@@ -34,6 +34,8 @@ TRAIN_OFFSET = 90_000
 """The default verifier's trials: the next seed's block from here (other seeds than any test)."""
 MIN_PER_CLASS = 12
 """The default verifier's failures per class, at least."""
+MIN_SUCCESSES = 40
+"""The default verifier's nominal trials, at least."""
 MAX_DRAWS_PER_FAILING = 3
 """Worlds drawn at most per failing trial asked for: a class whose draws all seat is counted."""
 Progress = Callable[[int], object]
@@ -120,19 +122,28 @@ def _train_trial(config: TaskConfig, item: tuple[int, str | None]) -> Trial:
     return simulate_trial(config, seed, failure=failure, name=name)
 
 
+def calibration_successes(false_alarm_rate: float) -> int:
+    """Nominal trials a verifier needs for its conformal threshold to reach `false_alarm_rate`
+    (with n successes the rate cannot go below 1 / (n + 1)), at least MIN_SUCCESSES."""
+    return max(MIN_SUCCESSES, math.ceil(1.0 / false_alarm_rate))
+
+
 def train_default_verifier(
     config: TaskConfig,
     classes: Sequence[str],
     verify_config: VerifyConfig,
     seed: int,
     per_class: int | None = None,
-    successes: int = 40,
+    successes: int | None = None,
     jobs: int = 1,
 ) -> VerifierModel:
     """A verifier trained on simulated trials of the same config on other seeds than any
-    experiment of `seed` runs: `successes` nominal ones and `per_class` of each class (None:
-    MIN_PER_CLASS, and at least as many failures in all as successes, so a task of few classes
-    learns its directions from as many trials as its detector learns the nominal from)."""
+    experiment of `seed` runs: `successes` nominal ones (None: what its false-alarm rate needs)
+    and `per_class` of each class (None: MIN_PER_CLASS, and at least as many failures in all as
+    successes, so a task of few classes learns its directions from as many trials as its
+    detector learns the nominal from)."""
+    if successes is None:
+        successes = calibration_successes(verify_config.false_alarm_rate)
     if per_class is None:
         per_class = max(MIN_PER_CLASS, math.ceil(successes / max(1, len(classes))))
     base = (seed + 1) * SEED_BLOCK + TRAIN_OFFSET

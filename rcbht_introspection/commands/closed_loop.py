@@ -112,7 +112,7 @@ def cmd_closed_loop(args: argparse.Namespace) -> int:
     classes = _classes(task_failure_classes(config), args.classes)
     jobs = jobs_from_args(args)
     with backend(args.scheduler):
-        verifier = _verifier(args, config, classes, policies, jobs)
+        verifier = _verifier(args, config, classes, policies, recovery.abort_rate, jobs)
         worlds = draw_worlds(config, classes, args.trials, args.nominal, args.seed, jobs)
         result = _run(args, config, worlds, policies, recovery, verifier, jobs)
     result["classes"] = classes
@@ -129,9 +129,17 @@ def cmd_closed_loop(args: argparse.Namespace) -> int:
 
 
 def _verifier(
-    args: argparse.Namespace, config: Any, classes: list[str], policies: list[str], jobs: int
+    args: argparse.Namespace,
+    config: Any,
+    classes: list[str],
+    policies: list[str],
+    abort_rate: float,
+    jobs: int,
 ) -> Any:
-    """The verifier file, else one trained here; None when no policy reads verdicts."""
+    """The verifier file, else one trained here at the planner's abort rate; None when no
+    policy reads verdicts."""
+    import dataclasses
+
     from rcbht_introspection.closed_loop.experiment import train_default_verifier
     from rcbht_introspection.verify.config import load_verify_config
     from rcbht_introspection.verify.model_file import load_verifier
@@ -146,7 +154,8 @@ def _verifier(
         except (OSError, ValueError) as exc:
             raise InputError(f"unusable verifier: {exc}", path=args.verifier) from None
     print("training a verifier on other seeds of the same config ...", file=sys.stderr)
-    model = train_default_verifier(config, classes, load_verify_config(), args.seed, jobs=jobs)
+    verify_config = dataclasses.replace(load_verify_config(), false_alarm_rate=abort_rate)
+    model = train_default_verifier(config, classes, verify_config, args.seed, jobs=jobs)
     if args.save_verifier is not None:
         save_verifier(model, args.save_verifier)
     return model

@@ -88,6 +88,9 @@ class RecoveryConfig:
     max_attempts: int = 3
     naming_wait_s: float = 1.0
     """After an alarm the planner waits this long for a class; then it aborts as `anomaly`."""
+    abort_rate: float = 0.01
+    """Share of nominal attempts the planner may abort needlessly: every alarm is an abort, so
+    `rcbht closed-loop` calibrates its default verifier to this false-alarm rate."""
     bounds: dict[str, float] = field(
         default_factory=lambda: {"x": 0.008, "y": 0.008, "z": 0.008, "yaw": 0.25}
     )
@@ -113,6 +116,8 @@ def check_recovery(config: RecoveryConfig) -> None:
         raise InputError("need at least one attempt", field="max_attempts")
     if config.naming_wait_s < 0:
         raise InputError("must not be negative", field="naming_wait_s")
+    if not 0 < config.abort_rate < 1:
+        raise InputError(f"must be in (0, 1), got {config.abort_rate}", field="abort_rate")
     for name, table in (("bounds", config.bounds), ("search_step", config.search_step)):
         _check_axes(table, name, positive=True)
     for cls, entry in config.classes.items():
