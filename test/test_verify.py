@@ -15,7 +15,6 @@ import pytest
 from conftest import SIM_SUCCESS
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from sklearn.base import clone
 from sklearn.ensemble import RandomForestClassifier
 from sklearn.linear_model import LogisticRegression
 from sklearn.preprocessing import StandardScaler
@@ -30,10 +29,10 @@ from rcbht_introspection.summaries.windows import to_panel
 from rcbht_introspection.verify.characterise import (
     FAILURE,
     Characteriser,
-    Constant,
     RunningEvidence,
     _shared_by_signs,
     class_head,
+    label_matrix,
     sign_table,
     span_index,
 )
@@ -104,7 +103,8 @@ def held_out_model(
                 windows.append(r.window)
                 names.append(TrialLabel(trial.name, "failure", cls, None, (0.0, float(np.sign(fy)) * 1e-3, 0.0)))  # fmt: skip
     char = Characteriser(n_estimators=20, shape_weight=0.5)  # the shape head votes live too
-    model.characteriser = char.fit(np.vstack(rows), names, windows)
+    trials = [lb.trial for lb in names]
+    model.characteriser = char.fit(np.vstack(rows), label_matrix(names), windows, trials)
     path = tmp_path_factory.mktemp("held_out") / "v.npz"
     return load_verifier(save_verifier(model, path))
 
@@ -121,7 +121,7 @@ def offline_namings(
     reader = reader_of(model.detector, "wrench", len(model.arms))
     ticks = reader.ticks(tf)
     rows = namings(reader, config.evidence_s, detection.onset, ticks, detection.alarm, config.lag_s)
-    return [(r.time, model.characteriser.predict(r.features, r.window)) for r in rows]
+    return [(r.time, model.characteriser.characterise(r.features, r.window)) for r in rows]
 
 
 def assert_live_names_as_offline(
@@ -516,17 +516,19 @@ def test_the_sign_table_ties_signs_to_a_class_only_when_unambiguous() -> None:
         return TrialLabel("t", "failure", cls, 1.0, dev)
 
     table = sign_table(
-        [
-            fail("slip_x", (0.002, 0.0, 0.0)),
-            fail("slip_x", (0.003, 0.0, 0.0)),
-            fail("slip_xy", (0.002, 0.002, 0.0)),
-            fail("slip_xy", (0.002, -0.002, 0.0)),  # two sign patterns: not in the table
-            fail("twist", (0.0, 0.0, 0.05)),
-            fail("turn", (0.0, 0.0, 0.06)),  # the same signs as twist: neither is
-            fail("jam", None),
-            fail("half", (0.0, 0.002, 0.0)),
-            fail("half", None),  # not every trial has a deviation
-        ]
+        label_matrix(
+            [
+                fail("slip_x", (0.002, 0.0, 0.0)),
+                fail("slip_x", (0.003, 0.0, 0.0)),
+                fail("slip_xy", (0.002, 0.002, 0.0)),
+                fail("slip_xy", (0.002, -0.002, 0.0)),  # two sign patterns: not in the table
+                fail("twist", (0.0, 0.0, 0.05)),
+                fail("turn", (0.0, 0.0, 0.06)),  # the same signs as twist: neither is
+                fail("jam", None),
+                fail("half", (0.0, 0.002, 0.0)),
+                fail("half", None),  # not every trial has a deviation
+            ]
+        )
     )
     assert table == {("+", "0", "0"): "slip_x"}
 
@@ -541,7 +543,7 @@ def _two_sided_characteriser() -> Characteriser:
         rows.append([10.0 if cls == "slip_x" else 0.0, side if k >= 20 else 0.0, rng.normal()])
         labels.append(TrialLabel(f"t{k}", "failure", cls, 1.0, dev))
     return Characteriser(n_estimators=20, min_samples_leaf=1, compose=True).fit(
-        np.array(rows), labels
+        np.array(rows), label_matrix(labels)
     )
 
 
@@ -552,9 +554,9 @@ def test_a_class_whose_deviations_change_sign_names_them_with_its_own_head() -> 
     assert set(ch.heads_) == {FAILURE, *DIRECTION_AXES, class_head("y", "beside")}
     assert list(ch.heads_["y"].classes_) == ["0"]  # slip_x only: beside's signs vary
     for side, want in ((1.0, "+"), (-1.0, "-")):
-        cls, _, dirs = ch.predict(np.array([0.0, side, 0.0]))
+        cls, _, dirs = ch.characterise(np.array([0.0, side, 0.0]))
         assert cls == "beside" and dirs["y"] == want
-    assert ch.predict(np.array([10.0, 0.0, 0.0]))[2] == {"x": "+", "y": "0", "r": "0"}
+    assert ch.characterise(np.array([10.0, 0.0, 0.0]))[2] == {"x": "+", "y": "0", "r": "0"}
 
 
 def test_a_verifier_file_keeps_the_heads_of_a_class(trained: VerifierModel, tmp_path: Path) -> None:
@@ -563,19 +565,7 @@ def test_a_verifier_file_keeps_the_heads_of_a_class(trained: VerifierModel, tmp_
     loaded = load_verifier(save_verifier(model, tmp_path / "v.npz")).characteriser
     assert loaded is not None and set(loaded.heads_) == set(ch.heads_)
     for row in ([0.0, 1.0, 0.0], [0.0, -1.0, 0.3], [10.0, 0.0, 0.0]):
-        assert loaded.predict(np.array(row)) == ch.predict(np.array(row))
-
-
-def test_a_constant_head_s_parameters_are_scikit_learn_s() -> None:
-    """get_params as BaseEstimator defines it (deep or not), so clone and set_params work."""
-    head = Constant("deviation_x+", 7)
-    assert (
-        head.get_params()
-        == head.get_params(deep=False)
-        == {"only": "deviation_x+", "n_features": 7}
-    )
-    copy = clone(head).set_params(n_features=9)
-    assert copy.get_params() == {"only": "deviation_x+", "n_features": 9}
+        assert loaded.characterise(np.array(row)) == ch.characterise(np.array(row))
 
 
 def test_direction_signs_share_the_deviation_classes_mass() -> None:
@@ -629,7 +619,8 @@ def test_a_saved_verifier_names_what_the_trained_one_names(
         onset = float(tf.times[len(tf.times) // 2])
         for r in namings(reader, config.evidence_s, onset, reader.ticks(tf), onset):
             x, w = r.features, r.window
-            assert loaded.characteriser.predict(x, w) == trained.characteriser.predict(x, w)
+            named = loaded.characteriser.characterise(x, w)
+            assert named == trained.characteriser.characterise(x, w)
             rows += 1
     assert rows > len(trials)
     assert offline_verdicts(trials[-1], loaded) == offline_verdicts(trials[-1], trained)
@@ -957,10 +948,14 @@ def test_the_shape_head_votes_only_when_it_helps_on_held_out_trials(shape_inform
     if not shape_informs:
         X[:, 0] += 3.0 * np.array([int(c[-1]) for c in y])
     labels = [TrialLabel(f"t{i // 3}", "failure", c) for i, c in enumerate(y)]
-    char = Characteriser(n_estimators=30).fit(X, labels, windows)
+    groups = [lb.trial for lb in labels]
+    char = Characteriser(n_estimators=30).fit(
+        X, [lb.failure_class for lb in labels], windows, groups
+    )
     if shape_informs:
         assert char.shape_ is not None and char.shape_weight_ > 0
-        assert char.predict(X[0], windows[0])[0] == y[0]
+        assert char.characterise(X[0], windows[0])[0] == y[0]
+        assert char.predict(X[:1], windows[:1])[0] == y[0]
     else:
         assert char.shape_ is None and char.shape_weight_ == 0
 

@@ -14,6 +14,8 @@ from typing import Any
 import numpy as np
 from sklearn.base import BaseEstimator, ClassifierMixin
 from sklearn.ensemble import RandomForestClassifier
+from sklearn.utils.multiclass import check_classification_targets
+from sklearn.utils.validation import check_is_fitted, validate_data
 
 ARRAYS = ("feature", "threshold", "left", "right", "leaf", "value", "roots")
 """The packed model's arrays: per node its split (feature, threshold), its children as global
@@ -35,21 +37,28 @@ class ForestHead(ClassifierMixin, BaseEstimator):  # type: ignore[misc]
         self.max_features = max_features
         self.random_state = random_state
 
-    def fit(self, X: np.ndarray, y: Sequence[str]) -> ForestHead:
+    def fit(self, X: np.ndarray, y: Sequence[Any] | np.ndarray) -> ForestHead:
         """Learn with scikit-learn (one process), then keep only the packed trees."""
+        X, y = validate_data(self, X, y)
+        check_classification_targets(y)
         model = RandomForestClassifier(
             n_estimators=self.n_estimators,
             min_samples_leaf=self.min_samples_leaf,
             max_features=self.max_features,
             random_state=self.random_state,
-        ).fit(np.asarray(X, dtype=float), np.asarray(y, dtype=str))
-        self.classes_ = np.asarray(model.classes_, dtype=str)
-        self.n_features_in_ = int(model.n_features_in_)
+        ).fit(X, y)
+        self.classes_ = np.asarray(model.classes_)
         self.arrays_ = pack(model)
         return self
 
     def predict_proba(self, X: np.ndarray) -> np.ndarray:
-        """The trees' mean class shares at the rows' leaves (rows compared as float32, as
+        """The trees' mean class shares at the rows' leaves."""
+        check_is_fitted(self, "arrays_")
+        return self.shares(validate_data(self, X, reset=False))
+
+    def shares(self, X: np.ndarray) -> np.ndarray:
+        """predict_proba without scikit-learn's input checks, for rows the caller built of the
+        fitted width (the live path's one row a tick; rows compared as float32, as
         scikit-learn's trees compare them)."""
         a = self.arrays_
         X = np.asarray(X, dtype=np.float32)
@@ -64,6 +73,7 @@ class ForestHead(ClassifierMixin, BaseEstimator):  # type: ignore[misc]
         return np.asarray(a["value"][node].mean(axis=1), dtype=float)
 
     def predict(self, X: np.ndarray) -> np.ndarray:
+        check_is_fitted(self, "arrays_")
         predicted: np.ndarray = self.classes_[np.argmax(self.predict_proba(X), axis=1)]
         return predicted
 

@@ -31,7 +31,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from sklearn.base import BaseEstimator
+from sklearn.base import BaseEstimator, ClassifierMixin
+from sklearn.utils import Tags
+from sklearn.utils.multiclass import check_classification_targets
+from sklearn.utils.validation import check_is_fitted, column_or_1d, validate_data
 
 from rcbht_introspection.learn.forest import ForestHead
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
@@ -122,28 +125,51 @@ def class_head(axis: str, failure_class: str) -> str:
     return f"{axis}@{failure_class}"
 
 
-def _signs_by_class(labels: Sequence[TrialLabel]) -> dict[str, set[tuple[str, ...]]]:
-    """The direction signs (x, y, r) each class's labelled trials carry."""
-    signs: dict[str, set[tuple[str, ...]]] = {}
+LABEL_COLUMNS = ("class", *DIRECTION_AXES)
+"""Columns of a characteriser's two-dimensional y: the failure class, then the deviation's sign
+per axis ('-', '0', '+'; '' for every axis of a trial whose label carries no deviation)."""
+
+
+def label_matrix(labels: Sequence[TrialLabel]) -> np.ndarray:
+    """The y of `Characteriser.fit` from trial labels: one row of LABEL_COLUMNS per label."""
+    rows = []
     for lb in labels:
-        if (d := lb.directions()) is not None:
-            signs.setdefault(lb.failure_class, set()).add(tuple(d[a] for a in DIRECTION_AXES))
+        d = lb.directions()
+        rows.append([lb.failure_class, *(d[a] if d else "" for a in DIRECTION_AXES)])
+    return np.asarray(rows, dtype=str).reshape(len(rows), len(LABEL_COLUMNS))
+
+
+def _signs_by_class(y: np.ndarray) -> dict[str, set[tuple[str, ...]]]:
+    """The direction signs (x, y, r) each class's labelled rows carry."""
+    signs: dict[str, set[tuple[str, ...]]] = {}
+    for cls, *key in y[y[:, 1] != ""]:
+        signs.setdefault(str(cls), set()).add(tuple(str(k) for k in key))
     return signs
 
 
-def sign_table(labels: Sequence[TrialLabel]) -> dict[tuple[str, ...], str]:
-    """Direction signs (x, y, r) -> failure class, from labelled failures: a class whose every
-    trial carries a deviation of the same signs, and whose signs no other class shares."""
-    unlabelled = {lb.failure_class for lb in labels if lb.directions() is None}
+def sign_table(y: np.ndarray) -> dict[tuple[str, ...], str]:
+    """Direction signs (x, y, r) -> failure class, from label rows (`label_matrix`): a class
+    whose every row carries a deviation of the same signs, and whose signs no other class shares."""
+    unlabelled = {str(c) for c in y[y[:, 1] == "", 0]}
     owners: dict[tuple[str, ...], list[str]] = {}
-    for cls, found in _signs_by_class(labels).items():
+    for cls, found in _signs_by_class(y).items():
         if len(found) == 1 and cls not in unlabelled:
             owners.setdefault(next(iter(found)), []).append(cls)
     return {key: names[0] for key, names in owners.items() if len(names) == 1}
 
 
-class Characteriser(BaseEstimator):  # type: ignore[misc]
-    """Evidence features -> failure class, its probabilities and the deviation directions."""
+def _evidence(X: np.ndarray) -> np.ndarray:
+    """Evidence rows as the heads read them: NaN as 0, clipped to +-CLIP."""
+    rows: np.ndarray = np.clip(np.nan_to_num(np.asarray(X, dtype=float), nan=0.0), -CLIP, CLIP)
+    return rows
+
+
+class Characteriser(ClassifierMixin, BaseEstimator):  # type: ignore[misc]
+    """Evidence features -> failure class, its probabilities and the deviation directions.
+
+    `fit(X, y)` takes y as class names, or as rows of LABEL_COLUMNS (`label_matrix`) to learn
+    the direction heads too; `windows` (the evidence since onset per row) add the shape head and
+    `groups` (the trial of each row) hold whole trials out when its vote weight is chosen."""
 
     def __init__(
         self,
@@ -160,6 +186,11 @@ class Characteriser(BaseEstimator):  # type: ignore[misc]
         """The shape head's vote weight (None: learnt from the training failures, vote_weight)."""
         self.random_state = random_state
 
+    def __sklearn_tags__(self) -> Tags:
+        tags = super().__sklearn_tags__()
+        tags.input_tags.allow_nan = True  # NaN reads as 0, as live evidence does
+        return tags
+
     def _head(self) -> ForestHead:
         return ForestHead(
             n_estimators=self.n_estimators,
@@ -170,61 +201,104 @@ class Characteriser(BaseEstimator):  # type: ignore[misc]
     def fit(
         self,
         X: np.ndarray,
-        labels: Sequence[TrialLabel],
-        windows: Sequence[np.ndarray] = (),
+        y: np.ndarray,
+        windows: Sequence[np.ndarray] | None = None,
+        groups: Sequence[str] | None = None,
     ) -> Characteriser:
-        """Rows of evidence features, each with the label of its trial (and the evidence window
-        it was read from: the shape head learns from them)."""
-        if len(X) == 0:
-            raise ValueError("no failure trials to learn failure classes from")
-        classes = [lb.failure_class for lb in labels]
-        self.heads_: dict[str, ForestHead] = {FAILURE: self._fit_head(X, classes)}
-        self._fit_shape(X, labels, windows)
-        signs = _signs_by_class(labels)
-        labelled = [i for i, lb in enumerate(labels) if lb.directions() is not None]
-        consistent = [i for i in labelled if len(signs[labels[i].failure_class]) == 1]
-        general = consistent or labelled
-        for axis in DIRECTION_AXES if labelled else ():
-            y = [labels[i].directions()[axis] for i in general]  # type: ignore[index]
-            self.heads_[axis] = self._fit_head(X[general], y)
-        for cls, found in signs.items() if consistent else ():
-            mine = [i for i in labelled if labels[i].failure_class == cls]
-            for k, axis in enumerate(DIRECTION_AXES):
-                if len(found) > 1 and len({key[k] for key in found}) > 1:
-                    y = [labels[i].directions()[axis] for i in mine]  # type: ignore[index]
-                    self.heads_[class_head(axis, cls)] = self._fit_head(X[mine], y)
-        self.signs_ = sign_table(labels) if self.compose and labelled else {}
+        """The class head, the direction heads (two-dimensional y) and the shape head."""
+        X, y = validate_data(self, X, y, multi_output=True, ensure_all_finite=False)
+        X = _evidence(X)
+        y = np.asarray(y)
+        if y.ndim == 2 and y.shape[1] == len(LABEL_COLUMNS):
+            y = y.astype(str)
+        else:
+            y = column_or_1d(y, warn=True)
+        classes = y[:, 0] if y.ndim == 2 else y
+        check_classification_targets(classes)
+        self.heads_: dict[str, ForestHead] = {FAILURE: self._head().fit(X, classes)}
+        self.classes_ = self.heads_[FAILURE].classes_
+        self._fit_shape(X, classes, windows, groups)
+        self.signs_: dict[tuple[str, ...], str] = {}
+        if y.ndim == 2:
+            self._fit_directions(X, y)
         return self
 
+    def _fit_directions(self, X: np.ndarray, y: np.ndarray) -> None:
+        """General direction heads from the classes of one set of signs (else every labelled
+        row), and a class's own heads on the axes where its signs change."""
+        signs = _signs_by_class(y)
+        labelled = np.flatnonzero(y[:, 1] != "")
+        consistent = [i for i in labelled if len(signs[y[i, 0]]) == 1]
+        general = consistent or list(labelled)
+        for k, axis in enumerate(DIRECTION_AXES, start=1):
+            if len(labelled):
+                self.heads_[axis] = self._head().fit(X[general], y[general, k])
+        for cls, found in signs.items() if consistent else ():
+            mine = labelled[y[labelled, 0] == cls]
+            for k, axis in enumerate(DIRECTION_AXES):
+                if len({key[k] for key in found}) > 1:
+                    self.heads_[class_head(axis, cls)] = self._head().fit(X[mine], y[mine, k + 1])
+        self.signs_ = sign_table(y) if self.compose and len(labelled) else {}
+
     def _fit_shape(
-        self, X: np.ndarray, labels: Sequence[TrialLabel], windows: Sequence[np.ndarray]
+        self,
+        X: np.ndarray,
+        classes: np.ndarray,
+        windows: Sequence[np.ndarray] | None,
+        groups: Sequence[str] | None,
     ) -> None:
         """The shape head and its vote weight (none without windows or with one class)."""
         self.shape_: ShapeHead | None = None
         self.shape_weight_ = 0.0
-        classes = [lb.failure_class for lb in labels]
-        if len(windows) != len(X) or len(set(classes)) < 2:
+        if windows is None or len(windows) != len(X) or len(set(classes)) < 2:
             return
+        names = [str(c) for c in classes]
         head = ShapeHead(random_state=self.random_state)
-        trials = [lb.trial for lb in labels]
         weight = self.shape_weight
         if weight is None:
-            weight = vote_weight(self._head, head, X, windows, classes, trials)
+            keys = list(groups) if groups is not None else [str(i) for i in range(len(X))]
+            weight = vote_weight(self._head, head, X, windows, names, keys)
         if weight > 0:
-            self.shape_, self.shape_weight_ = head.fit(windows, classes), weight
+            self.shape_, self.shape_weight_ = head.fit(windows, names), weight
 
-    def _fit_head(self, X: np.ndarray, y: Sequence[str]) -> ForestHead:
-        """A head; one class alone is named with certainty (no trees)."""
-        if len(set(y)) < 2:
-            return Constant(str(y[0]), X.shape[1])
-        return self._head().fit(X, y)
+    def predict_proba(
+        self, X: np.ndarray, windows: Sequence[np.ndarray] | None = None
+    ) -> np.ndarray:
+        """(rows, classes_) probabilities: the class head, voted with the shape head where the
+        rows' windows are given, the sign classes' mass shared by the direction heads."""
+        check_is_fitted(self, "heads_")
+        X = _evidence(validate_data(self, X, reset=False, ensure_all_finite=False))
+        out = np.zeros((len(X), len(self.classes_)))
+        for i, row in enumerate(X):
+            window = None if windows is None else windows[i]
+            probs = self._probabilities(row[None, :], window)[0]
+            out[i] = [probs[str(c)] for c in self.classes_]
+        return out
 
-    def predict(
+    def predict(self, X: np.ndarray, windows: Sequence[np.ndarray] | None = None) -> np.ndarray:
+        """The likeliest class of each row."""
+        proba = self.predict_proba(X, windows)
+        named: np.ndarray = self.classes_[np.argmax(proba, axis=1)]
+        return named
+
+    def characterise(
         self, x: np.ndarray, window: np.ndarray | None = None
     ) -> tuple[str, dict[str, float], dict[str, str]]:
-        """(class, class probabilities, direction per axis) of one evidence row (and its window,
-        which the shape head reads)."""
-        row = np.clip(np.nan_to_num(np.asarray(x, dtype=float), nan=0.0), -CLIP, CLIP)[None, :]
+        """(class, class probabilities, direction per axis) of one evidence row (and its
+        window): what the verifier names at a tick, without the array checks of predict."""
+        probs, directions = self._probabilities(_evidence(x)[None, :], window)
+        named = max(probs, key=probs.__getitem__)
+        row = _evidence(x)[None, :]
+        for axis in DIRECTION_AXES:  # a class with its own heads: its directions
+            if (head := self.heads_.get(class_head(axis, named))) is not None:
+                directions[axis] = _named(head, row)
+        dirs = {a: max(p, key=p.__getitem__) for a, p in directions.items()}
+        return named, probs, dirs
+
+    def _probabilities(
+        self, row: np.ndarray, window: np.ndarray | None
+    ) -> tuple[dict[str, float], dict[str, dict[str, float]]]:
+        """One row's class probabilities and the general direction heads' probabilities."""
         probs = _named(self.heads_[FAILURE], row)
         if self.shape_ is not None and window is not None:
             shape = self.shape_.predict_proba([window])[0]
@@ -232,18 +306,11 @@ class Characteriser(BaseEstimator):  # type: ignore[misc]
         directions = {a: _named(self.heads_[a], row) for a in DIRECTION_AXES if a in self.heads_}
         if self.signs_ and len(directions) == len(DIRECTION_AXES):
             probs = _shared_by_signs(probs, directions, self.signs_)
-        named = max(probs, key=probs.__getitem__)
-        for axis in DIRECTION_AXES:  # a class with its own heads: its directions
-            if (head := self.heads_.get(class_head(axis, named))) is not None:
-                directions[axis] = _named(head, row)
-        dirs = {a: max(p, key=p.__getitem__) for a, p in directions.items()}
-        return named, probs, dirs
+        return probs, directions
 
 
 def _named(head: ForestHead, row: np.ndarray) -> dict[str, float]:
-    return {
-        str(c): float(p) for c, p in zip(head.classes_, head.predict_proba(row)[0], strict=True)
-    }
+    return {str(c): float(p) for c, p in zip(head.classes_, head.shares(row)[0], strict=True)}
 
 
 def _shared_by_signs(
@@ -265,17 +332,3 @@ def _shared_by_signs(
     if mass <= 0 or total <= 0:
         return probs
     return {c: (mass * belief[c] / total if c in owned else p) for c, p in probs.items()}
-
-
-class Constant(ForestHead):
-    """A head that saw one class only: it names that class with certainty."""
-
-    def __init__(self, only: str = "", n_features: int = 0) -> None:
-        super().__init__()
-        self.only = only
-        self.n_features = n_features
-        self.classes_ = np.array([only], dtype=str)
-        self.n_features_in_ = n_features
-
-    def predict_proba(self, X: np.ndarray) -> np.ndarray:
-        return np.ones((len(np.atleast_2d(X)), 1))

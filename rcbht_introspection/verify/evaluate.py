@@ -21,7 +21,7 @@ from sklearn.metrics import roc_auc_score
 from sklearn.model_selection import StratifiedKFold
 
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.verify.characterise import sign_table
+from rcbht_introspection.verify.characterise import label_matrix, sign_table
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detection
 from rcbht_introspection.verify.evidence import named_at, namings
@@ -101,7 +101,7 @@ def _ours(fitted: Fitted, tf: TrialFeatures, onset: float, start: float, lead: f
         return NO_NAMING
     ticks = fitted.reader.ticks(tf)
     evidence = namings(fitted.reader, _spans(fitted), onset, ticks, start, lead)
-    named = [(r.time, char.predict(r.features, r.window)) for r in evidence]
+    named = [(r.time, char.characterise(r.features, r.window)) for r in evidence]
     if not named:
         return NO_NAMING
     return Naming([(t, n[0]) for t, n in named], named[-1][1][0], named[-1][1][2])
@@ -139,7 +139,7 @@ def _make_fold(
     failed = [n for n in train if labels[n].failed]
     failures = [(feats[n], labels[n], onset_for(labels[n], feats[n], timing)[0]) for n in failed]
     groups = {n: labels[n].session for n in train if labels[n].session}
-    table = sign_table([labels[n] for n in failed])
+    table = sign_table(label_matrix([labels[n] for n in failed]))
     signs = {cls: dict(zip(DIRECTION_AXES, key, strict=True)) for key, cls in table.items()}
     return Fold(successes, failures, timing, config, seed, groups, signs=signs)
 

@@ -16,7 +16,7 @@ from rcbht_introspection.config_files import from_mapping
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.safe_file import read_checked, write_safe_npz
 from rcbht_introspection.learn.forest import ARRAYS, ForestHead
-from rcbht_introspection.verify.characterise import FAILURE, Characteriser, Constant
+from rcbht_introspection.verify.characterise import FAILURE, Characteriser
 from rcbht_introspection.verify.config import VerifyConfig, check_verify_config
 from rcbht_introspection.verify.detector import Detector, SignalModels
 from rcbht_introspection.verify.labels import DIRECTION_AXES, DIRECTIONS
@@ -24,7 +24,7 @@ from rcbht_introspection.verify.novelty import NeighbourModel, NominalLevel, Tim
 from rcbht_introspection.verify.shape import ShapeHead
 
 FORMAT = "rcbht-verifier"
-FORMAT_VERSION = 7
+FORMAT_VERSION = 8
 """7: the characteriser's shape head (6: forest heads only; 5 and older: Mondrian heads;
 retrain)."""
 KIND = "verifier"
@@ -72,8 +72,6 @@ def _detector_parts(d: Detector) -> tuple[dict[str, Any], dict[str, np.ndarray]]
 
 def _head_parts(name: str, head: ForestHead) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     header = {"classes": [str(c) for c in head.classes_], "params": head.get_params()}
-    if isinstance(head, Constant):
-        return {**header, "constant": True}, {}
     arrays = {f"head.{name}.{k}": v for k, v in head.arrays_.items()}
     arrays[f"head.{name}.n_features"] = np.array(head.n_features_in_)
     return header, arrays
@@ -151,9 +149,6 @@ def _characteriser(c: dict[str, Any], arrays: dict[str, np.ndarray]) -> Characte
     for name, h in c["heads"].items():
         if name != FAILURE and name.partition("@")[0] not in DIRECTION_AXES:
             raise ValueError(f"unknown characteriser head {name!r}")
-        if h.get("constant"):
-            ch.heads_[name] = Constant(**h["params"])
-            continue
         start = f"head.{name}."
         own = {k[len(start) :]: a for k, a in arrays.items() if k.startswith(start)}
         missing = [k for k in (*ARRAYS, "n_features") if k not in own]
@@ -162,6 +157,8 @@ def _characteriser(c: dict[str, Any], arrays: dict[str, np.ndarray]) -> Characte
         ch.heads_[name] = ForestHead.from_arrays(h["params"], h["classes"], own)
     if FAILURE not in ch.heads_:
         raise ValueError("no failure-class head")
+    ch.classes_ = ch.heads_[FAILURE].classes_
+    ch.n_features_in_ = ch.heads_[FAILURE].n_features_in_
     ch.signs_ = {tuple(str(v) for v in row[:-1]): str(row[-1]) for row in c["signs"]}
     ch.shape_, ch.shape_weight_ = _shape(c.get("shape"), arrays)
     for key, cls in ch.signs_.items():

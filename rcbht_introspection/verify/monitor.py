@@ -254,7 +254,7 @@ class VerifierSession:
         if self.evidence is None or ch is None:
             return verdict
         if rename or self.named is None:
-            self.named = ch.predict(self.evidence.features(), self.evidence.window())
+            self.named = ch.characterise(self.evidence.features(), self.evidence.window())
         cls, probs, dirs = self.named
         return Verdict(
             **{

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.verify.characterise import Characteriser
+from rcbht_introspection.verify.characterise import Characteriser, label_matrix
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.detector import Detector
 from rcbht_introspection.verify.evidence import EvidenceReader, arms_of, namings, reader_of
@@ -82,7 +82,11 @@ def fit_method(
                 windows.append(reading.window)
                 labels.append(label)
     shape = windows if view == "wrench" else []
-    char = Characteriser(random_state=seed).fit(np.vstack(rows), labels, shape) if rows else None
+    char = None
+    if rows:
+        y = label_matrix(labels)
+        trials = [lb.trial for lb in labels]
+        char = Characteriser(random_state=seed).fit(np.vstack(rows), y, shape or None, trials)
     return Fitted(detector, reader, char)
 
 
