@@ -85,3 +85,30 @@ class SensorConfig:
     """... and a drift uniform in +-this (N/s) on each force axis, from each trial's start."""
     session_drift_torque: float = 0.001
     """... and on each moment axis (N m/s)."""
+
+
+@dataclass(frozen=True)
+class CollisionConfig:
+    """How hard, how long and how often a collision strikes (drawn uniformly in the ranges)."""
+
+    force: Range = (5.0, 40.0)
+    """Peak force (N) of each pulse on the held part, in a direction uniform on the sphere."""
+    duration: Range = (0.01, 0.3)
+    """How long (s) each pulse pushes (a half-sine: it rises and falls within that time)."""
+    delay: Range = (0.1, 1.5)
+    """When (s) into its sub-task the first pulse starts (at the sub-task's end if sooner)."""
+    second_pulse: float = 0.25
+    """Chance of a second pulse, `gap` after the first ends."""
+    gap: Range = (0.1, 1.0)
+    lever: float = 0.01
+    """Largest distance (m) per axis from the part's centre to where the push lands: its moment."""
+
+
+@dataclass(frozen=True)
+class SlipConfig:
+    """When and how fast a slow slip slides (its size: the deviation classes' ranges)."""
+
+    delay: Range = (0.1, 1.0)
+    """When (s) into its sub-task the slip starts (at the sub-task's end if sooner)."""
+    duration: Range = (1.0, 4.0)
+    """How long (s) the part takes to slide to its final offset."""

@@ -11,6 +11,7 @@ from typing import Literal
 from rcbht_introspection.config_files import config_path, load_config
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.sim.arm_config import ArmPhysicsConfig as ArmPhysicsConfig
+from rcbht_introspection.sim.arm_config import CollisionConfig, SlipConfig
 from rcbht_introspection.sim.arm_config import ForceLoopConfig as ForceLoopConfig
 from rcbht_introspection.sim.arm_config import Range as Range
 from rcbht_introspection.sim.arm_config import SensorConfig as SensorConfig
@@ -18,7 +19,7 @@ from rcbht_introspection.sim.arm_config import SensorConfig as SensorConfig
 # ArmPhysicsConfig, ForceLoopConfig, Range and SensorConfig are shared with the peg-in-hole task
 # (sim/arm_config.py) and re-exported here, where they used to live
 
-FailureFamily = Literal["misalignment", "jamming", "missed_snap", "deviation"]
+FailureFamily = Literal["misalignment", "jamming", "missed_snap", "deviation", "collision", "slip"]
 """The failure families the simulator can produce (each by its offset range in FailureConfig)."""
 FailureType = str
 """A failure class: a family other than deviation, or `deviation_<dirs>` (sim/failures.py)."""
@@ -163,6 +164,12 @@ class FailureConfig:
     """Size (m) of the part's slip in x or y along each deviated axis."""
     deviation_yaw: Range = (0.04, 0.08)
     """Size (rad) of the part's yaw slip about the tool axis."""
+    collision: CollisionConfig = field(default_factory=CollisionConfig)
+    slip: SlipConfig = field(default_factory=SlipConfig)
+    """The held part sliding in the hand over seconds during a contact sub-task (sim/slip.py),
+    to a size in the deviation ranges along one axis: a failure whether or not it still seats."""
+    """A push on the held part during a sub-task (sim/collision.py): a failure whether or not
+    the part still seats."""
     max_attempts: int = 4
 
 

@@ -18,6 +18,11 @@ from rcbht_introspection.sim.config import ControllerConfig, SimConfig
 from rcbht_introspection.task import HIRO_TASK
 
 PHASES: tuple[str, ...] = ("approach", "rotation", "insertion", "mating", "backoff", "done")
+SLIP_PHASES: tuple[str, ...] = PHASES[1:3]
+"""The phases a slow slip starts in: the part in contact and loaded."""
+STRUCK_PHASES: tuple[str, ...] = PHASES[:3]
+"""The phases a collision strikes in: the part is free or sliding in the housing. Once it is
+seated (mating), a push on it loads the housing's hooks, which the wrist's sensor hardly sees."""
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,17 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim import arm_run
 from rcbht_introspection.sim.arm_config import SensorConfig
 from rcbht_introspection.sim.arm_run import Wrench, uniform
+from rcbht_introspection.sim.collision import (
+    COLLISION,
+    Collision,
+    CollisionRun,
+    collision_record,
+    draw_collision,
+)
 from rcbht_introspection.sim.config import FailureType, SimConfig
 from rcbht_introspection.sim.controller import (
+    SLIP_PHASES,
+    STRUCK_PHASES,
     ControllerState,
     ControlPlan,
     HolderController,
@@ -44,6 +53,7 @@ from rcbht_introspection.sim.onset import (
 )
 from rcbht_introspection.sim.scenario import ScenarioName, get_scenario
 from rcbht_introspection.sim.sensor import SensorDraw, decimation, draw_sensor, measure
+from rcbht_introspection.sim.slip import SLIP, Slip, SlipRun, draw_slip, slip_record
 
 MAX_DURATION = 80.0
 """Upper bound (s) on one trial; the controller's own time-outs end every trial well before."""
@@ -70,6 +80,9 @@ class PhysicsRun:
     wrench: Wrench
     state: ControllerState
     latched: bool
+    disturbance_onset: float | None = None
+    """When a collision's first pulse struck or a slip started (s; None: none, or it never
+    happened)."""
 
 
 @dataclass(frozen=True)
@@ -82,6 +95,13 @@ class TrialDraw:
     plan: ControlPlan
     sensor: SensorDraw
     deviation: PartDeviation
+    collision: Collision | None = None
+    slip: Slip | None = None
+
+    @property
+    def disturbed(self) -> bool:
+        """A collision or a slip: a failure whether or not the part still seats."""
+        return self.collision is not None or self.slip is not None
 
 
 def draw_trial(
@@ -93,8 +113,13 @@ def draw_trial(
     yaw = float(rng.normal(0.0, var.offset_yaw))
     sign = 1.0 if rng.random() < 0.5 else -1.0
     deviation = PartDeviation()
+    collision = slip = None
     nominal = (ox, oy, oz, yaw)
-    if failure == "misalignment":
+    if failure == COLLISION:
+        collision = draw_collision(fc.collision, STRUCK_PHASES, rng)
+    elif failure == SLIP:
+        slip = draw_slip(fc.slip, SLIP_PHASES, (fc.deviation_xy, fc.deviation_yaw), rng)
+    elif failure == "misalignment":
         oy = sign * uniform(rng, fc.misalignment_xy)
     elif failure == "jamming":
         yaw = sign * uniform(rng, fc.jamming_yaw)
@@ -133,7 +158,7 @@ def draw_trial(
         female_yaw=math.degrees(nominal[3]),
         part_offset=(0.0, 0.0, 0.0),
     )
-    return TrialDraw(physics, twin, plan, sensor, deviation)
+    return TrialDraw(physics, twin, plan, sensor, deviation, collision, slip)
 
 
 def run_physics(
@@ -143,30 +168,65 @@ def run_physics(
     two_arm: bool,
     trace: list[tuple[float, ...]] | None = None,
     observer: Observer | None = None,
+    collision: Collision | None = None,
+    slip: Slip | None = None,
 ) -> PhysicsRun:
-    """Run the controller on the model; return the tared wrench per physics step and the events."""
+    """Run the controller on the model (a collision's pulses struck on the part, a slip moving
+    it); return the tared wrench per physics step and the events."""
     model = build_model(config, physics, two_arm)
     data = mujoco.MjData(model)
     rig = arm_run.ServoRig(model, data, pitch=plan.tilt)
     controller = SnapController(config, plan)
     if trace is not None:
         controller.trace = trace
-    holder = _holder_step(config, rig) if two_arm else None
-    after_step = (
-        _phase_observer(observer, controller, model, data) if observer is not None else None
-    )
+    disturbance: CollisionRun | SlipRun | None = None
+    if collision is not None:
+        disturbance = CollisionRun(collision, data, "male")
+    elif slip is not None:
+        disturbance = SlipRun(slip, data, rig.act)
+    before = _before_step(_holder_step(config, rig) if two_arm else None, disturbance)
+    after_step = _phase_observer(observer, disturbance, controller, model, data)
     max_steps = int(MAX_DURATION / rig.dt)
-    wrench = rig.run(controller, plan.start, max_steps, holder, after_step)
-    return PhysicsRun(wrench=wrench, state=controller.state, latched=_latched(config, model, data))
+    wrench = rig.run(controller, plan.start, max_steps, before, after_step)
+    latched = _latched(config, model, data)
+    onset = disturbance.onset if disturbance is not None else None
+    return PhysicsRun(wrench, controller.state, latched, onset)
+
+
+def _before_step(
+    holder: arm_run.StepHook | None, disturbance: CollisionRun | SlipRun | None
+) -> arm_run.StepHook | None:
+    """What runs before each physics step: the holding arm's step, a slip's servo offset."""
+    slip = disturbance if isinstance(disturbance, SlipRun) else None
+    if slip is None:
+        return holder
+
+    def step() -> None:
+        if holder is not None:
+            holder()
+        slip.apply()
+
+    return step
 
 
 def _phase_observer(
-    observer: Observer, controller: SnapController, model: mujoco.MjModel, data: mujoco.MjData
-) -> arm_run.StepObserver:
-    """The observer called after each physics step with the controller's phase at that time."""
+    observer: Observer | None,
+    disturbance: CollisionRun | SlipRun | None,
+    controller: SnapController,
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+) -> arm_run.StepObserver | None:
+    """What runs after each physics step with the controller's phase at that time: the
+    observer, and a collision's or a slip's next step."""
+    if observer is None and disturbance is None:
+        return None
 
     def observe(t: float) -> None:
-        observer(t, controller.state.phase, model, data)
+        phase = controller.state.phase
+        if observer is not None:
+            observer(t, phase, model, data)
+        if disturbance is not None:
+            disturbance.update(t, phase)
 
     return observe
 
@@ -233,6 +293,11 @@ def _draw_and_run(
     """One attempt at a trial: draw it, run its physics (a failure's contacts logged for its
     onset); it agrees when the part latched exactly when a success was asked for."""
     draw = draw_trial(config, rng, failure)
+    if draw.disturbed:  # struck or slid: a failure whether or not the part still seats
+        result = run_physics(
+            config, draw.physics, draw.plan, two_arm, collision=draw.collision, slip=draw.slip
+        )
+        return (draw, result, None), result.disturbance_onset is not None
     log = ContactLog(config) if failure is not None else None
     result = run_physics(config, draw.physics, draw.plan, two_arm, observer=log)
     consistent = result.latched if failure is None else not result.latched
@@ -338,11 +403,16 @@ def simulate_trial(
     if failure is None:
         outcome = "success" if latched else "failure"
     else:
-        outcome = failure if not latched else "success"
+        outcome = failure if not latched or draw.disturbed else "success"
     metadata = _trial_metadata(seed, scenario, failure, attempts, rate_hz, draw, result)
     if failure is not None and not latched and log is not None:
         onset = failure_onset(config, draw, scen.two_arm, result.state, log)
         metadata["failure"] = _failure_metadata(failure, onset, draw, 1.0 / rate_hz)
+    began = result.disturbance_onset
+    if draw.collision is not None and began is not None:
+        metadata["failure"] = collision_record(draw.collision, began, rate_hz)
+    if draw.slip is not None and began is not None:
+        metadata["failure"] = slip_record(draw.slip, began, rate_hz)
     rng = arm_run.sensor_rng(seed, attempts)
     return arm_run.sensor_trial(
         name or f"sim-{scenario}-{seed}",
