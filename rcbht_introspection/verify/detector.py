@@ -3,6 +3,8 @@
 Signals (each a score per tick, higher = less nominal):
 * `wrench`: distance of the wrench's recent change to the nearest successful trial at the same
   sub-task and time into it (novelty.NeighbourModel on the `change` features);
+* `transient`: the same distance on the `jump` features, the departure of single samples from
+  the step before: a push that comes and goes (a collision) within the 0.2 s means;
 * `timing`: a sub-task running longer, or ending sooner or later, than any nominal one;
 * `wrench_global`: the distance of the raw mean wrench by time into the trial (the raw-wrench
   baseline: no state machine, no bias cancelling);
@@ -31,7 +33,13 @@ from rcbht_introspection.verify.novelty import NeighbourModel, NominalLevel, Tim
 
 SCALE_QUANTILE = 0.75
 """Each (signal, sub-task) is first scaled by this quantile of its held-out maxima."""
-SIGNAL_FLOOR = {"wrench": 0.1, "wrench_global": 0.1, "timing": 0.5, "hmm": 0.1}
+SIGNAL_FLOOR = {
+    "wrench": 0.1,
+    "transient": 0.1,
+    "wrench_global": 0.1,
+    "timing": 0.5,
+    "hmm": 0.1,
+}
 """Smallest scale of a signal's maxima (a sub-task whose held-out maxima are all about 0 would
 otherwise turn any excursion into an alarm)."""
 SCORE_CAP = 1e6
@@ -43,6 +51,8 @@ class SignalModels:
     """The fitted models behind the signals (a detector fits the ones it uses)."""
 
     neighbours: NeighbourModel | None = None
+    transient: NeighbourModel | None = None
+    """The successes' jumps per sub-task (the `transient` signal)."""
     level: NominalLevel | None = None
     """The successes' mean wrench along each sub-task (fitted with the `wrench` signal)."""
     timing: TimingModel | None = None
@@ -56,6 +66,9 @@ class SignalModels:
         wrench = "wrench" in signals
         return cls(
             neighbours=NeighbourModel.fit(trials, config) if wrench else None,
+            transient=NeighbourModel.fit(trials, config, kind="jump", largest=True)
+            if "transient" in signals
+            else None,
             level=NominalLevel.fit(trials) if wrench else None,
             timing=TimingModel.fit(trials, config) if "timing" in signals else None,
             global_neighbours=NeighbourModel.fit(trials, config, phase_free=True, kind="mean")
@@ -70,6 +83,8 @@ class SignalModels:
         for s in signals:
             if s == "wrench" and self.neighbours is not None:
                 cols.append(self.neighbours.scores(tf))
+            elif s == "transient" and self.transient is not None:
+                cols.append(self.transient.scores(tf))
             elif s == "timing" and self.timing is not None:
                 cols.append(self.timing.scores(tf))
             elif s == "wrench_global" and self.global_neighbours is not None:
@@ -214,7 +229,7 @@ class Detector:
         cls,
         successes: Sequence[TrialFeatures],
         config: VerifyConfig,
-        signals: Sequence[str] = ("wrench", "timing"),
+        signals: Sequence[str] = ("wrench", "transient", "timing"),
         seed: int = 0,
         groups: Mapping[str, str] | None = None,
     ) -> Detector:

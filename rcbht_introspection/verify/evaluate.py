@@ -35,7 +35,7 @@ GATE_S = 1.0
 TRAIN_PREFIX = "train:"
 """Key prefix of training trials in a transfer evaluation (names may repeat across sets)."""
 METHODS: dict[str, tuple[tuple[str, ...], str]] = {
-    "verifier": (("wrench", "timing"), "wrench"),
+    "verifier": (("wrench", "transient", "timing"), "wrench"),
     "raw_wrench": (("wrench_global",), "raw"),
     "timing": (("timing",), "timing"),
 }

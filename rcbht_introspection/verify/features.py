@@ -1,11 +1,14 @@
 """Causal raw-wrench features of a stream, on a tick grid (every `step_s`).
 
 At tick g an arm's features use only samples stamped <= g: the mean of each axis over the last
-`window_s`, that mean's change over the last `lag_s` and each axis's spread over the window (from the stream's first tick while the
-stream is younger). The change is what the detector reads: a constant sensor bias, drift slower
-than `lag_s` and the load of the gripper cancel in it. The same `ArmFeatures` object serves the
-live verifier (sample by sample) and the offline evaluation (a whole trial fed through it), so
-both see identical numbers.
+`window_s`, that mean's change over the last `lag_s` and each axis's spread over the window (from
+the stream's first tick while the stream is younger), and the jump: the largest departure of any
+sample since the tick before from the mean of the samples of an earlier step (JUMP_STEPS back),
+sample by sample at the sensor's rate. The change and the jump are what the detector reads: a
+constant sensor bias, drift slower than `lag_s` and the load of the gripper cancel in them; the
+change sees a contact that stays, the jump one that comes and goes within a tick or two. The
+same `ArmFeatures` object serves the live verifier (sample by sample) and the offline
+evaluation (a whole trial fed through it), so both see identical numbers.
 """
 
 from __future__ import annotations
@@ -20,9 +23,13 @@ from rcbht_introspection.io.bags import trial_phase_events
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.verify.config import WRENCH_AXES, VerifyConfig
 
-KINDS = ("mean", "change", "std")
+KINDS = ("mean", "change", "std", "jump")
 """Feature blocks of an arm, six axes each."""
 PER_ARM = 6 * len(KINDS)
+JUMP_STEPS = 2
+"""A jump is measured from the mean of the samples this many steps back: a push that rises
+over a tenth of a second counts in full, a single sample's noise is averaged out of the
+reference."""
 
 
 def kind_columns(kind: str, n_arms: int) -> np.ndarray:
@@ -53,6 +60,13 @@ class ArmFeatures:
         """Index of the next tick to emit (tick k is at k * step_s)."""
         self._means: deque[np.ndarray] = deque(maxlen=lag_ticks(config) + 1)
         self._last = np.zeros(PER_ARM)
+        self._step_sum = np.zeros(6)
+        self._step_n = 0
+        """The samples since the last tick: their sum and count (the next reference)."""
+        self._steps: deque[np.ndarray] = deque(maxlen=JUMP_STEPS)
+        """The means of the samples of the last steps: the oldest is the jump's reference."""
+        self._jump = np.zeros(6)
+        """The largest departure from the reference of any sample since the last tick."""
 
     def push(self, t: float, wrench: np.ndarray) -> list[tuple[float, np.ndarray]]:
         """Add the sample at stream time t; returns (tick time, features) of every tick before t."""
@@ -63,6 +77,10 @@ class ArmFeatures:
             self.next_tick += 1
             out.append((g, self._row()))
         w = np.asarray(wrench, dtype=float)
+        if self._steps:
+            np.maximum(self._jump, np.abs(w - self._steps[0]), out=self._jump)
+        self._step_sum += w
+        self._step_n += 1
         self.window.append((t, w))
         self.sum += w
         self.sumsq += w * w
@@ -85,12 +103,16 @@ class ArmFeatures:
     def _row(self) -> np.ndarray:
         """The features of the next tick; an empty window (no sample for window_s, or none yet)
         holds the last row (zeros before the first sample), so every arm has a row per tick."""
+        jump = self._jump
+        if self._step_n:
+            self._steps.append(self._step_sum / self._step_n)
+        self._step_sum, self._step_n, self._jump = np.zeros(6), 0, np.zeros(6)
         if not self.window:
             return self._last.copy()
         mean = self.sum / len(self.window)
         std = np.sqrt(np.maximum(self.sumsq / len(self.window) - mean * mean, 0.0))
         self._means.append(mean)
-        self._last = np.concatenate([mean, mean - self._means[0], std])
+        self._last = np.concatenate([mean, mean - self._means[0], std, jump])
         return self._last.copy()
 
 

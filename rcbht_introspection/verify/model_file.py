@@ -25,8 +25,8 @@ from rcbht_introspection.verify.shape import ShapeHead
 
 FORMAT = "rcbht-verifier"
 FORMAT_VERSION = 8
-"""7: the characteriser's shape head (6: forest heads only; 5 and older: Mondrian heads;
-retrain)."""
+"""8: the transient signal and scikit-learn heads (7: the shape head; 6: forest heads only; 5
+and older: Mondrian heads; retrain)."""
 KIND = "verifier"
 
 
@@ -47,20 +47,26 @@ class VerifierModel:
 def _detector_parts(d: Detector) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     header: dict[str, Any] = {"signals": list(d.signals), "phases": list(d.phases)}
     arrays: dict[str, np.ndarray] = {"thresholds": d.thresholds}
-    nb, level, tm = d.models.neighbours, d.models.level, d.models.timing
-    if nb is not None:
-        header["neighbours"] = {
-            "phases": list(nb.phases),
-            "n_trials": nb.n_trials,
-            "bin_s": nb.bin_s,
-            "tolerance_s": nb.tolerance_s,
-            "relative": nb.relative,
-        }
-        for i in range(len(nb.phases)):
-            arrays[f"neighbours.{i}.elapsed"] = nb.elapsed[i]
-            arrays[f"neighbours.{i}.points"] = nb.points[i]
-            arrays[f"neighbours.{i}.scale"] = nb.scale[i]
-        arrays["neighbours.columns"] = nb.columns
+    level, tm = d.models.level, d.models.timing
+    models = d.models
+    for key, nb in (
+        ("neighbours", models.neighbours),
+        ("transient", models.transient),
+    ):
+        if nb is not None:
+            header[key] = {
+                "phases": list(nb.phases),
+                "n_trials": nb.n_trials,
+                "bin_s": nb.bin_s,
+                "tolerance_s": nb.tolerance_s,
+                "relative": nb.relative,
+                "largest": nb.largest,
+            }
+            for i in range(len(nb.phases)):
+                arrays[f"{key}.{i}.elapsed"] = nb.elapsed[i]
+                arrays[f"{key}.{i}.points"] = nb.points[i]
+                arrays[f"{key}.{i}.scale"] = nb.scale[i]
+            arrays[f"{key}.columns"] = nb.columns
     if level is not None:
         header["level"] = {"phases": list(level.phases)}
         arrays.update({f"level.{i}": m for i, m in enumerate(level.median)})
@@ -114,33 +120,46 @@ def save_verifier(model: VerifierModel, path: Path | str) -> Path:
 def _detector(
     header: dict[str, Any], arrays: dict[str, np.ndarray], config: VerifyConfig
 ) -> Detector:
-    neighbours = level = timing = None
-    if "neighbours" in header:
-        nh = header["neighbours"]
-        n = len(nh["phases"])
-        neighbours = NeighbourModel(
-            tuple(nh["phases"]),
-            [arrays[f"neighbours.{i}.elapsed"] for i in range(n)],
-            [arrays[f"neighbours.{i}.points"] for i in range(n)],
-            [arrays[f"neighbours.{i}.scale"] for i in range(n)],
-            float(nh["bin_s"]),
-            int(nh["n_trials"]),
-            float(nh["tolerance_s"]),
-            float(nh["relative"]),
-            arrays["neighbours.columns"],
-        )
+    level = timing = None
     if "level" in header:
         phases = tuple(header["level"]["phases"])
         level = NominalLevel(phases, [arrays[f"level.{i}"] for i in range(len(phases))])
     if "timing" in header:
         t = ("timing.low", "timing.high", "timing.scale")
         timing = TimingModel(tuple(header["timing"]["phases"]), *(arrays[k] for k in t))
-    models = SignalModels(neighbours=neighbours, level=level, timing=timing)
+    models = SignalModels(
+        neighbours=_neighbours(header, arrays, "neighbours"),
+        transient=_neighbours(header, arrays, "transient"),
+        level=level,
+        timing=timing,
+    )
     thresholds = arrays["thresholds"]
     phases = tuple(header["phases"])
     if thresholds.shape != (len(header["signals"]), len(phases)):
         raise ValueError("thresholds do not match the signals and sub-tasks")
     return Detector(tuple(header["signals"]), models, thresholds, config, phases)
+
+
+def _neighbours(
+    header: dict[str, Any], arrays: dict[str, np.ndarray], key: str
+) -> NeighbourModel | None:
+    """A neighbour model stored under `key` (None when the file has none)."""
+    if key not in header:
+        return None
+    nh = header[key]
+    n = len(nh["phases"])
+    return NeighbourModel(
+        tuple(nh["phases"]),
+        [arrays[f"{key}.{i}.elapsed"] for i in range(n)],
+        [arrays[f"{key}.{i}.points"] for i in range(n)],
+        [arrays[f"{key}.{i}.scale"] for i in range(n)],
+        float(nh["bin_s"]),
+        int(nh["n_trials"]),
+        float(nh["tolerance_s"]),
+        float(nh["relative"]),
+        arrays[f"{key}.columns"],
+        largest=bool(nh.get("largest", False)),
+    )
 
 
 def _characteriser(c: dict[str, Any], arrays: dict[str, np.ndarray]) -> Characteriser:

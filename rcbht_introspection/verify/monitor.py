@@ -192,8 +192,12 @@ class VerifierSession:
         starts = [s for _, s in self.phases]
         scores = []
         for s in d.signals:
-            if s == "wrench" and d.models.neighbours is not None:
-                v = d.models.neighbours.score_row(name, elapsed, features) if i >= 0 else 0.0
+            neighbours = {
+                "wrench": d.models.neighbours,
+                "transient": d.models.transient,
+            }.get(s)
+            if neighbours is not None:
+                v = neighbours.score_row(name, elapsed, features) if i >= 0 else 0.0
                 scores.append(min(v, SCORE_CAP))
             elif s == "timing" and d.models.timing is not None:
                 tm = d.models.timing

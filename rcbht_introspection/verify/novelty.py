@@ -162,6 +162,9 @@ class NeighbourModel:
     columns: np.ndarray
     """The feature columns compared (one kind of every arm)."""
     phase_free: bool = False
+    largest: bool = False
+    """Distances by the largest feature difference instead of the root-mean-square: a jump on
+    one axis counts in full, not diluted by the quiet others (the `jump` features)."""
 
     def window(self, p: int, elapsed: float) -> tuple[int, int]:
         """Index range of phase p's ticks within the tolerance of `elapsed`."""
@@ -180,9 +183,10 @@ class NeighbourModel:
         config: VerifyConfig,
         phase_free: bool = False,
         kind: str = "change",
+        largest: bool = False,
     ) -> NeighbourModel:
         """`kind`: the feature block compared (the verifier's change; the raw-wrench baseline's
-        mean)."""
+        mean); `largest`: distances by the largest difference."""
         n_arms = trials[0].features.shape[1] // PER_ARM if trials else 1
         columns = kind_columns(kind, n_arms)
         floors = scale_floors(len(columns))
@@ -199,6 +203,7 @@ class NeighbourModel:
             ELAPSED_RELATIVE,
             columns,
             phase_free,
+            largest,
         )
         for p, name in enumerate(names):
             el, feats, _ = pools[name]
@@ -221,7 +226,7 @@ class NeighbourModel:
         lo, hi = self.window(p, elapsed)
         scale = self.scale[p][min(int(elapsed / self.bin_s), len(self.scale[p]) - 1)]
         diff = (self.points[p][lo:hi] - features[self.columns]) / scale
-        dist = np.sqrt(np.mean(diff * diff, axis=1))
+        dist = np.abs(diff).max(axis=1) if self.largest else np.sqrt(np.mean(diff * diff, axis=1))
         return float(dist.min()) if len(dist) else float("inf")
 
     def scores(self, tf: TrialFeatures) -> np.ndarray:

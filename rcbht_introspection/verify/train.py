@@ -18,7 +18,7 @@ from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
 from rcbht_introspection.verify.model_file import VerifierModel
 from rcbht_introspection.verify.novelty import TimingModel
 
-MAIN_SIGNALS = ("wrench", "timing")
+MAIN_SIGNALS = ("wrench", "transient", "timing")
 
 
 def fallback_onset(tf: TrialFeatures, timing: TimingModel) -> float:
