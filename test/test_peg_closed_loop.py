@@ -76,7 +76,7 @@ def test_a_stepped_peg_attempt_is_the_batch_physics_and_the_truth_inserts(
     while (sample := attempt.step()) is not None:
         samples.append(sample.wrench)
         events += sample.events
-    raw, state, inserted = run_peg_physics(peg, turned.run.physics, turned.run.plan)
+    raw, state, inserted, _ = run_peg_physics(peg, turned.run.physics, turned.run.plan)
     true = resample(raw, round(1 / (rate * peg.physics.timestep)))[:, :6]
     assert state.aborted and not inserted
     assert attempt.end is not None and attempt.end.reason == "timeout"

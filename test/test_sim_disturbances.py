@@ -122,3 +122,17 @@ def test_the_transient_signal_alarms_at_a_push_the_change_sees_later(cell: SimCo
     assert onset <= with_jumps.alarm <= onset + 0.1
     without = Detector.fit(successes, config, ("wrench", "timing")).run(tf)
     assert without.alarm is None or without.alarm > with_jumps.alarm + 0.5
+
+
+def test_the_peg_task_is_struck_the_same_way(tmp_path: Path) -> None:
+    from rcbht_introspection.sim.peg_config import load_peg_config
+    from rcbht_introspection.sim.peg_simulate import simulate_peg_trial
+
+    text = config_path("sim/peg.yaml").read_text().replace("[hole_yaw]", "[collision]")
+    path = tmp_path / "peg.yaml"
+    path.write_text(text)
+    trial = simulate_peg_trial(load_peg_config(path), 2, failure="collision")
+    record = trial.metadata["failure"]
+    assert trial.outcome == "collision" and record["phase"] in ("reach", "search", "insert")
+    label = label_of(trial)
+    assert label.failure_class == "collision" and label.onset == pytest.approx(record["onset"])

@@ -10,6 +10,7 @@ from rcbht_introspection.config_files import config_path, load_config
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.sim.arm_config import (
     ArmPhysicsConfig,
+    CollisionConfig,
     ForceLoopConfig,
     Range,
     SensorConfig,
@@ -123,7 +124,7 @@ class PegSensorConfig(SensorConfig):
     quantization_torque: float = 0.001
 
 
-PEG_FAILURES: tuple[str, ...] = ("hole_yaw",)
+PEG_FAILURES: tuple[str, ...] = ("hole_yaw", "collision")
 """The peg task's failure classes."""
 
 
@@ -138,6 +139,9 @@ class PegFailureConfig:
     hole_yaw: Range = (0.035, 0.07)
     """Size (rad) of the hole's yaw error: a few degrees beyond the peg's fit (about 0.025 rad),
     where the peg still drops into the hole's mouth and jams."""
+    collision: CollisionConfig = field(default_factory=CollisionConfig)
+    """collision (not in the default types): a push on the held peg during reach, search or
+    insert (sim/collision.py), a failure whether or not the peg still goes in."""
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,13 @@ from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim import arm_run
 from rcbht_introspection.sim.arm_run import Wrench, uniform
+from rcbht_introspection.sim.collision import (
+    COLLISION,
+    Collision,
+    CollisionRun,
+    collision_record,
+    draw_collision,
+)
 from rcbht_introspection.sim.peg_config import PEG_FAILURES, PegConfig
 from rcbht_introspection.sim.peg_controller import PEG_TASK, PegController, PegPlan, PegState
 from rcbht_introspection.sim.peg_model import GRIP, PegPhysics, build_peg_model
@@ -75,7 +82,7 @@ def draw_peg_failure(
 ) -> tuple[PegPhysics, float]:
     """The trial's physics with the failure's error added, and that error's yaw (rad): the
     hole turned by a size in `failures.hole_yaw`, either way."""
-    if failure not in PEG_FAILURES:
+    if failure not in PEG_FAILURES or failure == COLLISION:
         known = ", ".join(PEG_FAILURES)
         raise InputError(f"unknown failure type {failure!r} (known: {known})", field="failure")
     sign = 1.0 if rng.random() < 0.5 else -1.0
@@ -98,18 +105,26 @@ def max_duration(config: PegConfig) -> float:
 
 
 def run_peg_physics(
-    config: PegConfig, physics: PegPhysics, plan: PegPlan
-) -> tuple[Wrench, PegState, bool]:
-    """Run the controller on the model: the tared tool-frame wrench per physics step (N, 6),
-    the controller's events, and whether the peg ends in the hole."""
+    config: PegConfig, physics: PegPhysics, plan: PegPlan, collision: Collision | None = None
+) -> tuple[Wrench, PegState, bool, float | None]:
+    """Run the controller on the model (a collision's pushes struck on the peg): the tared
+    tool-frame wrench per physics step (N, 6), the controller's events, whether the peg ends in
+    the hole and when the collision struck (None: no collision, or it never struck)."""
     model = build_peg_model(config, physics)
     data = mujoco.MjData(model)
     rig = arm_run.ServoRig(model, data)
     controller = PegController(config, plan)
     max_steps = int(max_duration(config) / rig.dt)
     release = _gripper_release(controller, model, data)
-    wrench = rig.run(controller, plan.start, max_steps, release)
-    return wrench, controller.state, in_hole(config, data)
+    strike = CollisionRun(collision, data, "peg") if collision is not None else None
+
+    def after(t: float) -> None:
+        if strike is not None:
+            strike.update(t, controller.state.phase)
+
+    wrench = rig.run(controller, plan.start, max_steps, release, after if strike else None)
+    onset = strike.onset if strike is not None else None
+    return wrench, controller.state, in_hole(config, data), onset
 
 
 def _gripper_release(
@@ -149,6 +164,9 @@ class PegRun:
     state: PegState
     inserted: bool
     failure_yaw: float
+    collision: Collision | None = None
+    struck: float | None = None
+    """When the collision's first push started (s)."""
 
 
 def draw_and_run(
@@ -157,18 +175,22 @@ def draw_and_run(
     """One attempt at a trial: draw it and run its physics; it agrees when the peg ended in the
     hole without an abort (for a nominal trial), or did not (for a failure)."""
     physics, plan, sensor = draw_peg_trial(config, rng)
-    twin, yaw = physics, 0.0
-    if failure is not None:
+    twin, yaw, collision = physics, 0.0, None
+    if failure == COLLISION:
+        collision = draw_collision(config.failures.collision, PEG_TASK.subtasks[:3], rng)
+    elif failure is not None:
         physics, yaw = draw_peg_failure(config, physics, failure, rng)
-    raw, state, inserted = run_peg_physics(config, physics, plan)
-    run = PegRun(physics, twin, plan, sensor, raw, state, inserted, yaw)
+    raw, state, inserted, struck = run_peg_physics(config, physics, plan, collision)
+    run = PegRun(physics, twin, plan, sensor, raw, state, inserted, yaw, collision, struck)
+    if collision is not None:  # struck: a failure whether or not the peg still goes in
+        return run, struck is not None
     return run, (inserted and not state.aborted) == (failure is None)
 
 
 def departure_onset(config: PegConfig, run: PegRun) -> float | None:
     """Where a failure first shows: the first physics step at which its wrench departs from its
     nominal twin's by more than DEPARTURE_NOISE x the sensor's noise on any axis (None: never)."""
-    twin, _, _ = run_peg_physics(config, run.twin, run.plan)
+    twin, _, _, _ = run_peg_physics(config, run.twin, run.plan)
     n = min(len(twin), len(run.raw))
     noise = config.sensor
     limit = DEPARTURE_NOISE * np.array([noise.noise_force] * 3 + [noise.noise_torque] * 3)
@@ -233,7 +255,10 @@ def simulate_peg_trial(
     ok = run.inserted and not run.state.aborted
     metadata = _peg_metadata(seed, attempts, rate, run, failure)
     outcome = "success" if ok else failure or "failure"
-    if failure is not None and not ok:
+    if run.collision is not None and run.struck is not None:
+        outcome = COLLISION
+        metadata["failure"] = collision_record(run.collision, run.struck, rate)
+    elif failure is not None and not ok:
         metadata["failure"] = _failure_record(config, failure, run, 1.0 / rate)
     return arm_run.sensor_trial(
         name or f"sim-peg-{seed}",
