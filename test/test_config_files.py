@@ -128,6 +128,10 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
                         candidates=({"yaw": 0.16}, {"yaw": -0.16}),
                     ),
                     "missed_snap": ClassRecovery("try", candidates=({"z": -0.0055},)),
+                    "slip": ClassRecovery(
+                        "undo_direction", size={"x": 0.002, "y": 0.002, "yaw": 0.06}
+                    ),
+                    "collision": ClassRecovery("retry"),
                     "anomaly": ClassRecovery("retry"),
                 }
             ),
@@ -144,6 +148,7 @@ SHIPPED: dict[str, list[tuple[Callable[[Path], Any], Any]]] = {
                         size={"yaw": 0.07},
                         candidates=({"yaw": 0.07}, {"yaw": -0.07}),
                     ),
+                    "collision": ClassRecovery("retry"),
                     "anomaly": ClassRecovery("retry"),
                 },
             ),
