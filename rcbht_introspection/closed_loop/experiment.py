@@ -19,9 +19,7 @@ from rcbht_introspection.plan.recovery import RecoveryConfig
 from rcbht_introspection.sim.episode import draw_world
 from rcbht_introspection.sim.peg_config import PegConfig
 from rcbht_introspection.sim.peg_episode import draw_peg_world
-from rcbht_introspection.sim.peg_simulate import simulate_peg_trial
-from rcbht_introspection.sim.simulate import simulate_trial
-from rcbht_introspection.sim.tasks import TaskConfig
+from rcbht_introspection.sim.tasks import TaskConfig, sim_task_of, trial_simulator
 from rcbht_introspection.verify.config import VerifyConfig
 from rcbht_introspection.verify.labels import label_of
 from rcbht_introspection.verify.model_file import VerifierModel
@@ -116,10 +114,8 @@ def run_policies(
 
 def _train_trial(config: TaskConfig, item: tuple[int, str | None]) -> Trial:
     seed, failure = item
-    name = f"TRAIN-{seed}-{failure or 'S'}"
-    if isinstance(config, PegConfig):
-        return simulate_peg_trial(config, seed, failure=failure, name=name)
-    return simulate_trial(config, seed, failure=failure, name=name)
+    simulate = trial_simulator(sim_task_of(config), config, "one-arm", config.sensor.rate_hz)
+    return simulate(seed, failure, f"TRAIN-{seed}-{failure or 'S'}")
 
 
 def calibration_successes(false_alarm_rate: float) -> int:

@@ -58,6 +58,11 @@ SIM_TASK_TABLE: dict[str, SimTask] = {  # keyed by SimTaskName; looked up by any
 }
 
 
+def sim_task_of(config: TaskConfig) -> SimTask:
+    """The task a configuration configures."""
+    return SIM_TASK_TABLE["peg-in-hole" if isinstance(config, PegConfig) else "snap-assembly"]
+
+
 def task_failure_classes(config: TaskConfig) -> tuple[str, ...]:
     """The failure classes a task's config draws (each snap deviation class is one)."""
     if isinstance(config, PegConfig):
