@@ -75,6 +75,20 @@ def on_clock(t: float, period: float) -> float:
     return round(round(t / period) * period, 9)
 
 
+def disturbance_record(
+    failure: str, onset: float, rate_hz: float, rule: str, **details: object
+) -> dict[str, object]:
+    """meta.json's failure entry of a disturbance that starts at a known time (a push, a slip):
+    the class, its onset on the sample clock and rule, and its details (deviation, phase...)."""
+    return {
+        "class": failure,
+        "onset": on_clock(onset, 1.0 / rate_hz),
+        "onset_rule": rule,
+        "onset_contact": None,
+        **details,
+    }
+
+
 Times = NDArray[np.float64]
 """Sample times (s) of a trial."""
 Measure = Callable[[Wrench, Times], dict[str, Wrench]]

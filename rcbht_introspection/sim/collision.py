@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from rcbht_introspection.sim.arm_config import CollisionConfig
-from rcbht_introspection.sim.arm_run import on_clock
+from rcbht_introspection.sim.arm_run import disturbance_record
 
 COLLISION = "collision"
 """The failure family of a struck part (`failures.types` of either task)."""
@@ -80,17 +80,17 @@ def draw_collision(
 def collision_record(collision: Collision, onset: float, rate_hz: float) -> dict[str, object]:
     """meta.json's failure entry of a collision: its onset (the first pulse's start) on the
     sample clock, and its direction as the deviation record."""
-    return {
-        "class": COLLISION,
-        "onset": on_clock(onset, 1.0 / rate_hz),
-        "onset_rule": "pulse_start",
-        "onset_contact": None,
-        "deviation": collision.direction(),
-        "phase": collision.phase,
-        "pulses": len(collision.pulses),
-        "duration_s": [round(p.duration, 4) for p in collision.pulses],
-        "peak_force": round(max(float(np.linalg.norm(p.force)) for p in collision.pulses), 4),
-    }
+    return disturbance_record(
+        COLLISION,
+        onset,
+        rate_hz,
+        "pulse_start",
+        deviation=collision.direction(),
+        phase=collision.phase,
+        pulses=len(collision.pulses),
+        duration_s=[round(p.duration, 4) for p in collision.pulses],
+        peak_force=round(max(float(np.linalg.norm(p.force)) for p in collision.pulses), 4),
+    )
 
 
 def _triple(v: np.ndarray) -> tuple[float, float, float]:

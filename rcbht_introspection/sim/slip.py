@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from rcbht_introspection.sim.arm_config import Range, SlipConfig
-from rcbht_introspection.sim.arm_run import on_clock
+from rcbht_introspection.sim.arm_run import disturbance_record
 
 SLIP = "slip"
 """The failure family of a part sliding in the hand (`failures.types` of the snap task)."""
@@ -93,12 +93,12 @@ class SlipRun:
 
 def slip_record(slip: Slip, onset: float, rate_hz: float) -> dict[str, object]:
     """meta.json's failure entry of a slip: its onset on the sample clock and final offset."""
-    return {
-        "class": SLIP,
-        "onset": on_clock(onset, 1.0 / rate_hz),
-        "onset_rule": "slip_start",
-        "onset_contact": None,
-        "deviation": slip.deviation(),
-        "phase": slip.phase,
-        "duration_s": round(slip.duration, 4),
-    }
+    return disturbance_record(
+        SLIP,
+        onset,
+        rate_hz,
+        "slip_start",
+        deviation=slip.deviation(),
+        phase=slip.phase,
+        duration_s=round(slip.duration, 4),
+    )
