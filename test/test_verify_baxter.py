@@ -45,8 +45,9 @@ def test_other_days_raise_no_alarm_as_imported_and_rebiased(tmp_path: Path) -> N
     others = _import(sorted(BAXTER.glob("other_sessions/*.bag")), tmp_path / "others")
     assert len(day) == 15 and len(others) == 4
     config = load_verify_config()
-    detector = Detector.fit([trial_features(t, config) for t in day], config)
-    assert "transient" in detector.signals
+    signals = ("wrench", "transient", "timing")  # every signal, the transient one included
+    detector = Detector.fit([trial_features(t, config) for t in day], config, signals)
+    assert detector.signals == signals
     runs = [t for o in others for t in (o, _rebiased(o, 20.0), _rebiased(o, -20.0))]
     alarms = {t.name: detector.run(trial_features(t, config)).alarm for t in runs}
     assert all(a is None for a in alarms.values()), alarms

@@ -39,6 +39,13 @@ class VerifyConfig:
     mismatch_min_probability: float = 0.45
     """The mismatch signal fires when a final verdict names another sub-task than the
     commanded one with a probability above this (needs the classifier's beliefs)."""
+    signals: tuple[str, ...] = ("wrench", "timing")
+    """The detector's signals: `wrench` and `timing`, and `transient` for sudden contacts
+    (it alarms on a push within a tick or two, at the cost of later alarms on slow deviations)."""
+
+
+VERIFIER_SIGNALS = ("wrench", "transient", "timing")
+"""The signals the verifier's detector can read (verify/detector.py)."""
 
 
 def check_verify_config(cfg: VerifyConfig) -> None:
@@ -50,6 +57,10 @@ def check_verify_config(cfg: VerifyConfig) -> None:
         raise InputError(
             f"must be >= 0, got {cfg.elapsed_tolerance_s}", field="elapsed_tolerance_s"
         )
+    unknown = [s for s in cfg.signals if s not in VERIFIER_SIGNALS]
+    if unknown or not cfg.signals or len(set(cfg.signals)) != len(cfg.signals):
+        known = ", ".join(VERIFIER_SIGNALS)
+        raise InputError(f"must be distinct signals of {known}, got {cfg.signals}", field="signals")
     if not 0 < cfg.false_alarm_rate < 1:
         raise InputError(f"must be in (0, 1), got {cfg.false_alarm_rate}", field="false_alarm_rate")
     if cfg.calibration_folds < 2:

@@ -229,7 +229,7 @@ class Detector:
         cls,
         successes: Sequence[TrialFeatures],
         config: VerifyConfig,
-        signals: Sequence[str] = ("wrench", "transient", "timing"),
+        signals: Sequence[str] = ("wrench", "timing"),
         seed: int = 0,
         groups: Mapping[str, str] | None = None,
     ) -> Detector:

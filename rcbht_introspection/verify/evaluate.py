@@ -35,11 +35,12 @@ GATE_S = 1.0
 TRAIN_PREFIX = "train:"
 """Key prefix of training trials in a transfer evaluation (names may repeat across sets)."""
 METHODS: dict[str, tuple[tuple[str, ...], str]] = {
-    "verifier": (("wrench", "transient", "timing"), "wrench"),
+    "verifier": ((), "wrench"),
     "raw_wrench": (("wrench_global",), "raw"),
     "timing": (("timing",), "timing"),
 }
-"""Method -> (detector signals, evidence view of its characteriser)."""
+"""Method -> (detector signals, evidence view of its characteriser); the verifier's signals
+are its config's (`signals`)."""
 PEERS = ("hmm", "minirocket")
 """The anchors' methods (peers/): `hmm` detects with the successor framework's HMM per sub-task
 and names the class by one HMM per class; `minirocket` names the class by MiniRocket features
@@ -191,6 +192,7 @@ def _detector_of(fold: Fold, method: str) -> Fitted:
     key = {"verifier_mismatch": "verifier", "minirocket": "verifier"}.get(method, method)
     if key not in fold.fitted:
         signals, view = METHODS.get(key, (("hmm",), "wrench"))
+        signals = signals or fold.config.signals
         failures = fold.failures if key in METHODS else []
         fold.fitted[key] = fit_method(
             fold.successes, failures, fold.config, signals, view, fold.seed, fold.groups

@@ -18,8 +18,6 @@ from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel
 from rcbht_introspection.verify.model_file import VerifierModel
 from rcbht_introspection.verify.novelty import TimingModel
 
-MAIN_SIGNALS = ("wrench", "transient", "timing")
-
 
 def fallback_onset(tf: TrialFeatures, timing: TimingModel) -> float:
     """Start of the first failing sub-task: the first whose duration lies outside the nominal
@@ -106,7 +104,7 @@ def train_verifier(
     timing = TimingModel.fit(successes, config)  # all successes, as verify-eval's onsets
     failures = [(feats[n], labels[n], onset_for(labels[n], feats[n], timing)[0]) for n in failed]
     groups = {n: lb.session for n, lb in labels.items() if lb.session}
-    fitted = fit_method(successes, failures, config, MAIN_SIGNALS, "wrench", seed, groups)
+    fitted = fit_method(successes, failures, config, config.signals, "wrench", seed, groups)
     return VerifierModel(
         arms=arms.pop(),
         detector=fitted.detector,
