@@ -113,8 +113,14 @@ def test_bad_goals_are_rejected_and_sigint_mid_attempt_exits_0(tmp_path: Path) -
                 wait_for_nodes(future.done, 60.0, every, what)
                 return future.result()
 
+            # the action server too: a goal sent before its services are matched is lost
             wait_for_nodes(
-                lambda: start.service_is_ready() and run.service_is_ready(), 120.0, every, "up"
+                lambda: (
+                    start.service_is_ready() and run.service_is_ready() and action.server_is_ready()
+                ),
+                120.0,
+                every,
+                "up",
             )
             early = call(action.send_goal_async(Attempt.Goal(attempt=1)), "a goal before a trial")
             assert call(early.get_result_async(), "its result").result.reason == "rejected"
