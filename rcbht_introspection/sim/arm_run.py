@@ -75,6 +75,28 @@ def on_clock(t: float, period: float) -> float:
     return round(round(t / period) * period, 9)
 
 
+class PhaseTrigger:
+    """Fires `delay` s into the first run of a controller phase, or as that phase ends if it
+    ends sooner: when a collision's first push or a slip starts."""
+
+    def __init__(self, phase: str, delay: float) -> None:
+        self.phase = phase
+        self.delay = delay
+        self.fired: float | None = None
+        self._start: float | None = None
+
+    def update(self, t: float, phase: str) -> float | None:
+        """The phase running at time `t`; the time it fired (None: not yet)."""
+        if self.fired is None:
+            if phase == self.phase:
+                self._start = t if self._start is None else self._start
+                if t - self._start >= self.delay:
+                    self.fired = t
+            elif self._start is not None:
+                self.fired = t
+        return self.fired
+
+
 def disturbance_record(
     failure: str, onset: float, rate_hz: float, rule: str, **details: object
 ) -> dict[str, object]:

@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from rcbht_introspection.sim.arm_config import CollisionConfig
-from rcbht_introspection.sim.arm_run import disturbance_record
+from rcbht_introspection.sim.arm_run import PhaseTrigger, disturbance_record
 
 COLLISION = "collision"
 """The failure family of a struck part (`failures.types` of either task)."""
@@ -105,7 +105,7 @@ class CollisionRun:
         self.collision = collision
         self.data = data
         self.body = data.body(body).id
-        self.phase_start: float | None = None
+        self.trigger = PhaseTrigger(collision.phase, collision.pulses[0].wait)
         self.next_start: float | None = None
         self.index = 0
         self.starts: list[float] = []
@@ -121,8 +121,8 @@ class CollisionRun:
         if self.index >= len(self.collision.pulses):
             return
         pulse = self.collision.pulses[self.index]
-        if self.next_start is None:
-            self._schedule(t, phase, pulse)
+        if self.next_start is None:  # the first pulse
+            self.next_start = self.trigger.update(t, phase)
         if self.next_start is None or t < self.next_start:
             return
         if not self.starts or len(self.starts) <= self.index:
@@ -136,13 +136,3 @@ class CollisionRun:
         shape = math.sin(math.pi * into / pulse.duration)
         self.data.xfrc_applied[self.body, :3] = np.asarray(pulse.force) * shape
         self.data.xfrc_applied[self.body, 3:] = np.asarray(pulse.moment) * shape
-
-    def _schedule(self, t: float, phase: str, pulse: Pulse) -> None:
-        """The first pulse: `wait` into the chosen phase, or as that phase ends."""
-        if phase == self.collision.phase:
-            if self.phase_start is None:
-                self.phase_start = t
-            if t - self.phase_start >= pulse.wait:
-                self.next_start = t
-        elif self.phase_start is not None:  # the phase ended before the wait: strike now
-            self.next_start = t

@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 
 from rcbht_introspection.sim.arm_config import Range, SlipConfig
-from rcbht_introspection.sim.arm_run import disturbance_record
+from rcbht_introspection.sim.arm_run import PhaseTrigger, disturbance_record
 
 SLIP = "slip"
 """The failure family of a part sliding in the hand (`failures.types` of the snap task)."""
@@ -69,19 +69,13 @@ class SlipRun:
         self.data = data
         self.actuator = actuators[{"x": 0, "y": 1, "yaw": 3}[slip.axis]]
         """A slip of +d is the hand moved by +d along the axis: that servo's target rises by d."""
-        self.phase_start: float | None = None
+        self.trigger = PhaseTrigger(slip.phase, slip.delay)
         self.onset: float | None = None
         self.offset = 0.0
 
     def update(self, t: float, phase: str) -> None:
         """Advance the slip to time `t`."""
-        if self.onset is None:
-            if phase == self.slip.phase:
-                self.phase_start = self.phase_start if self.phase_start is not None else t
-                if t - self.phase_start >= self.slip.delay:
-                    self.onset = t
-            elif self.phase_start is not None:
-                self.onset = t
+        self.onset = self.trigger.update(t, phase)
         if self.onset is not None:
             share = min(1.0, (t - self.onset) / self.slip.duration)
             self.offset = share * self.slip.size
