@@ -286,9 +286,9 @@ class Characteriser(ClassifierMixin, BaseEstimator):  # type: ignore[misc]
     ) -> tuple[str, dict[str, float], dict[str, str]]:
         """(class, class probabilities, direction per axis) of one evidence row (and its
         window): what the verifier names at a tick, without the array checks of predict."""
-        probs, directions = self._probabilities(_evidence(x)[None, :], window)
-        named = max(probs, key=probs.__getitem__)
         row = _evidence(x)[None, :]
+        probs, directions = self._probabilities(row, window)
+        named = max(probs, key=probs.__getitem__)
         for axis in DIRECTION_AXES:  # a class with its own heads: its directions
             if (head := self.heads_.get(class_head(axis, named))) is not None:
                 directions[axis] = _named(head, row)

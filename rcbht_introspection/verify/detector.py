@@ -77,14 +77,18 @@ class SignalModels:
             hmm=HMMSignal.fit(trials) if "hmm" in signals else None,
         )
 
+    def neighbours_for(self, signal: str) -> NeighbourModel | None:
+        """The neighbour model behind `signal` (None: not a neighbour signal, or not fitted)."""
+        if signal == "wrench":
+            return self.neighbours
+        return self.transient if signal == "transient" else None
+
     def scores(self, tf: TrialFeatures, signals: Sequence[str]) -> np.ndarray:
         """(ticks, signals) raw scores."""
         cols = []
         for s in signals:
-            if s == "wrench" and self.neighbours is not None:
-                cols.append(self.neighbours.scores(tf))
-            elif s == "transient" and self.transient is not None:
-                cols.append(self.transient.scores(tf))
+            if (neighbours := self.neighbours_for(s)) is not None:
+                cols.append(neighbours.scores(tf))
             elif s == "timing" and self.timing is not None:
                 cols.append(self.timing.scores(tf))
             elif s == "wrench_global" and self.global_neighbours is not None:
@@ -229,12 +233,13 @@ class Detector:
         cls,
         successes: Sequence[TrialFeatures],
         config: VerifyConfig,
-        signals: Sequence[str] = ("wrench", "timing"),
+        signals: Sequence[str] | None = None,
         seed: int = 0,
         groups: Mapping[str, str] | None = None,
     ) -> Detector:
-        """`groups`: trial -> session, for folds that hold out whole sessions."""
-        signals = tuple(signals)
+        """`signals`: None for the config's; `groups`: trial -> session, for folds that hold out
+        whole sessions."""
+        signals = tuple(config.signals if signals is None else signals)
         successes = list(successes)
         held = calibration_folds(
             [tf.trial for tf in successes], groups, config.calibration_folds, seed

@@ -192,10 +192,7 @@ class VerifierSession:
         starts = [s for _, s in self.phases]
         scores = []
         for s in d.signals:
-            neighbours = {
-                "wrench": d.models.neighbours,
-                "transient": d.models.transient,
-            }.get(s)
+            neighbours = d.models.neighbours_for(s)
             if neighbours is not None:
                 v = neighbours.score_row(name, elapsed, features) if i >= 0 else 0.0
                 scores.append(min(v, SCORE_CAP))
