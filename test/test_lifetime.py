@@ -57,6 +57,34 @@ def test_a_stop_once_up_only_asks(signum: int) -> None:
     assert code == 0 and out.strip() == "stopped in order"
 
 
+HUNG_SHUTDOWN = """
+import ctypes
+from rcbht_introspection.nodes.lifetime import StopSignal
+stop = StopSignal.install(watchdog_s=1.0)
+stop.up()
+print("ready", flush=True)
+stop.wait()
+stop.exiting()
+ctypes.PyDLL(None).sleep(60)  # a native destructor that hangs with the GIL held
+"""
+
+
+def test_a_shutdown_hung_in_native_code_is_dumped_and_ended() -> None:
+    """The watchdog needs no GIL and stays armed through the process's own exit."""
+    proc = subprocess.Popen(
+        [sys.executable, "-c", HUNG_SHUTDOWN],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+    start = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 1 and time.monotonic() - start < 20
+    assert "Timeout (0:00:01)!" in err and '<string>", line 9' in err, err
+
+
 def _children(pid: int) -> list[int]:
     """Pids of the live processes whose parent is `pid` (from /proc)."""
     out = []

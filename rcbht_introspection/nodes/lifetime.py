@@ -4,7 +4,9 @@ No rclpy here (imported before anything heavy), so a signal during start-up is c
 Python's default SIGINT handler would raise KeyboardInterrupt inside whatever import or rclpy
 call runs, and rclpy's own handler shuts the context down under a running node (publishers
 then fail). With a StopSignal the process finishes its step, logs its last line and shuts down
-in order; a watchdog ends a stop that hangs, with the stack of every thread in the log.
+in order; a watchdog ends a stop that hangs, with the stack of every thread in the log. It is
+faulthandler's, a thread of C that needs no GIL: a hang inside a library's native shutdown (a
+DDS participant's destructor holding the GIL) is dumped and ended as well.
 The handler only sets a flag and the interpreter's wake-up byte lands in a pipe: it takes no
 lock, so it cannot deadlock whatever the main thread was doing when the signal came.
 A node process installs it with `until_up=True`: a stop during start-up (imports, configure,
@@ -25,7 +27,7 @@ import time
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 WATCHDOG_S = 10.0
-"""A process that has not exited this long after the stop request dumps its stacks and exits 3."""
+"""A process that has not exited this long after the stop request dumps its stacks and exits 1."""
 
 
 class StopSignal:
@@ -37,7 +39,8 @@ class StopSignal:
         """A stop ends the process at once (start-up): until `up()`."""
         self.signum: int | None = None
         self._requested = False
-        self._done = False
+        self._watched = False
+        """Installed: a stop request arms the watchdog."""
         self._read, self._write = os.pipe()
         for fd in (self._read, self._write):
             os.set_blocking(fd, False)
@@ -51,8 +54,7 @@ class StopSignal:
         for signum in STOP_SIGNALS:
             signal.signal(signum, stop._handle)
         faulthandler.enable()  # a crash in native code leaves the Python stack in the log
-        if watchdog_s > 0:
-            threading.Thread(target=stop._watchdog, name="stop-watchdog", daemon=True).start()
+        stop._watched = True
         return stop
 
     def up(self) -> None:
@@ -69,6 +71,7 @@ class StopSignal:
 
     def request(self) -> None:
         """Ask for a stop as a signal would (tests, or a node that decides to end)."""
+        self._arm()
         self._requested = True
         with contextlib.suppress(BlockingIOError):
             os.write(self._write, b"\0")
@@ -87,10 +90,10 @@ class StopSignal:
         return self._requested
 
     def exiting(self) -> None:
-        """The process is done with its own shutdown: the watchdog stands down, and further
-        SIGINT/SIGTERM are ignored (Python restores the default action of a signal it handled
-        while the interpreter finalizes, so a second Ctrl-C would end the process with -2)."""
-        self._done = True
+        """The process is done with its own shutdown; further SIGINT/SIGTERM are ignored (Python
+        restores the default action of a signal it handled while the interpreter finalizes, so a
+        second Ctrl-C would end the process with -2). The watchdog stays armed: the interpreter's
+        finalization (thread joins, native destructors) can hang too."""
         if threading.current_thread() is threading.main_thread():
             for signum in STOP_SIGNALS:
                 signal.signal(signum, signal.SIG_IGN)
@@ -103,22 +106,14 @@ class StopSignal:
             os._exit(0)
         if self.signum is None:
             self.signum = signum
+        self._arm()
         self._requested = True
         # our own wake-up byte too, in case a library replaced the interpreter's wake-up fd
         with contextlib.suppress(OSError):
             os.write(self._write, b"\0")
 
-    def _watchdog(self) -> None:
-        while not self._requested:
-            time.sleep(0.1)
-        deadline = time.monotonic() + self.watchdog_s
-        while not self._done and time.monotonic() < deadline:
-            time.sleep(0.1)
-        if not self._done:  # still running this long after the request: a bug to see
-            print(
-                f"stop did not complete within {self.watchdog_s:.0f} s; stacks follow",
-                file=sys.stderr,
-                flush=True,
-            )
-            faulthandler.dump_traceback(all_threads=True)
-            os._exit(3)
+    def _arm(self) -> None:
+        """At the first stop request: dump every thread's stack and exit 1 if the process still
+        runs `watchdog_s` later (faulthandler's timer thread runs without the GIL)."""
+        if self._watched and not self._requested and self.watchdog_s > 0:
+            faulthandler.dump_traceback_later(self.watchdog_s, exit=True)
