@@ -99,11 +99,16 @@ def test_a_stepped_peg_attempt_is_the_batch_physics_and_the_truth_inserts(
 
 def test_closed_loop_runs_the_peg_task_with_its_own_table(tmp_path: Path) -> None:
     out = tmp_path / "peg.json"
+    recovery = tmp_path / "peg-recovery.yaml"  # the shipped table at a rate 40 successes calibrate
+    shipped = Path(__file__).parents[1] / "config" / "recovery" / "peg.yaml"
+    recovery.write_text(shipped.read_text().replace("abort_rate: 0.01 ", "abort_rate: 0.025"))
     args = ["closed-loop", "--task", "peg", "--trials", "2", "--nominal", "1"]
+    args += ["--recovery", str(recovery)]
     assert main([*args, "--policy", "none,oracle", "--seed", "3", "--json", str(out)]) == 0
     result = json.loads(out.read_text())
     assert result["task"] == "peg" and result["classes"] == ["hole_yaw"]
     assert result["policies"]["none"]["success_within_attempts"]["3"] == 0.0
     assert result["policies"]["oracle"]["success_within_attempts"]["2"] == 1.0
     assert result["verifier"]["deviation_by_class"]["hole_yaw"]["size"]["r"] > 0
+    assert result["verifier"]["successes"] == 40  # 1 / 0.025: the table's rate reached training
     assert main([*args, "--ros", str(tmp_path / "ros")]) == 2  # sim_node runs the snap task
