@@ -202,6 +202,26 @@ def test_the_cli_help_imports_no_engine() -> None:
     assert out.stdout.strip() == "[]", out.stdout
 
 
+def test_segmenter_node_starts_without_scikit_learn() -> None:
+    """segmenter_node runs no model: it starts in a third of the classifier's time (every ROS test
+    starts one). scikit-learn comes with a model file (classifier, verifier)."""
+    import subprocess
+    import sys
+
+    from ros_support import require_ros
+
+    require_ros()
+    code = (
+        "import sys\n"
+        "import rcbht_introspection.nodes.segmenter_node\n"
+        "print(sorted(m for m in ('sklearn', 'scipy.stats', 'pandas') if m in sys.modules))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=PACKAGE.parent
+    )
+    assert out.stdout.strip() == "[]", out.stdout
+
+
 MAX_FUNCTION_LINES = 60
 
 

@@ -14,7 +14,6 @@ from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
-import sklearn
 
 from rcbht_introspection.grammar.encoding.axes import AxisMemo
 from rcbht_introspection.grammar.split import SubtaskSample, window_sample
@@ -277,10 +276,12 @@ class BeliefTracker:
         if not final and wrench and not self._wrench_evidence(start, end):
             return belief(UNKNOWN, (0.0,) * len(self.classes))  # no wrench of its own yet
         memo = {"memo": self._axis_memo} if getattr(model, "takes_axis_memo", False) else {}
+        from sklearn import config_context  # loaded with the model; segmenter_node needs none
+
         try:
             # one sample at a time: scikit-learn's per-call checks cost more than the prediction
             # (the features are finite by construction); only for these calls, not globally
-            with sklearn.config_context(assume_finite=True, skip_parameter_validation=True):
+            with config_context(assume_finite=True, skip_parameter_validation=True):
                 proba = self._in_class_order(model, model.predict_proba_samples([sample], **memo))
                 if final:
                     # a verdict is the model's own prediction (as offline evaluation uses it),

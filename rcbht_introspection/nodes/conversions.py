@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -21,7 +22,9 @@ from rcbht_introspection.live.health import Health
 from rcbht_introspection.live.segmenter import PhaseEvent
 from rcbht_introspection.summaries.blocks import WrenchBlock
 from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
-from rcbht_introspection.verify.stream import StreamVerdict
+
+if TYPE_CHECKING:  # verdicts come from verifier_node's model: segmenter_node loads none
+    from rcbht_introspection.verify.stream import StreamVerdict
 
 LEVEL_CODES: dict[Level, int] = {level: i for i, level in enumerate(LEVELS)}
 _NS = 1_000_000_000
