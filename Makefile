@@ -6,6 +6,9 @@ PIP_QUIET := 2>&1 | { grep -v '^WARNING: Location' || true; }
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
+# The tests start hundreds of Python processes (nodes, CLI commands, workers): let them reuse the
+# package's compiled modules (__pycache__, git-ignored) even where the shell says not to write them.
+unexport PYTHONDONTWRITEBYTECODE
 PKG_SOURCES := $(shell find rcbht_introspection config launch resource scripts -type f -not -name '*.pyc' 2>/dev/null) setup.py setup.cfg package.xml
 MSG_SOURCES := $(wildcard msg_defs/msg/*.msg msg_defs/srv/*.srv msg_defs/action/*.action msg_defs/CMakeLists.txt msg_defs/package.xml)
 
