@@ -70,14 +70,17 @@ class SlipRun:
         self.actuator = actuators[{"x": 0, "y": 1, "yaw": 3}[slip.axis]]
         """A slip of +d is the hand moved by +d along the axis: that servo's target rises by d."""
         self.trigger = PhaseTrigger(slip.phase, slip.delay)
-        self.onset: float | None = None
         self.offset = 0.0
+
+    @property
+    def onset(self) -> float | None:
+        """When the part started to slide (None: not yet)."""
+        return self.trigger.fired
 
     def update(self, t: float, phase: str) -> None:
         """Advance the slip to time `t`."""
-        self.onset = self.trigger.update(t, phase)
-        if self.onset is not None:
-            share = min(1.0, (t - self.onset) / self.slip.duration)
+        if (onset := self.trigger.update(t, phase)) is not None:
+            share = min(1.0, (t - onset) / self.slip.duration)
             self.offset = share * self.slip.size
 
     def apply(self) -> None:
