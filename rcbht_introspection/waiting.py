@@ -12,7 +12,7 @@ from typing import Protocol
 
 
 class StopRequest(Protocol):
-    """Anything with a `requested` flag (nodes/lifetime.py's StopSignal)."""
+    """Anything with a `requested` flag (lifetime.py's StopSignal)."""
 
     @property
     def requested(self) -> bool: ...

@@ -104,7 +104,7 @@ def wrench_msg(stamp_ns: int, fz: float, mx: float = 0.0):
     """A WrenchStamped with force z and torque x."""
     from geometry_msgs.msg import WrenchStamped
 
-    from rcbht_introspection.nodes.conversions import to_time
+    from rcbht_introspection.messages import to_time
 
     msg = WrenchStamped()
     msg.header.stamp = to_time(stamp_ns)

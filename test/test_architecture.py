@@ -14,7 +14,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "rcbht_introspection"
 CORE = (
     "taxonomy", "summaries", "grammar", "learn", "live", "sim", "io", "audit", "plan", "verify",
-    "peers",
+    "peers", "configure",
 )  # fmt: skip
 """Subpackages of the pure core (NumPy, SciPy, scikit-learn, MuJoCo; io/ also reads bags with the
 pure-Python rosbags; peers/ the anchors' hmmlearn and aeon)."""
@@ -23,6 +23,7 @@ ROS_AND_PLOTTING = frozenset(
 )
 ROS_FREE = (
     "waiting",
+    "lifetime",
     "config_files",
     "replay.scoring",
     "replay.supervision",
@@ -251,6 +252,29 @@ def test_the_length_check_sees_a_long_function() -> None:
 
     assert _long_functions(function("f", MAX_FUNCTION_LINES + 1)) == [("f", 61)]
     assert _long_functions(function("g", MAX_FUNCTION_LINES)) == []
+
+
+NODE_LINES, SHARED_NODE_LINES = 150, 500
+"""Lines of code (non-blank, non-comment, docstrings included) of a node module, and of the
+nodes' shared modules together: the logic lives in the core, a node adapts messages."""
+
+
+def _code_lines(path: Path) -> int:
+    return sum(1 for line in path.read_text().splitlines() if line.strip()[:1] not in ("", "#"))
+
+
+def test_nodes_are_thin() -> None:
+    sizes = {p.name: _code_lines(p) for p in sorted((PACKAGE / "nodes").glob("*.py"))}
+    nodes = {name: n for name, n in sizes.items() if name.endswith("_node.py")}
+    shared = sum(n for name, n in sizes.items() if name not in nodes)
+    assert len(nodes) == 5 and max(nodes.values()) <= NODE_LINES, nodes
+    assert shared <= SHARED_NODE_LINES, sizes
+
+
+def test_the_line_count_skips_blanks_and_comments(tmp_path: Path) -> None:
+    module = tmp_path / "m.py"
+    module.write_text('"""Doc."""\n\n# note\nx = 1  # set\n    # indented note\n')
+    assert _code_lines(module) == 2
 
 
 DOCS = PACKAGE.parent / "docs"

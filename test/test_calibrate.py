@@ -15,18 +15,18 @@ from conftest import REAL
 
 from rcbht_introspection.cli import main
 from rcbht_introspection.config_files import write_profile
+from rcbht_introspection.configure.params import (
+    SegmenterConfig,
+    config_from_parameters,
+    defaults,
+    segmenter_taxonomy,
+)
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.hiro import find_trials, read_trial, write_trial
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.data import load_trial_samples
 from rcbht_introspection.learn.model_file import load_model
 from rcbht_introspection.live.segmenter import arm_stream_factory
-from rcbht_introspection.nodes.params import (
-    SegmenterConfig,
-    config_from_parameters,
-    defaults,
-    segmenter_taxonomy,
-)
 from rcbht_introspection.taxonomy.batch import label_trial
 from rcbht_introspection.taxonomy.calibration import (
     MAX_CUT_FRACTION,

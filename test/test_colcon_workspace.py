@@ -105,7 +105,7 @@ def _play_to_the_installed_nodes(ws: Path, prefix: Path, tmp_path: Path) -> None
 
     from rcbht_introspection.bench.ros import synthetic_trial
     from rcbht_introspection.io.bags import write_trial_bag
-    from rcbht_introspection.nodes.common import RosSession
+    from rcbht_introspection.rostools.session import RosSession
 
     model = small_model(tmp_path / "train")
     write_trial_bag(synthetic_trial("played", 20.0, 7), tmp_path / "played.mcap")

@@ -18,10 +18,7 @@ from rcbht_introspection.config_files import (
     load_config,
     read_yaml,
 )
-from rcbht_introspection.errors import InputError
-from rcbht_introspection.learn.live import LiveAugmentConfig, load_live_config
-from rcbht_introspection.learn.online import TeachConfig, load_teach_config
-from rcbht_introspection.nodes.params import (
+from rcbht_introspection.configure.params import (
     ClassifierConfig,
     PlannerConfig,
     SegmenterConfig,
@@ -29,6 +26,9 @@ from rcbht_introspection.nodes.params import (
     VerifierConfig,
     load_node_config,
 )
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.learn.live import LiveAugmentConfig, load_live_config
+from rcbht_introspection.learn.online import TeachConfig, load_teach_config
 from rcbht_introspection.plan.recovery import ClassRecovery, RecoveryConfig, load_recovery_config
 from rcbht_introspection.sim.config import SimConfig, load_sim_config
 from rcbht_introspection.sim.peg_config import PegConfig, load_peg_config

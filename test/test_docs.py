@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from rcbht_introspection.nodes.params import (
+from rcbht_introspection.configure.params import (
     ClassifierConfig,
     PlannerConfig,
     SegmenterConfig,

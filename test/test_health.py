@@ -17,6 +17,7 @@ from rcbht_introspection.live.health import (
     ArmHealth,
     CounterWatch,
     LatencyWindow,
+    ModelStatus,
     classifier_health,
 )
 from rcbht_introspection.live.join import (
@@ -58,26 +59,18 @@ def test_classifier_health_levels() -> None:
     latency = LatencyWindow()
     for ms in (1.0, 2.0, 3.0):
         latency.add(ms)
-    kwargs = dict(
-        state="active",
-        model_file="m.rcbht",
-        model_sha256="ab",
-        prediction_error=None,
-        counts={"words lost": 0},
-    )
-    ok = classifier_health(model_problem="", latency=latency, watch=CounterWatch(), **kwargs)
+    usable = ModelStatus("m.rcbht", "ab", "", None)
+    counts = {"words lost": 0}
+    ok = classifier_health("active", usable, latency, counts, CounterWatch())
     assert ok.level == OK and dict(ok.values)["belief update latency p50 (ms)"] == "2.000"
     assert dict(ok.values)["belief updates in period"] == "3"
     assert latency.take()[0] == 0  # the period was taken
-    bad = classifier_health(
-        model_problem="no such file", latency=latency, watch=CounterWatch(), **kwargs
-    )
+    missing = usable._replace(problem="no such file")
+    bad = classifier_health("active", missing, latency, counts, CounterWatch())
     assert bad.level == ERROR and "no such file" in bad.message
     watch = CounterWatch()
     watch.moved({"words lost": 0})
-    lost = classifier_health(
-        model_problem="", latency=latency, watch=watch, **{**kwargs, "counts": {"words lost": 7}}
-    )
+    lost = classifier_health("active", usable, latency, {"words lost": 7}, watch)
     assert lost.level == WARN and lost.message == "7 words lost in the last period"
 
 

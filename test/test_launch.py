@@ -22,8 +22,8 @@ import pytest
 import setuptools
 import yaml
 
+from rcbht_introspection.configure.params import NODE_NAMES, config_from_parameters
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.nodes.params import NODE_NAMES, config_from_parameters
 
 REPO = Path(__file__).resolve().parents[1]
 LAUNCH_FILE = REPO / "launch" / "introspection.launch.py"

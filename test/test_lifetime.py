@@ -1,4 +1,4 @@
-"""How our processes end: StopSignal (nodes/lifetime.py) in a real process, before and after
+"""How our processes end: StopSignal (lifetime.py) in a real process, before and after
 up(); and SIGTERM of a harness that runs node processes."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from rcbht_introspection.waiting import wait_until
 
 BUSY_START_UP = """
 import sys, time
-from rcbht_introspection.nodes.lifetime import StopSignal
+from rcbht_introspection.lifetime import StopSignal
 stop = StopSignal.install(until_up=True)
 if {up}:
     stop.up()
@@ -59,7 +59,7 @@ def test_a_stop_once_up_only_asks(signum: int) -> None:
 
 HUNG_SHUTDOWN = """
 import ctypes
-from rcbht_introspection.nodes.lifetime import StopSignal
+from rcbht_introspection.lifetime import StopSignal
 stop = StopSignal.install(watchdog_s=1.0)
 stop.up()
 print("ready", flush=True)

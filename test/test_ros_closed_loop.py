@@ -14,7 +14,7 @@ import pytest
 from ros_support import require_ros
 
 from rcbht_introspection.cli import main
-from rcbht_introspection.nodes.params import (
+from rcbht_introspection.configure.params import (
     ClassifierConfig,
     PlannerConfig,
     SegmenterConfig,
@@ -95,7 +95,7 @@ def test_bad_goals_are_rejected_and_sigint_mid_attempt_exits_0(tmp_path: Path) -
     from rcbht_interfaces.srv import RunTrial, StartTrial
     from rclpy.action.client import ActionClient
 
-    from rcbht_introspection.nodes.common import RosSession
+    from rcbht_introspection.rostools.session import RosSession
 
     domain = lease_domain()
     procs = _start(tmp_path, ros_env(domain, tmp_path / "ros_log"))

@@ -11,7 +11,7 @@ import pytest
 from ros_support import require_ros
 
 from rcbht_introspection.cli import main
-from rcbht_introspection.nodes.spin import Spin
+from rcbht_introspection.configure.spin import Spin
 
 pytestmark = [pytest.mark.ros, pytest.mark.shared_data, pytest.mark.slow]
 

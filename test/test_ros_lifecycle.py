@@ -97,7 +97,7 @@ def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, st
     from std_msgs.msg import String
 
     from rcbht_introspection.live.health import file_sha256
-    from rcbht_introspection.nodes.common import RosSession
+    from rcbht_introspection.rostools.session import RosSession
 
     first = toy_model(tmp_path / "first.rcbht", ("approach", "mating"))
     second = toy_model(tmp_path / "second.rcbht", ("approach", "rotation"))
@@ -134,8 +134,11 @@ def test_classifier_lifecycle_and_model_reload(tmp_path: Path, env: dict[str, st
             assert not refused.results[0].successful
             assert node.transition("deactivate") and node.state() == "inactive"
             assert node.transition("cleanup") and node.state() == "unconfigured"
+            # what configure and activate created is destroyed after cleanup and deactivate
+            assert wait_until(lambda: ros.node.count_publishers("/task_state") == 0)
             assert answer(lambda: client.set_parameters(model)).results[0].successful
             assert node.transition("configure") and node.transition("activate")
+            assert wait_until(lambda: ros.node.count_publishers("/task_state") == 1)
             assert wait_until(
                 lambda: (
                     diag.values("classifier_node: belief").get("model sha256")
@@ -156,7 +159,7 @@ def test_segmenter_diagnostics_report_rate_and_rejections(
     tmp_path: Path, env: dict[str, str]
 ) -> None:
     """/diagnostics: per-arm rate and counters; WARN with a one-line reason when samples are rejected."""
-    from rcbht_introspection.nodes.common import RosSession
+    from rcbht_introspection.rostools.session import RosSession
 
     log = tmp_path / "segmenter.log"
     proc = start_node("segmenter_node", {}, env, log)
@@ -196,7 +199,8 @@ def test_segmenter_intake_pose_frozen_sensor_and_tare(tmp_path: Path, env: dict[
     from diagnostic_msgs.srv import SelfTest
     from geometry_msgs.msg import PoseStamped
 
-    from rcbht_introspection.nodes.common import RosSession, qos_profile
+    from rcbht_introspection.nodes.common import qos_profile
+    from rcbht_introspection.rostools.session import RosSession
 
     log = tmp_path / "segmenter.log"
     params = {"pose_topics": ["/pose"], "intake.tool_mass_kg": 1.0, "intake.tare_window_s": 0.2}
@@ -245,8 +249,9 @@ def test_a_restarted_classifier_counts_the_loss_and_recovers_at_the_next_boundar
     from rcbht_interfaces.msg import Belief
     from std_msgs.msg import String
 
-    from rcbht_introspection.nodes.common import RosSession, qos_profile
+    from rcbht_introspection.nodes.common import qos_profile
     from rcbht_introspection.replay.observer import DiagnosticWatch
+    from rcbht_introspection.rostools.session import RosSession
 
     model = toy_model(tmp_path / "model.rcbht", ("approach", "rotation"))
     seg_log = tmp_path / "segmenter.log"
@@ -319,7 +324,7 @@ def test_a_failed_configure_leaves_the_node_unconfigured_and_says_why(
     from rclpy.parameter import Parameter
     from rclpy.parameter_client import AsyncParameterClient
 
-    from rcbht_introspection.nodes.common import RosSession
+    from rcbht_introspection.rostools.session import RosSession
 
     log = tmp_path / "segmenter.log"
     proc = start_node("segmenter_node", {"autostart": False}, env, log)

@@ -44,6 +44,21 @@ def test_ament_index_finds_the_executables(monkeypatch: pytest.MonkeyPatch) -> N
     assert (Path(get_package_share_directory("rcbht_interfaces")) / "msg" / "Words.msg").is_file()
 
 
+def test_notes_of_every_level_log_through_one_helper() -> None:
+    """rclpy fixes the severity of a logging call site at its first call and raises ValueError
+    at another: a teaching classifier's info note, then a refusal's warning, from one shared
+    call raised in the ~/teach callback and stopped the node (its service went unanswered)."""
+    require_ros()
+    from rclpy.logging import get_logger
+
+    from rcbht_introspection.nodes.common import log_notes
+
+    notes = [("info", "taught"), ("warning", "refused"), ("error", "failed"), ("info", "again")]
+    logger = get_logger("notes_test")
+    log_notes(logger, notes)
+    log_notes(logger, notes[::-1])
+
+
 @pytest.mark.parametrize("available", [True, False])
 def test_the_events_executor_by_default_and_the_fallback(
     monkeypatch: pytest.MonkeyPatch, available: bool
@@ -115,7 +130,7 @@ def test_classifier_without_usable_model_says_unknown(
 ) -> None:
     from std_msgs.msg import String
 
-    from rcbht_introspection.nodes.common import RosSession
+    from rcbht_introspection.rostools.session import RosSession
 
     path = tmp_path / "model.rcbht"
     params: dict[str, object] = {"model_file": str(path), "publish_rate_hz": 20.0}
@@ -156,7 +171,8 @@ def test_segmenter_survives_malformed_input_and_sigint(tmp_path: Path, env: dict
     from rcbht_interfaces.msg import Words
     from std_msgs.msg import String
 
-    from rcbht_introspection.nodes.common import RosSession, qos_profile
+    from rcbht_introspection.nodes.common import qos_profile
+    from rcbht_introspection.rostools.session import RosSession
 
     log = tmp_path / "segmenter.log"
     task = tmp_path / "task.yaml"  # names the sub-tasks: 'pirouette' below is not one of them
@@ -214,7 +230,8 @@ def test_a_late_subscriber_still_gets_the_applied_sub_task_events(
     from rcbht_interfaces.msg import Phase
     from std_msgs.msg import String
 
-    from rcbht_introspection.nodes.common import RosSession, phase_qos
+    from rcbht_introspection.nodes.common import phase_qos
+    from rcbht_introspection.rostools.session import RosSession
 
     log = tmp_path / "segmenter.log"
     proc = start_node("segmenter_node", {}, env, log)
@@ -243,8 +260,9 @@ def test_a_busy_node_still_answers_parameter_requests(
     from geometry_msgs.msg import WrenchStamped
     from rclpy.parameter_client import AsyncParameterClient
 
-    from rcbht_introspection.nodes.common import RosSession, qos_profile
-    from rcbht_introspection.nodes.params import SegmenterConfig, descriptions
+    from rcbht_introspection.configure.params import SegmenterConfig, descriptions
+    from rcbht_introspection.nodes.common import qos_profile
+    from rcbht_introspection.rostools.session import RosSession
 
     log = tmp_path / "segmenter.log"
     proc = start_node("segmenter_node", {"event_hold_s": 0.3, "spin": spin}, env, log)

@@ -6,8 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from rcbht_introspection.errors import InputError
-from rcbht_introspection.nodes.params import (
+from rcbht_introspection.configure.params import (
     ClassifierConfig,
     SegmenterConfig,
     VerifierConfig,
@@ -17,6 +16,7 @@ from rcbht_introspection.nodes.params import (
     load_node_config,
     word_topics,
 )
+from rcbht_introspection.errors import InputError
 
 
 def test_shipped_files_equal_defaults() -> None:

@@ -77,8 +77,9 @@ def test_cold_start_cli_and_topic_refusals(
     from diagnostic_msgs.msg import DiagnosticArray
     from rcbht_interfaces.msg import TeachRequest
 
-    from rcbht_introspection.nodes.common import RosSession, qos_profile
+    from rcbht_introspection.nodes.common import qos_profile
     from rcbht_introspection.replay.supervision import stop_process
+    from rcbht_introspection.rostools.session import RosSession
     from rcbht_introspection.waiting import wait_until
 
     monkeypatch.setenv("ROS_DOMAIN_ID", env["ROS_DOMAIN_ID"])  # the CLI's own session

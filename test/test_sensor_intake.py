@@ -283,7 +283,7 @@ def test_session_needs_a_pose_then_subtracts_the_tool_weight() -> None:
 
 
 def test_intake_parameters_are_checked_with_file_and_line(tmp_path: Path) -> None:
-    from rcbht_introspection.nodes.params import (
+    from rcbht_introspection.configure.params import (
         SegmenterConfig,
         config_from_parameters,
         defaults,

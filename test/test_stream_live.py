@@ -230,8 +230,8 @@ def test_evaluate_scores_the_live_words_and_live_windows(
 
 
 def test_the_segmenter_node_parameters_select_the_live_profile(tmp_path: Path) -> None:
+    from rcbht_introspection.configure.params import SegmenterConfig, load_node_config
     from rcbht_introspection.live.segmenter import arm_stream_factory
-    from rcbht_introspection.nodes.params import SegmenterConfig, load_node_config
 
     params = tmp_path / "segmenter.yaml"
     params.write_text("segmenter_node:\n  ros__parameters:\n    stream_profile: live\n")

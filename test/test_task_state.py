@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from sklearn.calibration import calibration_curve
 
+from rcbht_introspection.configure.params import ClassifierConfig, load_node_config
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live.belief import UNKNOWN, Belief
 from rcbht_introspection.live.reliability import expected_calibration_error, top_label
 from rcbht_introspection.live.state import StateFilter, TaskStateConfig
-from rcbht_introspection.nodes.params import ClassifierConfig, load_node_config
 
 CLASSES = ("approach", "insertion", "mating", "rotation")
 

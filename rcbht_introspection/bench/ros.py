@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from rcbht_introspection.bench.dds_floor import run_floor
+from rcbht_introspection.configure.spin import Spin
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import write_trial_bag
 from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
@@ -37,7 +38,6 @@ from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.learn.data import load_trials
 from rcbht_introspection.learn.live import live_training
 from rcbht_introspection.learn.model_file import save_model
-from rcbht_introspection.nodes.spin import Spin
 from rcbht_introspection.replay.harness import ReplayEvalOptions, replay_eval
 from rcbht_introspection.verify.config import load_verify_config
 from rcbht_introspection.verify.labels import SUCCESS, TrialLabel

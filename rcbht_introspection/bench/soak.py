@@ -42,9 +42,9 @@ from rcbht_introspection.bench.soak_traffic import (
     Source,
     trial_source,
 )
+from rcbht_introspection.configure.params import ClassifierConfig, SegmenterConfig
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.nodes.common import RosSession, qos_profile
-from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig
+from rcbht_introspection.nodes.common import qos_profile
 from rcbht_introspection.replay.supervision import (
     NodeProcess,
     environment,
@@ -53,6 +53,7 @@ from rcbht_introspection.replay.supervision import (
     wait_for_nodes,
     write_params,
 )
+from rcbht_introspection.rostools.session import RosSession
 from rcbht_introspection.waiting import wait_until
 
 GROWTH_WINDOW_S = 1800.0

@@ -18,6 +18,7 @@ from rcbht_interfaces.msg import Words as WordsMsg
 from std_msgs.msg import String
 
 from rcbht_introspection.bench import ros
+from rcbht_introspection.configure.params import ClassifierConfig, SegmenterConfig, word_topics
 from rcbht_introspection.io.bags import (
     END_PHASE,
     PHASE_TOPIC,
@@ -27,7 +28,6 @@ from rcbht_introspection.io.bags import (
 )
 from rcbht_introspection.io.hiro import find_trials, read_trial, shared_hiro
 from rcbht_introspection.io.trial import Trial
-from rcbht_introspection.nodes.params import ClassifierConfig, SegmenterConfig, word_topics
 from rcbht_introspection.replay.observer import DiagnosticWatch
 from rcbht_introspection.sim import load_sim_config, simulate_trial
 

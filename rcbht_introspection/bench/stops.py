@@ -34,8 +34,8 @@ from rcbht_introspection.grammar.split import SubtaskSample
 from rcbht_introspection.io.bags import bag_messages
 from rcbht_introspection.learn.model_file import save_model
 from rcbht_introspection.learn.models import train_model
-from rcbht_introspection.nodes.common import RosSession, qos_profile
-from rcbht_introspection.nodes.conversions import to_time
+from rcbht_introspection.messages import to_time
+from rcbht_introspection.nodes.common import qos_profile
 from rcbht_introspection.replay.supervision import (
     environment,
     lease_domain,
@@ -43,6 +43,7 @@ from rcbht_introspection.replay.supervision import (
     ros_env,
     stop_process,
 )
+from rcbht_introspection.rostools.session import RosSession
 from rcbht_introspection.taxonomy.words import Level, TrialWords, Word
 from rcbht_introspection.waiting import wait_until
 

@@ -75,9 +75,9 @@ def add_state_options(parser: argparse.ArgumentParser) -> None:
 def state_from_args(args: argparse.Namespace) -> TaskStateConfig:
     """The /task_state rule: config/classifier.yaml's `state` (the node's own defaults) with the
     given --state-* options."""
+    from rcbht_introspection.configure.params import ClassifierConfig, load_node_config
     from rcbht_introspection.errors import InputError
     from rcbht_introspection.live.state import check_task_state
-    from rcbht_introspection.nodes.params import ClassifierConfig, load_node_config
 
     given = {k: getattr(args, "state_" + k) for k in STATE_OPTIONS}
     config = dataclasses.replace(

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, get_args
 
 from rcbht_introspection.commands.options import add_state_options, state_from_args
+from rcbht_introspection.configure.spin import DEFAULT_SPIN, Spin
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.fleet import (
     BadInputs,
@@ -22,7 +23,6 @@ from rcbht_introspection.fleet import (
     parallel_map,
 )
 from rcbht_introspection.live import BeliefMode
-from rcbht_introspection.nodes.spin import DEFAULT_SPIN, Spin
 from rcbht_introspection.taxonomy import StreamProfile
 
 if TYPE_CHECKING:
@@ -391,9 +391,9 @@ def cmd_info(args: argparse.Namespace) -> int:
 
 def cmd_replay(args: argparse.Namespace) -> int:
     from rcbht_introspection.io.bags import TRIAL_INFO_TOPIC, bag_messages
-    from rcbht_introspection.nodes.common import RosSession
-    from rcbht_introspection.nodes.lifetime import StopSignal
-    from rcbht_introspection.nodes.player import BagPlayer
+    from rcbht_introspection.lifetime import StopSignal
+    from rcbht_introspection.rostools.player import BagPlayer
+    from rcbht_introspection.rostools.session import RosSession
 
     stop = StopSignal.install()  # Ctrl-C ends the playback between two messages
     messages = list(bag_messages(args.bag))
@@ -413,9 +413,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def cmd_record(args: argparse.Namespace) -> int:
-    from rcbht_introspection.nodes.common import RosSession
-    from rcbht_introspection.nodes.lifetime import StopSignal
-    from rcbht_introspection.nodes.player import RawRecorder
+    from rcbht_introspection.lifetime import StopSignal
+    from rcbht_introspection.rostools.player import RawRecorder
+    from rcbht_introspection.rostools.session import RosSession
 
     # SIGINT/SIGTERM end the recording where this loop checks, never inside a bag write
     stop = StopSignal.install()

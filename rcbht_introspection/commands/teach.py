@@ -38,8 +38,8 @@ def cmd_teach(args: argparse.Namespace) -> int:
         raise InputError("give both --start and --end, or neither (--last)")
     elif args.last and args.start is not None:
         raise InputError("--last and --start/--end exclude each other")
-    from rcbht_introspection.nodes.common import RosSession
-    from rcbht_introspection.nodes.teach_client import (
+    from rcbht_introspection.rostools.session import RosSession
+    from rcbht_introspection.rostools.teach_client import (
         call_teach,
         response_text,
         teach_client,

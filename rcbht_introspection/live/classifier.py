@@ -18,7 +18,7 @@ import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from rcbht_introspection.live.belief import Belief, BeliefTracker
+from rcbht_introspection.live.belief import UNKNOWN, Belief, BeliefTracker
 from rcbht_introspection.live.join import LatchedEvents
 from rcbht_introspection.live.state import StateFilter
 from rcbht_introspection.live.teach import Teacher, TeachRequest, TeachStatus
@@ -84,6 +84,23 @@ class Step:
     """Sub-task event names the tracker does not know."""
     model_swapped: bool = False
     """A taught model was taken into use before these beliefs."""
+    error: str = ""
+    """A model prediction error new since the last step ('' when none)."""
+
+    def notes(self) -> list[tuple[str, str]]:
+        """What the node logs about this step: (level, line)."""
+        out = [("warning", f"ignored unknown sub-task event {n!r}") for n in self.ignored_events]
+        if self.lost:
+            out.append(
+                (
+                    "warning",
+                    f"{self.lost} words of this stream never arrived (joined late or lost): the "
+                    f"sub-task under way is judged {UNKNOWN!r} until the next boundary",
+                )
+            )
+        if self.error:
+            out.append(("error", f"model prediction failed, publishing {UNKNOWN!r}: {self.error}"))
+        return out
 
 
 class ClassifierSession:
@@ -109,6 +126,7 @@ class ClassifierSession:
         self.trigger_ns: int | None = None
         """Earliest sample behind evidence not yet classified (the conservative latency)."""
         self._stale = 0
+        self.reported_error: str | None = None
         self.counts = counts if counts is not None else {}
         """Losses and drops (a node passes its own dict: the counts outlive a reconfigure)."""
         for name in COUNTS:
@@ -132,6 +150,9 @@ class ClassifierSession:
                 self._classify(step)
         self.counts["latched events of earlier streams dropped"] += self.history.stale - self._stale
         self._stale = self.history.stale
+        error = self.tracker.last_error
+        if error and error != self.reported_error:
+            self.reported_error = step.error = error
         return step
 
     def teach(self, request: TeachRequest) -> TeachStatus:
@@ -139,6 +160,16 @@ class ClassifierSession:
         if self.teaching is None:
             return TeachStatus(False, "teaching is off (parameter teach_enabled)", 0, 0, 0, 0)
         return self.teaching.request(request, self.tracker)
+
+    def teach_topic(self, request: TeachRequest, topic: str) -> str:
+        """A fire-and-forget label (the teach topic); what to warn about ('' when nothing): as
+        the service, an empty label is refused, and counted."""
+        if not request.label:
+            self.counts["teach requests refused"] = self.counts.get("teach requests refused", 0) + 1
+            return f"teach request refused: empty label on {topic}"
+        status = self.teach(request)
+        refused = not status.accepted and self.teaching is None
+        return f"teach request refused: {status.message}" if refused else ""
 
     def _classify(self, step: Step) -> None:
         """Verdicts, belief and state from the evidence so far."""

@@ -11,7 +11,7 @@ import hashlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -175,16 +175,13 @@ def segmenter_health(
     session: SegmenterSession[Any],
     arms: Mapping[str, ArmHealth],
     period_s: float,
-    *,
     active: bool,
-    frozen_checks: bool,
-    gravity: bool,
-    bad_poses: int,
     watch: CounterWatch,
 ) -> list[Health]:
     """segmenter_node's statuses: per arm intake (rate, accepted/rejected, gaps, finality
     backlog, frozen sensor, tare, pose with gravity compensation), then the events."""
     out = []
+    frozen_checks, gravity = session.intake.frozen_samples > 0, session.intake.compensates_gravity
     for arm, health in arms.items():
         st, counts = session.state[arm], session.counts[arm]
         pose = ("none yet" if session.rotations[arm] is None else "received") if gravity else ""
@@ -206,7 +203,7 @@ def segmenter_health(
         "unknown events": session.unknown_phases,
         "late events": session.late_phases,
         "pending events": len(session.pending),
-        "poses ignored": bad_poses,
+        "poses ignored": session.bad_poses,
     }
     out.append(events_health("segmenter_node", events, watch))
     return out
@@ -221,13 +218,20 @@ def events_health(node: str, counts: Mapping[str, int], watch: CounterWatch) -> 
     return Health(f"{node}: events", OK, "events in order", values)
 
 
+class ModelStatus(NamedTuple):
+    """The classifier's model for /diagnostics."""
+
+    file: str
+    sha256: str
+    problem: str
+    """Why no model is used ('' when one is)."""
+    prediction_error: str | None
+    """The latest prediction error (None: none)."""
+
+
 def classifier_health(
-    *,
     state: str,
-    model_file: str,
-    model_sha256: str,
-    model_problem: str,
-    prediction_error: str | None,
+    model: ModelStatus,
     latency: LatencyWindow,
     counts: Mapping[str, int],
     watch: CounterWatch,
@@ -235,6 +239,7 @@ def classifier_health(
 ) -> Health:
     """The classifier's status: model, belief-update latency of the period, word losses;
     `extra` values (teaching) go after them."""
+    model_file, model_sha256, model_problem, prediction_error = model
     n, p50, p99 = latency.take()
     moved = watch.moved(counts)
     values = (
@@ -256,3 +261,14 @@ def classifier_health(
     else:
         level, message = OK, f"{state}, {n} belief updates in the last period"
     return Health("classifier_node: belief", level, message, values)
+
+
+def outputs_health(name: str, words: int, phases: int, intake: int) -> Health:
+    """Subscribers matched to segmenter_node's outputs (the fewest of any word topic, the
+    events) and publishers to its inputs: a harness waits for them before it plays a bag."""
+    values = (
+        ("word subscribers matched", str(words)),
+        ("phase subscribers matched", str(phases)),
+        ("intake publishers matched", str(intake)),
+    )
+    return Health(f"{name}: outputs", OK, f"{words} subscribers on every word topic", values)

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from rcbht_introspection.live.classifier import PhaseInput, WordsInput
 from rcbht_introspection.live.join import LevelMessage, Watermarks, batch_messages
-from rcbht_introspection.live.segmenter import Output, PhaseEvent, WordBatch
+from rcbht_introspection.live.segmenter import Output, PhaseEvent, SegmenterSession, WordBatch
 from rcbht_introspection.summaries.blocks import WrenchBlock
 
 
@@ -53,8 +54,22 @@ def publication(out: Output, marks: Watermarks, now: float = 0.0) -> list[WordsO
     return items
 
 
+def idle_marks(session: SegmenterSession[Any], marks: Watermarks, now: float) -> list[WordsOut]:
+    """The empty Words messages of the levels whose numbers lag their arm's (Watermarks.due),
+    at the arm's last sample; `marks` learns they went out at `now`."""
+    out = []
+    for arm, stream_id, level, seq_end in marks.due(now):
+        if stream_id != session.stream_id or session.origin_ns is None:
+            continue
+        stamp = session.state[arm].last_ns
+        batch = WordBatch(arm, [], stamp, session.origin_ns, stream_id)
+        out.append(WordsOut(batch, LevelMessage(level, [], seq_end, False), 0))
+        marks.published(arm, stream_id, level, seq_end, now)
+    return out
+
+
 def classifier_inputs(items: Iterable[WordsOut | PhaseEvent]) -> list[WordsInput | PhaseInput]:
-    """Published messages as classifier_node's session receives them (nodes/conversions.py
+    """Published messages as classifier_node's session receives them (messages.py
     words_input and phase_input, without the messages)."""
     out: list[WordsInput | PhaseInput] = []
     for item in items:

@@ -25,7 +25,7 @@ from typing import Generic, Protocol, TypeVar
 import numpy as np
 
 from rcbht_introspection.io.sensor_checks import FrozenWatch, spread_stamp
-from rcbht_introspection.live.gravity import compensate_gravity
+from rcbht_introspection.live.gravity import compensate_gravity, rotation_from_quaternion
 from rcbht_introspection.live.intake import IntakeConfig, Tare
 from rcbht_introspection.summaries.blocks import BlockMeans, WrenchBlock
 from rcbht_introspection.taxonomy import StreamProfile
@@ -185,6 +185,7 @@ class SegmenterSession(Generic[S]):
         self.counts = {arm: ArmCounts() for arm in self.arms}
         self.unknown_phases = 0
         self.late_phases = 0
+        self.bad_poses = 0
         self.pending: list[_Pending] = []
         self.end_source: int | None = None
         self.stream_id = -1
@@ -207,6 +208,29 @@ class SegmenterSession(Generic[S]):
     def pose(self, arm: str, rotation: np.ndarray) -> None:
         """The latest orientation (3x3, sensor to world) of the arm's sensor."""
         self.rotations[arm] = rotation
+
+    def pose_quaternion(self, arm: str, x: float, y: float, z: float, w: float) -> str:
+        """The latest orientation as a quaternion; why it was ignored ('' when taken): a zero
+        or non-finite quaternion is counted in `bad_poses`."""
+        try:
+            self.pose(arm, rotation_from_quaternion(x, y, z, w))
+        except ValueError as exc:
+            self.bad_poses += 1
+            return str(exc)
+        return ""
+
+    def statistics(self) -> str:
+        """What the session took in (samples, intake policies, events): a node's last line."""
+        counts = {arm: (c.accepted, c.rejected_total) for arm, c in self.counts.items()}
+        intake = {
+            arm: (c.respaced, self.frozen[arm].episodes, self.tares[arm].completed)
+            for arm, c in self.counts.items()
+        }
+        return (
+            f"samples (accepted, rejected) per arm {counts}, (respaced samples, frozen episodes, "
+            f"tares) per arm {intake}, unknown events {self.unknown_phases}, "
+            f"late events {self.late_phases}"
+        )
 
     # --- samples ---------------------------------------------------------------------------
     def push(

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 
-from rcbht_introspection.nodes.lifetime import StopSignal
+from rcbht_introspection.lifetime import StopSignal
 
 NODES = ("segmenter_node", "classifier_node", "verifier_node", "sim_node", "planner_node")
 

@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import gc
 import sys
-import threading
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from functools import partial
 from typing import Any, Protocol
 
@@ -15,12 +13,8 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.context import Context
-from rclpy.executors import (
-    Executor,
-    ShutdownException,
-    SingleThreadedExecutor,
-    TimeoutException,
-)
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.guard_condition import GuardCondition
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -29,12 +23,7 @@ from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.utilities import try_shutdown
 
-from rcbht_introspection.errors import InputError
-from rcbht_introspection.live.health import ERROR, Health
-from rcbht_introspection.nodes.conversions import diagnostic_array
-from rcbht_introspection.nodes.intake import Intake
-from rcbht_introspection.nodes.lifetime import StopSignal
-from rcbht_introspection.nodes.params import (
+from rcbht_introspection.configure.params import (
     ClassifierConfig,
     NodeConfig,
     PlannerConfig,
@@ -46,7 +35,11 @@ from rcbht_introspection.nodes.params import (
     defaults,
     descriptions,
 )
-from rcbht_introspection.nodes.spin import Spin
+from rcbht_introspection.configure.spin import Spin
+from rcbht_introspection.errors import InputError
+from rcbht_introspection.lifetime import StopSignal, keep_out_of_collector
+from rcbht_introspection.live.health import ERROR, Health
+from rcbht_introspection.messages import diagnostic_array
 
 
 def qos_profile(depth: int, reliability: Reliability) -> QoSProfile:
@@ -93,6 +86,16 @@ def read_config(node: Node, cls: type[NodeConfig]) -> NodeConfig:
     return config_from_parameters(cls, values)
 
 
+class Inputs(Protocol):
+    """A node's intake (nodes/intake.py): what arrived is handed over at `settled()`."""
+
+    def settled(self) -> None:
+        """Hand what arrived to the session, in publication order."""
+
+    def publishers(self) -> int:
+        """Fewest publishers matched on any intake topic."""
+
+
 class NodeLogger(Protocol):
     """What the nodes call on their logger (rclpy's RcutilsLogger, which has no annotations)."""
 
@@ -104,6 +107,18 @@ class NodeLogger(Protocol):
 
     def error(self, message: str) -> bool:
         """Log `message` at ERROR; whether it was logged."""
+
+
+def log_notes(logger: NodeLogger, notes: Iterable[tuple[str, str]]) -> None:
+    """Log (level, line) notes, each severity from its own call: rclpy fixes a call site's
+    severity at its first call and raises ValueError in the callback at another one."""
+    for level, line in notes:
+        if level == "info":
+            logger.info(line)
+        elif level == "warning":
+            logger.warning(line)
+        else:
+            logger.error(line)
 
 
 DIAGNOSTICS_PERIOD_S = 1.0
@@ -126,8 +141,8 @@ def _without_info(handler: Callable[[Any, int | None], None], msg: Any) -> None:
 class ManagedNode(LifecycleNode):
     """A lifecycle node of ours: configure reads and validates the parameters of `config_class`.
 
-    Subclasses build their state and publishers in `configure`, subscribe in `activate`, stop
-    taking input in `deactivate` (which logs the statistics line) and drop everything in
+    Subclasses build their state and publishers in `configure` and subscribe in `activate`;
+    what each created is destroyed after `deactivate` (which logs the statistics line) and
     `cleanup`. Parameters can change while the node is not active; they take effect at the next
     configure (deactivate -> cleanup -> configure -> activate reloads a model file). The status
     of `health()` goes to /diagnostics once a second in every state.
@@ -156,8 +171,14 @@ class ManagedNode(LifecycleNode):
         self.events = False
         """Spun by rclpy's EventsExecutor (run() decides at start-up): callbacks get the
         message alone, no MessageInfo (rclpy 7.1.6's EventsExecutor cannot pass it)."""
-        self.inputs: Intake | None = None
+        self.inputs: Inputs | None = None
         """The wrench and /task_phase subscriptions while active (segmenter, verifier)."""
+        self.settle_guard: GuardCondition | None = None
+        """Under the SingleThreadedExecutor: triggered by an input, run after the executor ran
+        what its wait delivered (use_executor)."""
+        self.settle_due = False
+        self.created: dict[str, set[int]] = {}
+        """The entities each transition created (configure, activate), until it is undone."""
         self.stop: StopSignal | None = None
         """The process's stop request (set by run()); a manager's shutdown transition sets it."""
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -167,10 +188,6 @@ class ManagedNode(LifecycleNode):
 
     # --- what a node implements -------------------------------------------------------------
 
-    def spin_kind(self) -> str:
-        """The executor to spin this node with: its `spin` parameter (read at start-up)."""
-        return str(self.get_parameter("spin").value)
-
     def configure(self, cfg: Any) -> None:
         """Build the state and the publishers from a validated config."""
 
@@ -178,10 +195,10 @@ class ManagedNode(LifecycleNode):
         """Subscribe: input flows from now on."""
 
     def deactivate(self) -> None:
-        """Stop taking input; log the statistics line."""
+        """Log the statistics line (then what activate created is destroyed)."""
 
     def cleanup(self) -> None:
-        """Destroy the publishers, drop the state."""
+        """Drop what configure built beside its entities (which are destroyed after it)."""
 
     def health(self, period_s: float) -> list[Health]:
         """Statuses for /diagnostics covering the last `period_s` seconds."""
@@ -192,6 +209,28 @@ class ManagedNode(LifecycleNode):
         publication order."""
         if self.inputs is not None:
             self.inputs.settled()
+
+    # --- handing inputs over in publication order (live/order.py) -----------------------------
+
+    def use_executor(self, events: bool) -> None:
+        """Spun by the EventsExecutor (one message per event: hand each over at once) or by the
+        SingleThreadedExecutor (it serves one wait's messages topic by topic: hand them over
+        once it ran them all, from a guard condition it serves after them)."""
+        self.events = events
+        if not events:  # rclpy 7.1's EventsExecutor refuses a node with a guard condition
+            self.settle_guard = self.create_guard_condition(self._settle)
+
+    def arrived(self) -> None:
+        """An input was received: `settled()` now, or once the executor's burst is served."""
+        if self.settle_guard is None:
+            self.settled()
+        elif not self.settle_due:
+            self.settle_due = True
+            self.settle_guard.trigger()  # type: ignore[no-untyped-call]  # rclpy's is untyped
+
+    def _settle(self) -> None:
+        self.settle_due = False
+        self.settled()
 
     def subscribe(
         self,
@@ -207,6 +246,10 @@ class ManagedNode(LifecycleNode):
         callback: Callable[..., None] = partial(wrap, handler)
         return self.create_subscription(msg_type, topic, callback, qos, **kwargs)
 
+    def log_notes(self, notes: Iterable[tuple[str, str]]) -> None:
+        """Log what the core noted: (level info, warning or error; one line) each."""
+        log_notes(self.get_logger(), notes)
+
     def get_logger(self) -> NodeLogger:
         """The node's logger: rclpy's Node.get_logger, seen through the typed NodeLogger."""
         logger: NodeLogger = super().get_logger()  # type: ignore[no-untyped-call]
@@ -215,7 +258,8 @@ class ManagedNode(LifecycleNode):
     # --- lifecycle ----------------------------------------------------------------------------
     # rclpy turns an exception in a transition callback into a silent ERROR transition; each
     # transition here therefore catches it, logs one line, removes the entities the failed step
-    # created and reports FAILURE (the node stays in the state it was in).
+    # created and reports FAILURE (the node stays in the state it was in). What `configure`
+    # creates is destroyed after `cleanup`, what `activate` creates after `deactivate`.
     def _transition(
         self, name: str, step: Callable[[], None], then: str
     ) -> TransitionCallbackReturn:
@@ -231,23 +275,33 @@ class ManagedNode(LifecycleNode):
                 if isinstance(exc, InputError)
                 else f"{name} failed: {type(exc).__name__}: {exc}\n{traceback.format_exc()}"
             )
-            self._destroy_new(before)
+            self._destroy(self._entities() - before)
             return TransitionCallbackReturn.FAILURE
+        self.created[name] = self._entities() - before
         self.config_error = ""
         self.state_label = then
         return TransitionCallbackReturn.SUCCESS
 
     def _entities(self) -> set[int]:
-        return {id(e) for e in (*self.publishers, *self.subscriptions, *self.timers)}
+        kinds = (self.publishers, self.subscriptions, self.timers, self.services)
+        return {id(e) for kind in kinds for e in kind}
 
-    def _destroy_new(self, before: set[int]) -> None:
-        """Destroy the publishers, subscriptions and timers created since `before`."""
-        for sub in [s for s in self.subscriptions if id(s) not in before]:
+    def _destroy(self, ids: set[int]) -> None:
+        """Destroy the publishers, subscriptions, timers and services among `ids`."""
+        for sub in [s for s in self.subscriptions if id(s) in ids]:
             self.destroy_subscription(sub)
-        for timer in [t for t in self.timers if id(t) not in before]:
+        for timer in [t for t in self.timers if id(t) in ids]:
             self.destroy_timer(timer)
-        for pub in [p for p in self.publishers if id(p) not in before]:
+        for pub in [p for p in self.publishers if id(p) in ids]:
             self.destroy_publisher(pub)
+        for srv in [s for s in self.services if id(s) in ids]:
+            self.destroy_service(srv)
+
+    def _undo(self, name: str) -> None:
+        """Destroy what the transition `name` created."""
+        self._destroy(self.created.pop(name, set()))
+        if name == "activate":
+            self.inputs = None
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         return self._transition("configure", self._configure, "inactive")
@@ -264,17 +318,23 @@ class ManagedNode(LifecycleNode):
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         result = self._transition("deactivate", self.deactivate, "inactive")
         if result == TransitionCallbackReturn.SUCCESS:
+            self._undo("activate")
             return super().on_deactivate(state)
         return result
 
     def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        return self._transition("cleanup", self.cleanup, "unconfigured")
+        result = self._transition("cleanup", self.cleanup, "unconfigured")
+        if result == TransitionCallbackReturn.SUCCESS:
+            self._undo("configure")
+        return result
 
     def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
         if self.state_label == "active":
             self._transition("deactivate", self.deactivate, "inactive")
+            self._undo("activate")
         if self.state_label == "inactive":
             self._transition("cleanup", self.cleanup, "unconfigured")
+            self._undo("configure")
         self.state_label = "finalized"
         if self.stop is not None:  # a manager shut the node down: the process ends too
             self.stop.request()
@@ -283,7 +343,7 @@ class ManagedNode(LifecycleNode):
     def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
         # only reachable when code outside _transition raised: rclpy finalizes the node
         self.get_logger().error(f"a lifecycle transition failed in state {self.state_label}")
-        self._destroy_new(set())
+        self._destroy(self.created.pop("activate", set()) | self.created.pop("configure", set()))
         self.state_label = "finalized"
         if self.stop is not None:
             self.stop.request()
@@ -333,7 +393,8 @@ def run(
     try:
         node = node_factory()
         node.stop = stop
-        executor, node.events = make_executor(node.spin_kind())
+        executor, events = make_executor(str(node.get_parameter("spin").value))
+        node.use_executor(events)
         executor.add_node(node)
         node.get_logger().info(f"spun by rclpy's {type(executor).__name__}")
         if node.autostart and not stop.requested:
@@ -346,7 +407,7 @@ def run(
                 return 2
         stop.up()
         keep_out_of_collector()  # start-up objects: rclpy, NumPy, scikit-learn, the model
-        spin(executor, node, stop)
+        spin(executor, stop)
     finally:
         if node is not None:
             node.finish()
@@ -371,103 +432,13 @@ def make_executor(spin: Spin | str, context: Context | None = None) -> tuple[Exe
     return SingleThreadedExecutor(context=context), False
 
 
-def keep_out_of_collector() -> None:
-    """Collect, then freeze what the process holds now: it lives on, and the cyclic collector's
-    full passes over it would stall a 1 kHz callback or player for tens of milliseconds."""
-    gc.collect()
-    gc.freeze()
-
-
 SPIN_WAIT_S = 0.02
 """Longest wait of the spin for work: a stop request is seen within it."""
-BURST_CALLBACKS = 10_000
-"""Most callbacks the SingleThreadedExecutor runs before the node is told its burst is done."""
 
 
-def spin(executor: Executor, node: ManagedNode, stop: StopSignal) -> None:
-    """Spin `node` until `stop`. The EventsExecutor runs one event (a message, a timer, a
-    service request) per spin_once; rclpy's SingleThreadedExecutor waits for a callback, then
-    runs every callback whose message is delivered by then. After each, the node is told
-    (`settled`): it hands what arrived to its session in publication order."""
+def spin(executor: Executor, stop: StopSignal) -> None:
+    """Spin until `stop`: rclpy's spin_once in a loop, not executor.spin(). rclpy 7.1's
+    EventsExecutor cannot be ended from a callback: its spin() runs on after shutdown() or
+    try_shutdown(), its spin_until_future_complete() busy-waits (docs/ros.md, Executors)."""
     while executor.context.ok() and not stop.requested:
         executor.spin_once(timeout_sec=SPIN_WAIT_S)
-        if not node.events:
-            serve_ready(executor, BURST_CALLBACKS)
-        node.settled()
-
-
-def serve_ready(executor: Executor, limit: int) -> int:
-    """Run up to `limit` callbacks the executor finds ready now, without blocking; how many ran
-    (one wake-up's worth at most: a message per subscription)."""
-    for done in range(limit):
-        try:
-            handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0)
-        except (TimeoutException, ShutdownException):
-            return done
-        handler()
-        error = handler.exception()  # type: ignore[no-untyped-call]  # rclpy's Task is untyped
-        if error is not None:
-            raise error
-    return limit
-
-
-SETTLE_CALLBACKS = 10_000
-"""Most delivered callbacks `RosSession.settle` runs per round."""
-
-
-class RosSession:
-    """An rclpy context + node spun by a background SingleThreadedExecutor (for CLI tools).
-
-    rclpy installs no signal handler; the caller decides what SIGINT does (a StopSignal, or
-    Python's KeyboardInterrupt). `close` stops the spin thread before anything is destroyed.
-    """
-
-    def __init__(self, name: str, domain_id: int | None = None) -> None:
-        self.context = Context()
-        kwargs: dict[str, Any] = {"context": self.context}
-        if domain_id is not None:
-            kwargs["domain_id"] = domain_id
-        rclpy.init(signal_handler_options=SignalHandlerOptions.NO, **kwargs)
-        self.node = Node(name, context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        # a bounded wait, so the thread sees the stop request without the context going away
-        reported = False
-        while not self._stop.is_set() and self.context.ok():
-            try:
-                self.executor.spin_once(timeout_sec=0.05)
-            except Exception as exc:
-                if not reported:  # said once, on one line; the session keeps serving
-                    print(f"error in a callback: {type(exc).__name__}: {exc}", file=sys.stderr)
-                    reported = True
-
-    def settle(self, timeout: float = 2.0) -> None:
-        """Stop the spin thread, then run every callback whose message was already delivered."""
-        self._stop.set()
-        self._thread.join()
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            try:
-                if not serve_ready(self.executor, SETTLE_CALLBACKS):
-                    return
-            except Exception as exc:
-                print(f"error in a callback: {type(exc).__name__}: {exc}", file=sys.stderr)
-
-    def close(self) -> None:
-        """Stop the spin thread, then destroy the node and shut the context down, in that order."""
-        self._stop.set()
-        self._thread.join()
-        self.executor.shutdown(timeout_sec=0)
-        self.node.destroy_node()  # type: ignore[no-untyped-call]
-        try_shutdown(context=self.context)
-
-    def __enter__(self) -> RosSession:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

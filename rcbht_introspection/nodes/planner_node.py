@@ -16,9 +16,9 @@ from rcbht_interfaces.srv import RunTrial
 from rclpy.action.client import ActionClient, ClientGoalHandle
 from rclpy.task import Future
 
+from rcbht_introspection.configure.params import PlannerConfig
+from rcbht_introspection.lifetime import StopSignal
 from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run
-from rcbht_introspection.nodes.lifetime import StopSignal
-from rcbht_introspection.nodes.params import PlannerConfig
 from rcbht_introspection.plan.planner import Decision, Planner, Report, make_planner
 from rcbht_introspection.plan.recovery import Correction, load_recovery_config
 from rcbht_introspection.verify.model_file import load_verifier
@@ -44,19 +44,12 @@ class PlannerNode(ManagedNode):
 
     def activate(self) -> None:
         self.client = ActionClient(self, AttemptAction, self.cfg.attempt_action)
-        self.verdict_sub = self.create_subscription(
-            VerdictMsg, self.cfg.verdict_topic, self.on_verdict, self.qos
-        )
-        self.trial_srv = self.create_service(RunTrial, "~/run_trial", self.on_run_trial)
+        self.create_subscription(VerdictMsg, self.cfg.verdict_topic, self.on_verdict, self.qos)
+        self.create_service(RunTrial, "~/run_trial", self.on_run_trial)
 
     def deactivate(self) -> None:
         self.client.destroy()
-        self.destroy_subscription(self.verdict_sub)
-        self.destroy_service(self.trial_srv)
         self.get_logger().info(f"trials run: {self.trial}")
-
-    def cleanup(self) -> None:
-        self.destroy_publisher(self.decision_pub)
 
     def on_run_trial(self, req: RunTrial.Request, res: RunTrial.Response) -> RunTrial.Response:
         if self.planner is not None:

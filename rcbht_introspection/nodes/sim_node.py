@@ -19,12 +19,12 @@ from rclpy.task import Future
 from std_msgs.msg import String
 
 from rcbht_introspection.config_files import config_path
+from rcbht_introspection.configure.params import SimNodeConfig
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import END_PHASE
+from rcbht_introspection.lifetime import StopSignal
+from rcbht_introspection.messages import to_time
 from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run
-from rcbht_introspection.nodes.conversions import to_time
-from rcbht_introspection.nodes.lifetime import StopSignal
-from rcbht_introspection.nodes.params import SimNodeConfig
 from rcbht_introspection.plan.recovery import Correction, load_recovery_config
 
 if TYPE_CHECKING:  # the simulator (MuJoCo, the sim extra) is imported when the node configures
@@ -59,7 +59,7 @@ class SimNode(ManagedNode):
         self.phase_pub = self.create_publisher(String, cfg.phase_topic, self.qos)
 
     def activate(self) -> None:
-        self.trial_srv = self.create_service(StartTrial, "~/start_trial", self.on_start_trial)
+        self.create_service(StartTrial, "~/start_trial", self.on_start_trial)
         self.server = ActionServer(
             self,
             AttemptAction,
@@ -67,18 +67,12 @@ class SimNode(ManagedNode):
             execute_callback=self.execute,
             cancel_callback=lambda handle: CancelResponse.ACCEPT,
         )
-        self.timer = self.create_timer(STEP_S, self.on_step)
+        self.create_timer(STEP_S, self.on_step)
 
     def deactivate(self) -> None:
         self.server.destroy()
-        self.destroy_service(self.trial_srv)
-        self.destroy_timer(self.timer)
         seed = self.world.seed if self.world else "none"
         self.get_logger().info(f"samples published {self.published}, last trial {seed}")
-
-    def cleanup(self) -> None:
-        self.destroy_publisher(self.wrench_pub)
-        self.destroy_publisher(self.phase_pub)
 
     def on_start_trial(
         self, req: StartTrial.Request, res: StartTrial.Response

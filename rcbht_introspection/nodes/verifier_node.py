@@ -18,18 +18,13 @@ from rcbht_interfaces.msg import Verdict as VerdictMsg
 from rclpy.qos import DurabilityPolicy
 from std_msgs.msg import String
 
-from rcbht_introspection.live.health import (
-    CounterWatch,
-    Health,
-    LatencyWindow,
-    file_sha256,
-)
+from rcbht_introspection.configure.params import VerifierConfig
+from rcbht_introspection.configure.sessions import verifier_stream
+from rcbht_introspection.lifetime import StopSignal
+from rcbht_introspection.live.health import CounterWatch, Health, LatencyWindow, file_sha256
+from rcbht_introspection.messages import belief_from_msg, verdict_msg
 from rcbht_introspection.nodes.common import ManagedNode, qos_profile, run
-from rcbht_introspection.nodes.conversions import belief_from_msg, verdict_msg
 from rcbht_introspection.nodes.intake import Intake
-from rcbht_introspection.nodes.lifetime import StopSignal
-from rcbht_introspection.nodes.params import VerifierConfig
-from rcbht_introspection.task import load_task_file
 from rcbht_introspection.verify.model_file import load_usable_verifier
 from rcbht_introspection.verify.stream import (
     NO_MODEL,
@@ -58,19 +53,8 @@ class VerifierNode(ManagedNode):
                 f"{NO_MODEL!r}: {self.model_problem}"
             )
         else:
-            task = load_task_file(cfg.task_file) if cfg.task_file else None
-            self.stream = VerifierStream(
-                model,
-                cfg.arms,
-                tuple(dict.fromkeys([*cfg.end_phases, *(task.end_phases if task else ())])),
-                task.subtasks if task else None,
-                hold_s=cfg.event_hold_s,
-                max_hold_s=cfg.event_max_hold_s,
-            )
-        self.subtask = ""
-        self.inputs = None
-        self.published_health = ""
-        self.last_sample = time.monotonic()
+            self.stream = verifier_stream(model, cfg)
+        self.subtask, self.published_health = "", ""
         self.qos = qos_profile(cfg.qos_depth, cfg.qos_reliability)
         self.verdict_pub = self.create_publisher(VerdictMsg, cfg.verdict_topic, self.qos)
         latched = qos_profile(1, cfg.qos_reliability)
@@ -80,22 +64,11 @@ class VerifierNode(ManagedNode):
     def activate(self) -> None:
         cfg = self.cfg
         if self.stream is not None:
-            self.inputs = Intake(
-                self,
-                self.subscribe,
-                (cfg.arms, cfg.wrench_topics, cfg.phase_topic),
-                (self.sample, self.on_phase),
-                self.qos,
-            )
-        self.belief_sub = self.create_subscription(
-            BeliefMsg, cfg.belief_topic, self.on_belief, self.qos
-        )
-        self.flush_timer = self.create_timer(min(cfg.event_hold_s / 4, 0.05), self.on_flush)
-        self.health_timer = (
+            handlers = (self.sample, self.on_phase, self.on_tick)
+            self.inputs = Intake(self, cfg, handlers, self.qos)
+        self.create_subscription(BeliefMsg, cfg.belief_topic, self.on_belief, self.qos)
+        if cfg.publish_rate_hz > 0:
             self.create_timer(1.0 / cfg.publish_rate_hz, self.publish_health)
-            if cfg.publish_rate_hz > 0
-            else None
-        )
         self.publish_health()
         self.get_logger().info(
             f"arms {list(cfg.arms)} from {list(cfg.wrench_topics)}, events on {cfg.phase_topic}, "
@@ -104,30 +77,12 @@ class VerifierNode(ManagedNode):
         )
 
     def deactivate(self) -> None:
-        if self.inputs is not None:
-            self.inputs.destroy()
-        self.inputs = None
-        self.destroy_subscription(self.belief_sub)
-        self.destroy_timer(self.flush_timer)
-        if self.health_timer is not None:
-            self.destroy_timer(self.health_timer)
-        s = self.stream
-        counts = (
-            {a: (c.accepted, c.rejected_total) for a, c in s.segmenter.counts.items()} if s else {}
-        )
-        self.get_logger().info(
-            f"verdicts published {s.verdicts if s else 0}, alarms {s.alarms if s else 0}, "
-            f"samples (accepted, rejected) per arm {counts}"
-        )
-
-    def cleanup(self) -> None:
-        self.destroy_publisher(self.verdict_pub)
-        self.destroy_publisher(self.health_pub)
+        if self.stream is not None:
+            self.get_logger().info(self.stream.statistics())
 
     # --- input ---------------------------------------------------------------------------------
     def sample(self, arm: str, stamp: int, wrench: Sequence[float], source_ns: int | None) -> None:
         assert self.stream is not None  # subscribed only with a model
-        self.last_sample = time.monotonic()
         t0 = time.perf_counter()
         out = self.stream.push(arm, stamp, wrench, source_ns)
         self.publish(out, t0)
@@ -156,12 +111,10 @@ class VerifierNode(ManagedNode):
                     f"(p {c.probability:.2f}): mismatch from stream time {c.time:.3f} s"
                 )
 
-    def on_flush(self) -> None:
+    def on_tick(self, idle: bool) -> None:
         """Apply events that waited longer than the hold time for a later sample (no samples)."""
-        s = self.stream
-        idle = time.monotonic() - self.last_sample > self.cfg.event_hold_s
-        if s is not None and s.segmenter.pending and idle:
-            self.publish(s.flush(time.time_ns()))
+        if self.stream is not None and self.stream.segmenter.pending and idle:
+            self.publish(self.stream.flush(time.time_ns()))
 
     # --- output --------------------------------------------------------------------------------
     def publish(self, out: VerifierOutput, t0: float | None = None) -> None:
@@ -172,12 +125,8 @@ class VerifierNode(ManagedNode):
             self.latency.add((time.perf_counter() - t0) * 1e3)
         if self.stream is not None and self.stream.health != self.published_health:
             self.publish_health()
-        if any(sv.verdict.alarm_time == sv.verdict.time for sv in out.verdicts):
-            v = next(sv.verdict for sv in out.verdicts if sv.verdict.alarm_time == sv.verdict.time)
-            self.get_logger().warning(
-                f"alarm at stream time {v.time:.3f} s in sub-task {v.phase!r}: {v.health} "
-                f"(score {v.score:.2f}, onset {v.onset})"
-            )
+        if alarm := out.alarm_line():
+            self.get_logger().warning(alarm)
 
     def publish_health(self) -> None:
         """/task_health now (on change, and at publish_rate_hz)."""

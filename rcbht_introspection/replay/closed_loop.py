@@ -13,14 +13,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from rcbht_introspection.errors import InputError
-from rcbht_introspection.nodes.params import (
+from rcbht_introspection.configure.params import (
     ClassifierConfig,
     PlannerConfig,
     SegmenterConfig,
     SimNodeConfig,
     VerifierConfig,
 )
+from rcbht_introspection.errors import InputError
 from rcbht_introspection.replay.supervision import (
     NodeProcess,
     lease_domain,
@@ -118,7 +118,7 @@ def run_over_ros(
 ) -> tuple[list[RosTrial], dict[str, int | None]]:
     """Run the trials through the node processes; their decisions and each node's exit code
     after SIGINT (0: a clean stop)."""
-    from rcbht_introspection.nodes.common import RosSession
+    from rcbht_introspection.rostools.session import RosSession
 
     options.work.mkdir(parents=True, exist_ok=True)
     domain = lease_domain()

@@ -29,6 +29,14 @@ from typing import Any
 
 from rclpy.node import Node
 
+from rcbht_introspection.configure.params import (
+    ClassifierConfig,
+    SegmenterConfig,
+    VerifierConfig,
+    load_node_config,
+    segmenter_taxonomy,
+)
+from rcbht_introspection.configure.spin import DEFAULT_SPIN, Spin
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import (
     PHASE_TOPIC,
@@ -45,17 +53,7 @@ from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.offline import percentiles_ms
 from rcbht_introspection.live.segmenter import arm_stream_factory
 from rcbht_introspection.live.state import TaskStateConfig
-from rcbht_introspection.nodes.common import RosSession, qos_profile
-from rcbht_introspection.nodes.params import (
-    ClassifierConfig,
-    SegmenterConfig,
-    VerifierConfig,
-    load_node_config,
-    segmenter_taxonomy,
-)
-from rcbht_introspection.nodes.player import BagPlayer
-from rcbht_introspection.nodes.spin import DEFAULT_SPIN, Spin
-from rcbht_introspection.nodes.teach_client import call_teach, teach_client, teach_request
+from rcbht_introspection.nodes.common import qos_profile
 from rcbht_introspection.replay.observer import DiagnosticWatch, Observer, VerdictObserver
 from rcbht_introspection.replay.scoring import (
     BagRecord,
@@ -81,6 +79,9 @@ from rcbht_introspection.replay.verify_scoring import (
     verdict_latencies,
     verifier_scores,
 )
+from rcbht_introspection.rostools.player import BagPlayer
+from rcbht_introspection.rostools.session import RosSession
+from rcbht_introspection.rostools.teach_client import call_teach, teach_client, teach_request
 from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.config import TaxonomyConfig
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier

@@ -22,14 +22,14 @@ from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
-from rcbht_introspection.live.belief import UNKNOWN
-from rcbht_introspection.nodes.conversions import belief_from_msg, msg_to_word, to_ns
-from rcbht_introspection.nodes.params import (
+from rcbht_introspection.configure.params import (
     ClassifierConfig,
     SegmenterConfig,
     VerifierConfig,
     word_topics,
 )
+from rcbht_introspection.live.belief import UNKNOWN
+from rcbht_introspection.messages import belief_from_msg, msg_to_word, to_ns
 from rcbht_introspection.replay.scoring import (
     AppliedPhase,
     Observations,

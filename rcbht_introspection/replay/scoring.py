@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from rcbht_introspection.configure.params import LEVEL_TOPICS
 from rcbht_introspection.io.bags import END_PHASE, WRENCH_TYPE, BagMessage, decode_wrench
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.live import BeliefMode, offline
@@ -22,7 +23,6 @@ from rcbht_introspection.live.belief import UNKNOWN, Belief
 from rcbht_introspection.live.reliability import expected_calibration_error, top_label
 from rcbht_introspection.live.replay import LiveReplay, node_stream, replay_beliefs
 from rcbht_introspection.live.state import TaskStateConfig
-from rcbht_introspection.nodes.params import LEVEL_TOPICS
 from rcbht_introspection.taxonomy.stream import ArmStream
 from rcbht_introspection.taxonomy.words import LEVELS, Word
 

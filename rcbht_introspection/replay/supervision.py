@@ -25,8 +25,8 @@ import yaml
 
 import rcbht_introspection
 from rcbht_introspection.config_files import config_path
+from rcbht_introspection.configure.params import NODE_NAMES
 from rcbht_introspection.errors import InputError
-from rcbht_introspection.nodes.params import NODE_NAMES
 from rcbht_introspection.waiting import wait_until
 
 DOMAIN_IDS = range(1, 102)

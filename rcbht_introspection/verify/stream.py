@@ -58,6 +58,17 @@ class VerifierOutput:
     rejected: str | None = None
     unknown_phase: str | None = None
 
+    def alarm_line(self) -> str:
+        """The log line of an alarm raised by these verdicts ('' when none was)."""
+        for sv in self.verdicts:
+            v = sv.verdict
+            if v.alarm_time == v.time:
+                return (
+                    f"alarm at stream time {v.time:.3f} s in sub-task {v.phase!r}: {v.health} "
+                    f"(score {v.score:.2f}, onset {v.onset})"
+                )
+        return ""
+
 
 class _Stream:
     """One stream's VerifierSession, shared by its arms' feeds."""
@@ -148,6 +159,14 @@ class VerifierStream:
         `unknown` before the first verdict: nothing has been judged yet."""
         self.verdicts = 0
         self.alarms = 0
+
+    def statistics(self) -> str:
+        """What the stream took in and said: a node's last line."""
+        counts = {a: (c.accepted, c.rejected_total) for a, c in self.segmenter.counts.items()}
+        return (
+            f"verdicts published {self.verdicts}, alarms {self.alarms}, "
+            f"samples (accepted, rejected) per arm {counts}"
+        )
 
     def _feed(self, arm: str) -> _ArmFeed:
         """The SegmenterSession's stream factory: a new session when a new stream starts."""

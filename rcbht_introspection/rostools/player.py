@@ -15,8 +15,7 @@ from rclpy.qos import QoSProfile
 
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.io.bags import BagMessage, BagWriter
-from rcbht_introspection.nodes.common import keep_out_of_collector
-from rcbht_introspection.nodes.lifetime import StopSignal
+from rcbht_introspection.lifetime import StopSignal, keep_out_of_collector
 from rcbht_introspection.waiting import wait_until
 
 

@@ -1,4 +1,4 @@
-"""Conversions between rcbht_interfaces / ROS messages and the core records (Word, Belief)."""
+"""The rcbht_interfaces (and ROS) messages <-> the core records: Word, Belief, verdicts, health; for the nodes and the ROS tools."""
 
 from __future__ import annotations
 
@@ -8,18 +8,23 @@ from typing import TYPE_CHECKING
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.srv import SelfTest
 from geometry_msgs.msg import WrenchStamped
 from rcbht_interfaces.msg import Belief as BeliefMsg
 from rcbht_interfaces.msg import Phase as PhaseMsg
+from rcbht_interfaces.msg import TeachRequest as TeachRequestMsg
 from rcbht_interfaces.msg import Verdict as VerdictMsg
 from rcbht_interfaces.msg import Word as WordMsg
 from rcbht_interfaces.msg import Words as WordsMsg
 from rcbht_interfaces.msg import WrenchBlock as WrenchBlockMsg
+from rcbht_interfaces.srv import Teach
 
 from rcbht_introspection.live.belief import Belief
 from rcbht_introspection.live.classifier import PhaseInput, WordsInput
-from rcbht_introspection.live.health import Health
-from rcbht_introspection.live.segmenter import PhaseEvent
+from rcbht_introspection.live.health import OK, WARN, Health
+from rcbht_introspection.live.publication import WordsOut
+from rcbht_introspection.live.segmenter import ArmCounts, PhaseEvent
+from rcbht_introspection.live.teach import TeachRequest, TeachStatus
 from rcbht_introspection.summaries.blocks import WrenchBlock
 from rcbht_introspection.taxonomy.words import LEVELS, Level, Word
 
@@ -111,6 +116,25 @@ def words_msg(
     msg.header.stamp = to_time(stamp_ns)
     msg.header.frame_id = frame_id
     return msg
+
+
+def words_out_msg(item: WordsOut, counts: ArmCounts) -> WordsMsg:
+    """One message of live/publication.py (a batch's level, or an idle watermark) as sent."""
+    batch, message = item.batch, item.message
+    return words_msg(
+        batch.arm,
+        message.level,
+        message.words,
+        batch.stamp_ns,
+        batch.origin_ns,
+        stream_id=batch.stream_id,
+        batch_size=item.batch_size,
+        end_of_stream=message.end_of_stream,
+        accepted=counts.accepted,
+        rejected=counts.rejected_total,
+        seq_end=message.seq_end,
+        wrench=item.wrench,
+    )
 
 
 def words_from_msg(msg: WordsMsg) -> tuple[list[Word], float]:
@@ -210,6 +234,27 @@ def diagnostic_array(statuses: Sequence[Health], stamp: Time) -> DiagnosticArray
         for h in statuses
     ]
     return msg
+
+
+def self_test_status(response: SelfTest.Response, name: str, passed: bool, message: str) -> None:
+    """Fill a diagnostic_msgs/SelfTest response (the ~/tare answer: taken or not, and why)."""
+    response.id = name
+    response.passed = bytes([passed])  # a `byte` field
+    level = bytes([OK if passed else WARN])
+    response.status = [DiagnosticStatus(level=level, name=name, message=message)]
+
+
+def teach_response(response: Teach.Response, status: TeachStatus) -> Teach.Response:
+    """Fill the ~/teach service's response from the session's answer."""
+    response.accepted, response.message = status.accepted, status.message
+    response.pending, response.taught_windows = status.pending, status.taught_windows
+    response.model_version, response.errors = status.model_version, status.errors
+    return response
+
+
+def teach_request(msg: Teach.Request | TeachRequestMsg) -> TeachRequest:
+    """A ~/teach request or a teach topic message as the session's TeachRequest."""
+    return TeachRequest(msg.label, msg.last, msg.start, msg.end, msg.request_id)
 
 
 def verdict_msg(sv: StreamVerdict, subtask: str) -> VerdictMsg:

@@ -22,11 +22,12 @@ from rcbht_introspection.config_files import (
     read_yaml,
 )
 from rcbht_introspection.config_files import described as _f
+from rcbht_introspection.configure.spin import DEFAULT_SPIN, SPIN_HELP, Spin
 from rcbht_introspection.errors import InputError
 from rcbht_introspection.live import BeliefMode
 from rcbht_introspection.live.intake import IntakeConfig, check_intake
 from rcbht_introspection.live.state import TaskStateConfig, check_task_state
-from rcbht_introspection.nodes.spin import DEFAULT_SPIN, SPIN_HELP, Spin
+from rcbht_introspection.task import Task, load_task_file
 from rcbht_introspection.taxonomy import StreamProfile
 from rcbht_introspection.taxonomy.config import TaxonomyConfig, load_taxonomy_config
 
@@ -381,6 +382,13 @@ def segmenter_taxonomy(cfg: SegmenterConfig) -> TaxonomyConfig:
     from rcbht_introspection.learn.model_file import model_file_taxonomy
 
     return model_file_taxonomy(cfg.taxonomy_model_file, given if named else None)
+
+
+def task_events(cfg: SegmenterConfig | VerifierConfig) -> tuple[tuple[str, ...], Task | None]:
+    """The events that end the task (the node's and its task file's) and the task file's Task."""
+    task = load_task_file(cfg.task_file) if cfg.task_file else None
+    ends = dict.fromkeys([*cfg.end_phases, *(task.end_phases if task else ())])
+    return tuple(ends), task
 
 
 def _check_verifier(cfg: VerifierConfig, path: Path | None) -> None:
