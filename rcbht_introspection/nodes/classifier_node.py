@@ -122,11 +122,9 @@ class ClassifierNode(ManagedNode):
 
     def on_words(self, arm: str, msg: WordsMsg, published: int | None) -> None:
         self.arrivals.add(published, messages.words_input(arm, msg))
-        self.arrived()
 
     def on_phase(self, msg: PhaseMsg, published: int | None) -> None:
         self.arrivals.add(published, messages.phase_input(msg, published))
-        self.arrived()
 
     def settled(self) -> None:
         """The inputs go to the session in publication order (live/order.py), which classifies

@@ -13,8 +13,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.context import Context
-from rclpy.executors import Executor, SingleThreadedExecutor
-from rclpy.guard_condition import GuardCondition
+from rclpy.executors import Executor, ShutdownException, SingleThreadedExecutor, TimeoutException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -173,10 +172,6 @@ class ManagedNode(LifecycleNode):
         message alone, no MessageInfo (rclpy 7.1.6's EventsExecutor cannot pass it)."""
         self.inputs: Inputs | None = None
         """The wrench and /task_phase subscriptions while active (segmenter, verifier)."""
-        self.settle_guard: GuardCondition | None = None
-        """Under the SingleThreadedExecutor: triggered by an input, run after the executor ran
-        what its wait delivered (use_executor)."""
-        self.settle_due = False
         self.created: dict[str, set[int]] = {}
         """The entities each transition created (configure, activate), until it is undone."""
         self.stop: StopSignal | None = None
@@ -209,28 +204,6 @@ class ManagedNode(LifecycleNode):
         publication order."""
         if self.inputs is not None:
             self.inputs.settled()
-
-    # --- handing inputs over in publication order (live/order.py) -----------------------------
-
-    def use_executor(self, events: bool) -> None:
-        """Spun by the EventsExecutor (one message per event: hand each over at once) or by the
-        SingleThreadedExecutor (it serves one wait's messages topic by topic: hand them over
-        once it ran them all, from a guard condition it serves after them)."""
-        self.events = events
-        if not events:  # rclpy 7.1's EventsExecutor refuses a node with a guard condition
-            self.settle_guard = self.create_guard_condition(self._settle)
-
-    def arrived(self) -> None:
-        """An input was received: `settled()` now, or once the executor's burst is served."""
-        if self.settle_guard is None:
-            self.settled()
-        elif not self.settle_due:
-            self.settle_due = True
-            self.settle_guard.trigger()  # type: ignore[no-untyped-call]  # rclpy's is untyped
-
-    def _settle(self) -> None:
-        self.settle_due = False
-        self.settled()
 
     def subscribe(
         self,
@@ -393,8 +366,7 @@ def run(
     try:
         node = node_factory()
         node.stop = stop
-        executor, events = make_executor(str(node.get_parameter("spin").value))
-        node.use_executor(events)
+        executor, node.events = make_executor(str(node.get_parameter("spin").value))
         executor.add_node(node)
         node.get_logger().info(f"spun by rclpy's {type(executor).__name__}")
         if node.autostart and not stop.requested:
@@ -407,7 +379,7 @@ def run(
                 return 2
         stop.up()
         keep_out_of_collector()  # start-up objects: rclpy, NumPy, scikit-learn, the model
-        spin(executor, stop)
+        spin(executor, node, stop)
     finally:
         if node is not None:
             node.finish()
@@ -434,11 +406,31 @@ def make_executor(spin: Spin | str, context: Context | None = None) -> tuple[Exe
 
 SPIN_WAIT_S = 0.02
 """Longest wait of the spin for work: a stop request is seen within it."""
+BURST_CALLBACKS = 10_000
+"""Most callbacks the SingleThreadedExecutor runs before the node is told its burst is done."""
 
 
-def spin(executor: Executor, stop: StopSignal) -> None:
-    """Spin until `stop`: rclpy's spin_once in a loop, not executor.spin(). rclpy 7.1's
-    EventsExecutor cannot be ended from a callback: its spin() runs on after shutdown() or
-    try_shutdown(), its spin_until_future_complete() busy-waits (docs/ros.md, Executors)."""
+def spin(executor: Executor, node: ManagedNode, stop: StopSignal) -> None:
+    """Spin `node` until `stop`: spin_once, then (SingleThreadedExecutor) every callback
+    delivered by then, then `settled()` hands what arrived to the session in publication order.
+    Not executor.spin(): rclpy 7.1's EventsExecutor cannot be ended from inside, and a guard
+    condition to mark a burst's end cost more (docs/ros.md, Spinning)."""
     while executor.context.ok() and not stop.requested:
         executor.spin_once(timeout_sec=SPIN_WAIT_S)
+        if not node.events:
+            serve_ready(executor, BURST_CALLBACKS)
+        node.settled()
+
+
+def serve_ready(executor: Executor, limit: int) -> int:
+    """Run up to `limit` callbacks the executor finds ready now, without blocking; how many ran."""
+    for done in range(limit):
+        try:
+            handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0)
+        except (TimeoutException, ShutdownException):
+            return done
+        handler()
+        error = handler.exception()  # type: ignore[no-untyped-call]  # rclpy's Task is untyped
+        if error is not None:
+            raise error
+    return limit

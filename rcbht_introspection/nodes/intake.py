@@ -1,8 +1,8 @@
 """The robot's intake of a node (segmenter_node, verifier_node): wrench per arm and /task_phase.
 
 Both nodes take samples and events the same way: each message goes to `live/order.Arrivals`
-with its DDS source timestamp (None under the EventsExecutor), and when the node has settled
-(ManagedNode.arrived) its session gets them in publication order.
+with its DDS source timestamp (None under the EventsExecutor), and at each `settled()` (after
+the executor's burst: nodes/common.spin) the node's session gets them in publication order.
 """
 
 from __future__ import annotations
@@ -68,12 +68,10 @@ class Intake:
 
     def _phase(self, msg: String, source: int | None) -> None:
         self.arrivals.add(source, ("", msg.data))
-        self.node.arrived()
 
     def _sample(self, arm: str, msg: WrenchStamped, source: int | None) -> None:
         self.last_sample = time.monotonic()
         self.arrivals.add(source, (arm, wrench_sample(msg)))
-        self.node.arrived()
 
     def settled(self) -> None:
         """The executor ran what was delivered: the events and samples, in publication order."""

@@ -9,27 +9,15 @@ from typing import Any
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import Executor, ShutdownException, SingleThreadedExecutor, TimeoutException
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import try_shutdown
 
+from rcbht_introspection.nodes.common import serve_ready
+
 SETTLE_CALLBACKS = 10_000
 """Most delivered callbacks `RosSession.settle` runs per round."""
-
-
-def serve_ready(executor: Executor, limit: int) -> int:
-    """Run up to `limit` callbacks the executor finds ready now, without blocking; how many ran."""
-    for done in range(limit):
-        try:
-            handler, _, _ = executor.wait_for_ready_callbacks(timeout_sec=0)
-        except (TimeoutException, ShutdownException):
-            return done
-        handler()
-        error = handler.exception()  # type: ignore[no-untyped-call]  # rclpy's Task is untyped
-        if error is not None:
-            raise error
-    return limit
 
 
 class RosSession:
