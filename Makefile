@@ -14,14 +14,16 @@ MSG_SOURCES := $(wildcard msg_defs/msg/*.msg msg_defs/srv/*.srv msg_defs/action/
 
 .PHONY: setup demo test bench soak lint clean
 
-setup: $(VENV)/.pkg-stamp $(VENV)/.numba-stamp
+# msg_defs' build and MiniRocket's compilation do not wait on each other: two jobs.
+setup:
+	@$(MAKE) --no-print-directory -j2 $(VENV)/.pkg-stamp $(VENV)/.numba-stamp
 
 # requirements-peers.txt (the `peers` extra: hmmlearn) is resolved together with the rest,
 # so its pins and requirements.txt's cannot disagree.
 $(VENV)/.deps-stamp: requirements.txt requirements-ros.txt requirements-peers.txt
 	@for tool in cmake cc; do command -v $$tool > /dev/null || { 	  echo "make: $$tool not found; building msg_defs needs CMake and a C compiler" 	    "(Debian: apt install cmake build-essential)" >&2; exit 1; }; done
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt \
+	$(PY) -m pip install --quiet --disable-pip-version-check --no-compile -r requirements.txt \
 	  -r requirements-peers.txt $(PIP_QUIET)
 	touch $@
 
@@ -51,17 +53,19 @@ $(VENV)/.numba-stamp: $(VENV)/.deps-stamp
 demo: setup
 	$(VENV)/bin/rcbht demo --out demo_out
 
-# Two pytest processes side by side: the ROS tests (and the one that leases every free ROS
-# domain), which mostly wait on node processes and DDS, one at a time in one; the other tests in
-# the other. The ROS process's report is printed when both have ended. A background job of a
-# script ignores Ctrl-C unless told otherwise (trap - INT): Ctrl-C then ends both, make waits.
-ROS_TESTS := ros or leases_domains
+# The test that leases every free ROS domain runs first, alone. Then two suites side by side, each
+# on two pytest-xdist workers (whole files per worker): the ROS tests, which mostly wait on node
+# processes and DDS, and the rest. The ROS suite's report is printed when both have ended. A
+# background job of a script ignores Ctrl-C unless told otherwise (trap - INT): Ctrl-C then ends
+# both, make waits. Imported modules are compiled on first use (pip --no-compile).
+XDIST := -n 2 --dist loadfile
 test: lint
 	mkdir -p build
-	( trap - INT; exec $(PY) -m pytest -q -m "$(ROS_TESTS)" --durations=15 ) \
+	$(PY) -m pytest -q -m leases_domains
+	( trap - INT; exec $(PY) -m pytest -q -m ros $(XDIST) --durations=15 ) \
 	  > build/pytest-ros.log 2>&1 & ros=$$!; \
 	trap 'wait $$ros; exit 130' INT; \
-	core=0; $(PY) -m pytest -q -m "not ($(ROS_TESTS))" --durations=10 || core=$$?; \
+	core=0; $(PY) -m pytest -q -m "not (ros or leases_domains)" $(XDIST) --durations=10 || core=$$?; \
 	ros_rc=0; wait $$ros || ros_rc=$$?; \
 	echo "--- ROS tests (build/pytest-ros.log) ---"; cat build/pytest-ros.log; \
 	exit $$(( core || ros_rc ))

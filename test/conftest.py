@@ -3,9 +3,10 @@ rule that a skip is a failure."""
 
 from __future__ import annotations
 
+import fcntl
 import os
 import sys
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import pytest
@@ -45,15 +46,39 @@ def hiro_data() -> Path:
     return HIRO
 
 
+def made_once(
+    factory: pytest.TempPathFactory, name: str, make: Callable[[Path], Path | None]
+) -> Path | None:
+    """`make(folder)` once a test run: pytest-xdist's workers of one run share the first
+    worker's result through their common temporary folder (a lock file orders them)."""
+    if "PYTEST_XDIST_WORKER" not in os.environ:
+        return make(factory.mktemp(name))
+    folder = factory.getbasetemp().parent / name
+    with (folder.parent / f"{name}.lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        made = folder / ".made"
+        if not made.exists():
+            folder.mkdir(exist_ok=True)  # a worker whose make() failed may have left it
+            result = make(folder)
+            made.write_text("" if result is None else str(result))
+        text = made.read_text()
+    return Path(text) if text else None
+
+
 @pytest.fixture(scope="session")
 def sim_data(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Root of a small data set made by the project's MuJoCo simulator (fixed seeds; 7-11 s once a
     session on 2 shared cores): SIM_SUCCESS and SIM_FAILURE in the HIRO layout. Property tests run
     on it everywhere, also without ../shared; nothing generated is kept in the repository."""
+    root = made_once(tmp_path_factory, "sim_data", _write_sim_data)
+    assert root is not None
+    return root
+
+
+def _write_sim_data(root: Path) -> Path:
     from rcbht_introspection.io.hiro import write_trial
     from rcbht_introspection.sim import load_sim_config, simulate_trial, write_dataset
 
-    root = tmp_path_factory.mktemp("sim_data")
     config = load_sim_config()
     write_dataset(root / SIM_SUCCESS, SIM_TRIALS, seed=SIM_SEED, config=config)
     jammed = simulate_trial(config, SIM_SEED * 1000 + 999, failure="jamming", name=SIM_JAMMED)
@@ -73,7 +98,7 @@ def bench_model(tmp_path_factory: pytest.TempPathFactory) -> Path | None:
     require_ros()  # bench/ros.py imports the replay harness, which imports rclpy
     from rcbht_introspection.bench.ros import bench_model as make
 
-    return make(tmp_path_factory.mktemp("bench_model"))
+    return made_once(tmp_path_factory, "bench_model", make)
 
 
 def dataset_root(request: pytest.FixtureRequest, dataset: str) -> Path:
