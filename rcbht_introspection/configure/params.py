@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import re
 import typing
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal, TypeVar
@@ -222,6 +223,8 @@ NodeConfig = TypeVar(
     bound=SegmenterConfig | ClassifierConfig | VerifierConfig | SimNodeConfig | PlannerConfig,
 )
 """The config of one node (the checks and the defaults file depend on which)."""
+S = TypeVar("S")
+"""A nested section of a node's config (its intake, its task state)."""
 
 
 def descriptions(cls: type, prefix: str = "") -> dict[str, str]:
@@ -301,6 +304,14 @@ TOPIC_FIELDS = (
 def _check(cond: bool, field_name: str, message: str, path: Path | None) -> None:
     if not cond:
         raise InputError(message, path=path, field=field_name)
+
+
+def _check_section(check: Callable[[S], object], section: S, name: str, path: Path | None) -> None:
+    """A nested section's own check; its error names the field under `name` in this file."""
+    try:
+        check(section)
+    except InputError as exc:
+        raise InputError(exc.message, path=path, field=f"{name}.{exc.field}") from None
 
 
 def validate(cfg: NodeConfig, path: Path | None = None) -> NodeConfig:
@@ -418,10 +429,7 @@ def _check_segmenter(cfg: SegmenterConfig, path: Path | None) -> None:
         f" (tool_mass_kg {cfg.intake.tool_mass_kg}, pose_topics {list(cfg.pose_topics)})",
         path,
     )
-    try:
-        check_intake(cfg.intake)
-    except InputError as exc:
-        raise InputError(exc.message, path=path, field=f"intake.{exc.field}") from None
+    _check_section(check_intake, cfg.intake, "intake", path)
 
 
 def _check_classifier(cfg: ClassifierConfig, path: Path | None) -> None:
@@ -433,10 +441,7 @@ def _check_classifier(cfg: ClassifierConfig, path: Path | None) -> None:
         f"must be 0..1000, got {cfg.publish_rate_hz}",
         path,
     )
-    try:
-        check_task_state(cfg.state)
-    except InputError as exc:
-        raise InputError(exc.message, path=path, field=f"state.{exc.field}") from None
+    _check_section(check_task_state, cfg.state, "state", path)
     _check(bool(cfg.state_topic), "state_topic", "must not be empty", path)
     _check(
         0 <= cfg.teach_history_s <= 3600,
