@@ -1,6 +1,6 @@
 """Collisions and slow slips of the simulated snap cell: their records (class, onset at the push's
-or the slip's start, direction or final offset), the wrench they leave, and the verifier's jump
-features that see a push at the sensor's rate."""
+or the slip's start, direction or final offset), the wrench they leave, the verifier's jump
+features that see a push at the sensor's rate and the departure that sees a slip grow."""
 
 from __future__ import annotations
 
@@ -122,6 +122,28 @@ def test_the_transient_signal_alarms_at_a_push_the_change_sees_later(cell: SimCo
     assert onset <= with_jumps.alarm <= onset + 0.1
     without = Detector.fit(successes, config, ("wrench", "timing")).run(tf)
     assert without.alarm is None or without.alarm > with_jumps.alarm + 0.5
+
+
+def test_the_departure_signal_alarms_on_a_slow_slip_the_change_sees_later(
+    cell: SimConfig,
+) -> None:
+    """A slip that grows over 3.4 s during insertion: the departure from the sub-task's own
+    level raises the alarm about a second after the slip starts; the change over lag_s alone
+    sees it seconds later."""
+    from rcbht_introspection.verify.detector import Detector
+    from rcbht_introspection.verify.features import trial_features
+
+    config = load_verify_config()
+    successes = [trial_features(simulate_trial(cell, 100 + i), config) for i in range(10)]
+    slipped = simulate_trial(cell, 28, failure="slip")
+    onset = label_of(slipped).onset
+    assert onset is not None and slipped.metadata["failure"]["duration_s"] > 3.0
+    tf = trial_features(slipped, config)
+    seen = Detector.fit(successes, config, ("wrench", "departure", "timing")).run(tf)
+    assert seen.alarm is not None and seen.alarm_signal == "departure"
+    assert onset <= seen.alarm <= onset + 1.5
+    without = Detector.fit(successes, config, ("wrench", "timing")).run(tf)
+    assert without.alarm is None or without.alarm > seen.alarm + 1.0
 
 
 def test_the_peg_task_is_struck_the_same_way(tmp_path: Path) -> None:

@@ -36,7 +36,7 @@ from rcbht_introspection.verify.characterise import (
     sign_table,
     span_index,
 )
-from rcbht_introspection.verify.config import load_verify_config
+from rcbht_introspection.verify.config import VERIFIER_SIGNALS, load_verify_config
 from rcbht_introspection.verify.detector import (
     Detection,
     Detector,
@@ -45,7 +45,12 @@ from rcbht_introspection.verify.detector import (
 )
 from rcbht_introspection.verify.evaluate import GATE_S, RunResult, metrics
 from rcbht_introspection.verify.evidence import EvidenceReader, Tick, named_at, namings, reader_of
-from rcbht_introspection.verify.features import kind_columns, lag_ticks, trial_features
+from rcbht_introspection.verify.features import (
+    departure_features,
+    kind_columns,
+    lag_ticks,
+    trial_features,
+)
 from rcbht_introspection.verify.labels import DIRECTION_AXES, TrialLabel, label_of, read_labels
 from rcbht_introspection.verify.model_file import VerifierModel, load_verifier, save_verifier
 from rcbht_introspection.verify.monitor import NOMINAL, Verdict, VerifierSession
@@ -85,9 +90,10 @@ def held_out_model(
     """A verifier without the first success and the last failure, saved and loaded. Its
     characteriser is fitted on many evidence rows (onsets every 2.5 s of the training trials,
     named by the sign of the latest span's Fz and Fy change), so its namings change as the
-    evidence grows: three failures give too few rows for any tree to split."""
+    evidence grows: three failures give too few rows for any tree to split. It reads every
+    signal, so the live session is compared with the batch detector on each."""
     train = trials[1:-1]
-    config = load_verify_config()
+    config = dataclasses.replace(load_verify_config(), signals=VERIFIER_SIGNALS)
     model = train_verifier(train, labels, config)
     reader = reader_of(model.detector, "wrench", 1)
     rows, windows, names = [], [], []
@@ -311,6 +317,34 @@ def test_the_change_block_is_the_mean_minus_the_mean_lag_s_before(trials: list[T
     np.testing.assert_array_equal(sf.times, tf.times)
     np.testing.assert_allclose(sf.features[:, kind_columns("change", 1)], change, atol=1e-9)
     np.testing.assert_allclose(sf.features[:, kind_columns("mean", 1)], mean + offset, atol=1e-9)
+
+
+def test_the_departure_is_the_mean_minus_its_level_lag_s_into_the_sub_task(
+    trials: list[Trial],
+) -> None:
+    """departure(t) = mean(t) - mean at the sub-task's tick lag_s after its first, 0 before;
+    the reference is the trial's own, so a constant offset leaves it as it was."""
+    config = load_verify_config()
+    lag = lag_ticks(config)
+    trial = trials[-1]
+    tf = trial_features(trial, config)
+    mean_cols = kind_columns("mean", 1)
+    dep = departure_features(tf, lag)
+    np.testing.assert_array_equal(
+        np.delete(dep.features, mean_cols, 1), np.delete(tf.features, mean_cols, 1)
+    )
+    for j in range(len(tf.phases)):
+        ticks = np.flatnonzero(tf.phase_index == j)
+        assert len(ticks) > lag, tf.phases[j]
+        got = dep.features[ticks][:, mean_cols]
+        assert np.all(got[:lag] == 0.0)
+        want = tf.features[ticks[lag:]][:, mean_cols] - tf.features[ticks[lag], mean_cols]
+        np.testing.assert_allclose(got[lag:], want, rtol=0, atol=1e-12)
+    assert np.abs(dep.features[:, mean_cols]).max() > 1.0  # the contacts do move the wrench
+    offset = np.array([15.0, -4.0, 40.0, 0.5, -0.3, 0.2])
+    shifted = dataclasses.replace(trial, wrench={"R": trial.wrench["R"] + offset})
+    moved = departure_features(trial_features(shifted, config), lag)
+    np.testing.assert_allclose(moved.features[:, mean_cols], dep.features[:, mean_cols], atol=1e-9)
 
 
 def test_calibration_folds_hold_out_whole_sessions() -> None:

@@ -14,7 +14,7 @@ from rcbht_introspection.io.hiro import read_trial
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim import load_sim_config, write_dataset
 from rcbht_introspection.sim.sessions import draw_sessions, session_of
-from rcbht_introspection.verify.config import load_verify_config
+from rcbht_introspection.verify.config import VERIFIER_SIGNALS, load_verify_config
 from rcbht_introspection.verify.detector import Detector
 from rcbht_introspection.verify.features import trial_features
 from rcbht_introspection.verify.labels import label_of
@@ -64,7 +64,7 @@ def test_a_verifier_of_one_session_holds_on_the_others(sessions: list[list[Trial
     others = [t for s in sessions[1:] for t in s]
     levels = [np.mean(s[0].wrench["R"][:20, 2]) for s in sessions]
     assert max(levels) - min(levels) > 1.0, "the sessions' sensors read different levels"
-    verifier = Detector.fit(train, config, ("wrench", "timing"))
+    verifier = Detector.fit(train, config, VERIFIER_SIGNALS)
     assert _alarms(verifier, others) / len(others) <= 0.05
     raw = Detector.fit(train, config, ("wrench_global",))
     assert _alarms(raw, others) / len(others) > 0.5

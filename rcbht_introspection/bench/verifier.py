@@ -1,8 +1,9 @@
 """Verifier cost per tick after the alarm, offline, no ROS: what verifier_node's state
 (VerifierSession) spends on each verdict once the evidence runs.
 
-A verifier is trained on the project's simulated cell (config/sim/cell.yaml: TRAIN_SUCCESSES
-successes, FAILURES_PER_CLASS failures of every class). A held-out failing trial is fed as the
+A verifier reading every signal (VERIFIER_SIGNALS: the most a user can configure) is trained
+on the project's simulated cell (config/sim/cell.yaml: TRAIN_SUCCESSES successes,
+FAILURES_PER_CLASS failures of every class). A held-out failing trial is fed as the
 node is fed a replayed bag, then its last sample is held for HOLD_S more seconds of stream time
 (a robot left in contact after the alarm). Every tick after the alarm adds to the running
 evidence; the characteriser names the class only at the alarm, at each tick that opens an
@@ -13,6 +14,7 @@ hold's last WINDOW_S (the cost must not grow with the evidence).
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import os
 import time
@@ -27,7 +29,7 @@ from rcbht_introspection.config_files import config_path
 from rcbht_introspection.io.trial import Trial
 from rcbht_introspection.sim import load_sim_config, simulate_trial
 from rcbht_introspection.sim.config import SimConfig, failure_classes
-from rcbht_introspection.verify.config import load_verify_config
+from rcbht_introspection.verify.config import VERIFIER_SIGNALS, load_verify_config
 from rcbht_introspection.verify.labels import label_of
 from rcbht_introspection.verify.monitor import VerifierSession
 from rcbht_introspection.verify.stream import sample_steps
@@ -92,7 +94,8 @@ def run(out_dir: Path) -> dict[str, Any]:
     began = time.perf_counter()
     trials, sim_config = _train_set()
     labels = {t.name: label_of(t) for t in trials}
-    model = train_verifier(trials, labels, load_verify_config())
+    config = dataclasses.replace(load_verify_config(), signals=VERIFIER_SIGNALS)
+    model = train_verifier(trials, labels, config)
     trained_s = time.perf_counter() - began
     for seed in TEST_SEEDS:
         trial = simulate_trial(sim_config, seed, failure=TEST_CLASS, name=f"T-{seed}")

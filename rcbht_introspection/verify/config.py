@@ -40,11 +40,12 @@ class VerifyConfig:
     """The mismatch signal fires when a final verdict names another sub-task than the
     commanded one with a probability above this (needs the classifier's beliefs)."""
     signals: tuple[str, ...] = ("wrench", "timing")
-    """The detector's signals: `wrench` and `timing`, and `transient` for sudden contacts
-    (it alarms on a push within a tick or two, at the cost of later alarms on slow deviations)."""
+    """The detector's signals: `wrench` and `timing`; `transient` for sudden contacts (it alarms
+    on a push within a tick or two, at the cost of later alarms on slow deviations) and
+    `departure` for slow ones (a slip that grows for seconds)."""
 
 
-VERIFIER_SIGNALS = ("wrench", "transient", "timing")
+VERIFIER_SIGNALS = ("wrench", "transient", "departure", "timing")
 """The signals the verifier's detector can read (verify/detector.py)."""
 
 

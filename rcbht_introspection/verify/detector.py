@@ -5,6 +5,8 @@ Signals (each a score per tick, higher = less nominal):
   sub-task and time into it (novelty.NeighbourModel on the `change` features);
 * `transient`: the same distance on the `jump` features, the departure of single samples from
   the step before: a push that comes and goes (a collision) within the 0.2 s means;
+* `departure`: the same distance on the mean wrench's departure from its own level `lag_s` into
+  the sub-task (features.SubtaskDeparture): a slip that keeps growing for seconds;
 * `timing`: a sub-task running longer, or ending sooner or later, than any nominal one;
 * `wrench_global`: the distance of the raw mean wrench by time into the trial (the raw-wrench
   baseline: no state machine, no bias cancelling);
@@ -28,7 +30,13 @@ from typing import Any
 import numpy as np
 
 from rcbht_introspection.verify.config import VerifyConfig
-from rcbht_introspection.verify.features import PER_ARM, TrialFeatures, kind_columns
+from rcbht_introspection.verify.features import (
+    PER_ARM,
+    TrialFeatures,
+    departure_features,
+    kind_columns,
+    lag_ticks,
+)
 from rcbht_introspection.verify.novelty import NeighbourModel, NominalLevel, TimingModel
 
 SCALE_QUANTILE = 0.75
@@ -39,6 +47,7 @@ SIGNAL_FLOOR = {
     "wrench_global": 0.1,
     "timing": 0.5,
     "hmm": 0.1,
+    "departure": 0.1,
 }
 """Smallest scale of a signal's maxima (a sub-task whose held-out maxima are all about 0 would
 otherwise turn any excursion into an alarm)."""
@@ -58,6 +67,10 @@ class SignalModels:
     timing: TimingModel | None = None
     global_neighbours: NeighbourModel | None = None
     hmm: HMMSignal | None = None
+    departure: NeighbourModel | None = None
+    """The successes' departures per sub-task (the `departure` signal)."""
+    lag: int = 1
+    """The departure's reference: this many ticks into the sub-task (lag_s)."""
 
     @classmethod
     def fit(
@@ -75,6 +88,8 @@ class SignalModels:
             if "wrench_global" in signals
             else None,
             hmm=HMMSignal.fit(trials) if "hmm" in signals else None,
+            departure=_departure_model(trials, config) if "departure" in signals else None,
+            lag=lag_ticks(config),
         )
 
     def neighbours_for(self, signal: str) -> NeighbourModel | None:
@@ -93,6 +108,8 @@ class SignalModels:
                 cols.append(self.timing.scores(tf))
             elif s == "wrench_global" and self.global_neighbours is not None:
                 cols.append(self.global_neighbours.scores(tf))
+            elif s == "departure" and self.departure is not None:
+                cols.append(self.departure.scores(departure_features(tf, self.lag)))
             elif s == "hmm" and self.hmm is not None:
                 cols.append(self.hmm.scores(tf))
             else:
@@ -102,6 +119,12 @@ class SignalModels:
         # inf (unknown sub-task) -> the cap
         capped: np.ndarray = np.minimum(np.column_stack(cols), SCORE_CAP)
         return capped
+
+
+def _departure_model(trials: Sequence[TrialFeatures], config: VerifyConfig) -> NeighbourModel:
+    """The successes' departures (their mean blocks) by time into each sub-task."""
+    lag = lag_ticks(config)
+    return NeighbourModel.fit([departure_features(t, lag) for t in trials], config, kind="mean")
 
 
 @dataclass

@@ -6,13 +6,15 @@ the stream's first tick while the stream is younger), and the jump: the largest 
 sample since the tick before from the mean of the samples of an earlier step (JUMP_STEPS back),
 sample by sample at the sensor's rate. The change and the jump are what the detector reads: a
 constant sensor bias, drift slower than `lag_s` and the load of the gripper cancel in them; the
-change sees a contact that stays, the jump one that comes and goes within a tick or two. The
+change sees a contact that stays, the jump one that comes and goes within a tick or two, and the
+departure (`SubtaskDeparture`, from the ticks' sub-tasks) one that keeps growing for seconds. The
 same `ArmFeatures` object serves the live verifier (sample by sample) and the offline
 evaluation (a whole trial fed through it), so both see identical numbers.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -168,3 +170,39 @@ def trial_features(trial: Trial, config: VerifyConfig, end_phase: str = "done") 
         features=features.reshape(len(times), -1),
         end=float(time[-1]),
     )
+
+
+class SubtaskDeparture:
+    """Each tick's mean wrench minus the mean of its sub-task's tick `lag` ticks after the
+    sub-task's first (0 until then), ticks fed in order: a departure that keeps growing for
+    seconds, of which the change over lag_s holds one step. The reference is the trial's own,
+    so bias, load and the part's placement in this trial cancel."""
+
+    def __init__(self, lag: int, n_arms: int) -> None:
+        self.lag = lag
+        self.columns = kind_columns("mean", n_arms)
+        self.phase = -1
+        self.count = 0
+        self.reference: np.ndarray | None = None
+
+    def row(self, phase_index: int, features: np.ndarray) -> np.ndarray:
+        """`features` with its mean block replaced by the departure (the tick's sub-task index)."""
+        if phase_index != self.phase:
+            self.phase, self.count, self.reference = phase_index, 0, None
+        if self.count == self.lag:
+            self.reference = features[self.columns].copy()
+        self.count += 1
+        out = np.array(features, dtype=float)
+        if self.reference is None:
+            out[self.columns] = 0.0
+        else:
+            out[self.columns] -= self.reference
+        return out
+
+
+def departure_features(tf: TrialFeatures, lag: int) -> TrialFeatures:
+    """tf with each row's mean block replaced by its departure, tick by tick as the live
+    verifier computes it (`SubtaskDeparture`)."""
+    departure = SubtaskDeparture(lag, tf.features.shape[1] // PER_ARM)
+    rows = [departure.row(int(i), f) for i, f in zip(tf.phase_index, tf.features, strict=True)]
+    return dataclasses.replace(tf, features=np.array(rows).reshape(tf.features.shape))

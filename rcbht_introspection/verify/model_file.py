@@ -19,14 +19,15 @@ from rcbht_introspection.learn.forest import ARRAYS, ForestHead
 from rcbht_introspection.verify.characterise import FAILURE, Characteriser
 from rcbht_introspection.verify.config import VerifyConfig, check_verify_config
 from rcbht_introspection.verify.detector import Detector, SignalModels
+from rcbht_introspection.verify.features import lag_ticks
 from rcbht_introspection.verify.labels import DIRECTION_AXES, DIRECTIONS
 from rcbht_introspection.verify.novelty import NeighbourModel, NominalLevel, TimingModel
 from rcbht_introspection.verify.shape import ShapeHead
 
 FORMAT = "rcbht-verifier"
-FORMAT_VERSION = 8
-"""8: the transient signal and scikit-learn heads (7: the shape head; 6: forest heads only; 5
-and older: Mondrian heads; retrain)."""
+FORMAT_VERSION = 9
+"""9: the departure signal (8: the transient signal and scikit-learn heads; 7: the shape head;
+6: forest heads only; 5 and older: Mondrian heads; retrain)."""
 KIND = "verifier"
 
 
@@ -52,6 +53,7 @@ def _detector_parts(d: Detector) -> tuple[dict[str, Any], dict[str, np.ndarray]]
     for key, nb in (
         ("neighbours", models.neighbours),
         ("transient", models.transient),
+        ("departure", models.departure),
     ):
         if nb is not None:
             header[key] = {
@@ -132,6 +134,8 @@ def _detector(
         transient=_neighbours(header, arrays, "transient"),
         level=level,
         timing=timing,
+        departure=_neighbours(header, arrays, "departure"),
+        lag=lag_ticks(config),
     )
     thresholds = arrays["thresholds"]
     phases = tuple(header["phases"])

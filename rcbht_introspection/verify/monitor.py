@@ -18,7 +18,7 @@ import numpy as np
 from rcbht_introspection.verify.characterise import RunningEvidence
 from rcbht_introspection.verify.detector import SCORE_CAP
 from rcbht_introspection.verify.evidence import Tick, reader_of
-from rcbht_introspection.verify.features import PER_ARM, ArmFeatures
+from rcbht_introspection.verify.features import PER_ARM, ArmFeatures, SubtaskDeparture
 from rcbht_introspection.verify.mismatch import MISMATCH, Contradiction, mismatch_onset
 from rcbht_introspection.verify.model_file import VerifierModel
 
@@ -76,6 +76,8 @@ class VerifierSession:
         self.last_rows = {a: np.zeros(PER_ARM) for a in self.arms}
         d = self.model.detector
         self.reader = reader_of(d, VERIFIER_VIEW, len(self.arms))
+        self.departure = SubtaskDeparture(d.models.lag, len(self.arms))
+        """The running sub-task's reference level (the `departure` signal)."""
         self.held_rows = 0
         """Ticks at which an arm had sent nothing for MAX_ARM_LAG_TICKS while another had:
         its last row stood in (counted, not silent)."""
@@ -190,11 +192,15 @@ class VerifierSession:
         d = self.model.detector
         i, name, elapsed = self._phase_at(g)
         starts = [s for _, s in self.phases]
+        departure = self.departure.row(i, features)  # every tick, as departure_features
         scores = []
         for s in d.signals:
             neighbours = d.models.neighbours_for(s)
             if neighbours is not None:
                 v = neighbours.score_row(name, elapsed, features) if i >= 0 else 0.0
+                scores.append(min(v, SCORE_CAP))
+            elif s == "departure" and d.models.departure is not None:
+                v = d.models.departure.score_row(name, elapsed, departure) if i >= 0 else 0.0
                 scores.append(min(v, SCORE_CAP))
             elif s == "timing" and d.models.timing is not None:
                 tm = d.models.timing
