@@ -413,6 +413,36 @@ def test_an_injected_contact_anomaly_raises_the_alarm_after_it(
     assert plain.alarm is None
 
 
+def test_a_success_the_others_do_not_explain_is_no_reference(cell_successes: list[Trial]) -> None:
+    """One of the training successes carries a jam (a near-failure that still succeeded): it
+    is scored in the calibration but compared with no run, so a held-out run jammed the same
+    way still raises the alarm instead of matching it."""
+    config = dataclasses.replace(load_verify_config(), false_alarm_rate=0.2)  # 1 of 9 may go
+    odd = cell_successes[0]
+    odd = _jammed(odd, float(odd.state_times[1]) + 1.0)
+    train = [odd, *cell_successes[1:-1]]
+    detector = Detector.fit([trial_features(t, config) for t in train], config)
+    assert detector.calibration["unexplained"] == [odd.name]
+    assert detector.models.neighbours is not None
+    assert detector.models.neighbours.n_trials == len(train) - 1
+    held = cell_successes[-1]
+    onset = float(held.state_times[1]) + 1.0
+    hit = detector.run(trial_features(_jammed(held, onset), config))
+    assert hit.alarm is not None and onset <= hit.alarm <= onset + GATE_S
+
+
+def test_near_failures_that_recur_stay_references(cell_successes: list[Trial]) -> None:
+    """Two training successes jammed alike explain each other: neither is taken out of the
+    references (what recurs among successes is nominal)."""
+    config = dataclasses.replace(load_verify_config(), false_alarm_rate=0.2)
+    pair = [_jammed(t, float(t.state_times[1]) + 1.0) for t in cell_successes[:2]]
+    train = [*pair, *cell_successes[2:-1]]
+    detector = Detector.fit([trial_features(t, config) for t in train], config)
+    unexplained = detector.calibration["unexplained"]
+    assert isinstance(unexplained, list)
+    assert not {t.name for t in pair} & set(unexplained)
+
+
 def _jammed(trial: Trial, onset: float) -> Trial:
     """The trial with a jam from `onset`: 30 N more push, wedged about 17 mm off-centre."""
     wrench = trial.wrench["R"].copy()

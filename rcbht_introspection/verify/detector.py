@@ -17,7 +17,9 @@ cross-fitting (folds grouped by session where the labels name one, so a threshol
 on sessions it has not seen): each (signal, sub-task) maximum is divided by the upper quartile
 of its held-out maxima, and the run's largest such ratio is its combined score; the thresholds
 are those quartiles times the conformal (1 - false_alarm_rate) quantile of the combined scores,
-so the alarm fires on about `false_alarm_rate` of nominal runs.
+so the alarm fires on about `false_alarm_rate` of nominal runs. A success whose combined score
+is above that quantile is no reference (the others do not explain it), and the calibration runs
+again without it.
 """
 
 from __future__ import annotations
@@ -216,15 +218,19 @@ def _held_out_scores(
     signals: tuple[str, ...],
     phases: tuple[str, ...],
     held: list[list[int]],
+    references: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Cross-fitted calibration: each success scored by models fitted without its fold. Returns
-    the scale of each (signal, sub-task) - the upper quartile of its held-out maxima - and each
-    success's maxima in those units (successes, signals, sub-tasks)."""
+    """Cross-fitted calibration: each success scored by models fitted on the `references`
+    (mask) outside its fold. Returns the scale of each (signal, sub-task) - the upper quartile
+    of its held-out maxima - and each success's maxima in those units (successes, signals,
+    sub-tasks)."""
     maxima = np.zeros((len(successes), len(signals), len(phases)))
     for fold in held:
         out = set(fold)
         models = SignalModels.fit(
-            [tf for i, tf in enumerate(successes) if i not in out], config, signals
+            [tf for i, tf in enumerate(successes) if i not in out and references[i]],
+            config,
+            signals,
         )
         for i in fold:
             tf = successes[i]
@@ -237,6 +243,33 @@ def _held_out_scores(
     floor = np.array([SIGNAL_FLOOR[s] for s in signals])[:, None]
     scale = np.maximum(np.quantile(maxima, SCALE_QUANTILE, axis=0), floor)
     return scale, maxima / scale[None]
+
+
+def _calibrate(
+    successes: Sequence[TrialFeatures],
+    config: VerifyConfig,
+    signals: tuple[str, ...],
+    phases: tuple[str, ...],
+    held: list[list[int]],
+) -> tuple[np.ndarray, np.ndarray]:
+    """The thresholds (signals, sub-tasks) and the successes kept as references. A success whose
+    held-out combined score is above the conformal factor, one the others do not explain (a
+    near-failure that still succeeded), would make what resembles it look nominal: it is scored
+    but no reference, unless the calibration without it leaves another success unexplained
+    (then it is one of a kind that recurs, and all stay references)."""
+    level = 1.0 - config.false_alarm_rate
+    everyone = np.ones(len(successes), dtype=bool)
+    scale, ratios = _held_out_scores(successes, config, signals, phases, held, everyone)
+    combined = ratios.reshape(len(successes), -1).max(axis=1)  # each run's largest ratio
+    factor = conformal_threshold(combined, level)
+    references = combined <= factor
+    if references.all():
+        return scale * factor, everyone
+    scale2, ratios2 = _held_out_scores(successes, config, signals, phases, held, references)
+    combined2 = ratios2.reshape(len(successes), -1).max(axis=1)
+    if np.any(combined2[references] > factor):
+        return scale * factor, everyone
+    return scale2 * conformal_threshold(combined2, level), references
 
 
 @dataclass
@@ -274,16 +307,16 @@ class Detector:
         phases = tuple(dict.fromkeys(p for tf in successes for p in tf.phases))
         if not phases:
             raise ValueError("the successful trials have no sub-task events to calibrate on")
-        scale, ratios = _held_out_scores(successes, config, signals, phases, held)
-        combined = ratios.reshape(len(successes), -1).max(axis=1)  # each run's largest ratio
-        thresholds = scale * conformal_threshold(combined, 1.0 - config.false_alarm_rate)
+        thresholds, references = _calibrate(successes, config, signals, phases, held)
         calibration: dict[str, object] = {
             "successes": len(successes),
             "folds": len(held),
             "grouped_by_session": bool(groups),
             "level": 1.0 - config.false_alarm_rate,
+            "unexplained": [tf.trial for tf, r in zip(successes, references, strict=True) if not r],
         }
-        models = SignalModels.fit(successes, config, signals)
+        kept = [tf for tf, r in zip(successes, references, strict=True) if r]
+        models = SignalModels.fit(kept, config, signals)
         return cls(signals, models, thresholds, config, phases, calibration)
 
     def threshold_of(self, phase: str) -> np.ndarray:
