@@ -16,7 +16,13 @@ from rcbht_introspection.sim import SimConfig, load_sim_config, simulate_trial
 from rcbht_introspection.sim.failures import failure_classes
 from rcbht_introspection.sim.simulate import draw_trial
 from rcbht_introspection.verify.config import load_verify_config
-from rcbht_introspection.verify.features import ArmFeatures, kind_columns
+from rcbht_introspection.verify.detector import Detection, Detector
+from rcbht_introspection.verify.features import (
+    ArmFeatures,
+    TrialFeatures,
+    kind_columns,
+    trial_features,
+)
 from rcbht_introspection.verify.labels import label_of
 
 
@@ -105,44 +111,49 @@ def test_a_jump_is_a_departure_from_an_earlier_step_and_repeats_do_not_make_one(
     assert np.all(jump[step + 3 :] < quiet)  # JUMP_STEPS later the reference holds the new level
 
 
-def test_the_transient_signal_alarms_at_a_push_the_change_sees_later(cell: SimConfig) -> None:
+@pytest.fixture(scope="module")
+def nominal(cell: SimConfig) -> list[TrialFeatures]:
+    """The verifier features of ten successes of the cell."""
+    config = load_verify_config()
+    return [trial_features(simulate_trial(cell, 100 + i), config) for i in range(10)]
+
+
+def _alarms(
+    successes: list[TrialFeatures], trial: Trial, signal: str
+) -> tuple[Detection, Detection]:
+    """The trial through a detector with `signal` beside wrench and timing, and without it."""
+    config = load_verify_config()
+    tf = trial_features(trial, config)
+    with_it = Detector.fit(successes, config, ("wrench", signal, "timing")).run(tf)
+    return with_it, Detector.fit(successes, config, ("wrench", "timing")).run(tf)
+
+
+def test_the_transient_signal_alarms_at_a_push_the_change_sees_later(
+    cell: SimConfig, nominal: list[TrialFeatures]
+) -> None:
     """Trained on successes of the cell, the detector alarms within 0.1 s of a collision's
     push through the transient signal; without it, the same push is seen much later or never."""
-    from rcbht_introspection.verify.detector import Detector
-    from rcbht_introspection.verify.features import trial_features
-
-    config = load_verify_config()
-    successes = [trial_features(simulate_trial(cell, 100 + i), config) for i in range(10)]
     struck = simulate_trial(cell, 12, failure="collision")  # a 5 N push during insertion
     onset = label_of(struck).onset
     assert onset is not None
-    tf = trial_features(struck, config)
-    with_jumps = Detector.fit(successes, config, ("wrench", "transient", "timing")).run(tf)
+    with_jumps, without = _alarms(nominal, struck, "transient")
     assert with_jumps.alarm is not None and with_jumps.alarm_signal == "transient"
     assert onset <= with_jumps.alarm <= onset + 0.1
-    without = Detector.fit(successes, config, ("wrench", "timing")).run(tf)
     assert without.alarm is None or without.alarm > with_jumps.alarm + 0.5
 
 
 def test_the_departure_signal_alarms_on_a_slow_slip_the_change_sees_later(
-    cell: SimConfig,
+    cell: SimConfig, nominal: list[TrialFeatures]
 ) -> None:
     """A slip that grows over 3.4 s during insertion: the departure from the sub-task's own
     level raises the alarm about a second after the slip starts; the change over lag_s alone
     sees it seconds later."""
-    from rcbht_introspection.verify.detector import Detector
-    from rcbht_introspection.verify.features import trial_features
-
-    config = load_verify_config()
-    successes = [trial_features(simulate_trial(cell, 100 + i), config) for i in range(10)]
     slipped = simulate_trial(cell, 28, failure="slip")
     onset = label_of(slipped).onset
     assert onset is not None and slipped.metadata["failure"]["duration_s"] > 3.0
-    tf = trial_features(slipped, config)
-    seen = Detector.fit(successes, config, ("wrench", "departure", "timing")).run(tf)
+    seen, without = _alarms(nominal, slipped, "departure")
     assert seen.alarm is not None and seen.alarm_signal == "departure"
     assert onset <= seen.alarm <= onset + 1.5
-    without = Detector.fit(successes, config, ("wrench", "timing")).run(tf)
     assert without.alarm is None or without.alarm > seen.alarm + 1.0
 
 
