@@ -192,14 +192,15 @@ class VerifierSession:
         d = self.model.detector
         i, name, elapsed = self._phase_at(g)
         starts = [s for _, s in self.phases]
-        departure = self.departure.row(i, features)  # every tick, as departure_features
+        # every tick of a model with the signal, as departure_features feeds them
+        departure = self.departure.row(i, features) if d.models.departure is not None else None
         scores = []
         for s in d.signals:
             neighbours = d.models.neighbours_for(s)
             if neighbours is not None:
                 v = neighbours.score_row(name, elapsed, features) if i >= 0 else 0.0
                 scores.append(min(v, SCORE_CAP))
-            elif s == "departure" and d.models.departure is not None:
+            elif s == "departure" and d.models.departure is not None and departure is not None:
                 v = d.models.departure.score_row(name, elapsed, departure) if i >= 0 else 0.0
                 scores.append(min(v, SCORE_CAP))
             elif s == "timing" and d.models.timing is not None:
